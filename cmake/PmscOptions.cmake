@@ -1,0 +1,28 @@
+# Interface targets that carry the project's warning and sanitizer flags.
+add_library(pmsc_warnings INTERFACE)
+target_compile_options(pmsc_warnings INTERFACE -Wall -Wextra -Wpedantic -Wno-unused-parameter)
+
+add_library(pmsc_sanitize INTERFACE)
+if(PMSC_SANITIZE)
+  target_compile_options(pmsc_sanitize INTERFACE -fsanitize=${PMSC_SANITIZE} -fno-omit-frame-pointer -g)
+  target_link_options(pmsc_sanitize INTERFACE -fsanitize=${PMSC_SANITIZE})
+  if(PMSC_SANITIZE MATCHES "undefined")
+    target_compile_options(pmsc_sanitize INTERFACE -fno-sanitize-recover=undefined)
+  endif()
+endif()
+install(TARGETS pmsc_warnings pmsc_sanitize EXPORT pmscTargets)
+
+# pmsc_add_library(NAME pmsc_core ALIAS core SOURCES ... LINK ...): a static library with the
+# project's flags, exported as pmsc::<ALIAS>, headers installed under include/<folder>/.
+function(pmsc_add_library)
+  cmake_parse_arguments(A "" "NAME;ALIAS;HEADER_DIR" "SOURCES;HEADERS;LINK" ${ARGN})
+  add_library(${A_NAME} STATIC ${A_SOURCES})
+  add_library(pmsc::${A_ALIAS} ALIAS ${A_NAME})
+  set_target_properties(${A_NAME} PROPERTIES EXPORT_NAME ${A_ALIAS})
+  target_include_directories(${A_NAME} PUBLIC
+    $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}> $<INSTALL_INTERFACE:${CMAKE_INSTALL_INCLUDEDIR}>)
+  target_link_libraries(${A_NAME} PUBLIC ${A_LINK} PRIVATE $<BUILD_INTERFACE:pmsc_warnings>)
+  target_link_libraries(${A_NAME} PUBLIC $<BUILD_INTERFACE:pmsc_sanitize>)
+  install(TARGETS ${A_NAME} EXPORT pmscTargets ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR})
+  install(FILES ${A_HEADERS} DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/${A_HEADER_DIR})
+endfunction()

@@ -1,0 +1,62 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include "pmsc/FrameSet.h"
+
+#include <Eigen/Core>
+
+#include <string>
+#include <vector>
+
+namespace pmsc {
+
+/// Which key-point selector produced a model.
+enum class Selector : int {
+    Teleconnection = 0,  ///< the paper's section 4: Varimax blocks + teleconnection pairs
+    QDeim = 1,           ///< QR with column pivoting on the basis (Drmac & Gugercin 2016)
+};
+
+/// A trained point-multiplication model: everything the runtime needs.
+///
+/// Units: eps are in the data's units. The key error they are compared with is
+/// the RMS over key points of each key point's Euclidean error over its channels
+/// (see PointMultiplier::keyRmsError), so a threshold reads like a point error.
+struct Model {
+    Index points = 0;       ///< N
+    Index channels = 0;     ///< C
+    Index trainFrames = 0;  ///< F used for training
+
+    Eigen::VectorXd mean;            ///< N*C training mean (paper footnote 1)
+    Eigen::MatrixXd basis;           ///< (N*C) x M, orthonormal columns a_i[x] (section 3)
+    Eigen::VectorXd singularValues;  ///< M singular values of the mean-removed training matrix
+    double totalEnergy = 0;          ///< squared Frobenius norm of the mean-removed training matrix
+
+    std::vector<Index> keyPoints;  ///< K point indices, in selection order, no duplicates
+    Eigen::MatrixXd projector;     ///< M x (K*C) least-squares projector, key values -> pose-space coords
+
+    Selector selector = Selector::Teleconnection;
+    double epsMin = 0;     ///< soft cache: at or below, a hit (section 5)
+    double epsMax = 0;     ///< soft cache: at or above, a miss
+    double tolerance = 0;  ///< calibration target (largest point error of a hit); 0 = not calibrated
+    double trainMaxPointResidual = 0;  ///< largest point error of PM on the training set
+
+    Index basisSize() const { return basis.cols(); }
+    Index keyCount() const { return static_cast<Index>(keyPoints.size()); }
+    /// Fraction of the training energy the basis captures.
+    double energyCaptured() const;
+    /// Checks sizes and invariants; throws std::invalid_argument naming the first problem.
+    void validate() const;
+};
+
+/// Builds the least-squares projector pinv(B_K) for the rows of `basis` at
+/// `keyPoints` (all C channels of each key). Computed with a complete
+/// orthogonal decomposition, so a rank-deficient key system yields the
+/// minimum-norm solution instead of garbage.
+Eigen::MatrixXd makeProjector(const Eigen::MatrixXd& basis, Index channels,
+                              const std::vector<Index>& keyPoints);
+
+/// Gathers the (K*C) rows of a (N*C) x n matrix at the key points.
+Eigen::MatrixXd gatherKeyRows(const Eigen::Ref<const Eigen::MatrixXd>& m, Index channels,
+                              const std::vector<Index>& keyPoints);
+
+}  // namespace pmsc

@@ -1,0 +1,54 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include "pmsc/FrameSet.h"
+
+#include <span>
+#include <string>
+
+namespace pmsc {
+
+/// The expensive per-point calculation that point multiplication accelerates:
+/// posing a face's points, gathering indirect light at scene points, or reading
+/// a recorded frame (section 2, figure 3: "the standard posing engine").
+///
+/// An evaluator computes any subset of points of one frame without computing
+/// the others, so the runtime can evaluate only the key points (a hit), a chunk
+/// of points (one branch of a parallel fail-through), or all of them (a miss).
+///
+/// Thread safety: evaluate() is const and must be safe to call concurrently
+/// from several threads, for different frames and for disjoint chunks of the
+/// same frame. Results must be deterministic: a point's value may not depend
+/// on which other points are evaluated with it, nor on the thread count.
+class PointEvaluator {
+public:
+    virtual ~PointEvaluator() = default;
+
+    /// Short name for logs and error messages ("replay", "cornell", "face").
+    virtual std::string name() const = 0;
+    /// N, the number of points of a full evaluation.
+    virtual Index pointCount() const = 0;
+    /// C, values per point (3 for positions or RGB).
+    virtual Index channelCount() const = 0;
+    /// Number of frames this evaluator can produce (frames are 0 .. frameCount()-1).
+    virtual Index frameCount() const = 0;
+
+    /// Evaluates frame `frame` at `points` (indices in [0, N), any order, no
+    /// duplicates required) into `out`, point-major, channel-minor:
+    /// out[i*C + c] is channel c of points[i].
+    /// @param[out] out caller's buffer of points.size() * channelCount() doubles.
+    /// @throws std::out_of_range for a bad frame or point index; evaluators may
+    ///         throw std::runtime_error for their own failures.
+    virtual void evaluate(Index frame, std::span<const Index> points, double* out) const = 0;
+
+    /// Evaluates all N points of a frame into out (N*C doubles). The default
+    /// calls evaluate() with 0..N-1; evaluators override it when a full pose
+    /// shares work between points.
+    virtual void evaluateAll(Index frame, double* out) const;
+};
+
+/// Evaluates frames [first, first+count) at all points into a FrameSet
+/// (used to produce training data from an evaluator).
+FrameSet evaluateFrames(const PointEvaluator& evaluator, Index first, Index count);
+
+}  // namespace pmsc

@@ -1,0 +1,47 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include "pmsc/Model.h"
+
+#include <span>
+
+namespace pmsc {
+
+/// The runtime of point multiplication (section 6): key values -> pose-space
+/// coordinates by the precomputed least-squares projector, the key points'
+/// residual, and the reconstruction of any set of points.
+///
+/// Thread safety: all methods are const and may run concurrently.
+/// Buffers: key values are K*C doubles in model key order, channel-minor;
+/// coordinates are M doubles; point values are channel-minor.
+class PointMultiplier {
+public:
+    /// Keeps a reference to `model`, which must outlive this object.
+    explicit PointMultiplier(const Model& model);
+
+    const Model& model() const { return model_; }
+
+    /// Pose-space coordinates b = P (k - mean_K).
+    void project(const double* keyValues, double* coords) const;
+
+    /// RMS over key points of the Euclidean norm (over channels) of the key
+    /// residual k - (mean_K + B_K b). Data units. Returns NaN if any key value is
+    /// not finite.
+    double keyRmsError(const double* keyValues, const double* coords) const;
+
+    /// All N points: out = mean + B b (N*C doubles).
+    void reconstruct(const double* coords, double* out) const;
+
+    /// Only the given points (a query by point subset): out[i*C + c].
+    void reconstructPoints(const double* coords, std::span<const Index> points, double* out) const;
+
+    /// Points [first, first+count) into out (count*C doubles): one chunk.
+    void reconstructRange(const double* coords, Index first, Index count, double* out) const;
+
+private:
+    const Model& model_;
+    Eigen::VectorXd keyMean_;   // K*C
+    Eigen::MatrixXd keyBasis_;  // (K*C) x M
+};
+
+}  // namespace pmsc

@@ -1,0 +1,73 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include "pmsc/FrameSet.h"
+#include "pmsc/Model.h"
+
+#include <functional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace pmsc {
+
+/// Progress hook for long operations: (stage, done, total). Return false to
+/// cancel (training then throws pmsc::Cancelled).
+using ProgressFn = std::function<bool(std::string_view stage, double done, double total)>;
+
+/// Thrown when a progress hook asks to stop.
+struct Cancelled : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+/// Everything `pmsc train` can set. Zero means "not set" where noted.
+struct TrainingOptions {
+    // --- subspace size M (section 3): the first of these that is set wins ---
+    Index basis = 0;            ///< M explicitly
+    double energy = 0;          ///< smallest M capturing this fraction of the energy, in (0, 1]
+    double basisMaxError = 0;   ///< smallest M whose largest point projection error <= this (data units)
+    Index maxBasis = 256;       ///< cap on M, whatever the rule (and the SVD's target rank)
+    double defaultEnergy = 0.9999;  ///< used when none of the three above is set
+
+    // --- key points (section 4) ---
+    Selector selector = Selector::Teleconnection;
+    double maxError = 0;        ///< stop when the largest point residual on the training set <= this; 0 = off
+    Index maxKeys = 200;        ///< key budget K
+    Index block = 16;           ///< basis vectors per Varimax block (paper: 10 to 20)
+    std::vector<Index> fiducials;   ///< designer points, seeded into the first batch
+    std::vector<Index> gridPoints;  ///< sparse spatial grid of points (rendering), seeded too
+
+    // --- Varimax ---
+    double varimaxTolerance = 1e-8;
+    int varimaxMaxIterations = 200;
+
+    // --- calibration of eps (beyond the paper) ---
+    double tolerance = 0;       ///< largest point error a hit may have (data units); 0 = no calibration
+    Index calibrationSlices = 5;  ///< leave-one-slice-out folds
+
+    // --- SVD ---
+    unsigned seed = 20070101;   ///< randomized SVD test matrices; training is deterministic for a seed
+    int powerIterations = 2;
+
+    ProgressFn progress;        ///< optional
+};
+
+/// What training did besides the model: decisions a user must hear about.
+struct TrainingReport {
+    std::vector<std::string> warnings;  ///< e.g. "reduced M from 40 to 30: ..."
+    Index requestedBasis = 0;           ///< M before any reduction
+    Index iterations = 0;               ///< key-selection rounds
+    double seconds = 0;
+    /// Largest point residual on the training set after each round (data units).
+    std::vector<double> residualPerRound;
+};
+
+/// Trains a model from frames: mean removal, truncated SVD, key-point selection,
+/// projector, and eps. With options.tolerance > 0, eps is calibrated by
+/// leave-one-slice-out (Calibration.h). Without it, epsMin is the largest key
+/// RMS error seen on the training frames and epsMax = 1.5 x epsMin (the ratio of
+/// the paper's hand-picked [0.1, 0.15]); `pmsc replay --eps` can override both.
+/// @throws std::invalid_argument for unusable data or options (message names the value).
+Model train(const FrameSet& frames, const TrainingOptions& options, TrainingReport* report = nullptr);
+
+}  // namespace pmsc
