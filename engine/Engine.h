@@ -1,0 +1,99 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include "engine/RunStats.h"
+#include "nodes/FrameSource.h"
+#include "nodes/OrderedSink.h"
+#include "pmsc/Model.h"
+#include "pmsc/PointEvaluator.h"
+#include "pmsc/Training.h"  // pmsc::Cancelled
+
+#include <atomic>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <vector>
+
+namespace pmsc::engine {
+
+using nodes::FailurePolicy;
+using nodes::FrameRange;
+using nodes::FrameResult;
+using nodes::FrameWriter;
+
+/// Live numbers for a progress line, passed to EngineOptions::progress after each delivered frame.
+struct Progress {
+    Index framesDone = 0;  ///< delivered so far
+    Index framesTotal = 0;
+    Index hits = 0, blends = 0, misses = 0, failed = 0;
+    double elapsedSeconds = 0;
+};
+
+/// Everything a run can be told. Defaults give a full-speed run of all points.
+struct EngineOptions {
+    /// Worker threads (a tbb::task_arena of this size); 0 = every core. Results are
+    /// identical bit for bit whatever the value.
+    int threads = 0;
+    /// Frames between the source and the sink at once; 0 = 2 x threads. Memory is
+    /// this many frame buffers, however long the range.
+    Index maxFramesInFlight = 0;
+    FailurePolicy failurePolicy = FailurePolicy::StopRun;
+    /// Output points per fail-through branch; 0 = automatic (about 8 branches per
+    /// thread, at least 256 points each).
+    Index chunkPoints = 0;
+    /// Fail through with one PointEvaluator::evaluateAll() call per frame instead of
+    /// chunks (for evaluators whose full evaluation shares work between points).
+    bool wholeFrameFailThrough = false;
+    /// The points the consumer needs, in the order wanted (empty = all N). A hit then
+    /// reconstructs only these; a fail-through evaluates only these.
+    std::vector<Index> pointsWanted;
+    /// Thresholds; unset = the model's [epsMin, epsMax].
+    std::optional<SoftCachePolicy> policy;
+    /// Also hand the writer the PM result of every frame (FrameResult::pmValues), e.g.
+    /// to report PM errors on misses. Costs a reconstruction on misses.
+    bool keepPointMultiplication = false;
+    /// Another thread sets it to stop the run; Engine::run() then throws pmsc::Cancelled
+    /// within one frame's time. Must outlive the run.
+    const std::atomic<bool>* cancel = nullptr;
+    /// Called after each delivered frame, from the sink's thread (keep it cheap).
+    std::function<void(const Progress&)> progress;
+};
+
+/// The soft-caching evaluation engine (sections 5 and 6, issue 3): a oneTBB
+/// flow graph that streams a frame range through key-point evaluation,
+/// projection, the error monitor, and either point multiplication (a hit) or
+/// the fail-through branches (a blend or a miss), then restores frame order
+/// and hands each frame to a FrameWriter.
+///
+/// Thread safety: run() may be called again after it returns; one run at a
+/// time per Engine. The model and evaluator must outlive the engine.
+class Engine {
+public:
+    /// @throws pmsc::InputError if the evaluator's N or C differ from the model's, or an option
+    ///         is out of range (threads < 0, a wanted point outside [0, N) or repeated, ...).
+    Engine(const Model& model, const PointEvaluator& evaluator, EngineOptions options = {});
+    ~Engine();
+    Engine(const Engine&) = delete;
+    Engine& operator=(const Engine&) = delete;
+
+    /// Streams `range` through the graph; the writer receives every frame in order.
+    /// @return the run's stats (also in lastStats()).
+    /// @throws pmsc::InputError for a range outside the evaluator's frames;
+    ///         pmsc::EvaluatorError ("frame F: node 'N': ...") when an evaluator fails under
+    ///         StopRun — the writer has then received exactly the frames before F;
+    ///         pmsc::Cancelled when EngineOptions::cancel was set;
+    ///         whatever FrameWriter::write() threw, unchanged.
+    RunStats run(FrameRange range, FrameWriter& writer);
+
+    /// Stats of the last run, also when it threw.
+    const RunStats& lastStats() const;
+    const EngineOptions& options() const;
+    /// Points of each output frame (all N, or EngineOptions::pointsWanted).
+    const std::vector<Index>& outputPoints() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace pmsc::engine

@@ -1,0 +1,69 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include "nodes/FramePlan.h"
+#include "pmsc/SoftCache.h"
+
+#include <atomic>
+#include <mutex>
+#include <string>
+#include <vector>
+
+namespace pmsc::nodes {
+
+/// The working state of one frame in flight, passed by pointer from node to
+/// node. The engine allocates a fixed pool of maxFramesInFlight slots before a
+/// run and recycles them, so the slots ARE the tokens that bound the work in
+/// flight: memory stays constant however long the frame range.
+///
+/// Thread safety: a slot is owned by one node body at a time, except during a
+/// fail-through, when chunk bodies write disjoint ranges of `values` and
+/// `scratch` and meet again through `chunksLeft` (acquire/release) and fail().
+struct FrameSlot {
+    /// @param[in] plan         sizes the buffers (output points, scratch)
+    /// @param[in] keyCount     K of the model
+    /// @param[in] basisSize    M of the model
+    /// @param[in] keepPm       also hold the point-multiplication result of every frame
+    FrameSlot(const FramePlan& plan, Index keyCount, Index basisSize, bool keepPm);
+    ~FrameSlot();
+    FrameSlot(const FrameSlot&) = delete;
+    FrameSlot& operator=(const FrameSlot&) = delete;
+
+    /// Prepares the slot for a new frame (keeps the buffers' memory).
+    void reset(Index sequenceNumber, Index frameNumber);
+
+    /// Records a failure of `node` on this frame. Several chunks of one frame
+    /// may fail at once; the one with the lowest `order` wins, so the message
+    /// does not depend on scheduling. Thread-safe.
+    void fail(const std::string& node, const std::string& what, Index order = 0);
+    bool failed() const { return failed_.load(std::memory_order_acquire); }
+    /// "frame F: node 'N': what" (empty unless failed()).
+    const std::string& error() const { return error_; }
+
+    Index sequence = 0;  ///< position in the run, stamped by the source (restores order)
+    Index frame = 0;     ///< frame number given to the evaluator
+
+    std::vector<double> keyValues;  ///< K*C, model key order, channel-minor
+    bool keysFinite = true;         ///< false forces a fail-through of every point
+    std::vector<double> coords;     ///< M pose-space coordinates
+    double keyRmsError = 0;         ///< section 5's key-point error (NaN if keys not finite)
+    CacheDecision decision;         ///< hit / blend / miss and the weight of the full result
+
+    std::vector<double> values;   ///< output: plan.outputCount() * C
+    std::vector<double> scratch;  ///< fail-through / blend workspace (plan.scratchSize())
+    std::vector<double> pmValues;  ///< PM result of the output points (only when kept)
+    bool pmValid = false;          ///< pmValues holds this frame's PM result
+
+    std::atomic<Index> chunksLeft{0};  ///< fail-through branches still running
+
+    /// Live slots in the process (instrument for the bounded-memory test).
+    static Index liveCount();
+
+private:
+    std::atomic<bool> failed_{false};
+    std::mutex errorMutex_;
+    Index errorOrder_ = 0;
+    std::string error_;
+};
+
+}  // namespace pmsc::nodes
