@@ -19,7 +19,7 @@ namespace pmsc::engine {
 using nodes::FailurePolicy;
 using nodes::FrameRange;
 using nodes::FrameResult;
-using nodes::FrameWriter;
+using nodes::FrameSink;
 
 /// Live numbers for a progress line, passed to EngineOptions::progress after each delivered frame.
 struct Progress {
@@ -49,7 +49,7 @@ struct EngineOptions {
     std::vector<Index> pointsWanted;
     /// Thresholds; unset = the model's [epsMin, epsMax].
     std::optional<SoftCachePolicy> policy;
-    /// Also hand the writer the PM result of every frame (FrameResult::pmValues), e.g.
+    /// Also hand the sink the PM result of every frame (FrameResult::pmValues), e.g.
     /// to report PM errors on misses. Costs a reconstruction on misses.
     bool keepPointMultiplication = false;
     /// Another thread sets it to stop the run; Engine::run() then throws pmsc::Cancelled
@@ -63,7 +63,7 @@ struct EngineOptions {
 /// flow graph that streams a frame range through key-point evaluation,
 /// projection, the error monitor, and either point multiplication (a hit) or
 /// the fail-through branches (a blend or a miss), then restores frame order
-/// and hands each frame to a FrameWriter.
+/// and hands each frame to a FrameSink.
 ///
 /// Thread safety: run() may be called again after it returns; one run at a
 /// time per Engine. The model and evaluator must outlive the engine.
@@ -76,14 +76,14 @@ public:
     Engine(const Engine&) = delete;
     Engine& operator=(const Engine&) = delete;
 
-    /// Streams `range` through the graph; the writer receives every frame in order.
+    /// Streams `range` through the graph; the sink receives every frame in order.
     /// @return the run's stats (also in lastStats()).
     /// @throws pmsc::InputError for a range outside the evaluator's frames;
     ///         pmsc::EvaluatorError ("frame F: node 'N': ...") when an evaluator fails under
-    ///         StopRun — the writer has then received exactly the frames before F;
+    ///         StopRun — the sink has then received exactly the frames before F;
     ///         pmsc::Cancelled when EngineOptions::cancel was set;
-    ///         whatever FrameWriter::write() threw, unchanged.
-    RunStats run(FrameRange range, FrameWriter& writer);
+    ///         whatever FrameSink::write() threw, unchanged.
+    RunStats run(FrameRange range, FrameSink& sink);
 
     /// Stats of the last run, also when it threw.
     const RunStats& lastStats() const;

@@ -19,7 +19,7 @@ struct NodeTiming {
 /// What a run did and how fast.
 struct RunStats {
     Index framesRequested = 0;  ///< the frame range's count
-    Index framesDelivered = 0;  ///< frames handed to the writer (including failed ones under MarkFailed)
+    Index framesDelivered = 0;  ///< frames handed to the sink (including failed ones under MarkFailed)
     Index hits = 0, blends = 0, misses = 0;  ///< section 5 states of delivered, non-failed frames
     Index failed = 0;            ///< frames the evaluator failed on (delivered marked, or the one that stopped the run)
     Index forcedMisses = 0;      ///< misses forced by non-finite key values (counted in misses)

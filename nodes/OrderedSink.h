@@ -10,8 +10,8 @@
 
 namespace pmsc::nodes {
 
-/// One finished frame as a writer sees it. The spans point into the engine's
-/// frame buffer and are valid only during FrameWriter::write(); copy what you keep.
+/// One finished frame as a sink sees it. The spans point into the engine's
+/// frame buffer and are valid only during FrameSink::write(); copy what you keep.
 struct FrameResult {
     Index sequence = 0;  ///< 0, 1, 2, ... in the run's order (frames arrive in this order)
     Index frame = 0;     ///< the evaluator's frame number
@@ -37,33 +37,33 @@ struct FrameResult {
 /// frame-range order, never for a frame that did not finish (StopRun). An
 /// exception thrown by write() ends the run and is rethrown by Engine::run()
 /// unchanged (so an IoError stays an IoError).
-class FrameWriter {
+class FrameSink {
 public:
-    virtual ~FrameWriter() = default;
+    virtual ~FrameSink() = default;
     virtual void write(const FrameResult& frame) = 0;
 };
 
 /// What the sink does with a failed frame.
 enum class FailurePolicy : int {
     StopRun = 0,                ///< the first failed frame (in order) ends the run with its error
-    MarkFailedAndContinue = 1,  ///< the writer receives the frame marked failed; the run goes on
+    MarkFailedAndContinue = 1,  ///< the sink receives the frame marked failed; the run goes on
 };
 
 /// The serial, in-order end of the graph (after the sequencer): hands each
-/// finished frame to the writer, applies the failure policy, and counts.
-/// Decision: under StopRun the writer sees exactly the frames before the first
+/// finished frame to the user's FrameSink, applies the failure policy, and counts.
+/// Decision: under StopRun the sink sees exactly the frames before the first
 /// failing frame in range order, whatever the thread count, so a caller can
 /// keep or delete a deterministic prefix.
 class OrderedSink {
 public:
-    OrderedSink(const FramePlan& plan, FrameWriter& writer, FailurePolicy policy, RunControl& control);
+    OrderedSink(const FramePlan& plan, FrameSink& sink, FailurePolicy policy, RunControl& control);
 
     /// Delivers (or drops) the frame in `slot`. Not reentrant: one call at a time.
     void operator()(FrameSlot& slot);
 
 private:
     const FramePlan& plan_;
-    FrameWriter& writer_;
+    FrameSink& sink_;
     FailurePolicy policy_;
     RunControl& control_;
     Index expected_ = 0;

@@ -8,11 +8,11 @@
 
 namespace pmsc::engine {
 
-/// A FrameWriter that keeps every frame of a run in memory: the soft-cached
+/// A FrameSink that keeps every frame of a run in memory: the soft-cached
 /// values as a FrameSet (frames in range order) plus each frame's decision.
 /// Handy for tests, `pmsc replay` and short ranges; a long range wants a
-/// streaming writer instead.
-class FrameSetWriter : public FrameWriter {
+/// streaming sink instead.
+class FrameSetSink : public FrameSink {
 public:
     /// Per-frame record of the soft-cache decision.
     struct FrameInfo {
@@ -28,7 +28,7 @@ public:
     /// @param[in] outputPoints   points per frame (Engine::outputPoints().size())
     /// @param[in] channels       C
     /// @param[in] keepPm         also keep FrameResult::pmValues (needs keepPointMultiplication)
-    FrameSetWriter(Index frames, Index outputPoints, Index channels, bool keepPm = false);
+    FrameSetSink(Index frames, Index outputPoints, Index channels, bool keepPm = false);
 
     void write(const FrameResult& frame) override;
 
