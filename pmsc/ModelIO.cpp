@@ -1,0 +1,233 @@
+#include "pmsc/ModelIO.h"
+
+#include "pmsc/AtomicFile.h"
+#include "pmsc/Errors.h"
+
+#include <bit>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+namespace pmsc {
+
+static_assert(std::endian::native == std::endian::little, "pmsc's model I/O assumes a little-endian host");
+
+namespace {
+
+constexpr char kModelMagic[8] = {'P', 'M', 'S', 'C', 'M', 'O', 'D', 'L'};
+
+[[noreturn]] void bad(const std::string& name, const std::string& what) {
+    throw InputError(name + ": " + what);
+}
+
+template <class T>
+void put(std::string& out, T value) {
+    char bytes[sizeof(T)];
+    std::memcpy(bytes, &value, sizeof(T));
+    out.append(bytes, sizeof(T));
+}
+
+void putDoubles(std::string& out, const double* values, std::size_t count) {
+    out.append(reinterpret_cast<const char*>(values), count * sizeof(double));
+}
+
+template <class T>
+T get(std::string_view bytes, std::size_t offset) {
+    T value;
+    std::memcpy(&value, bytes.data() + offset, sizeof(T));
+    return value;
+}
+
+/// a*b and a+b for sizes read from a file, refusing to wrap.
+bool mulOk(std::uint64_t a, std::uint64_t b, std::uint64_t& out) {
+    return !__builtin_mul_overflow(a, b, &out);
+}
+bool addOk(std::uint64_t a, std::uint64_t b, std::uint64_t& out) {
+    return !__builtin_add_overflow(a, b, &out);
+}
+
+}  // namespace
+
+std::uint64_t fnv1a64(const void* data, std::size_t bytes) {
+    const unsigned char* p = static_cast<const unsigned char*>(data);
+    std::uint64_t hash = 0xcbf29ce484222325ull;
+    for (std::size_t i = 0; i < bytes; ++i) {
+        hash ^= p[i];
+        hash *= 0x100000001b3ull;
+    }
+    return hash;
+}
+
+std::string encodeModel(const Model& model) {
+    model.validate();
+    const std::uint64_t n = static_cast<std::uint64_t>(model.points);
+    const std::uint64_t c = static_cast<std::uint64_t>(model.channels);
+    const std::uint64_t m = static_cast<std::uint64_t>(model.basisSize());
+    const std::uint64_t k = static_cast<std::uint64_t>(model.keyCount());
+    std::string out;
+    out.reserve(kModelHeaderBytes + 8 * (n * c * (m + 1) + m + k + m * k * c + 1));
+    out.append(kModelMagic, sizeof kModelMagic);
+    put<std::uint32_t>(out, kModelFormatVersion);
+    put<std::uint32_t>(out, 0);
+    put<std::uint64_t>(out, n);
+    put<std::uint64_t>(out, c);
+    put<std::uint64_t>(out, m);
+    put<std::uint64_t>(out, k);
+    put<std::uint64_t>(out, static_cast<std::uint64_t>(model.trainFrames));
+    put<std::uint32_t>(out, static_cast<std::uint32_t>(model.selector));
+    put<std::uint32_t>(out, 0);
+    put<double>(out, model.epsMin);
+    put<double>(out, model.epsMax);
+    put<double>(out, model.tolerance);
+    put<double>(out, model.trainMaxPointResidual);
+    put<double>(out, model.totalEnergy);
+    putDoubles(out, model.mean.data(), n * c);
+    putDoubles(out, model.basis.data(), n * c * m);
+    putDoubles(out, model.singularValues.data(), m);
+    for (const Index key : model.keyPoints) put<std::uint64_t>(out, static_cast<std::uint64_t>(key));
+    putDoubles(out, model.projector.data(), m * k * c);
+    put<std::uint64_t>(out, fnv1a64(out.data(), out.size()));
+    return out;
+}
+
+Model decodeModel(std::string_view bytes, const std::string& name) {
+    const std::uint64_t length = bytes.size();
+    if (length >= sizeof kModelMagic && std::memcmp(bytes.data(), kModelMagic, sizeof kModelMagic) != 0)
+        bad(name, "not a pmsc model file (bad magic; expected \"PMSCMODL\")");
+    if (length < kModelHeaderBytes + 8) {
+        if (length < sizeof kModelMagic && std::memcmp(bytes.data(), kModelMagic, length) != 0)
+            bad(name, "not a pmsc model file (bad magic; expected \"PMSCMODL\")");
+        bad(name, "truncated model file (" + std::to_string(length) + " bytes; the header alone needs " +
+                      std::to_string(kModelHeaderBytes + 8) + ")");
+    }
+    const auto version = get<std::uint32_t>(bytes, 8);
+    if (version != kModelFormatVersion)
+        bad(name, "unsupported model format version " + std::to_string(version) +
+                      " (this build reads version " + std::to_string(kModelFormatVersion) + ")");
+
+    const auto n = get<std::uint64_t>(bytes, 16);
+    const auto c = get<std::uint64_t>(bytes, 24);
+    const auto m = get<std::uint64_t>(bytes, 32);
+    const auto k = get<std::uint64_t>(bytes, 40);
+    const auto trainFrames = get<std::uint64_t>(bytes, 48);
+    const auto selector = get<std::uint32_t>(bytes, 56);
+    const std::string sizes = "N=" + std::to_string(n) + ", C=" + std::to_string(c) +
+                              ", M=" + std::to_string(m) + ", K=" + std::to_string(k);
+    if (n == 0 || c == 0 || m == 0 || k == 0)
+        bad(name, "inconsistent sizes in the header (" + sizes + "): all must be positive");
+
+    // Expected length = header + 8*(N*C + N*C*M + M + K + M*K*C) + checksum, all
+    // computed without wrapping; only a file that is exactly that long is parsed,
+    // so every allocation below is bounded by the real file length.
+    std::uint64_t nc = 0, ncm = 0, kc = 0, mkc = 0, values = 0, expected = 0;
+    const bool ok = mulOk(n, c, nc) && mulOk(nc, m, ncm) && mulOk(k, c, kc) && mulOk(m, kc, mkc) &&
+                    addOk(nc, ncm, values) && addOk(values, m, values) && addOk(values, k, values) &&
+                    addOk(values, mkc, values) && mulOk(values, 8, expected) &&
+                    addOk(expected, kModelHeaderBytes + 8, expected);
+    if (!ok)
+        bad(name, "inconsistent sizes in the header (" + sizes + "): the arrays would not fit in any file");
+    if (expected != length) {
+        if (length < expected)
+            bad(name, "truncated model file or corrupted header: the header (" + sizes + ") needs " +
+                          std::to_string(expected) + " bytes, the file has " + std::to_string(length));
+        bad(name, "inconsistent sizes: the header (" + sizes + ") needs " + std::to_string(expected) +
+                      " bytes, the file has " + std::to_string(length) + " (" +
+                      std::to_string(length - expected) + " extra)");
+    }
+    const auto stored = get<std::uint64_t>(bytes, length - 8);
+    const auto computed = fnv1a64(bytes.data(), length - 8);
+    if (stored != computed) {
+        char detail[96];
+        std::snprintf(detail, sizeof detail, " (stored %016llx, computed %016llx)",
+                      static_cast<unsigned long long>(stored), static_cast<unsigned long long>(computed));
+        bad(name, std::string("checksum mismatch: the model file is corrupted") + detail);
+    }
+    if (selector > static_cast<std::uint32_t>(Selector::QDeim))
+        bad(name, "unknown key-point selector " + std::to_string(selector));
+    if (m > nc) bad(name, "inconsistent sizes (" + sizes + "): more basis vectors than values per frame");
+    if (k > n) bad(name, "inconsistent sizes (" + sizes + "): more key points than points");
+    if (trainFrames > static_cast<std::uint64_t>(INT64_MAX))
+        bad(name, "inconsistent header: " + std::to_string(trainFrames) + " training frames");
+
+    Model model;
+    model.points = static_cast<Index>(n);
+    model.channels = static_cast<Index>(c);
+    model.trainFrames = static_cast<Index>(trainFrames);
+    model.selector = static_cast<Selector>(selector);
+    model.epsMin = get<double>(bytes, 64);
+    model.epsMax = get<double>(bytes, 72);
+    model.tolerance = get<double>(bytes, 80);
+    model.trainMaxPointResidual = get<double>(bytes, 88);
+    model.totalEnergy = get<double>(bytes, 96);
+    std::size_t at = kModelHeaderBytes;
+    const auto readDoubles = [&](double* out, std::uint64_t count) {
+        std::memcpy(out, bytes.data() + at, count * sizeof(double));
+        at += count * sizeof(double);
+    };
+    model.mean.resize(static_cast<Index>(nc));
+    readDoubles(model.mean.data(), nc);
+    model.basis.resize(static_cast<Index>(nc), static_cast<Index>(m));
+    readDoubles(model.basis.data(), ncm);
+    model.singularValues.resize(static_cast<Index>(m));
+    readDoubles(model.singularValues.data(), m);
+    model.keyPoints.resize(k);
+    for (auto& key : model.keyPoints) {
+        const auto raw = get<std::uint64_t>(bytes, at);
+        at += 8;
+        if (raw >= n)
+            bad(name,
+                "key point index " + std::to_string(raw) + " is outside [0, " + std::to_string(n) + ")");
+        key = static_cast<Index>(raw);
+    }
+    model.projector.resize(static_cast<Index>(m), static_cast<Index>(kc));
+    readDoubles(model.projector.data(), mkc);
+    try {
+        model.validate();
+    } catch (const std::invalid_argument& e) {
+        bad(name, std::string("inconsistent model: ") + e.what());
+    }
+    return model;
+}
+
+void writeModel(const std::string& path, const Model& model) {
+    writeFileAtomically(path, encodeModel(model));
+}
+
+Model readModel(const std::string& path) {
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) {
+        const int error = errno;
+        bad(path, error == ENOENT ? std::string("no such file")
+                                  : std::string("cannot open: ") + std::strerror(error));
+    }
+    struct Closer {
+        int fd;
+        ~Closer() { ::close(fd); }
+    } closer{fd};
+    struct stat st {};
+    if (::fstat(fd, &st) != 0) bad(path, std::string("cannot stat: ") + std::strerror(errno));
+    if (S_ISDIR(st.st_mode)) bad(path, "is a folder, not a model file");
+    // The buffer is as large as the file really is; nothing is allocated from a size field.
+    std::string bytes(static_cast<std::size_t>(st.st_size), '\0');
+    std::size_t done = 0;
+    while (done < bytes.size()) {
+        const ssize_t got = ::read(fd, bytes.data() + done, bytes.size() - done);
+        if (got < 0) {
+            if (errno == EINTR) continue;
+            bad(path, std::string("read failed: ") + std::strerror(errno));
+        }
+        if (got == 0) break;
+        done += static_cast<std::size_t>(got);
+    }
+    bytes.resize(done);
+    return decodeModel(bytes, path);
+}
+
+}  // namespace pmsc

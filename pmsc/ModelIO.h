@@ -1,0 +1,65 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include "pmsc/Model.h"
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+
+namespace pmsc {
+
+/// Version of the model file layout this build writes and reads.
+inline constexpr std::uint32_t kModelFormatVersion = 1;
+
+/// The .pmsc model file (issue 2, item 8). Little-endian, no padding:
+///
+///   offset  size        field
+///   0       8           magic "PMSCMODL"
+///   8       4  u32      format version (1)
+///   12      4  u32      reserved, 0
+///   16      8  u64      N  points
+///   24      8  u64      C  channels
+///   32      8  u64      M  basis vectors
+///   40      8  u64      K  key points
+///   48      8  u64      training frames
+///   56      4  u32      selector (0 teleconnection, 1 Q-DEIM)
+///   60      4  u32      reserved, 0
+///   64      8  f64      eps_min
+///   72      8  f64      eps_max
+///   80      8  f64      tolerance (0: not calibrated)
+///   88      8  f64      largest point residual of PM on the training set
+///   96      8  f64      total energy of the mean-removed training matrix
+///   104     8*N*C       mean, f64, point-major, channel-minor
+///           8*N*C*M     basis, f64, column-major ((N*C) x M)
+///           8*M         singular values, f64
+///           8*K         key point indices, u64, selection order
+///           8*M*K*C     projector, f64, column-major (M x (K*C))
+///   end-8   8  u64      FNV-1a 64 checksum of every byte before it
+///
+/// The whole file size follows from the header, so a reader knows before it
+/// allocates anything whether the file can hold what the header claims.
+inline constexpr std::size_t kModelHeaderBytes = 104;
+
+/// FNV-1a, 64 bit (offset basis 0xcbf29ce484222325, prime 0x100000001b3).
+std::uint64_t fnv1a64(const void* data, std::size_t bytes);
+
+/// The bytes of a model file. @throws std::invalid_argument if model.validate() fails.
+std::string encodeModel(const Model& model);
+
+/// Parses the bytes of a model file. `name` (the path) starts every message.
+/// @throws InputError for a truncated file, a wrong magic number, an
+///         unsupported version (found vs supported), sizes inconsistent with the
+///         file length or with each other, a checksum mismatch, or a model that
+///         fails Model::validate().
+Model decodeModel(std::string_view bytes, const std::string& name);
+
+/// Writes a model atomically (temporary file in the same folder, fsync, rename).
+/// @throws IoError naming the path; std::invalid_argument for an invalid model.
+void writeModel(const std::string& path, const Model& model);
+
+/// Reads and validates a model file. @throws InputError naming the path and the
+/// problem (missing, unreadable, or everything decodeModel() rejects).
+Model readModel(const std::string& path);
+
+}  // namespace pmsc
