@@ -21,6 +21,7 @@ PACKAGES=(
   libembree-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   nlohmann-json3-dev libpng-dev
+  libassimp-dev assimp-testmodels slurm-wlm munge
 )
 
 die() { echo "pmsc.sh: $*" >&2; exit 1; }
