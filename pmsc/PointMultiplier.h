@@ -42,6 +42,7 @@ private:
     const Model& model_;
     Eigen::VectorXd keyMean_;   // K*C
     Eigen::MatrixXd keyBasis_;  // (K*C) x M
+    Eigen::VectorXd projectedKeyMean_;  // M: P mean_K, so project() needs no temporary
 };
 
 }  // namespace pmsc

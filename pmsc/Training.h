@@ -1,10 +1,12 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include "pmsc/Calibration.h"
 #include "pmsc/FrameSet.h"
 #include "pmsc/Model.h"
 
 #include <functional>
+#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -60,6 +62,9 @@ struct TrainingReport {
     double seconds = 0;
     /// Largest point residual on the training set after each round (data units).
     std::vector<double> residualPerRound;
+    /// How eps was set: the calibration's ratio r and per-frame key RMS / largest point error on
+    /// held-out frames (options.tolerance > 0), or the training frames' key RMS otherwise.
+    CalibrationStats calibration;
 };
 
 /// Trains a model from frames: mean removal, truncated SVD, key-point selection,

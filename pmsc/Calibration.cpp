@@ -1,0 +1,140 @@
+#include "pmsc/Calibration.h"
+
+#include "pmsc/Model.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace pmsc {
+
+Eigen::VectorXd keyRmsPerFrame(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::MatrixXd& basis,
+                               Index channels, const std::vector<Index>& keys,
+                               const Eigen::MatrixXd& projector) {
+    const Eigen::MatrixXd qk = gatherKeyRows(q, channels, keys);
+    const Eigen::MatrixXd bk = gatherKeyRows(basis, channels, keys);
+    Eigen::MatrixXd coords = projector * qk;
+    Eigen::MatrixXd r = qk;
+    r.noalias() -= bk * coords;
+    const double k = static_cast<double>(keys.size());
+    return (r.colwise().squaredNorm().array() / k).sqrt().matrix().transpose();
+}
+
+CalibrationStats thresholdsFromTraining(const Eigen::Ref<const Eigen::MatrixXd>& q,
+                                        const Eigen::MatrixXd& basis, Index channels,
+                                        const std::vector<Index>& keys, const Eigen::MatrixXd& projector) {
+    CalibrationStats s;
+    const Eigen::VectorXd e = keyRmsPerFrame(q, basis, channels, keys, projector);
+    s.epsMin = e.size() > 0 ? e.maxCoeff() : 0.0;
+    s.epsMax = 1.5 * s.epsMin;
+    s.keyRms.assign(e.data(), e.data() + e.size());
+    return s;
+}
+
+CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index channels,
+                           const std::vector<Index>& keys, Index basisSize, double tolerance,
+                           Index slices, const SvdOptions& svd) {
+    const Index f = q.cols();
+    if (!(tolerance > 0) || !std::isfinite(tolerance)) {
+        throw std::invalid_argument("calibration tolerance must be a positive number, got " +
+                                    std::to_string(tolerance));
+    }
+    if (slices < 2 || slices > f) {
+        throw std::invalid_argument("calibration slices must be in [2, " + std::to_string(f) +
+                                    "] (the frame count), got " + std::to_string(slices));
+    }
+    if (basisSize < 1) throw std::invalid_argument("calibration: basis size must be >= 1");
+    CalibrationStats s;
+    s.tolerance = tolerance;
+    s.slices = slices;
+    s.frames.reserve(static_cast<size_t>(f));
+    Index cappedFolds = 0;
+    Index smallestM = basisSize;
+    Eigen::MatrixXd heldIn;
+    Eigen::MatrixXd heldOut;
+    for (Index slice = 0; slice < slices; ++slice) {
+        const Index first = slice * f / slices;
+        const Index last = (slice + 1) * f / slices;  // exclusive
+        const Index out = last - first;
+        const Index in = f - out;
+        heldIn.resize(q.rows(), in);
+        heldIn.leftCols(first) = q.leftCols(first);
+        heldIn.rightCols(f - last) = q.rightCols(f - last);
+        const Eigen::VectorXd mean = heldIn.rowwise().mean();
+        heldIn.colwise() -= mean;
+        // A centered matrix of `in` frames has rank <= in - 1.
+        Index m = std::min(basisSize, in - 1);
+        if (m < basisSize) ++cappedFolds;
+        if (m < 1) continue;
+        SvdOptions o = svd;
+        o.seed = svd.seed + static_cast<unsigned>(slice) + 1000u;
+        TruncatedSvd fold = truncatedSvd(heldIn, m, o);
+        if (fold.sigma.size() < m) ++cappedFolds;
+        m = fold.sigma.size();
+        smallestM = std::min(smallestM, m);
+        if (m < 1) continue;
+        const Eigen::MatrixXd projector = makeProjector(fold.u, channels, keys);
+
+        heldOut = q.middleCols(first, out).colwise() - mean;
+        const Eigen::MatrixXd coords = projector * gatherKeyRows(heldOut, channels, keys);
+        heldOut.noalias() -= fold.u * coords;  // now the PM residual of the held-out frames
+        const Eigen::VectorXd pointErr = maxPointNormPerColumn(heldOut, channels);
+        const Eigen::MatrixXd keyResidual = gatherKeyRows(heldOut, channels, keys);
+        for (Index j = 0; j < out; ++j) {
+            s.frames.push_back(first + j);
+            s.keyRms.push_back(std::sqrt(keyResidual.col(j).squaredNorm() / static_cast<double>(keys.size())));
+            s.maxPointError.push_back(pointErr[j]);
+        }
+    }
+    if (cappedFolds > 0) {
+        s.notes.push_back("calibration: " + std::to_string(cappedFolds) + " of " + std::to_string(slices) +
+                          " folds had fewer than M = " + std::to_string(basisSize) +
+                          " usable basis vectors (down to " + std::to_string(smallestM) + ")");
+    }
+
+    const double largestError =
+        s.maxPointError.empty() ? 0.0 : *std::max_element(s.maxPointError.begin(), s.maxPointError.end());
+    // A key error at rounding level says nothing about the frame: exclude it from the ratio.
+    const double blindLevel = 1e-9 * largestError;
+    double ratio = 0;
+    double largestKeyRms = 0;
+    bool anyUsable = false;
+    for (size_t i = 0; i < s.keyRms.size(); ++i) {
+        largestKeyRms = std::max(largestKeyRms, s.keyRms[i]);
+        if (s.keyRms[i] > blindLevel && s.keyRms[i] > 0) {
+            ratio = std::max(ratio, s.maxPointError[i] / s.keyRms[i]);
+            anyUsable = true;
+        } else if (s.maxPointError[i] > 0) {
+            ++s.blindFrames;
+        }
+    }
+    s.ratio = ratio;
+    if (s.blindFrames > 0) {
+        s.notes.push_back("calibration: " + std::to_string(s.blindFrames) +
+                          " held-out frames had point errors the key error cannot see (key RMS at "
+                          "rounding level); add keys or reduce M");
+    }
+    if (!anyUsable || !(ratio > 0)) {
+        if (largestError == 0) {
+            // Every held-out frame was reconstructed exactly: any key error seen is harmless.
+            s.epsMin = largestKeyRms;
+            s.epsMax = 2 * s.epsMin;
+            s.notes.push_back("calibration: PM was exact on every held-out frame; eps_min set to the "
+                              "largest held-out key error");
+        } else {
+            // Errors exist but the key error never moves: no threshold separates good from bad.
+            s.epsMin = 0;
+            s.epsMax = 0;
+            s.notes.push_back("calibration: the key error is identically zero on held-out frames, so no "
+                              "threshold can bound the point error; every frame with any key error fails "
+                              "through");
+        }
+        return s;
+    }
+    s.epsMin = tolerance / ratio;
+    s.epsMax = 2 * s.epsMin;
+    return s;
+}
+
+}  // namespace pmsc

@@ -1,0 +1,63 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include "pmsc/FrameSet.h"
+#include "pmsc/Subspace.h"
+
+#include <Eigen/Core>
+
+#include <string>
+#include <vector>
+
+namespace pmsc {
+
+/// What calibration measured, so a user (and `pmsc train`) can see why eps came out as it did.
+struct CalibrationStats {
+    double epsMin = 0;
+    double epsMax = 0;
+    double tolerance = 0;  ///< T; 0 for the uncalibrated rule
+    /// r = max_f E_f / e_f over held-out frames with a usable key error: the linear bound E <= r e.
+    double ratio = 0;
+    Index slices = 0;
+    std::vector<Index> frames;          ///< held-out frame indices, ascending
+    std::vector<double> keyRms;         ///< e_f: key RMS error of each held-out frame
+    std::vector<double> maxPointError;  ///< E_f: largest point error of PM on it
+    /// Held-out frames whose key error is rounding noise (e_f <= 1e-9 max E) while E_f is not:
+    /// errors the key monitor cannot see (typically K*C == M).
+    Index blindFrames = 0;
+    std::vector<std::string> notes;     ///< decisions worth a warning
+};
+
+/// Calibrates the soft-cache thresholds for a largest point error `tolerance` T (beyond the
+/// paper, whose authors picked eps by hand; see section 5).
+///
+/// Leave-one-slice-out over `slices` contiguous slices of frames. Contiguous because neighbouring
+/// frames are correlated: holding out a slice approximates holding out a whole sequence, as a
+/// random split would not. For each slice the mean and the M-basis are recomputed from the other
+/// frames, the keys are kept, and each held-out frame f gives its key RMS e_f
+/// (PointMultiplier::keyRmsError) and the largest point error E_f of PM.
+///
+/// Model: E <= r e with r = max_f E_f / e_f. eps_min = T / r, so every held-out frame under
+/// eps_min had error <= T. eps_max = 2 eps_min: under the same bound the soft-cached error
+/// (1 - w) r e with w = (e - eps_min)/(eps_max - eps_min) is largest at e = eps_min whenever
+/// eps_max <= 2 eps_min, so 2 is the widest blend zone that still keeps blends under T.
+/// @param q training matrix (N*C) x F, raw or mean-removed (means are recomputed per fold)
+/// @param basisSize M (capped per fold by the held-in rank, with a note)
+/// @throws std::invalid_argument unless tolerance > 0 and 2 <= slices <= F.
+CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index channels,
+                           const std::vector<Index>& keys, Index basisSize, double tolerance,
+                           Index slices, const SvdOptions& svd = {});
+
+/// Key RMS error (PointMultiplier::keyRmsError) of every column of a mean-removed matrix `q`
+/// under the model's basis and key projector: e_t = sqrt((1/K) ||(I - B_K P) Q_K[:,t]||^2).
+Eigen::VectorXd keyRmsPerFrame(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::MatrixXd& basis,
+                               Index channels, const std::vector<Index>& keys,
+                               const Eigen::MatrixXd& projector);
+
+/// The uncalibrated rule (Training.h): eps_min = the largest key RMS seen on the training frames,
+/// eps_max = 1.5 eps_min, the ratio of the paper's hand-picked [0.1, 0.15] (section 7).
+CalibrationStats thresholdsFromTraining(const Eigen::Ref<const Eigen::MatrixXd>& q,
+                                        const Eigen::MatrixXd& basis, Index channels,
+                                        const std::vector<Index>& keys, const Eigen::MatrixXd& projector);
+
+}  // namespace pmsc

@@ -1,0 +1,182 @@
+#include "pmsc/KeyPointSelector.h"
+
+#include "pmsc/Model.h"
+
+#include <Eigen/SVD>
+
+#include <algorithm>
+#include <numeric>
+#include <stdexcept>
+#include <string>
+
+namespace pmsc {
+
+void seedKeys(KeySet& keys, const std::vector<Index>& fiducials, const std::vector<Index>& gridPoints) {
+    const Index n = keys.points();
+    auto seed = [&](const std::vector<Index>& list, const char* what) {
+        for (Index p : list) {
+            if (p < 0 || p >= n) {
+                throw std::invalid_argument(std::string(what) + " point " + std::to_string(p) +
+                                            " is outside [0, " + std::to_string(n) + ")");
+            }
+            if (!keys.add(p)) {
+                throw std::invalid_argument(std::string(what) + " point " + std::to_string(p) +
+                                            " is listed twice (or is already a fiducial)");
+            }
+        }
+    };
+    seed(fiducials, "fiducial");
+    seed(gridPoints, "grid");
+}
+
+Index addTeleconnectionPair(const Eigen::Ref<const Eigen::VectorXd>& v, Index channels, KeySet& keys,
+                            Index budget) {
+    const Index n = keys.points();
+    if (keys.size() >= budget) return 0;
+    const double* data = v.data();
+    auto loadingDot = [&](Index p, Index q) {
+        double s = 0;
+        for (Index c = 0; c < channels; ++c) s += data[p * channels + c] * data[q * channels + c];
+        return s;
+    };
+    // First: the non-key point with the largest loading (strict > keeps the lowest index on ties).
+    Index first = -1;
+    double firstNorm = -1;
+    for (Index p = 0; p < n; ++p) {
+        if (keys.contains(p)) continue;
+        const double s = loadingDot(p, p);
+        if (s > firstNorm) {
+            firstNorm = s;
+            first = p;
+        }
+    }
+    if (first < 0) return 0;
+    keys.add(first);
+    Index added = 1;
+    if (keys.size() >= budget) return added;
+
+    // Second: the most negative inner product of loadings with the first point.
+    Index second = -1;
+    double mostNegative = 0;
+    for (Index q = 0; q < n; ++q) {
+        if (keys.contains(q)) continue;
+        const double d = loadingDot(first, q);
+        if (d < mostNegative) {
+            mostNegative = d;
+            second = q;
+        }
+    }
+    if (second < 0) {
+        // No anti-correlated point under this vector: take the next largest magnitude instead, so
+        // every vector still yields two keys.
+        double best = -1;
+        for (Index q = 0; q < n; ++q) {
+            if (keys.contains(q)) continue;
+            const double s = loadingDot(q, q);
+            if (s > best) {
+                best = s;
+                second = q;
+            }
+        }
+    }
+    if (second >= 0 && keys.add(second)) ++added;
+    return added;
+}
+
+double pmResidual(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::MatrixXd& basis,
+                  Index channels, const std::vector<Index>& keys, Eigen::MatrixXd& residual) {
+    const Eigen::MatrixXd projector = makeProjector(basis, channels, keys);
+    const Eigen::MatrixXd qk = gatherKeyRows(q, channels, keys);
+    const Eigen::MatrixXd coords = projector * qk;  // M x F
+    residual.resize(q.rows(), q.cols());
+    residual = q;
+    residual.noalias() -= basis * coords;
+    return maxPointNorm(residual, channels);
+}
+
+Index determinedBasisSize(const Eigen::MatrixXd& basis, Index channels, const std::vector<Index>& keys,
+                          double maxCondition) {
+    const Eigen::MatrixXd bk = gatherKeyRows(basis, channels, keys);
+    auto determined = [&](Index m) {
+        if (m > bk.rows()) return false;
+        const Eigen::VectorXd s = Eigen::BDCSVD<Eigen::MatrixXd>(bk.leftCols(m)).singularValues();
+        return s[m - 1] > 0 && s[0] / s[m - 1] <= maxCondition;
+    };
+    Index lo = 0;  // largest size known determined (0 trivially)
+    Index hi = std::min(basis.cols(), bk.rows());
+    if (hi > 0 && determined(hi)) return hi;
+    // Invariant: lo determined (or 0), hi not determined.
+    while (hi - lo > 1) {
+        const Index mid = (lo + hi) / 2;
+        if (determined(mid)) lo = mid;
+        else hi = mid;
+    }
+    return lo;
+}
+
+KeySelection selectKeysTeleconnection(const Eigen::Ref<const Eigen::MatrixXd>& q,
+                                      const Eigen::MatrixXd& basis,
+                                      const Eigen::Ref<const Eigen::MatrixXd>& firstBlock,
+                                      const Eigen::VectorXd& firstSigma, Index channels,
+                                      const TeleconnectionOptions& options) {
+    if (options.block < 1) {
+        throw std::invalid_argument("block must be >= 1, got " + std::to_string(options.block));
+    }
+    const Index n = q.rows() / channels;
+    if (options.maxKeys < 1 || options.maxKeys > n) {
+        throw std::invalid_argument("key budget " + std::to_string(options.maxKeys) +
+                                    " must be in [1, " + std::to_string(n) + "]");
+    }
+    KeySet keys(n);
+    seedKeys(keys, options.fiducials, options.gridPoints);
+    if (keys.size() > options.maxKeys) {
+        throw std::invalid_argument(std::to_string(keys.size()) +
+                                    " fiducial and grid points exceed the key budget " +
+                                    std::to_string(options.maxKeys));
+    }
+
+    KeySelection result;
+    Eigen::MatrixXd residual;
+    Eigen::MatrixXd blockU = firstBlock.leftCols(std::min(options.block, firstBlock.cols()));
+    Eigen::VectorXd blockSigma = firstSigma.head(blockU.cols());
+    for (Index round = 1;; ++round) {
+        const Index before = keys.size();
+        if (blockU.cols() > 0 && keys.size() < options.maxKeys) {
+            const VarimaxResult rotated = varimax(blockU, options.varimax);
+            // Visit rotated vectors by the variance they carry: column j of the rotated block
+            // carries ||diag(sigma) t_j||^2 of the block's energy.
+            const Index b = blockU.cols();
+            Eigen::VectorXd variance(b);
+            for (Index j = 0; j < b; ++j)
+                variance[j] = (blockSigma.array() * rotated.rotation.col(j).array()).matrix().squaredNorm();
+            std::vector<Index> order(static_cast<size_t>(b));
+            std::iota(order.begin(), order.end(), Index{0});
+            std::stable_sort(order.begin(), order.end(),
+                             [&](Index a, Index c) { return variance[a] > variance[c]; });
+            for (Index j : order) {
+                if (keys.size() >= options.maxKeys) break;
+                addTeleconnectionPair(rotated.rotated.col(j), channels, keys, options.maxKeys);
+            }
+        }
+        const double worst = pmResidual(q, basis, channels, keys.keys(), residual);
+        result.residualPerRound.push_back(worst);
+        result.rounds = round;
+        if (options.onRound) options.onRound(round, keys.size(), worst);
+
+        const bool progressed = keys.size() > before;
+        if (!progressed || keys.size() >= options.maxKeys || keys.size() >= n) break;
+        if (options.maxError > 0 && worst <= options.maxError) break;
+
+        // Next block: the residual's leading vectors (cueing + projection error left over).
+        SvdOptions svdOptions = options.svd;
+        svdOptions.seed = options.svd.seed + static_cast<unsigned>(round);
+        TruncatedSvd next = truncatedSvd(residual, options.block, svdOptions);
+        blockU = std::move(next.u);
+        blockSigma = std::move(next.sigma);
+        if (blockU.cols() == 0) break;  // the residual is numerically zero: nothing left to cue
+    }
+    result.keys = keys.keys();
+    return result;
+}
+
+}  // namespace pmsc

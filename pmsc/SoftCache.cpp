@@ -1,0 +1,37 @@
+#include "pmsc/SoftCache.h"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace pmsc {
+
+std::string_view toString(CacheState state) {
+    switch (state) {
+        case CacheState::Hit: return "hit";
+        case CacheState::Blend: return "blend";
+        case CacheState::Miss: return "miss";
+    }
+    return "unknown";
+}
+
+SoftCachePolicy::SoftCachePolicy(double epsMin, double epsMax) : epsMin_(epsMin), epsMax_(epsMax) {
+    if (!std::isfinite(epsMin) || !std::isfinite(epsMax) || epsMin < 0 || epsMax < epsMin) {
+        throw std::invalid_argument("soft cache: need 0 <= eps_min <= eps_max, both finite; got [" +
+                                    std::to_string(epsMin) + ", " + std::to_string(epsMax) + "]");
+    }
+}
+
+CacheDecision SoftCachePolicy::decide(double keyRmsError) const {
+    // A non-finite key error means the key values themselves are broken (or the projection
+    // blew up): the PM result cannot be trusted, so fail through entirely.
+    if (!std::isfinite(keyRmsError)) return {CacheState::Miss, 1.0};
+    if (keyRmsError <= epsMin_) return {CacheState::Hit, 0.0};
+    // Checked after the hit test so that epsMin == epsMax is a hard switch at that value.
+    if (keyRmsError >= epsMax_) return {CacheState::Miss, 1.0};
+    // Strictly inside (epsMin, epsMax), so epsMax > epsMin and the weight is in (0, 1).
+    const double w = (keyRmsError - epsMin_) / (epsMax_ - epsMin_);
+    return {CacheState::Blend, w};
+}
+
+}  // namespace pmsc

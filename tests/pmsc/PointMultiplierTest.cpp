@@ -1,0 +1,153 @@
+#include "pmsc/PointMultiplier.h"
+
+#include "Synthetic.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/QR>
+
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <vector>
+
+namespace {
+
+// A hand-built model: random orthonormal basis, given keys, projector from makeProjector.
+pmsc::Model makeModel(pmsc::Index n, pmsc::Index c, pmsc::Index m, std::vector<pmsc::Index> keys) {
+    pmsc::Model model;
+    model.points = n;
+    model.channels = c;
+    model.trainFrames = 10;
+    const Eigen::MatrixXd g = pmsc::test::gaussian(n * c, m, 7);
+    Eigen::HouseholderQR<Eigen::MatrixXd> qr(g);
+    model.basis = qr.householderQ() * Eigen::MatrixXd::Identity(n * c, m);
+    model.mean = pmsc::test::gaussian(n * c, 1, 8).col(0);
+    model.singularValues = Eigen::VectorXd::LinSpaced(m, static_cast<double>(m), 1.0);
+    model.totalEnergy = model.singularValues.squaredNorm() * 1.01;
+    model.keyPoints = std::move(keys);
+    model.projector = pmsc::makeProjector(model.basis, c, model.keyPoints);
+    model.epsMin = 0.1;
+    model.epsMax = 0.15;
+    return model;
+}
+
+std::vector<double> keyValuesOf(const pmsc::Model& model, const Eigen::VectorXd& frame) {
+    std::vector<double> k;
+    for (pmsc::Index p : model.keyPoints)
+        for (pmsc::Index ch = 0; ch < model.channels; ++ch) k.push_back(frame[p * model.channels + ch]);
+    return k;
+}
+
+}  // namespace
+
+TEST(PointMultiplier, FrameInSubspaceIsReconstructedExactlyFromItsKeys) {
+    const pmsc::Model model = makeModel(50, 3, 6, {3, 17, 29, 41});
+    const pmsc::PointMultiplier pm(model);
+    const Eigen::VectorXd b = pmsc::test::gaussian(6, 1, 9).col(0);
+    const Eigen::VectorXd frame = model.mean + model.basis * b;
+    const std::vector<double> keys = keyValuesOf(model, frame);
+    Eigen::VectorXd coords(6);
+    pm.project(keys.data(), coords.data());
+    EXPECT_LT((coords - b).norm(), 1e-10);
+    Eigen::VectorXd out(150);
+    pm.reconstruct(coords.data(), out.data());
+    EXPECT_LT((out - frame).cwiseAbs().maxCoeff(), 1e-10);
+    EXPECT_LT(pm.keyRmsError(keys.data(), coords.data()), 1e-10);
+}
+
+TEST(PointMultiplier, KeyRmsIsRmsOverKeysOfPerPointEuclideanError) {
+    const pmsc::Model model = makeModel(40, 3, 4, {1, 5, 9, 13, 20});
+    const pmsc::PointMultiplier pm(model);
+    const Eigen::VectorXd b = pmsc::test::gaussian(4, 1, 10).col(0);
+    Eigen::VectorXd frame = model.mean + model.basis * b;
+    // Perturb out of the subspace, then check against the definition computed directly.
+    frame += 0.01 * pmsc::test::gaussian(120, 1, 11).col(0);
+    const std::vector<double> keys = keyValuesOf(model, frame);
+    Eigen::VectorXd coords(4);
+    pm.project(keys.data(), coords.data());
+    const Eigen::VectorXd predicted = model.mean + model.basis * coords;
+    double sum = 0;
+    for (pmsc::Index p : model.keyPoints) sum += (frame - predicted).segment(p * 3, 3).squaredNorm();
+    const double expected = std::sqrt(sum / 5.0);
+    EXPECT_GT(expected, 1e-4);
+    EXPECT_NEAR(pm.keyRmsError(keys.data(), coords.data()), expected, 1e-12);
+}
+
+TEST(PointMultiplier, KeyRmsIsNaNForNonFiniteKeyValue) {
+    const pmsc::Model model = makeModel(20, 3, 3, {0, 4, 8});
+    const pmsc::PointMultiplier pm(model);
+    std::vector<double> keys(9, 1.0);
+    Eigen::VectorXd coords(3);
+    pm.project(keys.data(), coords.data());
+    EXPECT_TRUE(std::isfinite(pm.keyRmsError(keys.data(), coords.data())));
+    keys[4] = std::numeric_limits<double>::infinity();
+    EXPECT_TRUE(std::isnan(pm.keyRmsError(keys.data(), coords.data())));
+    keys[4] = std::numeric_limits<double>::quiet_NaN();
+    EXPECT_TRUE(std::isnan(pm.keyRmsError(keys.data(), coords.data())));
+}
+
+TEST(PointMultiplier, PointsAndRangeAgreeWithFullReconstruction) {
+    const pmsc::Model model = makeModel(60, 3, 5, {2, 30, 58});
+    const pmsc::PointMultiplier pm(model);
+    const Eigen::VectorXd coords = pmsc::test::gaussian(5, 1, 12).col(0);
+    Eigen::VectorXd all(180);
+    pm.reconstruct(coords.data(), all.data());
+    const std::vector<pmsc::Index> subset = {59, 0, 17, 17, 33};
+    std::vector<double> some(subset.size() * 3);
+    pm.reconstructPoints(coords.data(), subset, some.data());
+    for (size_t i = 0; i < subset.size(); ++i)
+        for (int c = 0; c < 3; ++c) EXPECT_NEAR(some[i * 3 + c], all[subset[i] * 3 + c], 1e-13);
+    std::vector<double> chunk(7 * 3);
+    pm.reconstructRange(coords.data(), 20, 7, chunk.data());
+    for (int i = 0; i < 21; ++i) EXPECT_NEAR(chunk[i], all[60 + i], 1e-13);
+    // Against the definition mean + B b.
+    EXPECT_LT((all - (model.mean + model.basis * coords)).cwiseAbs().maxCoeff(), 1e-12);
+}
+
+TEST(PointMultiplier, UnderdeterminedKeysGiveMinimumNormCoordinates) {
+    // K*C = 3 < M = 5: the projector must still be the pseudo-inverse (minimum-norm solution).
+    const pmsc::Model model = makeModel(30, 3, 5, {7});
+    const Eigen::MatrixXd bk = pmsc::gatherKeyRows(model.basis, 3, model.keyPoints);
+    const Eigen::MatrixXd pinv = bk.completeOrthogonalDecomposition().pseudoInverse();
+    EXPECT_LT((model.projector - pinv).norm(), 1e-12);
+    EXPECT_LT((bk * model.projector - Eigen::MatrixXd::Identity(3, 3)).norm(), 1e-10);
+}
+
+TEST(Model, ValidateNamesTheProblem) {
+    pmsc::Model model = makeModel(20, 3, 3, {0, 4, 8});
+    EXPECT_NO_THROW(model.validate());
+    auto expectThrowContaining = [](const pmsc::Model& m, const std::string& needle) {
+        try {
+            m.validate();
+            ADD_FAILURE() << "no throw, expected " << needle;
+        } catch (const std::invalid_argument& e) {
+            EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+        }
+    };
+    pmsc::Model bad = model;
+    bad.keyPoints = {0, 4, 4};
+    expectThrowContaining(bad, "repeated");
+    bad = model;
+    bad.keyPoints = {0, 4, 20};
+    expectThrowContaining(bad, "outside");
+    bad = model;
+    bad.epsMin = 0.2;
+    expectThrowContaining(bad, "eps_min");
+    bad = model;
+    bad.mean.resize(5);
+    expectThrowContaining(bad, "mean");
+    bad = model;
+    bad.projector.resize(3, 6);
+    expectThrowContaining(bad, "projector");
+    bad = model;
+    bad.basis(3, 1) = std::numeric_limits<double>::quiet_NaN();
+    expectThrowContaining(bad, "NaN");
+}
+
+TEST(Model, EnergyCaptured) {
+    pmsc::Model model = makeModel(20, 3, 3, {0, 4, 8});
+    model.singularValues = Eigen::Vector3d(3, 2, 1);
+    model.totalEnergy = 28;
+    EXPECT_NEAR(model.energyCaptured(), 14.0 / 28.0, 1e-15);
+}

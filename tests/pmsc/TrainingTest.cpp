@@ -1,0 +1,179 @@
+#include "pmsc/Training.h"
+
+#include "pmsc/Errors.h"
+#include "pmsc/PointMultiplier.h"
+#include "Synthetic.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <set>
+#include <string>
+
+namespace {
+
+bool anyWarningContains(const pmsc::TrainingReport& r, const std::string& needle) {
+    for (const auto& w : r.warnings)
+        if (w.find(needle) != std::string::npos) return true;
+    return false;
+}
+
+template <class E, class F>
+void expectThrowMentioning(F&& f, const std::string& needle) {
+    try {
+        f();
+        ADD_FAILURE() << "no exception; expected one mentioning " << needle;
+    } catch (const E& e) {
+        EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+    }
+}
+
+}  // namespace
+
+TEST(Training, LowRankDataIsReconstructedFromKeysExactly) {
+    // Rank-5 data + offset: 5 basis vectors capture everything and a handful of keys determine
+    // them, so every training frame is reconstructed to rounding from its keys.
+    const Eigen::MatrixXd m = pmsc::test::lowRank(60 * 3, 40, 5, 1);
+    const pmsc::FrameSet frames = pmsc::test::framesFromMatrix(m, 3);
+    pmsc::TrainingOptions o;
+    o.maxKeys = 6;
+    o.block = 4;
+    pmsc::TrainingReport report;
+    const pmsc::Model model = pmsc::train(frames, o, &report);
+    EXPECT_EQ(model.basisSize(), 5);
+    EXPECT_EQ(model.keyCount(), 6);
+    EXPECT_LT(model.trainMaxPointResidual, 1e-9);
+    EXPECT_NEAR(model.energyCaptured(), 1.0, 1e-10);
+    const pmsc::PointMultiplier pm(model);
+    std::vector<double> keys(model.keyCount() * 3), out(60 * 3);
+    Eigen::VectorXd coords(model.basisSize());
+    for (pmsc::Index f = 0; f < frames.frames; ++f) {
+        for (pmsc::Index i = 0; i < model.keyCount(); ++i)
+            for (int c = 0; c < 3; ++c) keys[i * 3 + c] = frames.frame(f)[model.keyPoints[i] * 3 + c];
+        pm.project(keys.data(), coords.data());
+        pm.reconstruct(coords.data(), out.data());
+        for (pmsc::Index x = 0; x < 180; ++x) ASSERT_NEAR(out[x], frames.frame(f)[x], 1e-9);
+    }
+    EXPECT_GT(report.seconds, 0.0);
+    ASSERT_FALSE(report.residualPerRound.empty());
+}
+
+TEST(Training, RejectsBadDataNamingTheValue) {
+    pmsc::FrameSet frames = pmsc::test::patchFrames(4, 10, 3, 30, 2);
+    pmsc::TrainingOptions o;
+    o.maxKeys = 10;
+    frames.frame(7)[5 * 3 + 2] = std::numeric_limits<double>::quiet_NaN();
+    expectThrowMentioning<pmsc::InputError>([&] { pmsc::train(frames, o); }, "frame 7, point 5, channel 2");
+    frames.frame(7)[5 * 3 + 2] = std::numeric_limits<double>::infinity();
+    expectThrowMentioning<pmsc::InputError>([&] { pmsc::train(frames, o); }, "inf");
+
+    pmsc::FrameSet one(1, 10, 3);
+    expectThrowMentioning<pmsc::InputError>([&] { pmsc::train(one, o); }, "at least 2");
+    pmsc::FrameSet still(5, 10, 3);
+    expectThrowMentioning<pmsc::InputError>([&] { pmsc::train(still, o); }, "identical");
+}
+
+TEST(Training, RejectsBadOptionsNamingTheValue) {
+    const pmsc::FrameSet frames = pmsc::test::patchFrames(4, 10, 3, 30, 3);
+    auto check = [&](auto tweak, const std::string& needle) {
+        pmsc::TrainingOptions o;
+        o.maxKeys = 10;
+        tweak(o);
+        expectThrowMentioning<std::invalid_argument>([&] { pmsc::train(frames, o); }, needle);
+    };
+    check([](auto& o) { o.maxKeys = 41; }, "41");
+    check([](auto& o) { o.maxKeys = 0; }, "max keys");
+    check([](auto& o) { o.block = 0; }, "block");
+    check([](auto& o) { o.energy = 1.5; }, "1.5");
+    check([](auto& o) { o.energy = std::numeric_limits<double>::quiet_NaN(); }, "energy");
+    check([](auto& o) { o.basis = -2; }, "-2");
+    check([](auto& o) { o.maxError = -1; }, "max error");
+    check([](auto& o) { o.tolerance = 0.1; o.calibrationSlices = 1; }, "slices");
+    check([](auto& o) { o.fiducials = {3, 99}; }, "99");
+    check([](auto& o) { o.fiducials = {3, 4, 3}; }, "fiducial point 3");
+    check([](auto& o) { o.fiducials = {3}; o.gridPoints = {3}; }, "3");
+    check([](auto& o) { o.varimaxMaxIterations = 0; }, "varimax");
+}
+
+TEST(Training, ProgressIsReportedAndCanCancel) {
+    const pmsc::FrameSet frames = pmsc::test::patchFrames(4, 10, 3, 30, 4);
+    pmsc::TrainingOptions o;
+    o.maxKeys = 10;
+    std::set<std::string> stages;
+    o.progress = [&](std::string_view stage, double, double) {
+        stages.insert(std::string(stage));
+        return true;
+    };
+    pmsc::train(frames, o);
+    for (const char* s : {"mean", "svd", "keys", "projector", "calibration"}) EXPECT_TRUE(stages.count(s)) << s;
+    o.progress = [&](std::string_view stage, double, double) { return stage != "keys"; };
+    expectThrowMentioning<pmsc::Cancelled>([&] { pmsc::train(frames, o); }, "keys");
+}
+
+TEST(Training, TooFewKeysReduceMAndSaySo) {
+    // 3 keys x 3 channels = 9 values cannot determine 12 basis vectors: M must drop to <= 9.
+    const Eigen::MatrixXd m = pmsc::test::lowRank(40 * 3, 50, 12, 5, 0.9);
+    const pmsc::FrameSet frames = pmsc::test::framesFromMatrix(m, 3);
+    pmsc::TrainingOptions o;
+    o.basis = 12;
+    o.maxKeys = 3;
+    o.block = 4;
+    pmsc::TrainingReport report;
+    const pmsc::Model model = pmsc::train(frames, o, &report);
+    EXPECT_EQ(report.requestedBasis, 12);
+    EXPECT_LE(model.basisSize(), 9);
+    EXPECT_GE(model.basisSize(), 1);
+    EXPECT_TRUE(anyWarningContains(report, "reduced M from 12 to " + std::to_string(model.basisSize())))
+        << (report.warnings.empty() ? "" : report.warnings[0]);
+    EXPECT_TRUE(anyWarningContains(report, "K*C = 9"));
+    EXPECT_NO_THROW(model.validate());
+}
+
+TEST(Training, KeyCountTimesChannelsEqualToMWarnsThatTheMonitorIsBlind) {
+    const Eigen::MatrixXd m = pmsc::test::lowRank(40 * 3, 50, 12, 6, 0.9);
+    const pmsc::FrameSet frames = pmsc::test::framesFromMatrix(m, 3);
+    pmsc::TrainingOptions o;
+    o.basis = 6;
+    o.maxKeys = 2;  // K*C = 6 = M
+    o.block = 3;
+    pmsc::TrainingReport report;
+    const pmsc::Model model = pmsc::train(frames, o, &report);
+    ASSERT_EQ(model.basisSize(), 6);
+    EXPECT_TRUE(anyWarningContains(report, "blind"));
+}
+
+TEST(Training, EnergyRuleAndDefaultThresholds) {
+    Eigen::VectorXd sigma;
+    const Eigen::MatrixXd m = pmsc::test::lowRank(50 * 3, 60, 10, 7, 0.5, &sigma);
+    const pmsc::FrameSet frames = pmsc::test::framesFromMatrix(m, 3);
+    pmsc::TrainingOptions o;
+    o.energy = 0.99;
+    o.maxKeys = 20;
+    pmsc::TrainingReport report;
+    const pmsc::Model model = pmsc::train(frames, o, &report);
+    // Expected M straight from the prescribed spectrum.
+    double total = sigma.squaredNorm(), acc = 0;
+    pmsc::Index expected = 0;
+    while (acc < 0.99 * total) acc += sigma[expected] * sigma[expected], ++expected;
+    EXPECT_EQ(model.basisSize(), expected);
+    EXPECT_GE(model.energyCaptured(), 0.99);
+    // Uncalibrated: eps_min is the largest training key RMS, eps_max 1.5x.
+    double largest = 0;
+    for (double e : report.calibration.keyRms) largest = std::max(largest, e);
+    EXPECT_DOUBLE_EQ(model.epsMin, largest);
+    EXPECT_DOUBLE_EQ(model.epsMax, 1.5 * largest);
+    EXPECT_EQ(model.tolerance, 0.0);
+}
+
+TEST(Training, DeterministicForASeed) {
+    const pmsc::FrameSet frames = pmsc::test::patchFrames(6, 30, 3, 80, 8);
+    pmsc::TrainingOptions o;
+    o.maxKeys = 24;
+    o.block = 4;
+    o.basis = 6;
+    const pmsc::Model a = pmsc::train(frames, o);
+    const pmsc::Model b = pmsc::train(frames, o);
+    EXPECT_EQ(a.keyPoints, b.keyPoints);
+    EXPECT_EQ((a.basis - b.basis).cwiseAbs().maxCoeff(), 0.0);
+}
