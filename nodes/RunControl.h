@@ -39,7 +39,7 @@ public:
     Index stopSequence() const { return stopSequence_.load(std::memory_order_acquire); }
 
     /// The first failed frame in order under StopRun (set by the sink).
-    void setRunError(std::string message, Index frame);
+    void setRunError(std::string message);
     const std::string& runError() const { return runError_; }
     bool hasRunError() const { return hasRunError_.load(std::memory_order_acquire); }
 

@@ -1,0 +1,46 @@
+#include "nodes/FrameSlot.h"
+
+#include <limits>
+
+namespace pmsc::nodes {
+
+namespace {
+std::atomic<Index> gLiveSlots{0};
+}
+
+FrameSlot::FrameSlot(const FramePlan& plan, Index keyCount, Index basisSize, bool keepPm)
+    : keyValues(static_cast<size_t>(keyCount * plan.channels)),
+      coords(static_cast<size_t>(basisSize)),
+      values(static_cast<size_t>(plan.outputCount() * plan.channels)),
+      scratch(static_cast<size_t>(plan.scratchSize())),
+      pmValues(keepPm ? static_cast<size_t>(plan.outputCount() * plan.channels) : 0) {
+    gLiveSlots.fetch_add(1, std::memory_order_relaxed);
+}
+
+FrameSlot::~FrameSlot() { gLiveSlots.fetch_sub(1, std::memory_order_relaxed); }
+
+Index FrameSlot::liveCount() { return gLiveSlots.load(std::memory_order_relaxed); }
+
+void FrameSlot::reset(Index sequenceNumber, Index frameNumber) {
+    sequence = sequenceNumber;
+    frame = frameNumber;
+    keysFinite = true;
+    keyRmsError = 0;
+    decision = CacheDecision{};
+    pmValid = false;
+    chunksLeft.store(0, std::memory_order_relaxed);
+    std::lock_guard lock(errorMutex_);
+    failed_.store(false, std::memory_order_relaxed);
+    errorOrder_ = std::numeric_limits<Index>::max();
+    error_.clear();
+}
+
+void FrameSlot::fail(const std::string& node, const std::string& what, Index order) {
+    std::lock_guard lock(errorMutex_);
+    if (failed_.load(std::memory_order_relaxed) && order >= errorOrder_) return;
+    errorOrder_ = order;
+    error_ = "frame " + std::to_string(frame) + ": node '" + node + "': " + what;
+    failed_.store(true, std::memory_order_release);
+}
+
+}  // namespace pmsc::nodes

@@ -1,0 +1,407 @@
+// Engine tests: order, bounded work in flight, failures, NaN, determinism, cancellation,
+// fail-through routing, bounded memory. CI runs them under ThreadSanitizer (label "engine").
+#include "engine/Engine.h"
+#include "engine/FrameSetSink.h"
+#include "nodes/FrameSlot.h"
+#include "pmsc/Errors.h"
+#include "tests/engine/Synthetic.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <cstring>
+#include <random>
+
+namespace pmsc::engine {
+namespace {
+
+using testing::SyntheticEvaluator;
+using testing::withWatchdog;
+
+/// Checks order and finiteness as frames arrive; keeps a copy of what it is told to keep.
+class CheckingSink : public FrameSink {
+public:
+    explicit CheckingSink(const SyntheticEvaluator* e = nullptr, bool keep = true) : evaluator_(e), keep_(keep) {}
+    void write(const FrameResult& r) override {
+        if (evaluator_) evaluator_->frameDelivered();
+        EXPECT_EQ(r.sequence, Index(frames.size())) << "frames out of order";
+        frames.push_back(r.frame);
+        states.push_back(r.state);
+        failed.push_back(r.failed);
+        for (const double v : r.values) ASSERT_TRUE(std::isfinite(v)) << "non-finite output, frame " << r.frame;
+        if (keep_) values.emplace_back(r.values.begin(), r.values.end());
+        if (throwAt == Index(frames.size()) - 1) throw IoError("disk full (injected)");
+        peakLiveSlots = std::max(peakLiveSlots, nodes::FrameSlot::liveCount());
+    }
+    std::vector<Index> frames;
+    std::vector<CacheState> states;
+    std::vector<char> failed;
+    std::vector<std::vector<double>> values;
+    Index throwAt = -1;
+    Index peakLiveSlots = 0;
+
+private:
+    const SyntheticEvaluator* evaluator_;
+    bool keep_;
+};
+
+struct Fixture : ::testing::Test {
+    Model model = testing::makeModel(/*points*/ 600, /*channels*/ 3, /*basis*/ 8, /*keys*/ 20);
+    SyntheticEvaluator evaluator{model, 400};
+    SoftCachePolicy policy = testing::syntheticPolicy(model, evaluator);
+
+    EngineOptions options(int threads) const {
+        EngineOptions o;
+        o.threads = threads;
+        o.policy = policy;
+        o.chunkPoints = 64;
+        return o;
+    }
+};
+
+TEST_F(Fixture, MatchesThePlainSerialAlgorithmFrameByFrame) {
+    Engine engine(model, evaluator, options(2));
+    CheckingSink sink;
+    RunStats stats;
+    withWatchdog(60, "run", [&] { stats = engine.run({0, 40, 1}, sink); });
+    ASSERT_EQ(sink.frames.size(), 40u);
+    for (Index f = 0; f < 40; ++f) {
+        CacheDecision d;
+        const auto expected = testing::referenceFrame(model, evaluator, policy, f, &d);
+        EXPECT_EQ(sink.states[size_t(f)], d.state) << "frame " << f;
+        ASSERT_EQ(sink.values[size_t(f)].size(), expected.size());
+        for (size_t x = 0; x < expected.size(); ++x) {
+            ASSERT_NEAR(sink.values[size_t(f)][x], expected[x], 1e-9) << "frame " << f << " value " << x;
+        }
+    }
+    // The synthetic classes give 2 hits, 1 blend, 1 miss per 4 frames.
+    EXPECT_EQ(stats.hits, 20);
+    EXPECT_EQ(stats.blends, 10);
+    EXPECT_EQ(stats.misses, 10);
+    EXPECT_EQ(stats.framesDelivered, 40);
+}
+
+TEST_F(Fixture, KeepsFrameOrderUnderRandomEvaluatorDelays) {
+    evaluator.maxDelayMicros = 2000;
+    EngineOptions o = options(2);
+    o.maxFramesInFlight = 6;
+    Engine engine(model, evaluator, o);
+    CheckingSink sink(&evaluator, false);
+    withWatchdog(120, "run", [&] { engine.run({10, 120, 2}, sink); });
+    ASSERT_EQ(sink.frames.size(), 120u);
+    for (Index i = 0; i < 120; ++i) EXPECT_EQ(sink.frames[size_t(i)], 10 + 2 * i);
+}
+
+TEST_F(Fixture, NeverHasMoreFramesInFlightThanTheBound) {
+    evaluator.maxDelayMicros = 500;
+    for (const Index bound : {Index(1), Index(3)}) {
+        SyntheticEvaluator e(model, 400);
+        e.maxDelayMicros = 500;
+        EngineOptions o = options(2);
+        o.maxFramesInFlight = bound;
+        Engine engine(model, e, o);
+        CheckingSink sink(&e, false);
+        RunStats stats;
+        withWatchdog(120, "run", [&] { stats = engine.run({0, 200, 1}, sink); });
+        EXPECT_EQ(sink.frames.size(), 200u);
+        EXPECT_LE(e.peakInFlight(), bound) << "evaluator saw more frames at once than the bound";
+        EXPECT_LE(stats.peakFramesInFlight, bound);
+        EXPECT_GE(e.peakInFlight(), 1);
+    }
+}
+
+TEST_F(Fixture, AnExceptionOnARandomFrameEndsTheRunWithFrameAndNode) {
+    std::mt19937 rng(1234);
+    for (int trial = 0; trial < 6; ++trial) {
+        SyntheticEvaluator e(model, 400);
+        e.maxDelayMicros = 300;
+        const Index bad = Index(rng() % 150);
+        const bool inKeys = trial % 2 == 0;
+        // A full-evaluation failure needs a frame that fails through: class 2 is a miss.
+        if (inKeys) {
+            e.throwInKeysAt = bad;
+        } else {
+            e.throwInFullAt = bad - bad % 4 + 2;
+        }
+        const Index badFrame = inKeys ? bad : bad - bad % 4 + 2;
+        Engine engine(model, e, options(2));
+        CheckingSink sink(nullptr, false);
+        std::string message;
+        withWatchdog(60, "failing run", [&] {
+            try {
+                engine.run({0, 200, 1}, sink);
+            } catch (const EvaluatorError& err) {
+                message = err.what();
+            }
+        });
+        ASSERT_FALSE(message.empty()) << "no EvaluatorError for frame " << badFrame;
+        EXPECT_NE(message.find("frame " + std::to_string(badFrame) + ":"), std::string::npos) << message;
+        EXPECT_NE(message.find(inKeys ? "node 'keys'" : "node 'fail-through'"), std::string::npos) << message;
+        EXPECT_NE(message.find("injected"), std::string::npos) << message;
+        // StopRun: exactly the frames before the failing one, none after, none partial.
+        ASSERT_EQ(Index(sink.frames.size()), badFrame) << message;
+        EXPECT_EQ(engine.lastStats().failed, 1);
+    }
+}
+
+TEST_F(Fixture, MarkFailedAndContinueDeliversEveryFrame) {
+    evaluator.throwInKeysAt = 7;
+    evaluator.throwInFullAt = 14;  // class 2: a miss
+    EngineOptions o = options(2);
+    o.failurePolicy = FailurePolicy::MarkFailedAndContinue;
+    Engine engine(model, evaluator, o);
+    CheckingSink sink;
+    RunStats stats;
+    withWatchdog(60, "run", [&] { stats = engine.run({0, 30, 1}, sink); });
+    ASSERT_EQ(sink.frames.size(), 30u);
+    for (Index f = 0; f < 30; ++f) EXPECT_EQ(bool(sink.failed[size_t(f)]), f == 7 || f == 14) << f;
+    EXPECT_TRUE(sink.values[7].empty());
+    EXPECT_EQ(stats.failed, 2);
+    EXPECT_EQ(stats.hits + stats.blends + stats.misses, 28);
+}
+
+TEST_F(Fixture, ASinkExceptionEndsTheRunUnchanged) {
+    Engine engine(model, evaluator, options(2));
+    CheckingSink sink;
+    sink.throwAt = 5;
+    withWatchdog(60, "run", [&] { EXPECT_THROW(engine.run({0, 100, 1}, sink), IoError); });
+    EXPECT_EQ(sink.frames.size(), 6u);  // the sixth write threw; no write after it
+}
+
+TEST_F(Fixture, NanInKeyValuesForcesAFullEvaluation) {
+    evaluator.nanInKeysAt = 4;  // class 0: would be a hit
+    Engine engine(model, evaluator, options(2));
+    CheckingSink sink;
+    RunStats stats;
+    withWatchdog(60, "run", [&] { stats = engine.run({0, 8, 1}, sink); });
+    ASSERT_EQ(sink.frames.size(), 8u);
+    EXPECT_EQ(sink.states[4], CacheState::Miss);
+    EXPECT_EQ(stats.forcedMisses, 1);
+    EXPECT_GT(evaluator.fullCalls(4), 0);
+    // The output is the full evaluation, keys included (they were evaluated again).
+    for (Index p = 0; p < model.points; ++p)
+        for (Index c = 0; c < 3; ++c)
+            ASSERT_EQ(sink.values[4][size_t(p * 3 + c)], evaluator.value(4, p, c)) << p;
+}
+
+TEST_F(Fixture, NanInTheFullEvaluationIsAnEvaluatorErrorNeverAnOutput) {
+    evaluator.nanInFullAt = 6;  // class 2: a miss
+    evaluator.nanPoint = 123;
+    {
+        Engine engine(model, evaluator, options(2));
+        CheckingSink sink;
+        std::string message;
+        withWatchdog(60, "run", [&] {
+            try {
+                engine.run({0, 20, 1}, sink);
+            } catch (const EvaluatorError& e) {
+                message = e.what();
+            }
+        });
+        EXPECT_NE(message.find("frame 6:"), std::string::npos) << message;
+        EXPECT_NE(message.find("point 123"), std::string::npos) << message;
+        EXPECT_EQ(sink.frames.size(), 6u);
+    }
+    {
+        EngineOptions o = options(1);
+        o.failurePolicy = FailurePolicy::MarkFailedAndContinue;
+        Engine engine(model, evaluator, o);
+        CheckingSink sink;  // asserts every delivered value is finite
+        withWatchdog(60, "run", [&] { engine.run({0, 20, 1}, sink); });
+        EXPECT_EQ(sink.frames.size(), 20u);
+        EXPECT_TRUE(sink.failed[6]);
+    }
+}
+
+TEST_F(Fixture, OutputIsIdenticalBitForBitAtOneAndTwoThreads) {
+    evaluator.maxDelayMicros = 200;
+    std::vector<FrameSet> results;
+    for (const int threads : {1, 2, 2}) {
+        EngineOptions o = options(threads);
+        o.chunkPoints = 0;  // the automatic chunking must not depend on the thread count
+        Engine engine(model, evaluator, o);
+        FrameSetSink sink(60, model.points, 3);
+        withWatchdog(60, "run", [&] { engine.run({0, 60, 1}, sink); });
+        results.push_back(sink.values());
+    }
+    for (size_t i = 1; i < results.size(); ++i) {
+        ASSERT_EQ(results[i].values.size(), results[0].values.size());
+        EXPECT_EQ(std::memcmp(results[i].values.data(), results[0].values.data(),
+                              results[0].values.size() * sizeof(double)),
+                  0)
+            << "run " << i;
+    }
+}
+
+TEST_F(Fixture, CancellationFromAnotherThreadStopsWithinAFrame) {
+    SyntheticEvaluator slow(model, 400);
+    slow.busyMicros = 2000;  // ~2 ms per evaluator call
+    std::atomic<bool> cancel{false};
+    EngineOptions o = options(2);
+    o.cancel = &cancel;
+    o.maxFramesInFlight = 8;
+    Engine engine(model, slow, o);
+    CheckingSink sink(nullptr, false);
+    std::chrono::steady_clock::time_point cancelledAt;
+    std::thread canceller([&] {
+        std::this_thread::sleep_for(std::chrono::milliseconds(60));
+        cancelledAt = std::chrono::steady_clock::now();
+        cancel.store(true);
+    });
+    bool threwCancelled = false;
+    withWatchdog(60, "cancelled run", [&] {
+        try {
+            engine.run({0, 400, 1}, sink);
+        } catch (const Cancelled&) {
+            threwCancelled = true;
+        }
+    });
+    const auto returnedAt = std::chrono::steady_clock::now();
+    canceller.join();
+    EXPECT_TRUE(threwCancelled);
+    EXPECT_TRUE(engine.lastStats().cancelled);
+    EXPECT_LT(sink.frames.size(), 400u);
+    // Delivered frames are a prefix, and the run ended within about one frame's time
+    // (a frame costs up to ~2 evaluator calls of 2 ms; generous for sanitizer builds).
+    for (size_t i = 0; i < sink.frames.size(); ++i) EXPECT_EQ(sink.frames[i], Index(i));
+    const double ms = std::chrono::duration<double, std::milli>(returnedAt - cancelledAt).count();
+    EXPECT_LT(ms, 50.0) << "took " << ms << " ms to stop";
+}
+
+TEST_F(Fixture, HitsNeverCallTheFailThroughEvaluator) {
+    Engine engine(model, evaluator, options(2));
+    CheckingSink sink;
+    withWatchdog(60, "run", [&] { engine.run({0, 80, 1}, sink); });
+    for (Index f = 0; f < 80; ++f) {
+        EXPECT_EQ(evaluator.keyCalls(f), 1) << f;
+        if (sink.states[size_t(f)] == CacheState::Hit) {
+            EXPECT_EQ(evaluator.fullCalls(f), 0) << "hit frame " << f << " failed through";
+        } else {
+            EXPECT_EQ(evaluator.fullCalls(f), int(engine.lastStats().chunks)) << f;
+        }
+    }
+    // Key points are evaluated once per frame: a fail-through evaluates only the others.
+    EXPECT_EQ(evaluator.pointsEvaluated(), 40 * (model.points - model.keyCount()));
+}
+
+TEST_F(Fixture, PointsWantedLimitsReconstructionAndFailThrough) {
+    std::vector<Index> wanted = {599, 3, model.keyPoints[2], 42, 301};
+    EngineOptions o = options(2);
+    o.pointsWanted = wanted;
+    Engine engine(model, evaluator, o);
+    CheckingSink sink;
+    withWatchdog(60, "run", [&] { engine.run({0, 12, 1}, sink); });
+    ASSERT_EQ(engine.outputPoints(), wanted);
+    for (Index f = 0; f < 12; ++f) {
+        const auto full = testing::referenceFrame(model, evaluator, policy, f);
+        ASSERT_EQ(sink.values[size_t(f)].size(), wanted.size() * 3);
+        for (size_t i = 0; i < wanted.size(); ++i)
+            for (Index c = 0; c < 3; ++c)
+                EXPECT_NEAR(sink.values[size_t(f)][i * 3 + size_t(c)], full[size_t(wanted[i] * 3 + c)], 1e-9);
+    }
+    // 6 frames of 12 fail through (blends and misses); each evaluates the 4 wanted non-key points.
+    EXPECT_EQ(evaluator.pointsEvaluated(), 6 * 4);
+}
+
+TEST_F(Fixture, WholeFrameFailThroughGivesTheSameResult) {
+    EngineOptions o = options(2);
+    o.wholeFrameFailThrough = true;
+    Engine engine(model, evaluator, o);
+    CheckingSink sink;
+    withWatchdog(60, "run", [&] { engine.run({0, 12, 1}, sink); });
+    EXPECT_EQ(engine.lastStats().chunks, 1);
+    for (Index f = 0; f < 12; ++f) {
+        const auto expected = testing::referenceFrame(model, evaluator, policy, f);
+        for (size_t x = 0; x < expected.size(); ++x) ASSERT_NEAR(sink.values[size_t(f)][x], expected[x], 1e-9);
+    }
+}
+
+TEST_F(Fixture, KeepPointMultiplicationHandsThePmResultOfEveryFrame) {
+    EngineOptions o = options(2);
+    o.keepPointMultiplication = true;
+    Engine engine(model, evaluator, o);
+    FrameSetSink sink(12, model.points, 3, /*keepPm*/ true);
+    withWatchdog(60, "run", [&] { engine.run({0, 12, 1}, sink); });
+    const PointMultiplier pm(model);
+    for (Index f = 0; f < 12; ++f) {
+        std::vector<double> k(size_t(model.keyCount() * 3)), b(size_t(model.basisSize())), r(size_t(model.points * 3));
+        for (Index i = 0; i < model.keyCount(); ++i)
+            for (Index c = 0; c < 3; ++c) k[size_t(i * 3 + c)] = evaluator.value(f, model.keyPoints[size_t(i)], c);
+        pm.project(k.data(), b.data());
+        pm.reconstruct(b.data(), r.data());
+        for (size_t x = 0; x < r.size(); ++x) ASSERT_EQ(sink.pmValues().frame(f)[x], r[x]) << f;
+        const auto expected = testing::referenceFrame(model, evaluator, policy, f);
+        for (size_t x = 0; x < r.size(); ++x) ASSERT_NEAR(sink.values().frame(f)[x], expected[x], 1e-9);
+    }
+}
+
+TEST(EngineMemory, HundredThousandFramesRunInBoundedMemory) {
+    const Model model = testing::makeModel(12, 3, 3, 4);
+    SyntheticEvaluator evaluator(model, 100000);
+    EngineOptions o;
+    o.threads = 2;
+    o.maxFramesInFlight = 4;
+    o.policy = testing::syntheticPolicy(model, evaluator);
+    Engine engine(model, evaluator, o);
+    CheckingSink sink(&evaluator, false);
+    RunStats stats;
+    withWatchdog(300, "100k frames", [&] { stats = engine.run({0, 100000, 1}, sink); });
+    EXPECT_EQ(stats.framesDelivered, 100000);
+    EXPECT_LE(sink.peakLiveSlots, 4) << "frame buffers grew with the range";
+    EXPECT_LE(evaluator.peakInFlight(), 4);
+    EXPECT_EQ(nodes::FrameSlot::liveCount(), 0);
+}
+
+TEST_F(Fixture, StatsAndProgress) {
+    EngineOptions o = options(2);
+    Index calls = 0, lastDone = 0;
+    bool monotonic = true;
+    o.progress = [&](const Progress& p) {
+        ++calls;
+        monotonic = monotonic && p.framesDone == lastDone + 1 && p.framesTotal == 24;
+        lastDone = p.framesDone;
+    };
+    Engine engine(model, evaluator, o);
+    CheckingSink sink;
+    RunStats stats;
+    withWatchdog(60, "run", [&] { stats = engine.run({0, 24, 1}, sink); });
+    EXPECT_EQ(calls, 24);
+    EXPECT_TRUE(monotonic);
+    const auto j = nlohmann::json::parse(stats.toJson());
+    EXPECT_EQ(j.at("frames_delivered").get<Index>(), 24);
+    EXPECT_EQ(j.at("hits").get<Index>() + j.at("blends").get<Index>() + j.at("misses").get<Index>(), 24);
+    EXPECT_GT(j.at("frames_per_second").get<double>(), 0);
+    bool sawKeys = false;
+    for (const auto& n : j.at("nodes")) {
+        if (n.at("node") == "keys") {
+            sawKeys = true;
+            EXPECT_EQ(n.at("calls").get<Index>(), 24);
+            EXPECT_GT(n.at("seconds").get<double>(), 0);
+        }
+        if (n.at("node") == "fail-through") {
+            EXPECT_EQ(n.at("calls").get<Index>(), 12 * stats.chunks);
+        }
+    }
+    EXPECT_TRUE(sawKeys);
+}
+
+TEST_F(Fixture, RejectsBadOptionsAndRanges) {
+    EngineOptions o = options(2);
+    o.pointsWanted = {1, 1};
+    EXPECT_THROW(Engine(model, evaluator, o), InputError);
+    o.pointsWanted = {600};
+    EXPECT_THROW(Engine(model, evaluator, o), InputError);
+    o = options(-1);
+    EXPECT_THROW(Engine(model, evaluator, o), InputError);
+    const Model other = testing::makeModel(500, 3, 8, 20);
+    EXPECT_THROW(Engine(other, evaluator, options(1)), InputError);
+    Engine engine(model, evaluator, options(1));
+    CheckingSink sink;
+    EXPECT_THROW(engine.run({390, 20, 1}, sink), InputError);
+    EXPECT_THROW(engine.run({0, 10, 0}, sink), InputError);
+    EXPECT_EQ(engine.run({0, 0, 1}, sink).framesDelivered, 0);
+}
+
+}  // namespace
+}  // namespace pmsc::engine
