@@ -1,0 +1,298 @@
+#include "pmsc/Errors.h"
+#include "pmsc/ModelIO.h"
+
+#include "TempDir.h"
+
+#include <gtest/gtest.h>
+#include <Eigen/QR>
+
+#include <cstring>
+#include <string>
+
+namespace {
+
+using pmsc::InputError;
+using pmsc::Model;
+using pmsc::test::TempDir;
+using pmsc::test::writeBytes;
+
+/// A small but complete model: N=7 points, C=3, M=3, K=3 keys, made the way
+/// training makes one (orthonormal basis, projector = pinv of the key rows).
+Model smallModel() {
+    Model m;
+    m.points = 7;
+    m.channels = 3;
+    m.trainFrames = 11;
+    Eigen::MatrixXd random(21, 3);
+    for (Eigen::Index i = 0; i < random.size(); ++i) random.data()[i] = std::sin(0.7 * i + 0.3);
+    m.basis = Eigen::HouseholderQR<Eigen::MatrixXd>(random).householderQ() * Eigen::MatrixXd::Identity(21, 3);
+    m.mean = Eigen::VectorXd::LinSpaced(21, -1.0, 2.5);
+    m.singularValues = Eigen::Vector3d(9.5, 3.25, 0.125);
+    m.totalEnergy = m.singularValues.squaredNorm() + 0.5;
+    m.keyPoints = {4, 0, 6};
+    m.projector = pmsc::makeProjector(m.basis, m.channels, m.keyPoints);
+    m.selector = pmsc::Selector::QDeim;
+    m.epsMin = 0.01;
+    m.epsMax = 0.015;
+    m.tolerance = 0.05;
+    m.trainMaxPointResidual = 0.002;
+    return m;
+}
+
+template <class T>
+void poke(std::string& bytes, std::size_t offset, T value) {
+    std::memcpy(bytes.data() + offset, &value, sizeof(T));
+}
+
+/// Rewrites the checksum so only the check under test can object.
+void reseal(std::string& bytes) {
+    poke<std::uint64_t>(bytes, bytes.size() - 8, pmsc::fnv1a64(bytes.data(), bytes.size() - 8));
+}
+
+std::string inputErrorMessage(const std::string& path) {
+    try {
+        pmsc::readModel(path);
+    } catch (const InputError& e) {
+        return e.what();
+    } catch (const std::exception& e) {
+        return std::string("WRONG EXCEPTION TYPE: ") + e.what();
+    }
+    return "NO ERROR";
+}
+
+void expectRejected(const std::string& path, std::initializer_list<std::string> fragments) {
+    const std::string what = inputErrorMessage(path);
+    EXPECT_EQ(what.rfind(path + ": ", 0), 0u) << what;
+    for (const auto& f : fragments) EXPECT_NE(what.find(f), std::string::npos) << what;
+}
+
+TEST(ModelFile, Fnv1a64MatchesPublishedVectors) {
+    // Test vectors of the FNV reference (www.isthe.com/chongo/tech/comp/fnv).
+    EXPECT_EQ(pmsc::fnv1a64("", 0), 0xcbf29ce484222325ull);
+    EXPECT_EQ(pmsc::fnv1a64("a", 1), 0xaf63dc4c8601ec8cull);
+    EXPECT_EQ(pmsc::fnv1a64("foobar", 6), 0x85944171f73967e8ull);
+}
+
+TEST(ModelFile, RoundTripIsBitExact) {
+    TempDir dir;
+    const auto path = dir.file("m.pmsc");
+    const Model m = smallModel();
+    pmsc::writeModel(path, m);
+    EXPECT_EQ(dir.entries(), std::vector<std::string>{"m.pmsc"});
+    const Model r = pmsc::readModel(path);
+    EXPECT_EQ(r.points, m.points);
+    EXPECT_EQ(r.channels, m.channels);
+    EXPECT_EQ(r.trainFrames, m.trainFrames);
+    EXPECT_EQ(r.selector, m.selector);
+    EXPECT_EQ(r.keyPoints, m.keyPoints);
+    EXPECT_EQ(r.mean, m.mean);
+    EXPECT_EQ(r.basis, m.basis);
+    EXPECT_EQ(r.singularValues, m.singularValues);
+    EXPECT_EQ(r.projector, m.projector);
+    EXPECT_EQ(r.epsMin, m.epsMin);
+    EXPECT_EQ(r.epsMax, m.epsMax);
+    EXPECT_EQ(r.tolerance, m.tolerance);
+    EXPECT_EQ(r.trainMaxPointResidual, m.trainMaxPointResidual);
+    EXPECT_EQ(r.totalEnergy, m.totalEnergy);
+    EXPECT_EQ(pmsc::encodeModel(r), pmsc::test::readBytes(path));  // and the bytes again
+}
+
+TEST(ModelFile, LayoutMatchesTheDocumentedOffsets) {
+    const Model m = smallModel();
+    const std::string bytes = pmsc::encodeModel(m);
+    const std::size_t nc = 21, mm = 3, k = 3;
+    EXPECT_EQ(bytes.size(), pmsc::kModelHeaderBytes + 8 * (nc + nc * mm + mm + k + mm * k * 3) + 8);
+    EXPECT_EQ(bytes.substr(0, 8), "PMSCMODL");
+    std::uint32_t version;
+    std::memcpy(&version, bytes.data() + 8, 4);
+    EXPECT_EQ(version, 1u);
+    std::uint64_t n, keys0;
+    std::memcpy(&n, bytes.data() + 16, 8);
+    EXPECT_EQ(n, 7u);
+    double epsMax;
+    std::memcpy(&epsMax, bytes.data() + 72, 8);
+    EXPECT_EQ(epsMax, 0.015);
+    std::memcpy(&keys0, bytes.data() + pmsc::kModelHeaderBytes + 8 * (nc + nc * mm + mm), 8);
+    EXPECT_EQ(keys0, 4u);
+}
+
+std::string decodeMessage(const std::string& bytes, const std::string& name) {
+    try {
+        pmsc::decodeModel(bytes, name);
+    } catch (const InputError& e) {
+        return e.what();
+    } catch (const std::exception& e) {
+        return std::string("WRONG EXCEPTION TYPE: ") + e.what();
+    }
+    return "NO ERROR";
+}
+
+// Every length is decoded from memory (the file system makes 700 file round trips slow); a
+// sample goes through real files to cover readModel's own path.
+TEST(ModelFile, EveryTruncationIsRejected) {
+    TempDir dir;
+    const auto path = dir.file("m.pmsc");
+    const std::string bytes = pmsc::encodeModel(smallModel());
+    for (std::size_t length = 0; length < bytes.size(); ++length) {
+        const std::string what = decodeMessage(bytes.substr(0, length), path);
+        EXPECT_EQ(what.rfind(path + ": ", 0), 0u) << "length " << length << ": " << what;
+        if (length >= 8) {
+            EXPECT_NE(what.find("truncated"), std::string::npos) << length << ": " << what;
+        }
+        if (length % 61 == 0 || length + 1 == bytes.size()) {
+            writeBytes(path, bytes.substr(0, length));
+            EXPECT_EQ(inputErrorMessage(path), what);
+        }
+    }
+}
+
+TEST(ModelFile, EveryFlippedByteIsRejected) {
+    TempDir dir;
+    const auto path = dir.file("m.pmsc");
+    const std::string good = pmsc::encodeModel(smallModel());
+    for (std::size_t i = 0; i < good.size(); ++i) {
+        for (unsigned char mask : {0x01, 0x80, 0xff}) {
+            std::string bytes = good;
+            bytes[i] = static_cast<char>(bytes[i] ^ mask);
+            const std::string what = decodeMessage(bytes, path);
+            EXPECT_EQ(what.rfind(path + ": ", 0), 0u) << "byte " << i << ": " << what;
+            // Past the size fields, only the checksum can notice.
+            if (i >= 64) {
+                EXPECT_NE(what.find("checksum mismatch"), std::string::npos) << i << ": " << what;
+            }
+            if (i % 53 == 0 && mask == 0x80) {
+                writeBytes(path, bytes);
+                EXPECT_EQ(inputErrorMessage(path), what);
+            }
+        }
+    }
+}
+
+TEST(ModelFile, WrongMagic) {
+    TempDir dir;
+    const auto path = dir.file("m.pmsc");
+    std::string bytes = pmsc::encodeModel(smallModel());
+    bytes.replace(0, 8, "PMSCMODX");
+    writeBytes(path, bytes);
+    expectRejected(path, {"not a pmsc model file", "bad magic"});
+    writeBytes(path, "GARBAGE");  // shorter than the magic itself
+    expectRejected(path, {"bad magic"});
+    writeBytes(path, std::string(300, 'x'));
+    expectRejected(path, {"bad magic"});
+}
+
+TEST(ModelFile, WrongVersionSaysFoundAndSupported) {
+    TempDir dir;
+    const auto path = dir.file("m.pmsc");
+    std::string bytes = pmsc::encodeModel(smallModel());
+    poke<std::uint32_t>(bytes, 8, 2);
+    reseal(bytes);
+    writeBytes(path, bytes);
+    expectRejected(path, {"unsupported model format version 2", "reads version 1"});
+    poke<std::uint32_t>(bytes, 8, 0);
+    reseal(bytes);
+    writeBytes(path, bytes);
+    expectRejected(path, {"version 0", "reads version 1"});
+}
+
+TEST(ModelFile, AbsurdSizesAreRejectedBeforeAllocating) {
+    TempDir dir;
+    const auto path = dir.file("m.pmsc");
+    const std::string good = pmsc::encodeModel(smallModel());
+    const struct {
+        std::size_t offset;
+        std::uint64_t value;
+        const char* expected;
+    } cases[] = {
+        {16, 0, "must be positive"},                   // N = 0
+        {24, 0, "must be positive"},                   // C = 0
+        {32, 0, "must be positive"},                   // M = 0
+        {40, 0, "must be positive"},                   // K = 0
+        {16, 1ull << 62, "would not fit"},             // N*C*8 overflows
+        {32, 0xffffffffffffffffull, "would not fit"},  // M wraps
+        {40, 1ull << 40, "needs"},                     // K large, no overflow: length check
+        {16, 1000000, "truncated model file or corrupted header"},
+        {16, 6, "the file has"},  // N one smaller: extra bytes
+    };
+    for (const auto& c : cases) {
+        std::string bytes = good;
+        poke<std::uint64_t>(bytes, c.offset, c.value);
+        reseal(bytes);
+        writeBytes(path, bytes);
+        expectRejected(path, {c.expected});
+    }
+}
+
+TEST(ModelFile, SizesThatFitTheLengthButNotEachOther) {
+    TempDir dir;
+    const auto path = dir.file("m.pmsc");
+    // N=1, C=1, M=2: the length can be made consistent, but M > N*C.
+    std::string bytes = "PMSCMODL";
+    const auto u32 = [&](std::uint32_t v) { bytes.append(reinterpret_cast<const char*>(&v), 4); };
+    const auto u64 = [&](std::uint64_t v) { bytes.append(reinterpret_cast<const char*>(&v), 8); };
+    const auto f64 = [&](double v) { bytes.append(reinterpret_cast<const char*>(&v), 8); };
+    u32(1), u32(0), u64(1), u64(1), u64(2), u64(1), u64(3), u32(0), u32(0);
+    for (int i = 0; i < 5; ++i) f64(0.0);
+    // mean 1, basis 2, sv 2, keys 1, projector 2
+    f64(0), f64(1), f64(0), f64(1), f64(0), u64(0), f64(1), f64(0);
+    u64(0);
+    reseal(bytes);
+    writeBytes(path, bytes);
+    expectRejected(path, {"more basis vectors than values"});
+}
+
+TEST(ModelFile, KeyIndexOutOfRangeAndDuplicateKeys) {
+    TempDir dir;
+    const auto path = dir.file("m.pmsc");
+    const std::string good = pmsc::encodeModel(smallModel());
+    const std::size_t keysAt = pmsc::kModelHeaderBytes + 8 * (21 + 63 + 3);
+    std::string bytes = good;
+    poke<std::uint64_t>(bytes, keysAt + 8, 7);
+    reseal(bytes);
+    writeBytes(path, bytes);
+    expectRejected(path, {"key point index 7 is outside [0, 7)"});
+    bytes = good;
+    poke<std::uint64_t>(bytes, keysAt + 8, 4);  // {4, 4, 6}
+    reseal(bytes);
+    writeBytes(path, bytes);
+    expectRejected(path, {"inconsistent model", "repeated"});
+}
+
+TEST(ModelFile, InvalidValuesFailValidation) {
+    TempDir dir;
+    const auto path = dir.file("m.pmsc");
+    std::string bytes = pmsc::encodeModel(smallModel());
+    poke<double>(bytes, 64, 0.5);  // eps_min 0.5 > eps_max 0.015
+    reseal(bytes);
+    writeBytes(path, bytes);
+    expectRejected(path, {"inconsistent model", "eps_min"});
+    bytes = pmsc::encodeModel(smallModel());
+    poke<std::uint32_t>(bytes, 56, 9);
+    reseal(bytes);
+    writeBytes(path, bytes);
+    expectRejected(path, {"unknown key-point selector 9"});
+}
+
+TEST(ModelFile, MissingFileAndFolder) {
+    TempDir dir;
+    expectRejected(dir.file("none.pmsc"), {"no such file"});
+    expectRejected(dir.path().string(), {"folder"});
+}
+
+TEST(ModelFile, WriterRefusesAnInvalidModel) {
+    TempDir dir;
+    Model m = smallModel();
+    m.keyPoints = {4, 4, 6};
+    EXPECT_THROW(pmsc::writeModel(dir.file("m.pmsc"), m), std::invalid_argument);
+    EXPECT_TRUE(dir.entries().empty());
+}
+
+TEST(ModelFile, UnwritableDestinationIsAnIoErrorAndLeavesNoTemporaryFile) {
+    TempDir dir;
+    EXPECT_THROW(pmsc::writeModel(dir.file("missing/m.pmsc"), smallModel()), pmsc::IoError);
+    std::filesystem::create_directories(dir.file("taken/child"));
+    EXPECT_THROW(pmsc::writeModel(dir.file("taken"), smallModel()), pmsc::IoError);
+    EXPECT_EQ(dir.entries(), std::vector<std::string>{"taken"});
+}
+
+}  // namespace
