@@ -53,7 +53,7 @@ run_sanitizers() {
   # Unit tests (mathematics, file formats) under ASan+UBSan.
   configure build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPMSC_SANITIZE=address,undefined \
     -DPMSC_BUILD_EXAMPLES=OFF -DPMSC_BUILD_BENCH=OFF
-  cmake --build build-asan -j "$JOBS" --target pmsc_unit_tests
+  cmake --build build-asan -j "$JOBS" --target pmsc_unit_tests pmsc_io_tests
   ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
     ctest --test-dir build-asan -L unit --output-on-failure -j "$JOBS"
   # The engine's tests under ThreadSanitizer.
