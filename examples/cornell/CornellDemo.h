@@ -1,0 +1,58 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <cstddef>
+#include <functional>
+#include <string>
+#include <string_view>
+
+namespace pmsc::cornell {
+
+/// The settings of section 8's experiment as `pmsc demo cornell` runs it.
+struct CornellDemoOptions {
+    std::string outDir;            ///< created if missing; receives *.vdb, *.png, *.pfm, report.json
+    std::size_t points = 160000;   ///< active voxels of the lighting cache (the paper's 160,000 points)
+    int samples = 96;              ///< paths per point per frame (half cosine gathers, half light paths)
+    int basis = 32;                ///< M (paper: 32 illumination basis functions)
+    int keys = 200;                ///< K (paper: 200 control points), including the spatial grid
+    int gridKeys = 48;             ///< about this many of the K from a sparse spatial grid (section 4)
+    /// Largest point error a hit may have, as a fraction of the largest indirect irradiance
+    /// (Euclidean over RGB) seen in training. 0.1: a hit never misses by more than a tenth of
+    /// the brightest indirect light; where indirect light is that bright (next to the light)
+    /// direct light is several times brighter still, so such an error stays under a few
+    /// percent of the pixel. Calibrated into eps by pmsc::train (leave-one-slice-out).
+    double toleranceFraction = 0.1;
+    int scatteredLights = 16;      ///< validation lights near, never on, the training grid
+    int pathFrames = 60;           ///< the light animation path
+    int pathFullEvery = 3;         ///< full gathers on every n-th path frame (errors, images)
+    int referenceMultiplier = 16;  ///< converged reference: this many times the samples
+    int referencePoints = 2000;    ///< random subset of points for the reference
+    int imageSize = 256;
+    int renderFrames = 2;          ///< path frames rendered per camera (spread over the path)
+    int threads = 0;               ///< 0 = every core; full gathers and the engine use the same
+    bool quick = false;            ///< small settings for a smoke test (set by quickOptions)
+    /// Progress hook: (stage, done, total); return false to cancel (throws pmsc::Cancelled).
+    std::function<bool(std::string_view, double, double)> progress;
+
+    /// `--quick`: 6,000 points, 32 samples, 8 scattered lights, 500 reference points, 128 px.
+    static CornellDemoOptions quickOptions();
+};
+
+/// Runs the whole experiment (section 8, issue 4) and writes into options.outDir:
+/// - report.json (returned too): points, key_points, basis, train_frames, test_frames,
+///   samples_per_point, full_seconds_per_frame, pmsc_seconds_per_frame, speedup,
+///   rms_rel_error, hit_rate, reference_rms_rel_error_full, reference_rms_rel_error_pm, and more;
+/// - cache_{pmsc,full}_pathNNN.vdb: the lighting-cache grids of the rendered frames;
+/// - CAMERA_pathNNN.png (full | PMSC | |diff| x 10) and .pfm (the same, linear).
+///
+/// Steps: voxelize the box; 144 training frames by full gathers; pmsc::train; full gathers of
+/// the validation frames that are checked; the validation frames through the engine
+/// (pmsc::engine::Engine, soft cache per frame); the converged reference on a subset; grids,
+/// renders, report.
+/// @throws pmsc::InputError for bad options, pmsc::IoError for outputs that cannot be written,
+///         pmsc::Cancelled when the progress hook asks to stop.
+nlohmann::json runCornellDemo(const CornellDemoOptions& options);
+
+}  // namespace pmsc::cornell

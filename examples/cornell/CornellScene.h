@@ -1,0 +1,104 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include <array>
+#include <string>
+#include <vector>
+
+namespace pmsc::cornell {
+
+/// A small 3-vector of doubles (world space, millimetres). Kept free of Eigen and of the
+/// ray tracer's types so this header stays cheap to include.
+struct Vec3 {
+    double x = 0, y = 0, z = 0;
+};
+inline Vec3 operator+(Vec3 a, Vec3 b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
+inline Vec3 operator-(Vec3 a, Vec3 b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+inline Vec3 operator*(Vec3 a, double s) { return {a.x * s, a.y * s, a.z * s}; }
+inline Vec3 operator*(double s, Vec3 a) { return a * s; }
+inline double dot(Vec3 a, Vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+inline Vec3 cross(Vec3 a, Vec3 b) {
+    return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+double length(Vec3 a);
+Vec3 normalize(Vec3 a);
+
+/// RGB triple (reflectance, irradiance or radiance, linear).
+using Rgb = std::array<double, 3>;
+
+/// One planar quad of the box, corners in order, with its diffuse reflectance and the
+/// unit normal of its visible side.
+struct Quad {
+    std::string name;
+    std::array<Vec3, 4> corners;
+    Rgb albedo;
+    Vec3 normal;  ///< unit, pointing to the side the box's light reaches
+    double area() const;
+    /// Closest point of the quad to p (as two triangles 0-1-2 and 0-2-3).
+    Vec3 closestPoint(Vec3 p) const;
+};
+
+/// A pinhole camera: square image, vertical field of view in degrees.
+struct Camera {
+    std::string name;
+    Vec3 eye, target, up{0, 1, 0};
+    double fovYDegrees = 39.3077;
+};
+
+/// The measured Cornell box (shared/data/cornell-box.md), millimetres, y up.
+///
+/// Decisions the data leaves open:
+/// - The light opening in the ceiling is closed: the paper's experiment lights the box with one
+///   point light per frame (section 8), not the original area light, so the ceiling is whole.
+/// - Normals: walls face the box's centre, block faces face away from their block's centre.
+/// - The floor under the blocks is kept in the geometry (the ray tracer needs it), but
+///   surfaces inside a block are never points of the lighting cache (see SurfaceVoxels).
+class CornellScene {
+public:
+    /// The box exactly as measured: 5 walls, 5 quads per block.
+    static CornellScene standard();
+
+    const std::vector<Quad>& quads() const { return quads_; }
+    double totalArea() const;
+    /// True if p lies strictly inside one of the two blocks (their footprint, below their top).
+    bool insideBlock(Vec3 p, double marginMm = 0) const;
+
+    /// The measured camera: (278, 273, -800) looking down +z, 39.3077 degrees.
+    static Camera standardCamera();
+
+private:
+    std::vector<Quad> quads_;
+    struct Block {
+        std::array<Vec3, 4> footprint;  // top quad's corners projected to y = 0 (xz)
+        double height;
+    };
+    std::vector<Block> blocks_;
+};
+
+/// A point light: position in millimetres and RGB intensity (power per steradian).
+struct PointLight {
+    Vec3 position;
+    Rgb intensity;
+};
+
+/// The light positions of the experiment (section 8). Distances in millimetres.
+struct LightRig {
+    int gridSide = 12;            ///< 12 x 12 = 144 training lights
+    double spacingMm = 36.0;      ///< grid pitch in x and z
+    double belowCeilingMm = 60.0; ///< lights at y = 548.8 - this
+    Rgb intensity{1.6e5, 1.36e5, 1.12e5};  ///< warm white, gives irradiance of order 1
+
+    /// The 12 x 12 training grid, row-major in (z, x), centred on the ceiling.
+    std::vector<PointLight> trainingLights() const;
+    /// `count` lights near the training grid but never on it: jittered off the grid nodes by
+    /// 15-50% of the pitch in x and z and a few millimetres in y (deterministic for a seed).
+    std::vector<PointLight> scatteredLights(int count, unsigned seed = 7) const;
+    /// A smooth closed `frames`-frame path (a Lissajous figure) across the grid's extent.
+    std::vector<PointLight> animationPath(int frames) const;
+};
+
+/// Cameras of the moving-camera renders: the standard view, an orbit outside the opening
+/// and one inside the box. `t` in [0, 1] moves each along its own path.
+std::vector<Camera> demoCameras(double t);
+
+}  // namespace pmsc::cornell

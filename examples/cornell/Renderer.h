@@ -1,0 +1,23 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include "examples/cornell/CornellEvaluator.h"
+#include "examples/cornell/ImageIO.h"
+#include "examples/cornell/LightingCacheGrid.h"
+
+#include <vector>
+
+namespace pmsc::cornell {
+
+/// Renders the box from a camera: each pixel's visible surface gets its direct light exactly
+/// (a shadow ray to the point light) and its indirect light looked up in world space from a
+/// lighting cache (LightingCacheGrid::sample), radiance = albedo/pi * (direct + indirect).
+///
+/// One image per cache, from the same primary rays and the same direct light, so images
+/// differ only where the caches differ (full gather vs PMSC). 2 x 2 stratified samples per
+/// pixel, fixed pattern: deterministic. Parallel over rows (tbb::parallel_for).
+/// @param size width = height in pixels (the measured camera's images are square).
+std::vector<Image> renderWithCaches(const CornellWorld& world, const Camera& camera, const PointLight& light,
+                                    const std::vector<const LightingCacheGrid*>& caches, int size);
+
+}  // namespace pmsc::cornell
