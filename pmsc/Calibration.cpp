@@ -34,7 +34,7 @@ CalibrationStats thresholdsFromTraining(const Eigen::Ref<const Eigen::MatrixXd>&
 
 CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index channels,
                            const std::vector<Index>& keys, Index basisSize, double tolerance,
-                           Index slices, const SvdOptions& svd) {
+                           Index slices, const SvdOptions& svd, const Eigen::MatrixXd* gram) {
     const Index f = q.cols();
     if (!(tolerance > 0) || !std::isfinite(tolerance)) {
         throw std::invalid_argument("calibration tolerance must be a positive number, got " +
@@ -51,6 +51,9 @@ CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index cha
     s.frames.reserve(static_cast<size_t>(f));
     Index cappedFolds = 0;
     Index smallestM = basisSize;
+    if (gram && (gram->rows() != f || gram->cols() != f)) {
+        throw std::invalid_argument("calibrate: Gram matrix is not F x F");
+    }
     Eigen::MatrixXd heldIn;
     Eigen::MatrixXd heldOut;
     for (Index slice = 0; slice < slices; ++slice) {
@@ -58,19 +61,47 @@ CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index cha
         const Index last = (slice + 1) * f / slices;  // exclusive
         const Index out = last - first;
         const Index in = f - out;
-        heldIn.resize(q.rows(), in);
-        heldIn.leftCols(first) = q.leftCols(first);
-        heldIn.rightCols(f - last) = q.rightCols(f - last);
-        const Eigen::VectorXd mean = heldIn.rowwise().mean();
-        heldIn.colwise() -= mean;
+        const Index right = f - last;
         // A centered matrix of `in` frames has rank <= in - 1.
         Index m = std::min(basisSize, in - 1);
-        if (m < basisSize) ++cappedFolds;
-        if (m < 1) continue;
+        if (m < 1) {
+            ++cappedFolds;
+            continue;
+        }
         SvdOptions o = svd;
         o.seed = svd.seed + static_cast<unsigned>(slice) + 1000u;
-        TruncatedSvd fold = truncatedSvd(heldIn, m, o);
-        if (fold.sigma.size() < m) ++cappedFolds;
+        TruncatedSvd fold;
+        Eigen::VectorXd mean;
+        if (gram) {
+            Eigen::MatrixXd g(in, in);
+            g.topLeftCorner(first, first) = gram->topLeftCorner(first, first);
+            g.topRightCorner(first, right) = gram->topRightCorner(first, right);
+            g.bottomLeftCorner(right, first) = gram->bottomLeftCorner(right, first);
+            g.bottomRightCorner(right, right) = gram->bottomRightCorner(right, right);
+            // J g J: subtract row and column means, add back the grand mean.
+            const Eigen::VectorXd rowMean = g.rowwise().mean();
+            const double grand = rowMean.mean();
+            g.colwise() -= rowMean;
+            g.rowwise() -= rowMean.transpose();
+            g.array() += grand;
+            fold = svdFromGram(Eigen::MatrixXd(0, in), g, m, 0);
+            // U = Q_I (J V) S^-1; J V removes each column's mean.
+            Eigen::MatrixXd jv = fold.v;
+            jv.rowwise() -= jv.colwise().mean();
+            for (Index i = 0; i < jv.cols(); ++i) jv.col(i) /= fold.sigma[i];
+            fold.u.resize(q.rows(), jv.cols());
+            fold.u.noalias() = q.leftCols(first) * jv.topRows(first);
+            fold.u.noalias() += q.rightCols(right) * jv.bottomRows(right);
+            mean = (q.leftCols(first).rowwise().sum() + q.rightCols(right).rowwise().sum()) / static_cast<double>(in);
+        } else {
+            heldIn.resize(q.rows(), in);
+            heldIn.leftCols(first) = q.leftCols(first);
+            heldIn.rightCols(right) = q.rightCols(right);
+            mean = heldIn.rowwise().mean();
+            heldIn.colwise() -= mean;
+            fold = truncatedSvd(heldIn, m, o);
+        }
+        if (fold.sigma.size() < basisSize) ++cappedFolds;
         m = fold.sigma.size();
         smallestM = std::min(smallestM, m);
         if (m < 1) continue;

@@ -41,12 +41,18 @@ struct CalibrationStats {
 /// eps_min had error <= T. eps_max = 2 eps_min: under the same bound the soft-cached error
 /// (1 - w) r e with w = (e - eps_min)/(eps_max - eps_min) is largest at e = eps_min whenever
 /// eps_max <= 2 eps_min, so 2 is the widest blend zone that still keeps blends under T.
+///
+/// Speed: with `gram` = Q^T Q (F x F) each fold's SVD comes from the held-in block of it,
+/// centred in frame space (J G_II J with J = I - 11^T/n: the held-in mean removed without
+/// touching the (N*C)-row data), and U = Q_I J V S^-1 is one product: no per-fold copy of Q and no
+/// per-fold (N*C) x F^2 Gram product.
 /// @param q training matrix (N*C) x F, raw or mean-removed (means are recomputed per fold)
 /// @param basisSize M (capped per fold by the held-in rank, with a note)
+/// @param gram Q^T Q of exactly this q, or null
 /// @throws std::invalid_argument unless tolerance > 0 and 2 <= slices <= F.
 CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index channels,
                            const std::vector<Index>& keys, Index basisSize, double tolerance,
-                           Index slices, const SvdOptions& svd = {});
+                           Index slices, const SvdOptions& svd = {}, const Eigen::MatrixXd* gram = nullptr);
 
 /// Key RMS error (PointMultiplier::keyRmsError) of every column of a mean-removed matrix `q`
 /// under the model's basis and key projector: e_t = sqrt((1/K) ||(I - B_K P) Q_K[:,t]||^2).

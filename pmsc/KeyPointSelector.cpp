@@ -2,9 +2,11 @@
 
 #include "pmsc/Model.h"
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 
 #include <algorithm>
+#include <cmath>
 #include <numeric>
 #include <stdexcept>
 #include <string>
@@ -84,13 +86,15 @@ Index addTeleconnectionPair(const Eigen::Ref<const Eigen::VectorXd>& v, Index ch
 }
 
 double pmResidual(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::MatrixXd& basis,
-                  Index channels, const std::vector<Index>& keys, Eigen::MatrixXd& residual) {
+                  Index channels, const std::vector<Index>& keys, Eigen::MatrixXd& residual,
+                  Eigen::MatrixXd* coordsOut) {
     const Eigen::MatrixXd projector = makeProjector(basis, channels, keys);
     const Eigen::MatrixXd qk = gatherKeyRows(q, channels, keys);
-    const Eigen::MatrixXd coords = projector * qk;  // M x F
+    Eigen::MatrixXd coords = projector * qk;  // M x F
     residual.resize(q.rows(), q.cols());
     residual = q;
     residual.noalias() -= basis * coords;
+    if (coordsOut) *coordsOut = std::move(coords);
     return maxPointNorm(residual, channels);
 }
 
@@ -118,7 +122,7 @@ KeySelection selectKeysTeleconnection(const Eigen::Ref<const Eigen::MatrixXd>& q
                                       const Eigen::MatrixXd& basis,
                                       const Eigen::Ref<const Eigen::MatrixXd>& firstBlock,
                                       const Eigen::VectorXd& firstSigma, Index channels,
-                                      const TeleconnectionOptions& options) {
+                                      const TeleconnectionOptions& options, const Eigen::MatrixXd* gram) {
     if (options.block < 1) {
         throw std::invalid_argument("block must be >= 1, got " + std::to_string(options.block));
     }
@@ -137,6 +141,17 @@ KeySelection selectKeysTeleconnection(const Eigen::Ref<const Eigen::MatrixXd>& q
 
     KeySelection result;
     Eigen::MatrixXd residual;
+    Eigen::MatrixXd coords;
+    Eigen::MatrixXd projected;  // W = B^T Q, for the frame-space residual Gram
+    double sigmaQ = 0;
+    if (gram) {
+        if (gram->rows() != q.cols() || gram->cols() != q.cols()) {
+            throw std::invalid_argument("selectKeysTeleconnection: Gram matrix is not F x F");
+        }
+        projected.noalias() = basis.transpose() * q;
+        // firstSigma are Q's leading singular values: the scale the cancellation is relative to.
+        sigmaQ = firstSigma.size() > 0 ? firstSigma[0] : 0.0;
+    }
     Eigen::MatrixXd blockU = firstBlock.leftCols(std::min(options.block, firstBlock.cols()));
     Eigen::VectorXd blockSigma = firstSigma.head(blockU.cols());
     for (Index round = 1;; ++round) {
@@ -158,7 +173,7 @@ KeySelection selectKeysTeleconnection(const Eigen::Ref<const Eigen::MatrixXd>& q
                 addTeleconnectionPair(rotated.rotated.col(j), channels, keys, options.maxKeys);
             }
         }
-        const double worst = pmResidual(q, basis, channels, keys.keys(), residual);
+        const double worst = pmResidual(q, basis, channels, keys.keys(), residual, &coords);
         result.residualPerRound.push_back(worst);
         result.rounds = round;
         if (options.onRound) options.onRound(round, keys.size(), worst);
@@ -168,9 +183,20 @@ KeySelection selectKeysTeleconnection(const Eigen::Ref<const Eigen::MatrixXd>& q
         if (options.maxError > 0 && worst <= options.maxError) break;
 
         // Next block: the residual's leading vectors (cueing + projection error left over).
-        SvdOptions svdOptions = options.svd;
-        svdOptions.seed = options.svd.seed + static_cast<unsigned>(round);
-        TruncatedSvd next = truncatedSvd(residual, options.block, svdOptions);
+        TruncatedSvd next;
+        if (gram) {
+            Eigen::MatrixXd rtr = *gram;
+            Eigen::MatrixXd cross = projected.transpose() * coords;  // W^T C
+            rtr -= cross;
+            rtr -= cross.transpose();
+            rtr.noalias() += coords.transpose() * coords;
+            next = svdFromGram(residual, rtr, options.block, -1, 1e-7 * sigmaQ);
+        }
+        if (next.sigma.size() == 0) {
+            SvdOptions svdOptions = options.svd;
+            svdOptions.seed = options.svd.seed + static_cast<unsigned>(round);
+            next = truncatedSvd(residual, options.block, svdOptions);
+        }
         blockU = std::move(next.u);
         blockSigma = std::move(next.sigma);
         if (blockU.cols() == 0) break;  // the residual is numerically zero: nothing left to cue

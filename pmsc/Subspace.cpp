@@ -32,31 +32,6 @@ void truncate(TruncatedSvd& s, Index rank, double threshold) {
     s.sigma.conservativeResize(keep);
 }
 
-TruncatedSvd gramSvd(const Eigen::Ref<const Eigen::MatrixXd>& q, Index rank) {
-    const Index n = q.cols();
-    // Symmetric rank-k update: half the flops of a general Q^T Q product.
-    Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(n, n);
-    gram.selfadjointView<Eigen::Lower>().rankUpdate(q.transpose());
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(gram);
-    if (eig.info() != Eigen::Success) throw std::runtime_error("truncatedSvd: eigen solver failed");
-    // Eigenvalues come ascending; reverse to descending.
-    const Index r = std::min(rank, n);
-    TruncatedSvd s;
-    s.gramRoute = true;
-    s.sigma.resize(r);
-    s.v.resize(n, r);
-    for (Index i = 0; i < r; ++i) {
-        const Index j = n - 1 - i;
-        s.sigma[i] = std::sqrt(std::max(0.0, eig.eigenvalues()[j]));
-        s.v.col(i) = eig.eigenvectors().col(j);
-    }
-    const double threshold = (s.sigma.size() > 0 ? s.sigma[0] : 0.0) * 1e-7;
-    truncate(s, rank, threshold);
-    s.u.noalias() = q * s.v;
-    for (Index i = 0; i < s.sigma.size(); ++i) s.u.col(i) /= s.sigma[i];
-    return s;
-}
-
 TruncatedSvd randomizedSvd(const Eigen::Ref<const Eigen::MatrixXd>& q, Index rank,
                            const SvdOptions& options) {
     const Index m = q.rows();
@@ -94,7 +69,8 @@ TruncatedSvd randomizedSvd(const Eigen::Ref<const Eigen::MatrixXd>& q, Index ran
     while (keep < r && s.sigma[keep] > threshold) ++keep;
     s.sigma.conservativeResize(keep);
     s.v.conservativeResize(Eigen::NoChange, keep);
-    s.u.noalias() = y * svd.matrixU().leftCols(keep);
+    const Index formed = options.leftVectors < 0 ? keep : std::min(options.leftVectors, keep);
+    s.u.noalias() = y * svd.matrixU().leftCols(formed);
     return s;
 }
 
@@ -109,11 +85,61 @@ TruncatedSvd truncatedSvd(const Eigen::Ref<const Eigen::MatrixXd>& q, Index rank
         throw std::invalid_argument("truncatedSvd: negative power iteration count");
     }
     rank = std::min({rank, q.rows(), q.cols()});
-    const Index l = rank + options.oversampling;
-    // Decision (see header): the Gram route when the sketch would be at least half as wide as Q.
-    // It also needs cols <= rows to be the cheap side; for wide matrices the sketch is used.
-    if (2 * l >= q.cols() && q.cols() <= q.rows()) return gramSvd(q, rank);
+    const bool tall = q.cols() <= q.rows();
+    SvdOptions::Route route = options.route;
+    if (route == SvdOptions::Route::Auto) {
+        // Flop counts of the two routes (see header); the constant factors of Eigen's GEMM and
+        // Householder QR are close enough that the counts decide.
+        const double m = static_cast<double>(q.rows());
+        const double n = static_cast<double>(q.cols());
+        const double l = static_cast<double>(std::min({rank + options.oversampling, q.rows(), q.cols()}));
+        const double r = static_cast<double>(options.leftVectors < 0 ? rank : std::min(rank, options.leftVectors));
+        const double pq = options.powerIterations;
+        const double gram = m * n * n + 2 * m * n * r;
+        const double randomized = 2 * m * n * l * (2 * pq + 2) + 4 * m * l * l * (pq + 1);
+        route = tall && gram <= randomized ? SvdOptions::Route::Gram : SvdOptions::Route::Randomized;
+    }
+    if (route == SvdOptions::Route::Gram) {
+        if (!tall) throw std::invalid_argument("truncatedSvd: the Gram route needs cols <= rows");
+        Eigen::MatrixXd gram = gramMatrix(q);
+        TruncatedSvd s = svdFromGram(q, gram, rank, options.leftVectors);
+        s.gram = std::move(gram);
+        return s;
+    }
     return randomizedSvd(q, rank, options);
+}
+
+Eigen::MatrixXd gramMatrix(const Eigen::Ref<const Eigen::MatrixXd>& q) {
+    const Index n = q.cols();
+    Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(n, n);
+    gram.selfadjointView<Eigen::Lower>().rankUpdate(q.transpose());
+    gram.triangularView<Eigen::StrictlyUpper>() = gram.transpose();
+    return gram;
+}
+
+TruncatedSvd svdFromGram(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::MatrixXd& g, Index rank,
+                         Index leftVectors, double dropBelow) {
+    const Index n = g.cols();
+    if (g.rows() != n || q.cols() != n) throw std::invalid_argument("svdFromGram: Gram matrix size mismatch");
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(g);
+    if (eig.info() != Eigen::Success) throw std::runtime_error("svdFromGram: eigen solver failed");
+    // Eigenvalues come ascending; reverse to descending.
+    const Index r = std::min(rank, n);
+    TruncatedSvd s;
+    s.gramRoute = true;
+    s.sigma.resize(r);
+    s.v.resize(n, r);
+    for (Index i = 0; i < r; ++i) {
+        const Index j = n - 1 - i;
+        s.sigma[i] = std::sqrt(std::max(0.0, eig.eigenvalues()[j]));
+        s.v.col(i) = eig.eigenvectors().col(j);
+    }
+    const double largest = eig.eigenvalues().size() > 0 ? std::sqrt(std::max(0.0, eig.eigenvalues()[n - 1])) : 0.0;
+    truncate(s, rank, std::max(dropBelow, largest * 1e-7));
+    const Index formed = leftVectors < 0 ? s.sigma.size() : std::min(leftVectors, s.sigma.size());
+    s.u.noalias() = q * s.v.leftCols(formed);
+    for (Index i = 0; i < formed; ++i) s.u.col(i) /= s.sigma[i];
+    return s;
 }
 
 Eigen::VectorXd removeRowMean(const Eigen::Ref<const Eigen::MatrixXd>& raw, Eigen::MatrixXd& centered) {

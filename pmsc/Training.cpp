@@ -193,7 +193,8 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
             progress("keys", static_cast<double>(k), static_cast<double>(options.maxKeys));
         };
         progress("keys", 0, static_cast<double>(options.maxKeys));
-        KeySelection sel = selectKeysTeleconnection(q, basis, svd.u, svd.sigma, channels, t);
+        KeySelection sel = selectKeysTeleconnection(q, basis, svd.u, svd.sigma, channels, t,
+                                                    svd.gramRoute ? &svd.gram : nullptr);
         keys = std::move(sel.keys);
         report.iterations = sel.rounds;
         report.residualPerRound = std::move(sel.residualPerRound);
@@ -249,7 +250,8 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
     progress("calibration", 0, 1);
     if (options.tolerance > 0) {
         report.calibration =
-            calibrate(q, channels, keys, m, options.tolerance, options.calibrationSlices, svdOptions);
+            calibrate(q, channels, keys, m, options.tolerance, options.calibrationSlices, svdOptions,
+                      svd.gramRoute ? &svd.gram : nullptr);
         model.tolerance = options.tolerance;
     } else {
         report.calibration = thresholdsFromTraining(q, model.basis, channels, keys, model.projector);
