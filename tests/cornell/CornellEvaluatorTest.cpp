@@ -1,0 +1,148 @@
+// The Cornell evaluator: a point's value must not depend on its company or the thread count
+// (PointEvaluator's contract), and the numbers must behave like light.
+#include "examples/cornell/CornellEvaluator.h"
+
+#include <gtest/gtest.h>
+#include <tbb/task_arena.h>
+
+#include <cmath>
+#include <cstring>
+#include <numeric>
+
+namespace pmsc::cornell {
+namespace {
+
+std::shared_ptr<const CornellWorld> smallWorld() {
+    static const auto world = CornellWorld::create(3000);
+    return world;
+}
+
+TEST(CornellEvaluator, PointAloneEqualsPointAmongAllBitForBit) {
+    const auto world = smallWorld();
+    const CornellEvaluator ev(world, LightRig{}.scatteredLights(3), 24);
+    const Index n = ev.pointCount();
+    std::vector<double> all(static_cast<std::size_t>(3 * n));
+    ev.evaluateAll(2, all.data());
+    for (Index p : {Index{0}, Index{1}, n / 3, n / 2, n - 1}) {
+        double one[3];
+        const Index idx[1] = {p};
+        ev.evaluate(2, idx, one);
+        EXPECT_EQ(0, std::memcmp(one, all.data() + 3 * p, sizeof one)) << "point " << p;
+    }
+    // A shuffled subset, as the engine's key evaluation and fail-through chunks ask for it.
+    const std::vector<Index> subset = {n - 5, 7, n / 2 + 1, 3, n / 4};
+    std::vector<double> some(3 * subset.size());
+    ev.evaluate(2, subset, some.data());
+    for (std::size_t i = 0; i < subset.size(); ++i)
+        EXPECT_EQ(0, std::memcmp(&some[3 * i], all.data() + 3 * subset[i], 3 * sizeof(double)));
+}
+
+TEST(CornellEvaluator, ThreadCountDoesNotChangeAnyBit) {
+    const auto world = smallWorld();
+    const CornellEvaluator ev(world, LightRig{}.trainingLights(), 16);
+    std::vector<double> one(static_cast<std::size_t>(3 * ev.pointCount())), two(one.size());
+    tbb::task_arena(1).execute([&] { ev.evaluateAll(77, one.data()); });
+    tbb::task_arena(2).execute([&] { ev.evaluateAll(77, two.data()); });
+    EXPECT_EQ(0, std::memcmp(one.data(), two.data(), one.size() * sizeof(double)));
+}
+
+TEST(CornellEvaluator, IrradianceIsFiniteNonNegativeAndLit) {
+    const auto world = smallWorld();
+    const CornellEvaluator ev(world, LightRig{}.trainingLights(), 16);
+    std::vector<double> v(static_cast<std::size_t>(3 * ev.pointCount()));
+    ev.evaluateAll(0, v.data());
+    double sum = 0;
+    for (double x : v) {
+        ASSERT_TRUE(std::isfinite(x));
+        ASSERT_GE(x, 0.0);
+        sum += x;
+    }
+    EXPECT_GT(sum / static_cast<double>(v.size()), 0.01);
+}
+
+TEST(CornellEvaluator, DirectLightFollowsTheInverseSquareLaw) {
+    const auto world = smallWorld();
+    const Vec3 floorPoint{278, 0, 100};
+    const Vec3 up{0, 1, 0};
+    double e[3][3];
+    const double heights[3] = {50, 100, 200};
+    for (int i = 0; i < 3; ++i) {
+        const PointLight light{{278, heights[i], 100}, {1e4, 2e4, 3e4}};
+        directIrradiance(*world->tracer, light, std::span<const Vec3>(&floorPoint, 1), std::span<const Vec3>(&up, 1), e[i]);
+    }
+    for (int i = 0; i < 3; ++i)
+        for (int c = 0; c < 3; ++c) EXPECT_NEAR(e[i][c] * heights[i] * heights[i], 1e4 * (c + 1), 1e-6 * 1e4 * (c + 1));
+}
+
+TEST(CornellEvaluator, IndirectLightFallsOffWithLightDistance) {
+    // A light in front of the open box, moving away along -z: the light entering the opening
+    // falls as 1/r^2 and so does everything it bounces into.
+    const auto world = smallWorld();
+    std::vector<PointLight> lights;
+    for (double z : {-1500.0, -3000.0, -6000.0}) lights.push_back({{278, 274, z}, {1e7, 1e7, 1e7}});
+    const CornellEvaluator ev(world, lights, 32);
+    std::vector<double> v(static_cast<std::size_t>(3 * ev.pointCount()));
+    double mean[3];
+    for (Index f = 0; f < 3; ++f) {
+        ev.evaluateAll(f, v.data());
+        mean[f] = std::accumulate(v.begin(), v.end(), 0.0) / static_cast<double>(v.size());
+    }
+    EXPECT_GT(mean[0], mean[1]);
+    EXPECT_GT(mean[1], mean[2]);
+    EXPECT_GT(mean[0] / mean[1], 2.0);
+    EXPECT_LT(mean[0] / mean[1], 6.0);
+    EXPECT_GT(mean[1] / mean[2], 2.5);
+    EXPECT_LT(mean[1] / mean[2], 5.5);
+}
+
+TEST(CornellEvaluator, IndirectLightIsLinearInTheLightsIntensity) {
+    const auto world = smallWorld();
+    const Vec3 pos{300, 480, 250};
+    const CornellEvaluator ev(world, {{pos, {1e5, 1e5, 1e5}}, {pos, {4e5, 2e5, 1e5}}}, 16);
+    std::vector<double> a(static_cast<std::size_t>(3 * ev.pointCount())), b(a.size());
+    ev.evaluateAll(0, a.data());
+    ev.evaluateAll(1, b.data());
+    for (std::size_t i = 0; i < a.size(); i += 3) {
+        EXPECT_NEAR(b[i], 4 * a[i], 1e-9 * (1 + b[i]));
+        EXPECT_NEAR(b[i + 1], 2 * a[i + 1], 1e-9 * (1 + b[i]));
+        EXPECT_NEAR(b[i + 2], a[i + 2], 1e-9 * (1 + b[i]));
+    }
+}
+
+TEST(CornellEvaluator, EstimatesAgreeAcrossSampleCounts) {
+    // The MIS estimator is unbiased: its mean over all points must not depend on the sample
+    // count (a wrong MIS weight or pdf shows up as a few percent here), and the per-point
+    // noise must fall as samples grow.
+    const auto world = smallWorld();
+    const auto lights = LightRig{}.scatteredLights(2);
+    std::vector<double> ref(static_cast<std::size_t>(3 * world->voxels.size())), v(ref.size());
+    CornellEvaluator(world, lights, 1024).evaluateAll(1, ref.data());
+    const double refMean = std::accumulate(ref.begin(), ref.end(), 0.0);
+    double lastNoise = 1e30;
+    for (int s : {8, 32, 128}) {
+        CornellEvaluator(world, lights, s).evaluateAll(1, v.data());
+        EXPECT_NEAR(std::accumulate(v.begin(), v.end(), 0.0) / refMean, 1.0, 0.02) << s << " samples";
+        double e2 = 0, r2 = 0;
+        for (std::size_t i = 0; i < v.size(); ++i) {
+            e2 += (v[i] - ref[i]) * (v[i] - ref[i]);
+            r2 += ref[i] * ref[i];
+        }
+        const double noise = std::sqrt(e2 / r2);
+        EXPECT_LT(noise, 0.7 * lastNoise) << s << " samples";
+        lastNoise = noise;
+    }
+}
+
+TEST(CornellEvaluator, RejectsBadFramesAndPoints) {
+    const CornellEvaluator ev(smallWorld(), LightRig{}.scatteredLights(2), 4);
+    double out[3];
+    const Index bad[1] = {ev.pointCount()};
+    const Index good[1] = {0};
+    EXPECT_THROW(ev.evaluate(0, bad, out), std::out_of_range);
+    EXPECT_THROW(ev.evaluate(2, good, out), std::out_of_range);
+    EXPECT_THROW(CornellEvaluator(smallWorld(), {}, 4), std::invalid_argument);
+    EXPECT_THROW(CornellEvaluator(smallWorld(), LightRig{}.scatteredLights(1), 0), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace pmsc::cornell
