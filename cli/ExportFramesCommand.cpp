@@ -1,0 +1,108 @@
+// `pmsc export-frames`: an evaluator's full frames as a .npy training set (issue 6: a user's own
+// character, posed by skin:ASSET, becomes the frames `pmsc train` learns from).
+#include "cli/Args.h"
+#include "cli/Commands.h"
+#include "cli/EvaluatorRegistry.h"
+#include "cli/ExitCodes.h"
+#include "cli/FarmFrames.h"
+#include "cli/Interrupt.h"
+#include "cli/Progress.h"
+#include "pmsc/Errors.h"
+#include "pmsc/NpyIO.h"
+#include "pmsc/Training.h"  // pmsc::Cancelled
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <atomic>
+#include <iostream>
+#include <mutex>
+
+namespace pmsc::cli {
+
+namespace {
+
+/// "skin:ASSET", "cornell", "replay:F.npy" stay as they are; anything else is an asset path
+/// for the skin evaluator, so `pmsc export-frames character.glb` does what it says.
+std::string specOrAsset(const std::string& text) {
+    const std::string name = text.substr(0, text.find(':'));
+    for (const auto& kind : evaluatorKinds())
+        if (kind.name == name) return text;
+    return "skin:" + text;
+}
+
+}  // namespace
+
+int runExportFrames(const std::vector<std::string>& args) {
+    std::string spec, outPath, framesText, dtype = "float64";
+    int threads = 0;
+    bool quiet = false;
+    ArgParser parser("export-frames", "SPEC|ASSET --out FRAMES.npy [--frames A-B[:STEP]] [options]",
+                     "Evaluates every point of the chosen frames and writes them as a (frames, points, 3)\n"
+                     ".npy file for `pmsc train`. SPEC is an evaluator (skin:ASSET[:fps=F][:animation=A],\n"
+                     "face:DIR, cornell, replay:FILE.npy); a plain ASSET path means skin:ASSET. The file\n"
+                     "appears only when complete. Default frames: all the evaluator has.");
+    parser.positional("SPEC|ASSET", "evaluator spec or animated asset (glTF 2, FBX, Collada, X, BVH, ...)", spec);
+    parser.option("--out", "FRAMES.npy", "frames file to write", outPath, true);
+    parser.option("--frames", "A-B[:STEP]", "frames to export (default: all)", framesText);
+    parser.option("--dtype", "float64|float32", "element type (default float64)", dtype);
+    parser.option("--threads", "T", "worker threads (default: every core; the file does not depend on it)",
+                  [&](const std::string& v) { threads = static_cast<int>(parseIndex("--threads", v, 1, 4096)); });
+    parser.flag("--quiet", "no progress display", quiet);
+    if (!parser.parse(args)) return kExitOk;
+    NpyDtype type = NpyDtype::Float64;
+    if (dtype == "float32") type = NpyDtype::Float32;
+    else if (dtype != "float64") parser.fail("--dtype: expected float64 or float32, got '" + dtype + "'");
+
+    spec = specOrAsset(spec);
+    const std::unique_ptr<PointEvaluator> evaluator = makeEvaluator(spec);
+    FrameSpan span{0, evaluator->frameCount() - 1, 1};
+    if (!framesText.empty()) {
+        try {
+            span = parseFrameSpan("--frames", framesText);
+        } catch (const UsageError& e) {
+            parser.fail(e.what());
+        }
+    }
+    if (span.last >= evaluator->frameCount())
+        throw InputError("frames " + span.text() + " are outside the evaluator's frames 0-" +
+                         std::to_string(evaluator->frameCount() - 1) + " (" + spec + ")");
+    const Index n = evaluator->pointCount(), c = evaluator->channelCount(), count = span.count();
+
+    NpyFrameWriter writer(outPath, count, n, c, type);  // a temporary file until commit()
+    Progress progress("export-frames", !quiet);
+    std::mutex progressMutex;
+    std::atomic<Index> done{0};
+    const std::atomic<bool>& stop = interruptFlag();
+
+    // Frames are independent: evaluate them in parallel, each into its own place in the file.
+    tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+    arena.execute([&] {
+        tbb::parallel_for(tbb::blocked_range<Index>(0, count, 1), [&](const tbb::blocked_range<Index>& r) {
+            std::vector<double> buffer(static_cast<std::size_t>(n * c));
+            for (Index i = r.begin(); i < r.end(); ++i) {
+                if (stop.load(std::memory_order_relaxed)) throw Cancelled("export-frames interrupted");
+                const Index frame = span.frame(i);
+                try {
+                    evaluator->evaluateAll(frame, buffer.data());
+                } catch (const InputError&) {
+                    throw;
+                } catch (const std::exception& e) {
+                    throw EvaluatorError("frame " + std::to_string(frame) + ": " + evaluator->name() + ": " + e.what());
+                }
+                writer.writeFrame(i, buffer.data());
+                const Index d = ++done;
+                if (std::unique_lock lock(progressMutex, std::try_to_lock); lock)
+                    progress.update("frames", static_cast<double>(d), static_cast<double>(count));
+            }
+        });
+    });
+    progress.finish();
+    writer.commit();
+    std::cout << "pmsc export-frames: " << outPath << ": " << count << " frames x " << n << " points x " << c
+              << " channels of " << spec << " (frames " << span.text() << ")\n";
+    return kExitOk;
+}
+
+}  // namespace pmsc::cli

@@ -1,0 +1,160 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#include "cli/FarmFrames.h"
+
+#include "cli/Args.h"
+#include "pmsc/Errors.h"
+
+#include <cerrno>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <regex>
+#include <unordered_set>
+
+#include <fcntl.h>
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+
+namespace pmsc::cli {
+
+std::string FrameSpan::text() const {
+    std::string t = std::to_string(first) + "-" + std::to_string(last);
+    if (step != 1) t += ":" + std::to_string(step);
+    return t;
+}
+
+FrameSpan parseFrameSpan(const std::string& option, const std::string& text) {
+    static const std::regex pattern(R"(^(\d+)(?:-(\d+))?(?::(\d+))?$)");
+    std::smatch m;
+    if (!std::regex_match(text, m, pattern))
+        throw UsageError(option + ": expected FIRST-LAST[:STEP] (for example 0-99 or 0-99:2), got '" + text + "'");
+    FrameSpan s;
+    s.first = parseIndex(option, m[1].str());
+    s.last = m[2].matched ? parseIndex(option, m[2].str()) : s.first;
+    s.step = m[3].matched ? parseIndex(option, m[3].str(), 1) : 1;
+    if (s.last < s.first)
+        throw UsageError(option + ": the range " + text + " ends before it starts");
+    // Keep `last` on the grid, so count() and text() agree with what runs.
+    s.last = s.first + (s.last - s.first) / s.step * s.step;
+    return s;
+}
+
+namespace {
+
+std::string frameName(Index frame, const std::string& extension) {
+    char digits[32];
+    std::snprintf(digits, sizeof digits, "%06lld", static_cast<long long>(frame));
+    return std::string("frame.") + digits + extension;
+}
+
+std::string systemError(int error) { return std::strerror(error); }
+
+void fsyncPath(const std::string& path, bool directory) {
+    const int fd = ::open(path.c_str(), (directory ? O_DIRECTORY : 0) | O_RDONLY | O_CLOEXEC);
+    if (fd < 0) throw IoError(path + ": " + systemError(errno));
+    const int rc = ::fsync(fd);
+    const int error = errno;
+    ::close(fd);
+    // Some file systems do not sync folders (EINVAL); the rename itself is still atomic there.
+    if (rc != 0 && !(directory && (error == EINVAL || error == EROFS)))
+        throw IoError(path + ": cannot flush to disk: " + systemError(error));
+}
+
+}  // namespace
+
+FrameOutput::FrameOutput(std::string dir, const std::string& format,
+                         std::vector<std::shared_ptr<const FrameWriter>> writers, Index points, Index channels,
+                         NpyDtype dtype)
+    : dir_(std::move(dir)), points_(points), channels_(channels), dtype_(dtype) {
+    if (format == "npy") {
+        extension_ = ".npy";
+        return;
+    }
+    std::string offered = "npy";
+    for (auto& w : writers) {
+        if (w->extension() == "." + format) {
+            writer_ = w;
+            extension_ = w->extension();
+            return;
+        }
+        offered += ", " + w->extension().substr(1);
+    }
+    throw UsageError("--format: this evaluator writes " + offered + ", not '" + format + "'");
+}
+
+std::string FrameOutput::path(Index frame) const { return (fs::path(dir_) / frameName(frame, extension_)).string(); }
+
+bool FrameOutput::isValid(Index frame) const {
+    const std::string p = path(frame);
+    std::error_code ec;
+    if (!fs::is_regular_file(p, ec)) return false;
+    if (writer_) return writer_->isValid(p);
+    try {
+        const NpyInfo info = readNpyInfo(p);  // checks the length against the shape
+        return info.frames == 1 && info.points == points_ && info.channels == channels_ && info.dtype == dtype_;
+    } catch (const std::exception&) {
+        return false;
+    }
+}
+
+void FrameOutput::write(Index frame, const double* values) const {
+    const std::string p = path(frame);
+    if (!writer_) {
+        FrameSet one(1, points_, channels_);
+        std::copy(values, values + points_ * channels_, one.values.begin());
+        writeFrames(p, one, dtype_);  // AtomicFile: temporary, fsync, rename, fsync folder
+        return;
+    }
+    std::string temp = p + ".tmp-XXXXXX";
+    const int fd = ::mkstemp(temp.data());
+    if (fd < 0) throw IoError(p + ": cannot create a temporary file: " + systemError(errno));
+    ::close(fd);
+    try {
+        writer_->write(temp, frame, values);
+        fsyncPath(temp, false);
+        if (::rename(temp.c_str(), p.c_str()) != 0) throw IoError(p + ": cannot rename into place: " + systemError(errno));
+    } catch (const IoError&) {
+        ::unlink(temp.c_str());
+        throw;
+    } catch (const std::exception& e) {
+        ::unlink(temp.c_str());
+        throw IoError(p + ": " + e.what());
+    }
+    fsyncPath(dir_, true);
+}
+
+Index FrameOutput::removeStaleTemporaries(const std::vector<Index>& frames) const {
+    std::unordered_set<std::string> ours;
+    for (Index f : frames) ours.insert(frameName(f, extension_));
+    Index removed = 0;
+    std::error_code ec;
+    for (const auto& entry : fs::directory_iterator(dir_, ec)) {
+        const std::string name = entry.path().filename().string();
+        const auto tmp = name.find(".tmp-");
+        if (tmp == std::string::npos || !ours.count(name.substr(0, tmp))) continue;
+        std::error_code rm;
+        if (fs::remove(entry.path(), rm)) ++removed;
+    }
+    return removed;
+}
+
+std::vector<std::shared_ptr<const FrameWriter>> offeredWriters(const PointEvaluator& evaluator) {
+    if (const auto* provider = dynamic_cast<const FrameWriterProvider*>(&evaluator)) return provider->frameWriters();
+    return {};
+}
+
+void ensureWritableFolder(const std::string& dir) {
+    std::error_code ec;
+    fs::create_directories(dir, ec);
+    if (ec) throw IoError(dir + ": cannot create the output folder: " + ec.message());
+    if (!fs::is_directory(dir, ec)) throw IoError(dir + ": not a folder");
+    std::string probe = (fs::path(dir) / ".pmsc-write-test-XXXXXX").string();
+    const int fd = ::mkstemp(probe.data());
+    if (fd < 0) throw IoError(dir + ": cannot create files in the output folder: " + systemError(errno));
+    ::close(fd);
+    ::unlink(probe.c_str());
+}
+
+}  // namespace pmsc::cli

@@ -1,0 +1,59 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include "cli/FarmFrames.h"
+#include "pmsc/Model.h"
+#include "pmsc/NpyIO.h"
+#include "pmsc/PointEvaluator.h"
+
+#include <atomic>
+#include <string>
+
+namespace pmsc::cli {
+
+/// What `pmsc run` was asked to do (issue 6: render-farm use).
+struct RunOptions {
+    std::string modelPath;      ///< for the stats only (the model is passed in)
+    std::string evaluatorSpec;  ///< NAME[:ARGS], for the stats only
+    FrameSpan frames;           ///< the task's frames
+    std::string outDir;         ///< one file per frame goes here
+    std::string format = "npy"; ///< "npy" or an extension the evaluator offers ("obj", "vdb")
+    NpyDtype dtype = NpyDtype::Float64;  ///< of .npy frames
+    std::string statsPath;      ///< empty: OUT/pmsc-run.<A-B>.json
+    int threads = 0;            ///< 0: every core
+    bool force = false;         ///< redo frames whose output is already valid
+    bool quiet = false;         ///< no progress display
+    double logSeconds = 10;     ///< plain progress lines this often when stderr is not a terminal
+    std::string commandLine;    ///< as typed, for the stats
+    const std::atomic<bool>* cancel = nullptr;  ///< set by another thread (SIGINT/SIGTERM) to stop
+};
+
+/// What a run did; also written, with per-frame states and timings, to the stats file.
+struct RunReport {
+    Index frames = 0;            ///< in the task's range
+    Index evaluated = 0;         ///< frames run through the engine and written
+    Index skipped = 0;           ///< frames whose valid output was already there
+    Index replaced = 0;          ///< frames whose existing output was invalid (redone)
+    Index staleTemporaries = 0;  ///< temporary files of a killed run, removed
+    Index hits = 0, blends = 0, misses = 0;
+    double seconds = 0;          ///< wall time of the whole run
+    std::string statsPath;
+};
+
+/// The stats file's default name for a range: OUT/pmsc-run.A-B.json (":S" -> "_byS").
+std::string defaultStatsPath(const std::string& outDir, const FrameSpan& frames);
+
+/// Runs the task's frames of `evaluator` through the soft-caching engine (issue 3) and writes
+/// one file per frame (FrameOutput: atomic, resumable). Frames whose output exists and is valid
+/// are skipped unless options.force.
+///
+/// Checks, in this order, before any evaluation or any file is written:
+/// evaluator N and C == the model's (InputError), frames inside 0..frameCount()-1 (InputError),
+/// the format is npy or offered by the evaluator (UsageError), the output folder can be created
+/// and written (IoError).
+/// Afterwards the stats JSON is written atomically, also when the run then fails (evaluator
+/// failure, I/O failure, interruption: "status" and "error" say which), and the error rethrown.
+/// @throws InputError, UsageError, IoError, EvaluatorError, pmsc::Cancelled.
+RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const RunOptions& options);
+
+}  // namespace pmsc::cli
