@@ -1,11 +1,15 @@
 #include "examples/cornell/CornellEvaluator.h"
 
+#include "examples/cornell/LightingCacheGrid.h"
 #include "examples/cornell/Sampling.h"
+#include "pmsc/Errors.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <cmath>
+#include <filesystem>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 
@@ -199,6 +203,83 @@ void CornellEvaluator::evaluateAll(Index frame, double* out) const {
     tbb::parallel_for(tbb::blocked_range<Index>(0, pointCount(), 256), [&](const tbb::blocked_range<Index>& r) {
         for (Index p = r.begin(); p != r.end(); ++p) gather(light, p, out + 3 * p);
     });
+}
+
+namespace {
+
+/// One frame of the cache as a .vdb file (the state is "full": `pmsc run` hands the writer the
+/// soft-cached values without the decision, so the file says what it knows).
+class VdbFrameWriter : public FrameWriter {
+public:
+    explicit VdbFrameWriter(const CornellEvaluator& ev) : ev_(ev) {}
+    std::string extension() const override { return ".vdb"; }
+    void write(const std::string& path, Index frame, const double* values) const override {
+        const SurfaceVoxels& vox = ev_.world().voxels;
+        const PointLight& light = ev_.lights().at(static_cast<std::size_t>(frame));
+        CacheMetadata meta{static_cast<std::int32_t>(frame), light.position, "soft-cached", -1, 0};
+        LightingCacheGrid(vox, std::span<const double>(values, 3 * vox.size()), meta).write(path);
+    }
+    bool isValid(const std::string& path) const override {
+        try {
+            return std::filesystem::is_regular_file(path) &&
+                   LightingCacheGrid::read(path).activeVoxelCount() == static_cast<std::int64_t>(ev_.world().voxels.size());
+        } catch (...) {
+            return false;
+        }
+    }
+
+private:
+    const CornellEvaluator& ev_;
+};
+
+}  // namespace
+
+std::vector<std::shared_ptr<const FrameWriter>> CornellEvaluator::frameWriters() const {
+    return {std::make_shared<VdbFrameWriter>(*this)};
+}
+
+std::unique_ptr<CornellEvaluator> makeCornellEvaluator(const std::string& options) {
+    std::size_t points = 160000;
+    int samples = 128;
+    std::string lights = "all";
+    std::stringstream in(options);
+    std::string item;
+    while (std::getline(in, item, ',')) {
+        if (item.empty()) continue;
+        const auto eq = item.find('=');
+        const std::string key = item.substr(0, eq), value = eq == std::string::npos ? "" : item.substr(eq + 1);
+        auto number = [&](long lo, long hi) {
+            std::size_t used = 0;
+            long v = 0;
+            try {
+                v = std::stol(value, &used);
+            } catch (const std::exception&) {
+                used = 0;
+            }
+            if (value.empty() || used != value.size() || v < lo || v > hi)
+                throw InputError("evaluator 'cornell': " + key + "='" + value + "' is not an integer in [" +
+                                 std::to_string(lo) + ", " + std::to_string(hi) + "]");
+            return v;
+        };
+        if (key == "points") {
+            points = static_cast<std::size_t>(number(1000, 4000000));
+        } else if (key == "samples") {
+            samples = static_cast<int>(number(2, 65536));
+        } else if (key == "lights") {
+            if (value != "all" && value != "training" && value != "scattered" && value != "path")
+                throw InputError("evaluator 'cornell': lights='" + value + "' is not all, training, scattered or path");
+            lights = value;
+        } else {
+            throw InputError("evaluator 'cornell': unknown option '" + key + "' (points=N, samples=S, lights=SET)");
+        }
+    }
+    const LightRig rig;
+    std::vector<PointLight> set;
+    auto add = [&](const std::vector<PointLight>& l) { set.insert(set.end(), l.begin(), l.end()); };
+    if (lights == "all" || lights == "training") add(rig.trainingLights());
+    if (lights == "all" || lights == "scattered") add(rig.scatteredLights(16));
+    if (lights == "all" || lights == "path") add(rig.animationPath(60));
+    return std::make_unique<CornellEvaluator>(CornellWorld::create(points), std::move(set), samples, "cornell");
 }
 
 }  // namespace pmsc::cornell

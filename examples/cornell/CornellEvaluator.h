@@ -4,6 +4,7 @@
 #include "examples/cornell/CornellScene.h"
 #include "examples/cornell/RayTracer.h"
 #include "examples/cornell/SurfaceVoxels.h"
+#include "pmsc/FrameWriter.h"
 #include "pmsc/PointEvaluator.h"
 
 #include <memory>
@@ -48,7 +49,10 @@ void directIrradiance(const RayTracer& tracer, const PointLight& light, std::spa
 /// tbb::parallel_for in the caller's task arena (limit threads with tbb::task_arena or
 /// tbb::global_control); evaluate() itself is serial, so the engine's parallel fail-through
 /// branches do not oversubscribe.
-class CornellEvaluator : public PointEvaluator {
+///
+/// Also a FrameWriterProvider: `pmsc run` can write each frame as a lighting-cache .vdb
+/// (LightingCacheGrid, grid "indirect" + "normal" + "surface_point").
+class CornellEvaluator : public PointEvaluator, public FrameWriterProvider {
 public:
     /// @param lights one frame per light. @param samplesPerPoint S >= 1.
     CornellEvaluator(std::shared_ptr<const CornellWorld> world, std::vector<PointLight> lights,
@@ -62,6 +66,8 @@ public:
     void evaluate(Index frame, std::span<const Index> points, double* out) const override;
     void evaluateAll(Index frame, double* out) const override;
 
+    std::vector<std::shared_ptr<const FrameWriter>> frameWriters() const override;
+
     const CornellWorld& world() const { return *world_; }
     const std::vector<PointLight>& lights() const { return lights_; }
     int samplesPerPoint() const { return samples_; }
@@ -74,5 +80,13 @@ private:
     int samples_;
     std::string name_;
 };
+
+/// The `cornell` evaluator of the command line (spec "cornell[:OPTIONS]"), OPTIONS a comma-separated
+/// list of points=N (default 160000), samples=S (default 128) and lights=SET, SET one of
+///   all (default): the 144 training lights, then 16 scattered validation lights, then the 60-frame
+///                  path (frames 0-143, 144-159, 160-219), so one spec serves export-frames and run;
+///   training | scattered | path: only that set, from frame 0.
+/// @throws pmsc::InputError naming the bad option.
+std::unique_ptr<CornellEvaluator> makeCornellEvaluator(const std::string& options);
 
 }  // namespace pmsc::cornell

@@ -1,12 +1,14 @@
 // The Cornell evaluator: a point's value must not depend on its company or the thread count
 // (PointEvaluator's contract), and the numbers must behave like light.
 #include "examples/cornell/CornellEvaluator.h"
+#include "pmsc/Errors.h"
 
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
 
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <numeric>
 
 namespace pmsc::cornell {
@@ -142,6 +144,34 @@ TEST(CornellEvaluator, RejectsBadFramesAndPoints) {
     EXPECT_THROW(ev.evaluate(2, good, out), std::out_of_range);
     EXPECT_THROW(CornellEvaluator(smallWorld(), {}, 4), std::invalid_argument);
     EXPECT_THROW(CornellEvaluator(smallWorld(), LightRig{}.scatteredLights(1), 0), std::invalid_argument);
+}
+
+TEST(CornellEvaluator, CommandLineSpecSetsPointsSamplesAndLights) {
+    const auto all = makeCornellEvaluator("points=2000,samples=4");
+    EXPECT_EQ(all->frameCount(), 144 + 16 + 60);
+    EXPECT_NEAR(static_cast<double>(all->pointCount()), 2000, 40);
+    EXPECT_EQ(all->samplesPerPoint(), 4);
+    EXPECT_EQ(makeCornellEvaluator("points=2000,lights=path")->frameCount(), 60);
+    EXPECT_EQ(makeCornellEvaluator("points=2000,lights=scattered")->frameCount(), 16);
+    EXPECT_THROW(makeCornellEvaluator("points=ten"), InputError);
+    EXPECT_THROW(makeCornellEvaluator("samples=1"), InputError);
+    EXPECT_THROW(makeCornellEvaluator("lights=moon"), InputError);
+    EXPECT_THROW(makeCornellEvaluator("colour=red"), InputError);
+}
+
+TEST(CornellEvaluator, OffersAVdbFrameWriterForTheRenderFarm) {
+    const auto ev = makeCornellEvaluator("points=2000,samples=4,lights=path");
+    const auto writers = ev->frameWriters();
+    ASSERT_EQ(writers.size(), 1u);
+    EXPECT_EQ(writers[0]->extension(), ".vdb");
+    std::vector<double> v(static_cast<std::size_t>(3 * ev->pointCount()));
+    ev->evaluateAll(5, v.data());
+    const std::string path =
+        (std::filesystem::temp_directory_path() / ("pmsc_cornell_writer_" + std::to_string(::getpid()) + ".vdb")).string();
+    EXPECT_FALSE(writers[0]->isValid(path));
+    writers[0]->write(path, 5, v.data());
+    EXPECT_TRUE(writers[0]->isValid(path));
+    std::filesystem::remove(path);
 }
 
 }  // namespace
