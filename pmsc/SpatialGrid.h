@@ -20,9 +20,10 @@ namespace pmsc {
 ///         position is not finite.
 std::vector<Index> sparseGridPoints(const Eigen::Ref<const Eigen::MatrixXd>& positions, Index cellsPerAxis);
 
-/// About `count` grid points: the finest grid whose occupied cell count does not exceed `count`
-/// (found by bisection on cellsPerAxis, since the occupied count never decreases when cells are
-/// refined... up to boundary effects, which the bisection tolerates by taking the best found).
+/// At most `count` grid points: sparseGridPoints with the cellsPerAxis whose occupied-cell count is
+/// the largest not above `count`. Found by doubling then bisection on cellsPerAxis; the occupied
+/// count grows with cellsPerAxis only roughly (cell boundaries move), so the search keeps the best
+/// grid it has seen rather than trusting monotonicity.
 /// @throws std::invalid_argument if count < 1.
 std::vector<Index> sparseGridPointsByCount(const Eigen::Ref<const Eigen::MatrixXd>& positions, Index count);
 

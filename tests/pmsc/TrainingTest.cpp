@@ -177,3 +177,60 @@ TEST(Training, DeterministicForASeed) {
     EXPECT_EQ(a.keyPoints, b.keyPoints);
     EXPECT_EQ((a.basis - b.basis).cwiseAbs().maxCoeff(), 0.0);
 }
+
+TEST(Training, QDeimSelectorTrainsAWellDeterminedModel) {
+    const pmsc::FrameSet frames = pmsc::test::patchFrames(8, 25, 3, 100, 9);
+    pmsc::TrainingOptions o;
+    o.selector = pmsc::Selector::QDeim;
+    o.basis = 8;
+    o.maxKeys = 12;
+    o.fiducials = {7};
+    pmsc::TrainingReport report;
+    const pmsc::Model model = pmsc::train(frames, o, &report);
+    EXPECT_EQ(model.selector, pmsc::Selector::QDeim);
+    EXPECT_EQ(model.keyCount(), 12);
+    EXPECT_EQ(model.keyPoints.front(), 7);
+    EXPECT_EQ(model.basisSize(), 8);
+    EXPECT_LT(model.trainMaxPointResidual, 1e-9);  // rank-8 data, determined keys
+    ASSERT_EQ(report.residualPerRound.size(), 1u);
+    EXPECT_GE(report.iterations, 1);
+}
+
+TEST(Training, ToleranceCalibratesEps) {
+    // Rank-6 structure plus small off-subspace noise, M = 6: held-out errors are the noise.
+    const Eigen::MatrixXd m = pmsc::test::lowRank(50 * 3, 90, 6, 10, 0.8) + 1e-4 * pmsc::test::gaussian(150, 90, 11);
+    const pmsc::FrameSet frames = pmsc::test::framesFromMatrix(m, 3);
+    pmsc::TrainingOptions o;
+    o.basis = 6;
+    o.maxKeys = 10;
+    o.tolerance = 1e-3;
+    o.calibrationSlices = 3;
+    pmsc::TrainingReport report;
+    const pmsc::Model model = pmsc::train(frames, o, &report);
+    EXPECT_EQ(model.tolerance, 1e-3);
+    ASSERT_GT(report.calibration.ratio, 0.0);
+    EXPECT_DOUBLE_EQ(model.epsMin, 1e-3 / report.calibration.ratio);
+    EXPECT_DOUBLE_EQ(model.epsMax, 2 * model.epsMin);
+    EXPECT_EQ(report.calibration.frames.size(), 90u);
+    EXPECT_EQ(report.calibration.slices, 3);
+}
+
+TEST(Training, BasisMaxErrorRulePicksTheSmallestSufficientM) {
+    const Eigen::MatrixXd m = pmsc::test::lowRank(40 * 3, 60, 12, 12, 0.6);
+    const pmsc::FrameSet frames = pmsc::test::framesFromMatrix(m, 3);
+    pmsc::TrainingOptions o;
+    o.basisMaxError = 0.01;
+    o.maxKeys = 20;
+    const pmsc::Model model = pmsc::train(frames, o);
+    // Check the rule directly on the training data: M meets the bound, M - 1 does not.
+    Eigen::MatrixXd q;
+    pmsc::removeRowMean(frames.matrix(), q);
+    const pmsc::TruncatedSvd svd = pmsc::truncatedSvd(q, 12);
+    auto err = [&](pmsc::Index k) {
+        const Eigen::MatrixXd u = svd.u.leftCols(k);
+        return pmsc::maxPointNorm(q - u * (u.transpose() * q), 3);
+    };
+    const pmsc::Index mm = model.basisSize();
+    EXPECT_LE(err(mm), 0.01);
+    for (pmsc::Index k = 1; k < mm; ++k) EXPECT_GT(err(k), 0.01) << k;
+}

@@ -1,0 +1,18 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace pmsc::cli {
+
+/// The subcommands of `pmsc`. Each takes the arguments after its name and returns
+/// an exit code (cli/ExitCodes.h); errors are thrown as the typed exceptions of
+/// pmsc/Errors.h and turned into one stderr line and an exit code by main().
+/// One declaration per command; main.cpp's table maps names to them.
+int runTrain(const std::vector<std::string>& args);         // cli/TrainCommand.cpp
+int runReplay(const std::vector<std::string>& args);        // cli/ReplayCommand.cpp
+int runInspect(const std::vector<std::string>& args);       // cli/InspectCommand.cpp
+int runDemo(const std::vector<std::string>& args);          // cli/DemoCommand.cpp
+
+}  // namespace pmsc::cli

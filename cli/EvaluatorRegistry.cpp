@@ -1,0 +1,43 @@
+#include "cli/EvaluatorRegistry.h"
+
+#include "cli/ReplayEvaluator.h"
+
+#include <stdexcept>
+
+namespace pmsc::cli {
+
+namespace {
+
+/// Fails for a kind that needs ARGS when none were given.
+std::string requireArgs(const std::string& name, const std::string& what, const std::string& args) {
+    if (args.empty())
+        throw std::invalid_argument("evaluator '" + name + "' needs " + what + ": '" + name + ":" + what +
+                                    "'");
+    return args;
+}
+
+}  // namespace
+
+const std::vector<EvaluatorKind>& evaluatorKinds() {
+    // One row per evaluator kind, one line each; other layers register theirs here.
+    // clang-format off
+    static const std::vector<EvaluatorKind> kinds = {
+        {"replay", "FILE.npy", "recorded frames (F, N, C) stand in for the calculation", [](const std::string& a) { return std::make_unique<ReplayEvaluator>(requireArgs("replay", "FILE.npy", a)); }},
+    };
+    // clang-format on
+    return kinds;
+}
+
+std::unique_ptr<PointEvaluator> makeEvaluator(const std::string& spec) {
+    const auto colon = spec.find(':');
+    const std::string name = spec.substr(0, colon);
+    const std::string args = colon == std::string::npos ? std::string() : spec.substr(colon + 1);
+    std::string known;
+    for (const auto& kind : evaluatorKinds()) {
+        if (kind.name == name) return kind.make(args);
+        known += (known.empty() ? "" : ", ") + kind.name;
+    }
+    throw std::invalid_argument("unknown evaluator '" + name + "' (known: " + known + ")");
+}
+
+}  // namespace pmsc::cli

@@ -1,0 +1,101 @@
+// `pmsc inspect`: what a model file holds.
+#include "cli/Args.h"
+#include "cli/Commands.h"
+#include "cli/ExitCodes.h"
+#include "pmsc/ModelIO.h"
+
+#include <nlohmann/json.hpp>
+
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+
+namespace pmsc::cli {
+
+namespace {
+
+std::string fmt(const char* format, double v) {
+    char buffer[64];
+    std::snprintf(buffer, sizeof buffer, format, v);
+    return buffer;
+}
+
+/// Fraction of the training energy captured by the first m basis vectors.
+double capturedBy(const Model& model, Index m) {
+    if (!(model.totalEnergy > 0)) return 1.0;
+    return model.singularValues.head(m).squaredNorm() / model.totalEnergy;
+}
+
+}  // namespace
+
+int runInspect(const std::vector<std::string>& args) {
+    std::string modelPath;
+    bool json = false;
+    ArgParser parser("inspect", "MODEL.pmsc [--json]",
+                     "Shows a model file: sizes, key point indices, the basis energy (captured fraction and\n"
+                     "singular values), the soft-cache thresholds and the calibration tolerance.");
+    parser.positional("MODEL.pmsc", "model file", modelPath);
+    parser.flag("--json", "print one JSON object instead of text", json);
+    if (!parser.parse(args)) return kExitOk;
+
+    const Model model = readModel(modelPath);
+    const auto bytes = std::filesystem::file_size(modelPath);
+    const char* selector = model.selector == Selector::QDeim ? "qdeim" : "teleconnection";
+    if (json) {
+        nlohmann::ordered_json j;
+        j["file"] = modelPath;
+        j["format_version"] = kModelFormatVersion;
+        j["bytes"] = bytes;
+        j["points"] = model.points;
+        j["channels"] = model.channels;
+        j["train_frames"] = model.trainFrames;
+        j["basis"] = model.basisSize();
+        j["key_points"] = model.keyCount();
+        j["selector"] = selector;
+        j["energy_captured"] = model.energyCaptured();
+        j["total_energy"] = model.totalEnergy;
+        j["singular_values"] = std::vector<double>(model.singularValues.data(),
+                                                   model.singularValues.data() + model.singularValues.size());
+        j["eps_min"] = model.epsMin;
+        j["eps_max"] = model.epsMax;
+        j["tolerance"] = model.tolerance;
+        j["train_max_point_residual"] = model.trainMaxPointResidual;
+        j["key_indices"] = std::vector<long long>(model.keyPoints.begin(), model.keyPoints.end());
+        std::cout << j.dump(2) << "\n";
+        return kExitOk;
+    }
+    std::cout << modelPath << ": pmsc model, format version " << kModelFormatVersion << ", " << bytes
+              << " bytes\n";
+    std::cout << "  points        N = " << model.points << ", channels C = " << model.channels
+              << ", trained on " << model.trainFrames << " frames\n";
+    std::cout << "  basis         M = " << model.basisSize() << ", captures "
+              << fmt("%.4f", 100 * model.energyCaptured()) << "% of the training energy (total "
+              << fmt("%.6g", model.totalEnergy) << ")\n";
+    std::cout << "  energy by M  ";
+    for (Index m : {Index{1}, Index{2}, Index{5}, Index{10}, Index{20}, Index{50}, Index{100}, Index{200}})
+        if (m < model.basisSize())
+            std::cout << " " << m << ":" << fmt("%.4f", 100 * capturedBy(model, m)) << "%";
+    std::cout << " " << model.basisSize() << ":" << fmt("%.4f", 100 * capturedBy(model, model.basisSize()))
+              << "%\n";
+    std::cout << "  singular values";
+    for (Index i = 0; i < model.singularValues.size(); ++i) {
+        if (i % 8 == 0) std::cout << "\n   ";
+        std::cout << " " << fmt("%.5g", model.singularValues[i]);
+    }
+    std::cout << "\n  key points    K = " << model.keyCount() << " (" << selector << "), in selection order:";
+    for (std::size_t i = 0; i < model.keyPoints.size(); ++i) {
+        if (i % 12 == 0) std::cout << "\n   ";
+        std::cout << " " << model.keyPoints[i];
+    }
+    std::cout << "\n  eps           [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax)
+              << "] key RMS error (data units)\n";
+    std::cout << "  tolerance     "
+              << (model.tolerance > 0 ? fmt("%.6g", model.tolerance) + " (eps calibrated for it)"
+                                      : std::string("none (eps from the training frames)"))
+              << "\n";
+    std::cout << "  residual      largest point error of PM on the training frames: "
+              << fmt("%.6g", model.trainMaxPointResidual) << "\n";
+    return kExitOk;
+}
+
+}  // namespace pmsc::cli

@@ -1,0 +1,177 @@
+#include "cli/Replay.h"
+
+#include "pmsc/Training.h"  // pmsc::Cancelled
+
+#include <tbb/blocked_range.h>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <mutex>
+
+namespace pmsc::cli {
+
+ReplayScratch::ReplayScratch(const Model& model)
+    : keys(static_cast<std::size_t>(model.keyCount() * model.channels)),
+      coords(static_cast<std::size_t>(model.basisSize())),
+      pm(static_cast<std::size_t>(model.points * model.channels)),
+      full(pm.size()) {}
+
+namespace {
+
+/// Largest Euclidean distance (over channels) between two frames' points.
+double maxPointError(const double* a, const double* b, Index points, Index channels) {
+    double worst = 0;
+    for (Index p = 0; p < points; ++p) {
+        double sum = 0;
+        for (Index c = 0; c < channels; ++c) {
+            const double d = a[p * channels + c] - b[p * channels + c];
+            sum += d * d;
+        }
+        worst = std::max(worst, sum);
+    }
+    return std::sqrt(worst);
+}
+
+}  // namespace
+
+ReplayFrame replayFrame(const PointMultiplier& multiplier, const SoftCachePolicy& policy,
+                        const PointEvaluator& recorded, Index frame, ReplayScratch& s, double* out) {
+    const Model& model = multiplier.model();
+    const Index n = model.points, c = model.channels;
+    ReplayFrame row;
+    row.frame = frame;
+    recorded.evaluate(frame, model.keyPoints, s.keys.data());
+    multiplier.project(s.keys.data(), s.coords.data());
+    row.keyRms = multiplier.keyRmsError(s.keys.data(), s.coords.data());
+    row.decision = policy.decide(row.keyRms);
+    // Replay exists to measure: the PM result and the recorded frame are needed for the errors
+    // whatever the decision, so both are computed even where a production run would skip one.
+    multiplier.reconstruct(s.coords.data(), s.pm.data());
+    recorded.evaluateAll(frame, s.full.data());
+    const std::size_t values = static_cast<std::size_t>(n * c);
+    const double w = row.decision.weight;
+    switch (row.decision.state) {
+        case CacheState::Hit:
+            std::copy_n(s.pm.data(), values, out);
+            break;
+        case CacheState::Miss:
+            std::copy_n(s.full.data(), values, out);
+            break;
+        case CacheState::Blend:
+            for (std::size_t i = 0; i < values; ++i) out[i] = (1.0 - w) * s.pm[i] + w * s.full[i];
+            break;
+    }
+    row.pmMaxPointError = maxPointError(s.pm.data(), s.full.data(), n, c);
+    row.softMaxPointError = maxPointError(out, s.full.data(), n, c);
+    return row;
+}
+
+ReplayResult replay(const Model& model, const PointEvaluator& recorded, const ReplayOptions& options,
+                    NpyFrameWriter* out) {
+    ReplayResult result;
+    result.epsMin = options.eps ? options.eps->first : model.epsMin;
+    result.epsMax = options.eps ? options.eps->second : model.epsMax;
+    const SoftCachePolicy policy(result.epsMin, result.epsMax);
+    const PointMultiplier multiplier(model);
+    const Index frames = recorded.frameCount();
+    result.frames.resize(static_cast<std::size_t>(frames));
+
+    std::unique_ptr<tbb::global_control> limit;
+    if (options.threads > 0)
+        limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                      static_cast<std::size_t>(options.threads));
+    result.threads =
+        static_cast<int>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+
+    std::atomic<Index> done{0};
+    std::atomic<bool> stopped{false};
+    std::mutex progressMutex;
+    const auto start = std::chrono::steady_clock::now();
+    // Grain 1: frames are large (a whole frame's reconstruction each), so per-frame tasks
+    // balance hits against the costlier blends and misses.
+    tbb::parallel_for(tbb::blocked_range<Index>(0, frames, 1), [&](const tbb::blocked_range<Index>& range) {
+        ReplayScratch scratch(model);
+        std::vector<double> soft(scratch.pm.size());
+        for (Index f = range.begin(); f != range.end(); ++f) {
+            if (options.cancel && options.cancel->load(std::memory_order_relaxed)) {
+                stopped = true;
+                return;
+            }
+            result.frames[static_cast<std::size_t>(f)] =
+                replayFrame(multiplier, policy, recorded, f, scratch, soft.data());
+            if (out) out->writeFrame(f, soft.data());
+            const Index now = ++done;
+            if (options.progress) {
+                std::unique_lock lock(progressMutex, std::try_to_lock);
+                if (lock.owns_lock()) options.progress(now, frames);
+            }
+        }
+    });
+    result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (stopped)
+        throw Cancelled("replay interrupted after " + std::to_string(done.load()) + " of " +
+                        std::to_string(frames) + " frames");
+    return result;
+}
+
+Percentiles percentiles(std::vector<double> values) {
+    Percentiles p;
+    if (values.empty()) return p;
+    std::sort(values.begin(), values.end());
+    const auto at = [&](double q) {
+        const double h = q * static_cast<double>(values.size() - 1);
+        const std::size_t lo = static_cast<std::size_t>(std::floor(h));
+        const std::size_t hi = std::min(lo + 1, values.size() - 1);
+        return values[lo] + (h - static_cast<double>(lo)) * (values[hi] - values[lo]);
+    };
+    p.p50 = at(0.5);
+    p.p99 = at(0.99);
+    p.p995 = at(0.995);
+    p.max = values.back();
+    return p;
+}
+
+nlohmann::ordered_json replayReport(const Model& model, const ReplayResult& result) {
+    using json = nlohmann::ordered_json;
+    const auto pct = [](const Percentiles& p) {
+        return json{{"p50", p.p50}, {"p99", p.p99}, {"p995", p.p995}, {"max", p.max}};
+    };
+    std::vector<double> pm, soft;
+    Index hits = 0, blends = 0, misses = 0;
+    json frames = json::array();
+    for (const auto& r : result.frames) {
+        pm.push_back(r.pmMaxPointError);
+        soft.push_back(r.softMaxPointError);
+        hits += r.decision.state == CacheState::Hit;
+        blends += r.decision.state == CacheState::Blend;
+        misses += r.decision.state == CacheState::Miss;
+        frames.push_back({{"frame", r.frame},
+                          {"key_rms", r.keyRms},
+                          {"state", std::string(toString(r.decision.state))},
+                          {"weight", r.decision.weight},
+                          {"pm_max_point_error", r.pmMaxPointError},
+                          {"soft_max_point_error", r.softMaxPointError}});
+    }
+    const double count = std::max<double>(1.0, static_cast<double>(result.frames.size()));
+    json summary = {{"frames", result.frames.size()},
+                    {"points", model.points},
+                    {"channels", model.channels},
+                    {"key_points", model.keyCount()},
+                    {"basis", model.basisSize()},
+                    {"eps_min", result.epsMin},
+                    {"eps_max", result.epsMax},
+                    {"hit_rate", static_cast<double>(hits) / count},
+                    {"blend_rate", static_cast<double>(blends) / count},
+                    {"miss_rate", static_cast<double>(misses) / count},
+                    {"pm_max_point_error", pct(percentiles(pm))},
+                    {"soft_max_point_error", pct(percentiles(soft))},
+                    {"seconds", result.seconds}};
+    return json{{"summary", std::move(summary)}, {"frames", std::move(frames)}};
+}
+
+}  // namespace pmsc::cli

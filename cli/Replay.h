@@ -1,0 +1,89 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include "pmsc/Model.h"
+#include "pmsc/NpyIO.h"
+#include "pmsc/PointEvaluator.h"
+#include "pmsc/PointMultiplier.h"
+#include "pmsc/SoftCache.h"
+
+#include <nlohmann/json.hpp>
+
+#include <atomic>
+#include <functional>
+#include <optional>
+#include <utility>
+#include <vector>
+
+namespace pmsc::cli {
+
+/// What replaying one frame through the soft cache gave (a row of the report).
+struct ReplayFrame {
+    Index frame = 0;
+    double keyRms = 0;             ///< PointMultiplier::keyRmsError of the recorded key values
+    CacheDecision decision;        ///< section 5: hit, blend (with the weight of the full result) or miss
+    double pmMaxPointError = 0;    ///< largest point error of the PM reconstruction alone
+    double softMaxPointError = 0;  ///< largest point error of the soft-cached output
+};
+
+struct ReplayOptions {
+    /// Overrides the model's [eps_min, eps_max] (`--eps`).
+    std::optional<std::pair<double, double>> eps;
+    /// Worker threads (tbb::global_control); 0 = every core. Results do not depend on it.
+    int threads = 0;
+    /// Set by another thread (SIGINT) to stop; replay() then throws pmsc::Cancelled.
+    const std::atomic<bool>* cancel = nullptr;
+    /// Called now and then with (frames done, frames total), from one thread at a time.
+    std::function<void(Index, Index)> progress;
+};
+
+struct ReplayResult {
+    double epsMin = 0, epsMax = 0;    ///< thresholds used
+    std::vector<ReplayFrame> frames;  ///< in frame order
+    double seconds = 0;               ///< wall time of the per-frame loop (input already read)
+    int threads = 0;                  ///< worker threads allowed
+};
+
+/// Per-worker buffers, sized for one frame of a model.
+struct ReplayScratch {
+    std::vector<double> keys, coords, pm, full;
+    explicit ReplayScratch(const Model& model);
+};
+
+/// Replays ONE frame (sections 5 and 6): reads the key points' recorded values,
+/// projects them onto the basis, takes the key RMS error, decides hit / blend /
+/// miss, reconstructs all points by point multiplication, reads the recorded
+/// frame (the fail-through, and the reference for the errors) and writes the
+/// soft-cached output: PM for a hit, the recorded frame for a miss,
+/// (1 - w) PM + w recorded for a blend.
+///
+/// Kept as one function of (frame) -> (output, row) with no shared state, so
+/// frames can run in any order on any thread (and on the engine's flow graph)
+/// with bit-identical results.
+/// @param[out] out N*C doubles: the soft-cached frame.
+ReplayFrame replayFrame(const PointMultiplier& multiplier, const SoftCachePolicy& policy,
+                        const PointEvaluator& recorded, Index frame, ReplayScratch& scratch, double* out);
+
+/// Replays every frame of `recorded`, in parallel over frames (tbb::parallel_for),
+/// writing each soft-cached frame to `out` when given.
+/// @pre recorded's N and C equal the model's (the command checks and names the files).
+/// @throws std::invalid_argument for bad eps; pmsc::Cancelled when options.cancel is raised.
+ReplayResult replay(const Model& model, const PointEvaluator& recorded, const ReplayOptions& options,
+                    NpyFrameWriter* out = nullptr);
+
+/// p50, p99, p99.5 and max of a sample.
+struct Percentiles {
+    double p50 = 0, p99 = 0, p995 = 0, max = 0;
+};
+
+/// Percentiles with linear interpolation between closest ranks (NumPy's default,
+/// "linear"): the q-quantile of n sorted values is v[h] + (h - floor h)(v[h+1] - v[h])
+/// at h = q (n - 1). So p50 of an even count is the mean of the middle two, and
+/// max is the largest value. An empty sample gives zeros.
+Percentiles percentiles(std::vector<double> values);
+
+/// The REPORT.json of `pmsc replay`: {"summary": {...}, "frames": [...]} with exactly
+/// the fields issue 2 lists (see README, "Reading a replay report").
+nlohmann::ordered_json replayReport(const Model& model, const ReplayResult& result);
+
+}  // namespace pmsc::cli

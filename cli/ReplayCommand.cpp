@@ -1,0 +1,85 @@
+// `pmsc replay`: recorded frames through a model's soft cache, with a report of what it did.
+#include "cli/Args.h"
+#include "cli/Commands.h"
+#include "cli/ExitCodes.h"
+#include "cli/Interrupt.h"
+#include "cli/Progress.h"
+#include "cli/Replay.h"
+#include "cli/ReplayEvaluator.h"
+#include "cli/ReplaySummary.h"
+#include "pmsc/AtomicFile.h"
+#include "pmsc/Errors.h"
+#include "pmsc/ModelIO.h"
+
+#include <iostream>
+#include <memory>
+#include <optional>
+
+namespace pmsc::cli {
+
+int runReplay(const std::vector<std::string>& args) {
+    std::string modelPath, framesPath, outPath, reportPath;
+    ReplayOptions options;
+    bool quiet = false;
+    ArgParser parser("replay", "--model MODEL.pmsc --frames TEST.npy --report REPORT.json [options]",
+                     "Replays recorded frames through the soft cache (sections 5, 6): each frame's key\n"
+                     "points are read from the recording, projected, and their RMS error decides hit,\n"
+                     "blend or miss; a fail-through reads the recorded frame. The report gives, per frame\n"
+                     "and in percentiles, the largest point error of point multiplication alone and of\n"
+                     "the soft-cached result: how PMSC would hold on this shot.");
+    parser.option("--model", "MODEL.pmsc", "model from pmsc train", modelPath, true);
+    parser.option("--frames", "TEST.npy", "recorded frames (frames, points, channels), float32/64",
+                  framesPath, true);
+    parser.option("--report", "REPORT.json", "report to write", reportPath, true);
+    parser.option("--out", "OUT.npy", "soft-cached frames to write (same shape and dtype as --frames)",
+                  outPath);
+    parser.option("--eps", "MIN,MAX", "override the model's thresholds (key RMS, data units)",
+                  [&](const std::string& v) {
+                      const auto eps = parseDoublePair("--eps", v);
+                      if (!(eps.first >= 0 && eps.first <= eps.second))
+                          throw UsageError("--eps: need 0 <= MIN <= MAX, got " + v);
+                      options.eps = eps;
+                  });
+    parser.option("--threads", "T", "worker threads (default: every core; results do not depend on it)",
+                  [&](const std::string& v) {
+                      options.threads = static_cast<int>(parseIndex("--threads", v, 1, 4096));
+                  });
+    parser.flag("--quiet", "no progress display", quiet);
+    if (!parser.parse(args)) return kExitOk;
+
+    const Model model = readModel(modelPath);
+    const ReplayEvaluator recorded(framesPath);
+    if (recorded.pointCount() != model.points || recorded.channelCount() != model.channels)
+        throw InputError(framesPath + ": frames have " + std::to_string(recorded.pointCount()) +
+                         " points x " + std::to_string(recorded.channelCount()) +
+                         " channels, but the model " + modelPath + " was trained on " +
+                         std::to_string(model.points) + " points x " + std::to_string(model.channels) +
+                         " channels");
+
+    // Both outputs are temporary files until everything succeeded: a failure or an interrupt
+    // leaves neither behind.
+    AtomicFile report(reportPath);
+    std::optional<NpyFrameWriter> out;
+    if (!outPath.empty())
+        out.emplace(outPath, recorded.frameCount(), recorded.pointCount(), recorded.channelCount(),
+                    recorded.dtype());
+
+    Progress progress("replay", !quiet);
+    options.cancel = &interruptFlag();
+    options.progress = [&](Index done, Index total) {
+        progress.update("frames", static_cast<double>(done), static_cast<double>(total));
+    };
+    const ReplayResult result = replay(model, recorded, options, out ? &*out : nullptr);
+    progress.finish();
+
+    const std::string text = replayReport(model, result).dump(2) + "\n";
+    report.write(text.data(), text.size());
+    if (out) out->commit();
+    report.commit();
+    printReplaySummary(std::cout, model, result, options.eps.has_value());
+    std::cout << "  report      " << reportPath << (outPath.empty() ? "" : "\n  output      " + outPath)
+              << "\n";
+    return kExitOk;
+}
+
+}  // namespace pmsc::cli

@@ -1,0 +1,59 @@
+#include "cli/ReplaySummary.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+namespace pmsc::cli {
+
+namespace {
+
+std::string fmt(const char* format, double v) {
+    char buffer[64];
+    std::snprintf(buffer, sizeof buffer, format, v);
+    return buffer;
+}
+
+std::string row(const char* label, const Percentiles& p) {
+    char buffer[160];
+    std::snprintf(buffer, sizeof buffer, "    %-24s %11.5g %11.5g %11.5g %11.5g\n", label, p.p50, p.p99,
+                  p.p995, p.max);
+    return buffer;
+}
+
+}  // namespace
+
+void printReplaySummary(std::ostream& out, const Model& model, const ReplayResult& result,
+                        bool epsOverridden) {
+    const double frames = static_cast<double>(result.frames.size());
+    std::size_t hits = 0, blends = 0, misses = 0;
+    std::vector<double> pm, soft;
+    for (const auto& f : result.frames) {
+        hits += f.decision.state == CacheState::Hit;
+        blends += f.decision.state == CacheState::Blend;
+        misses += f.decision.state == CacheState::Miss;
+        pm.push_back(f.pmMaxPointError);
+        soft.push_back(f.softMaxPointError);
+    }
+    out << "replayed " << result.frames.size() << " frames of " << model.points << " points x "
+        << model.channels << " through M = " << model.basisSize() << ", K = " << model.keyCount()
+        << " keys in " << fmt("%.3f", result.seconds) << " s ("
+        << fmt("%.1f", frames / std::max(result.seconds, 1e-9)) << " frames/s, " << result.threads
+        << " threads)\n";
+    out << "  eps         [" << fmt("%.6g", result.epsMin) << ", " << fmt("%.6g", result.epsMax)
+        << "] key RMS ("
+        << (epsOverridden         ? "--eps"
+            : model.tolerance > 0 ? "calibrated for tolerance " + fmt("%.6g", model.tolerance)
+                                  : "model's, not calibrated")
+        << ")\n";
+    out << "  cache       hit " << fmt("%.1f", 100.0 * hits / std::max(frames, 1.0)) << "%  blend "
+        << fmt("%.1f", 100.0 * blends / std::max(frames, 1.0)) << "%  miss "
+        << fmt("%.1f", 100.0 * misses / std::max(frames, 1.0)) << "%  (" << hits << " / " << blends << " / "
+        << misses << " frames)\n";
+    out << "  largest point error per frame    p50         p99       p99.5         max\n";
+    out << row("point multiplication", percentiles(pm));
+    out << row("soft cached", percentiles(soft));
+}
+
+}  // namespace pmsc::cli

@@ -1,0 +1,15 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include "cli/Replay.h"
+
+#include <ostream>
+
+namespace pmsc::cli {
+
+/// The short human summary of a replay: cache states, error percentiles of PM
+/// alone and soft-cached, the thresholds and the speed.
+void printReplaySummary(std::ostream& out, const Model& model, const ReplayResult& result,
+                        bool epsOverridden);
+
+}  // namespace pmsc::cli

@@ -1,0 +1,42 @@
+#include "cli/TrainSummary.h"
+
+#include <cstdio>
+
+namespace pmsc::cli {
+
+namespace {
+
+std::string fmt(const char* format, double v) {
+    char buffer[64];
+    std::snprintf(buffer, sizeof buffer, format, v);
+    return buffer;
+}
+
+}  // namespace
+
+void printTrainSummary(std::ostream& out, const std::string& modelPath, const FrameSet& frames,
+                       const Model& model, const TrainingReport& report, double seconds) {
+    out << "trained " << modelPath << " from " << frames.frames << " frames x " << frames.points
+        << " points x " << frames.channels << " channels in " << fmt("%.2f", seconds) << " s (training "
+        << fmt("%.2f", report.seconds) << " s)\n";
+    out << "  basis       M = " << model.basisSize() << ", captures "
+        << fmt("%.4f", 100.0 * model.energyCaptured()) << "% of the training energy\n";
+    out << "  key points  K = " << model.keyCount() << " ("
+        << (model.selector == Selector::QDeim ? "Q-DEIM" : "Varimax + teleconnection") << ", "
+        << report.iterations << " rounds)\n";
+    out << "  residual    largest point error of PM on the training frames: "
+        << fmt("%.6g", model.trainMaxPointResidual) << "\n";
+    if (model.tolerance > 0) {
+        out << "  eps         [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax)
+            << "] key RMS, calibrated for tolerance " << fmt("%.6g", model.tolerance) << " ("
+            << report.calibration.slices
+            << " held-out slices, point error <= " << fmt("%.4g", report.calibration.ratio)
+            << " x key RMS)\n";
+    } else {
+        out << "  eps         [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax)
+            << "] key RMS, from the training frames (no --tolerance: not calibrated)\n";
+    }
+    for (const auto& w : report.warnings) out << "  warning: " << w << "\n";
+}
+
+}  // namespace pmsc::cli

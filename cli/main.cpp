@@ -1,0 +1,132 @@
+// pmsc — the command line of Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+//
+// main() only dispatches: it finds the subcommand in the table below, runs it, and turns every
+// typed error into ONE line on stderr and an exit code (cli/ExitCodes.h).
+#include "cli/Commands.h"
+#include "cli/ExitCodes.h"
+#include "cli/Interrupt.h"
+#include "pmsc/Errors.h"
+#include "pmsc/Training.h"  // pmsc::Cancelled
+
+#include <cstdio>
+#include <exception>
+#include <iostream>
+#include <new>
+#include <sstream>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace {
+
+using namespace pmsc::cli;
+
+struct Command {
+    std::string_view name;  ///< one or more words: "train", "demo cornell"
+    std::string_view summary;
+    int (*run)(const std::vector<std::string>& args);
+};
+
+// The dispatch table. Add a row per subcommand; a multi-word name ("demo cornell") wins over
+// its shorter prefix ("demo"). One line per row.
+// clang-format off
+const Command kCommands[] = {
+    {"train", "train a model (basis, key points, thresholds) from frames in a .npy file", runTrain},
+    {"replay", "replay recorded frames through a model's soft cache and report its errors", runReplay},
+    {"inspect", "show a model file: sizes, key points, basis energy, thresholds", runInspect},
+    {"demo", "train and replay on generated data, and print what the soft cache did", runDemo},
+};
+// clang-format on
+
+std::vector<std::string_view> words(std::string_view s) {
+    std::vector<std::string_view> out;
+    while (!s.empty()) {
+        const auto space = s.find(' ');
+        out.push_back(s.substr(0, space));
+        if (space == std::string_view::npos) break;
+        s.remove_prefix(space + 1);
+    }
+    return out;
+}
+
+/// The longest table name whose words start the arguments, or nullptr.
+const Command* findCommand(const std::vector<std::string>& args, std::size_t& used) {
+    const Command* best = nullptr;
+    used = 0;
+    for (const auto& command : kCommands) {
+        const auto w = words(command.name);
+        if (w.size() > args.size() || w.size() <= used) continue;
+        bool match = true;
+        for (std::size_t i = 0; i < w.size(); ++i) match = match && args[i] == w[i];
+        if (match) {
+            best = &command;
+            used = w.size();
+        }
+    }
+    return best;
+}
+
+std::string usage() {
+    std::ostringstream out;
+    out << "usage: pmsc <command> [options]   (pmsc <command> --help for its options)\n\n"
+           "Point multiplication and soft caching (Meyer & Anderson, Pixar): a statistical\n"
+           "model computes all points of a frame from a few key points, and falls through to\n"
+           "the full calculation when the key points say the model does not fit.\n\ncommands:\n";
+    for (const auto& c : kCommands) {
+        std::string name(c.name);
+        out << "  " << name << std::string(name.size() < 16 ? 16 - name.size() : 1, ' ') << c.summary << "\n";
+    }
+    out << "\nexit codes: 0 ok, 1 internal error, 2 bad input, 3 evaluator failure, 4 cannot write output,\n"
+           "130 interrupted\n";
+    return out.str();
+}
+
+/// Prints "pmsc: <message>" as one line, whatever the message holds.
+int fail(int code, std::string message) {
+    for (char& ch : message)
+        if (ch == '\n' || ch == '\r') ch = ' ';
+    std::cout.flush();
+    std::fprintf(stderr, "pmsc: %s\n", message.c_str());
+    return code;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    std::vector<std::string> args(argv + 1, argv + argc);
+    if (args.empty()) {
+        std::cerr << usage();
+        return kExitBadInput;
+    }
+    if (args[0] == "--help" || args[0] == "-h" || args[0] == "help") {
+        std::cout << usage();
+        return kExitOk;
+    }
+    std::size_t used = 0;
+    const Command* command = findCommand(args, used);
+    if (!command) return fail(kExitBadInput, "unknown command '" + args[0] + "' (see 'pmsc --help')");
+    args.erase(args.begin(), args.begin() + static_cast<std::ptrdiff_t>(used));
+
+    installInterruptHandler();
+    try {
+        const int code = command->run(args);
+        if (interrupted()) return fail(kExitInterrupted, "interrupted");
+        return code;
+    } catch (const pmsc::Cancelled& e) {
+        return fail(kExitInterrupted, std::string("interrupted: ") + e.what());
+    } catch (const pmsc::InputError& e) {
+        return fail(kExitBadInput, e.what());
+    } catch (const pmsc::EvaluatorError& e) {
+        return fail(kExitEvaluator, std::string("evaluator failed: ") + e.what());
+    } catch (const pmsc::IoError& e) {
+        return fail(kExitIo, std::string("cannot write output: ") + e.what());
+    } catch (const std::invalid_argument& e) {
+        return fail(kExitBadInput, e.what());
+    } catch (const std::bad_alloc&) {
+        return fail(kExitInternal, "internal error: out of memory");
+    } catch (const std::exception& e) {
+        return fail(kExitInternal, std::string("internal error: ") + e.what());
+    } catch (...) {
+        return fail(kExitInternal, "internal error: unknown exception");
+    }
+}

@@ -1,0 +1,419 @@
+// The `pmsc` program end to end: success paths and every kind of bad input, through the real
+// binary (exit codes, the one stderr line, and no output file left behind).
+#include "CliRunner.h"
+#include "examples/synthetic/SyntheticSurface.h"
+#include "pmsc/ModelIO.h"
+#include "pmsc/NpyIO.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <csignal>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+
+namespace {
+
+using pmsc::test::runPmsc;
+using pmsc::test::RunResult;
+using pmsc::test::TempDir;
+namespace fs = std::filesystem;
+
+/// A small shot: 12 x 12 sheet, 240 training frames (seed 1), 60 test frames (seed 2) whose
+/// last 20 carry motion training never saw.
+struct Shot {
+    TempDir inputs;
+    std::string train = inputs.file("train.npy"), test = inputs.file("test.npy"),
+                test32 = inputs.file("test32.npy");
+    Shot() {
+        pmsc::synthetic::SurfaceOptions o;
+        o.grid = 12;
+        o.frames = 240;
+        o.seed = 1;
+        pmsc::writeFrames(train, pmsc::evaluateFrames(pmsc::synthetic::SyntheticSurface(o), 0, o.frames),
+                          pmsc::NpyDtype::Float64);
+        o.frames = 60;
+        o.seed = 2;
+        o.novelFrames = 20;
+        const auto test = pmsc::evaluateFrames(pmsc::synthetic::SyntheticSurface(o), 0, o.frames);
+        pmsc::writeFrames(this->test, test, pmsc::NpyDtype::Float64);
+        pmsc::writeFrames(test32, test, pmsc::NpyDtype::Float32);
+    }
+};
+
+/// One shot and one trained model for the whole suite (training is the slow part).
+class Cli : public ::testing::Test {
+protected:
+    static void SetUpTestSuite() {
+        shot_ = new Shot;
+        modelDir_ = new TempDir;
+        model_ = modelDir_->file("model.pmsc");
+        const RunResult r = runPmsc(*modelDir_, {"train", "--frames", shot_->train, "--out", model_,
+                                                 "--max-keys", "24", "--tolerance", "0.02"});
+        ASSERT_EQ(r.exitCode, 0) << r.err;
+    }
+    static void TearDownTestSuite() {
+        delete modelDir_;
+        delete shot_;
+    }
+
+    /// Expects the failure contract: the exit code, exactly one stderr line "pmsc: ..." holding
+    /// every fragment, and no file in `dir` except `allowed`.
+    static void expectFailure(const RunResult& r, int code, std::initializer_list<std::string> fragments) {
+        EXPECT_EQ(r.exitCode, code) << r.err;
+        const auto lines = r.errLines();
+        ASSERT_EQ(lines.size(), 1u) << r.err;
+        EXPECT_EQ(lines[0].rfind("pmsc: ", 0), 0u) << lines[0];
+        for (const auto& f : fragments) EXPECT_NE(lines[0].find(f), std::string::npos) << lines[0];
+    }
+    /// Everything in `dir` except the captured stdout/stderr files.
+    static std::vector<std::string> outputs(const TempDir& dir) {
+        std::vector<std::string> names;
+        for (const auto& n : dir.entries())
+            if (n != "stdout.txt" && n != "stderr.txt") names.push_back(n);
+        return names;
+    }
+
+    static Shot* shot_;
+    static TempDir* modelDir_;
+    static std::string model_;
+};
+
+Shot* Cli::shot_ = nullptr;
+TempDir* Cli::modelDir_ = nullptr;
+std::string Cli::model_;
+
+TEST_F(Cli, TrainWritesAModelAndASummary) {
+    TempDir dir;
+    const auto model = dir.file("m.pmsc");
+    const RunResult r = runPmsc(dir, {"train", "--frames", shot_->train, "--out", model, "--basis", "8",
+                                      "--max-keys", "16", "--selector", "qdeim"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_EQ(r.err, "");  // short run, not a terminal: no progress lines
+    EXPECT_NE(r.out.find("trained " + model + " from 240 frames x 144 points x 3 channels"),
+              std::string::npos)
+        << r.out;
+    EXPECT_NE(r.out.find("M = 8"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("Q-DEIM"), std::string::npos) << r.out;
+    const pmsc::Model m = pmsc::readModel(model);
+    EXPECT_EQ(m.basisSize(), 8);
+    EXPECT_LE(m.keyCount(), 16);
+    EXPECT_EQ(m.selector, pmsc::Selector::QDeim);
+    EXPECT_EQ(outputs(dir), std::vector<std::string>{"m.pmsc"});
+}
+
+TEST_F(Cli, TrainSeedsFiducials) {
+    TempDir dir;
+    const auto model = dir.file("m.pmsc");
+    const RunResult r = runPmsc(dir, {"train", "--frames", shot_->train, "--out", model, "--fiducials",
+                                      "5,77,140", "--max-keys", "12", "--quiet"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const pmsc::Model m = pmsc::readModel(model);
+    for (pmsc::Index f : {5, 77, 140})
+        EXPECT_NE(std::find(m.keyPoints.begin(), m.keyPoints.end(), f), m.keyPoints.end()) << f;
+}
+
+TEST_F(Cli, ReplayReportHasEveryFieldAndTheOutputMatchesTheInput) {
+    TempDir dir;
+    const auto report = dir.file("report.json"), out = dir.file("out.npy");
+    const RunResult r = runPmsc(
+        dir, {"replay", "--model", model_, "--frames", shot_->test32, "--out", out, "--report", report});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.out.find("replayed 60 frames"), std::string::npos) << r.out;
+    const auto json = nlohmann::json::parse(pmsc::test::readBytes(report));
+    const auto& s = json.at("summary");
+    for (const char* key :
+         {"frames", "points", "channels", "key_points", "basis", "eps_min", "eps_max", "hit_rate",
+          "blend_rate", "miss_rate", "pm_max_point_error", "soft_max_point_error", "seconds"})
+        EXPECT_TRUE(s.contains(key)) << key;
+    EXPECT_EQ(s.size(), 13u);
+    EXPECT_EQ(s.at("frames"), 60);
+    EXPECT_EQ(s.at("points"), 144);
+    EXPECT_EQ(s.at("channels"), 3);
+    EXPECT_NEAR(
+        s.at("hit_rate").get<double>() + s.at("blend_rate").get<double>() + s.at("miss_rate").get<double>(),
+        1.0, 1e-12);
+    for (const char* which : {"pm_max_point_error", "soft_max_point_error"}) {
+        const auto& p = s.at(which);
+        EXPECT_EQ(p.size(), 4u);
+        EXPECT_LE(p.at("p50").get<double>(), p.at("p99").get<double>());
+        EXPECT_LE(p.at("p99").get<double>(), p.at("p995").get<double>());
+        EXPECT_LE(p.at("p995").get<double>(), p.at("max").get<double>());
+    }
+    const pmsc::Model model = pmsc::readModel(model_);
+    EXPECT_EQ(s.at("eps_min").get<double>(), model.epsMin);
+    EXPECT_EQ(s.at("eps_max").get<double>(), model.epsMax);
+    const auto& frames = json.at("frames");
+    ASSERT_EQ(frames.size(), 60u);
+    double worstSoft = 0;
+    for (std::size_t i = 0; i < frames.size(); ++i) {
+        const auto& f = frames[i];
+        EXPECT_EQ(f.size(), 6u);
+        EXPECT_EQ(f.at("frame"), static_cast<int>(i));
+        const std::string state = f.at("state");
+        const double w = f.at("weight"), key = f.at("key_rms");
+        if (state == "hit") {
+            EXPECT_LE(key, model.epsMin);
+            EXPECT_EQ(w, 0.0);
+            EXPECT_EQ(f.at("soft_max_point_error"), f.at("pm_max_point_error"));
+        } else if (state == "miss") {
+            EXPECT_GE(key, model.epsMax);
+            EXPECT_EQ(w, 1.0);
+            EXPECT_EQ(f.at("soft_max_point_error").get<double>(), 0.0);  // the recorded frame itself
+        } else {
+            ASSERT_EQ(state, "blend");
+            EXPECT_NEAR(w, (key - model.epsMin) / (model.epsMax - model.epsMin), 1e-12);
+            EXPECT_NEAR(f.at("soft_max_point_error").get<double>(),
+                        (1 - w) * f.at("pm_max_point_error").get<double>(),
+                        1e-6 * (1 + f.at("pm_max_point_error").get<double>()));
+        }
+        worstSoft = std::max(worstSoft, f.at("soft_max_point_error").get<double>());
+    }
+    EXPECT_EQ(s.at("soft_max_point_error").at("max").get<double>(), worstSoft);
+    // The last 20 frames carry motion training never saw: the soft cache must not call them hits
+    // once the motion is under way (it ramps in over the first 10).
+    for (std::size_t i = 50; i < 60; ++i) EXPECT_NE(frames[i].at("state"), "hit") << "frame " << i;
+
+    const auto written = pmsc::readFrames(out);
+    EXPECT_EQ(written.dtype, pmsc::NpyDtype::Float32);  // same dtype as --frames
+    EXPECT_EQ(written.frames.frames, 60);
+    EXPECT_EQ(written.frames.points, 144);
+    EXPECT_EQ(written.frames.channels, 3);
+    const auto recorded = pmsc::readFrames(shot_->test32);
+    for (std::size_t i = 50; i < 60; ++i)
+        if (frames[i].at("state") == "miss")
+            for (pmsc::Index v = 0; v < 432; ++v)
+                EXPECT_EQ(written.frames.frame(static_cast<pmsc::Index>(i))[v],
+                          recorded.frames.frame(static_cast<pmsc::Index>(i))[v]);
+    EXPECT_EQ(outputs(dir), (std::vector<std::string>{"out.npy", "report.json"}));
+}
+
+TEST_F(Cli, ReplayIsIdenticalForAnyThreadCount) {
+    TempDir dir;
+    std::vector<std::string> outs, frames;
+    for (const char* threads : {"1", "2", "3"}) {
+        const auto out = dir.file(std::string("out") + threads + ".npy");
+        const auto report = dir.file(std::string("report") + threads + ".json");
+        const RunResult r = runPmsc(dir, {"replay", "--model", model_, "--frames", shot_->test, "--threads",
+                                          threads, "--out", out, "--report", report});
+        ASSERT_EQ(r.exitCode, 0) << r.err;
+        outs.push_back(pmsc::test::readBytes(out));
+        frames.push_back(nlohmann::json::parse(pmsc::test::readBytes(report)).at("frames").dump());
+    }
+    EXPECT_EQ(outs[0], outs[1]);
+    EXPECT_EQ(outs[0], outs[2]);
+    EXPECT_EQ(frames[0], frames[1]);
+    EXPECT_EQ(frames[0], frames[2]);
+}
+
+TEST_F(Cli, ReplayEpsOverridesTheModel) {
+    TempDir dir;
+    const auto report = dir.file("r.json");
+    RunResult r = runPmsc(
+        dir, {"replay", "--model", model_, "--frames", shot_->test, "--eps", "0,0", "--report", report});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    auto s = nlohmann::json::parse(pmsc::test::readBytes(report)).at("summary");
+    EXPECT_EQ(s.at("eps_max").get<double>(), 0.0);
+    EXPECT_EQ(s.at("miss_rate").get<double>(), 1.0);  // every key error > 0: all miss
+    r = runPmsc(dir,
+                {"replay", "--model", model_, "--frames", shot_->test, "--eps=1e9,1e9", "--report", report});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    s = nlohmann::json::parse(pmsc::test::readBytes(report)).at("summary");
+    EXPECT_EQ(s.at("hit_rate").get<double>(), 1.0);
+}
+
+TEST_F(Cli, InspectTextAndJson) {
+    TempDir dir;
+    RunResult r = runPmsc(dir, {"inspect", model_});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const pmsc::Model m = pmsc::readModel(model_);
+    EXPECT_NE(r.out.find("N = 144, channels C = 3"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("K = " + std::to_string(m.keyCount())), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("eps"), std::string::npos);
+    r = runPmsc(dir, {"inspect", "--json", model_});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const auto j = nlohmann::json::parse(r.out);
+    EXPECT_EQ(j.at("points"), 144);
+    EXPECT_EQ(j.at("basis"), m.basisSize());
+    EXPECT_EQ(j.at("key_indices").get<std::vector<long long>>(),
+              std::vector<long long>(m.keyPoints.begin(), m.keyPoints.end()));
+    EXPECT_EQ(j.at("singular_values").size(), static_cast<std::size_t>(m.basisSize()));
+    EXPECT_EQ(j.at("eps_min").get<double>(), m.epsMin);
+    EXPECT_EQ(j.at("tolerance").get<double>(), 0.02);
+    EXPECT_NEAR(j.at("energy_captured").get<double>(), m.energyCaptured(), 1e-15);
+}
+
+TEST_F(Cli, DemoRunsEndToEnd) {
+    TempDir dir;
+    const auto out = dir.file("demo");
+    const RunResult r = runPmsc(dir, {"demo", "--out", out, "--grid", "12", "--train-frames", "240",
+                                      "--test-frames", "60", "--novel-frames", "20", "--max-keys", "24"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    for (const char* f : {"train.npy", "test.npy", "model.pmsc", "report.json", "out.npy"})
+        EXPECT_TRUE(fs::exists(fs::path(out) / f)) << f;
+    for (const char* text : {"pmsc train", "pmsc replay", "hit", "blend", "miss", "p99.5", "eps", "faster"})
+        EXPECT_NE(r.out.find(text), std::string::npos) << text << "\n" << r.out;
+    EXPECT_EQ(fs::directory_iterator(out) == fs::directory_iterator(), false);
+    std::size_t files = 0;
+    for ([[maybe_unused]] const auto& e : fs::directory_iterator(out)) ++files;
+    EXPECT_EQ(files, 5u);  // no temporary file left
+}
+
+TEST_F(Cli, HelpForEveryCommand) {
+    TempDir dir;
+    for (const char* command : {"train", "replay", "inspect", "demo"}) {
+        const RunResult r = runPmsc(dir, {command, "--help"});
+        EXPECT_EQ(r.exitCode, 0);
+        EXPECT_NE(r.out.find(std::string("usage: pmsc ") + command), std::string::npos) << r.out;
+        EXPECT_EQ(r.err, "");
+    }
+    RunResult r = runPmsc(dir, {"--help"});
+    EXPECT_EQ(r.exitCode, 0);
+    EXPECT_NE(r.out.find("replay"), std::string::npos);
+    r = runPmsc(dir, {});
+    EXPECT_EQ(r.exitCode, 2);
+}
+
+// ---- bad input: exit 2, one line, nothing written ----------------------------------------------
+
+TEST_F(Cli, MissingFramesFile) {
+    TempDir dir;
+    const RunResult r =
+        runPmsc(dir, {"train", "--frames", dir.file("nope.npy"), "--out", dir.file("m.pmsc")});
+    expectFailure(r, 2, {dir.file("nope.npy"), "no such file"});
+    EXPECT_TRUE(outputs(dir).empty());
+}
+
+TEST_F(Cli, TruncatedFrames) {
+    TempDir dir;
+    const std::string bytes = pmsc::test::readBytes(shot_->train);
+    pmsc::test::writeBytes(dir.file("cut.npy"), bytes.substr(0, bytes.size() - 100));
+    const RunResult r = runPmsc(dir, {"train", "--frames", dir.file("cut.npy"), "--out", dir.file("m.pmsc")});
+    expectFailure(r, 2, {"cut.npy", "truncated data"});
+    EXPECT_EQ(outputs(dir), std::vector<std::string>{"cut.npy"});
+}
+
+TEST_F(Cli, NanInFrames) {
+    TempDir dir;
+    std::string bytes = pmsc::test::readBytes(shot_->test);
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    const std::size_t value = (7 * 144 + 33) * 3 + 2;  // frame 7, point 33, channel 2
+    std::memcpy(bytes.data() + bytes.size() - 8 * (60 * 144 * 3 - value), &nan, 8);
+    pmsc::test::writeBytes(dir.file("nan.npy"), bytes);
+    const RunResult r = runPmsc(dir, {"replay", "--model", model_, "--frames", dir.file("nan.npy"), "--out",
+                                      dir.file("out.npy"), "--report", dir.file("r.json")});
+    expectFailure(r, 2, {"nan.npy", "NaN at frame 7, point 33, channel 2"});
+    EXPECT_EQ(outputs(dir), std::vector<std::string>{"nan.npy"});
+}
+
+TEST_F(Cli, WrongDtype) {
+    TempDir dir;
+    std::string bytes = pmsc::test::readBytes(shot_->train);
+    const auto at = bytes.find("<f8");
+    ASSERT_NE(at, std::string::npos);
+    bytes.replace(at, 3, "<i8");
+    pmsc::test::writeBytes(dir.file("int.npy"), bytes);
+    const RunResult r = runPmsc(dir, {"train", "--frames", dir.file("int.npy"), "--out", dir.file("m.pmsc")});
+    expectFailure(r, 2, {"int.npy", "unsupported dtype '<i8'"});
+    EXPECT_EQ(outputs(dir), std::vector<std::string>{"int.npy"});
+}
+
+TEST_F(Cli, CorruptedModel) {
+    TempDir dir;
+    std::string bytes = pmsc::test::readBytes(model_);
+    bytes[bytes.size() / 2] ^= 0x10;
+    pmsc::test::writeBytes(dir.file("bad.pmsc"), bytes);
+    RunResult r = runPmsc(dir, {"replay", "--model", dir.file("bad.pmsc"), "--frames", shot_->test, "--out",
+                                dir.file("out.npy"), "--report", dir.file("r.json")});
+    expectFailure(r, 2, {"bad.pmsc", "checksum mismatch"});
+    r = runPmsc(dir, {"inspect", dir.file("bad.pmsc")});
+    expectFailure(r, 2, {"bad.pmsc", "checksum mismatch"});
+    pmsc::test::writeBytes(dir.file("bad.pmsc"), bytes.substr(0, 1000));
+    r = runPmsc(dir, {"inspect", dir.file("bad.pmsc")});
+    expectFailure(r, 2, {"bad.pmsc", "truncated"});
+    EXPECT_EQ(outputs(dir), std::vector<std::string>{"bad.pmsc"});
+}
+
+TEST_F(Cli, PointCountMismatch) {
+    TempDir dir;
+    pmsc::synthetic::SurfaceOptions o;
+    o.grid = 11;
+    o.frames = 5;
+    pmsc::writeFrames(dir.file("other.npy"), pmsc::evaluateFrames(pmsc::synthetic::SyntheticSurface(o), 0, 5),
+                      pmsc::NpyDtype::Float64);
+    const RunResult r = runPmsc(dir, {"replay", "--model", model_, "--frames", dir.file("other.npy"), "--out",
+                                      dir.file("out.npy"), "--report", dir.file("r.json")});
+    expectFailure(r, 2, {"other.npy", "121 points", "144 points"});
+    EXPECT_EQ(outputs(dir), std::vector<std::string>{"other.npy"});
+}
+
+TEST_F(Cli, UsageMistakes) {
+    TempDir dir;
+    const auto out = dir.file("m.pmsc");
+    expectFailure(runPmsc(dir, {"train", "--frames", shot_->train, "--out", out, "--bogus", "1"}), 2,
+                  {"unknown option '--bogus'", "pmsc train --help"});
+    expectFailure(runPmsc(dir, {"train", "--frames", shot_->train, "--out"}), 2, {"missing value for --out"});
+    expectFailure(runPmsc(dir, {"train", "--frames", shot_->train}), 2, {"missing --out"});
+    expectFailure(runPmsc(dir, {"train", "--frames", shot_->train, "--out", out, "--basis", "ten"}), 2,
+                  {"--basis", "'ten' is not an integer"});
+    expectFailure(
+        runPmsc(dir, {"train", "--frames", shot_->train, "--out", out, "--basis", "4", "--energy", "0.9"}), 2,
+        {"at most one of --basis, --energy"});
+    expectFailure(runPmsc(dir, {"train", "--frames", shot_->train, "--out", out, "--selector", "best"}), 2,
+                  {"'best' is not teleconnection or qdeim"});
+    expectFailure(runPmsc(dir, {"train", "--frames", shot_->train, "--out", out, "--energy", "1.5"}), 2,
+                  {"--energy", "out of range"});
+    expectFailure(runPmsc(dir, {"frobnicate"}), 2, {"unknown command 'frobnicate'"});
+    expectFailure(runPmsc(dir, {"inspect"}), 2, {"missing MODEL.pmsc"});
+    EXPECT_TRUE(outputs(dir).empty());
+}
+
+TEST_F(Cli, BadEps) {
+    TempDir dir;
+    for (const char* eps : {"0.2,0.1", "abc", "0.1", "-1,2", "0.1,inf", "0.1,0.2,0.3"}) {
+        const RunResult r = runPmsc(dir, {"replay", "--model", model_, "--frames", shot_->test, "--eps", eps,
+                                          "--out", dir.file("out.npy"), "--report", dir.file("r.json")});
+        expectFailure(r, 2, {"--eps"});
+    }
+    EXPECT_TRUE(outputs(dir).empty());
+}
+
+TEST_F(Cli, UnwritableOutputIsExitFour) {
+    TempDir dir;
+    RunResult r = runPmsc(dir, {"train", "--frames", shot_->train, "--out", dir.file("missing/m.pmsc")});
+    expectFailure(r, 4, {"cannot write output", "missing/m.pmsc"});
+    r = runPmsc(
+        dir, {"replay", "--model", model_, "--frames", shot_->test, "--report", dir.file("missing/r.json")});
+    expectFailure(r, 4, {"missing/r.json"});
+    EXPECT_TRUE(outputs(dir).empty());
+}
+
+TEST_F(Cli, TrainingUnusableDataIsBadInput) {
+    TempDir dir;
+    pmsc::FrameSet same(4, 10, 3);  // four identical frames: nothing to learn
+    pmsc::writeFrames(dir.file("same.npy"), same, pmsc::NpyDtype::Float64);
+    const RunResult r =
+        runPmsc(dir, {"train", "--frames", dir.file("same.npy"), "--out", dir.file("m.pmsc")});
+    expectFailure(r, 2, {});
+    EXPECT_EQ(outputs(dir), std::vector<std::string>{"same.npy"});
+}
+
+TEST_F(Cli, InterruptLeavesNoOutputAndExits130) {
+    TempDir dir;
+    // Large enough that training cannot finish in the 0.3 s before SIGINT arrives.
+    pmsc::synthetic::SurfaceOptions o;
+    o.grid = 64;
+    o.frames = 1500;
+    pmsc::writeFrames(dir.file("big.npy"),
+                      pmsc::evaluateFrames(pmsc::synthetic::SyntheticSurface(o), 0, o.frames),
+                      pmsc::NpyDtype::Float32);
+    const RunResult r = runPmsc(
+        dir, {"train", "--frames", dir.file("big.npy"), "--out", dir.file("m.pmsc"), "--tolerance", "0.01"},
+        "timeout --preserve-status -s INT 0.3");
+    expectFailure(r, 130, {"interrupted"});
+    EXPECT_EQ(outputs(dir), std::vector<std::string>{"big.npy"});
+}
+
+}  // namespace

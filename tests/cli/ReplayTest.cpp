@@ -1,0 +1,142 @@
+#include "cli/EvaluatorRegistry.h"
+#include "cli/Replay.h"
+#include "cli/ReplayEvaluator.h"
+#include "pmsc/Errors.h"
+#include "pmsc/Training.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+namespace {
+
+using pmsc::Index;
+using pmsc::cli::percentiles;
+
+// Reference values: numpy.percentile(v, [50, 99, 99.5]) with the default method="linear".
+TEST(Percentiles, LinearInterpolationBetweenClosestRanks) {
+    const auto p = percentiles({4, 1, 3, 2});
+    EXPECT_DOUBLE_EQ(p.p50, 2.5);
+    EXPECT_DOUBLE_EQ(p.p99, 3.97);    // h = 0.99 * 3 = 2.97: 3 + 0.97 * (4 - 3)
+    EXPECT_DOUBLE_EQ(p.p995, 3.985);  // h = 2.985
+    EXPECT_DOUBLE_EQ(p.max, 4);
+    std::vector<double> ramp(201);
+    for (std::size_t i = 0; i < ramp.size(); ++i) ramp[i] = static_cast<double>(i);
+    const auto q = percentiles(ramp);
+    EXPECT_DOUBLE_EQ(q.p50, 100);
+    EXPECT_DOUBLE_EQ(q.p99, 198);
+    EXPECT_DOUBLE_EQ(q.p995, 199);
+    EXPECT_DOUBLE_EQ(q.max, 200);
+    const auto one = percentiles({7});
+    EXPECT_EQ(one.p50, 7);
+    EXPECT_EQ(one.max, 7);
+    EXPECT_EQ(percentiles({}).max, 0);
+}
+
+/// A model of 3 points x 1 channel with M = 1: basis e = (1, 1, 1)/sqrt 3, key = point 0 and
+/// point 1, mean 0. A frame a*(1,1,1) is reproduced exactly; (1, 0, 0) is not.
+pmsc::Model tinyModel(double epsMin, double epsMax) {
+    pmsc::Model m;
+    m.points = 3;
+    m.channels = 1;
+    m.trainFrames = 2;
+    m.mean = Eigen::VectorXd::Zero(3);
+    m.basis = Eigen::VectorXd::Constant(3, 1 / std::sqrt(3.0));
+    m.singularValues = Eigen::VectorXd::Constant(1, 1.0);
+    m.totalEnergy = 1;
+    m.keyPoints = {0, 1};
+    m.projector = pmsc::makeProjector(m.basis, 1, m.keyPoints);
+    m.epsMin = epsMin;
+    m.epsMax = epsMax;
+    return m;
+}
+
+pmsc::cli::ReplayEvaluator recording(std::vector<double> values, Index frames) {
+    pmsc::FrameFile file{pmsc::FrameSet(frames, 3, 1), pmsc::NpyDtype::Float64};
+    file.frames.values = std::move(values);
+    return pmsc::cli::ReplayEvaluator(std::move(file), "test");
+}
+
+TEST(ReplayFrame, HitBlendAndMissProduceTheSoftCachedFrame) {
+    // Frame 0 lies in the subspace; frames 1-2 have key residual 0.5 * sqrt(2)/sqrt(2) = 0.5
+    // ((1,0) projected onto (1,1)/sqrt2 leaves (0.5,-0.5): RMS over 2 keys = 0.5).
+    const auto rec = recording({2, 2, 2, 1, 0, 0, 1, 0, 0}, 3);
+    const pmsc::Model model = tinyModel(0.25, 0.75);
+    const pmsc::PointMultiplier pm(model);
+    pmsc::cli::ReplayScratch scratch(model);
+    std::vector<double> out(3);
+
+    auto row = pmsc::cli::replayFrame(pm, pmsc::SoftCachePolicy(0.25, 0.75), rec, 0, scratch, out.data());
+    EXPECT_EQ(row.decision.state, pmsc::CacheState::Hit);
+    EXPECT_NEAR(row.keyRms, 0, 1e-12);
+    EXPECT_NEAR(row.pmMaxPointError, 0, 1e-12);
+    EXPECT_NEAR(out[2], 2, 1e-12);
+
+    row = pmsc::cli::replayFrame(pm, pmsc::SoftCachePolicy(0.25, 0.75), rec, 1, scratch, out.data());
+    EXPECT_NEAR(row.keyRms, 0.5, 1e-12);
+    EXPECT_EQ(row.decision.state, pmsc::CacheState::Blend);
+    EXPECT_NEAR(row.decision.weight, 0.5, 1e-12);
+    // PM gives (0.5, 0.5, 0.5); the recording (1, 0, 0); the blend is halfway.
+    EXPECT_NEAR(out[0], 0.75, 1e-12);
+    EXPECT_NEAR(out[1], 0.25, 1e-12);
+    EXPECT_NEAR(out[2], 0.25, 1e-12);
+    EXPECT_NEAR(row.pmMaxPointError, 0.5, 1e-12);
+    EXPECT_NEAR(row.softMaxPointError, 0.25, 1e-12);
+
+    row = pmsc::cli::replayFrame(pm, pmsc::SoftCachePolicy(0.1, 0.2), rec, 2, scratch, out.data());
+    EXPECT_EQ(row.decision.state, pmsc::CacheState::Miss);
+    EXPECT_EQ(out, (std::vector<double>{1, 0, 0}));
+    EXPECT_EQ(row.softMaxPointError, 0);
+}
+
+TEST(Replay, ReportCountsStatesAndUsesTheOverride) {
+    const auto rec = recording({2, 2, 2, 1, 0, 0, 1, 0, 0}, 3);
+    const pmsc::Model model = tinyModel(0.25, 0.75);
+    pmsc::cli::ReplayOptions options;
+    options.threads = 1;
+    auto result = pmsc::cli::replay(model, rec, options);
+    auto report = pmsc::cli::replayReport(model, result);
+    EXPECT_DOUBLE_EQ(report["summary"]["hit_rate"].get<double>(), 1.0 / 3);
+    EXPECT_DOUBLE_EQ(report["summary"]["blend_rate"].get<double>(), 2.0 / 3);
+    EXPECT_EQ(report["frames"][1]["state"], "blend");
+    options.eps = std::make_pair(0.0, 0.0);
+    result = pmsc::cli::replay(model, rec, options);
+    report = pmsc::cli::replayReport(model, result);
+    // Frame 0's key error is zero up to rounding, so only frames 1 and 2 are certain misses.
+    EXPECT_EQ(report["frames"][1]["state"], "miss");
+    EXPECT_EQ(report["frames"][2]["state"], "miss");
+    EXPECT_EQ(report["summary"]["eps_max"], 0.0);
+}
+
+TEST(Replay, CancelFlagStopsWithCancelled) {
+    const auto rec = recording({2, 2, 2, 1, 0, 0, 1, 0, 0}, 3);
+    const pmsc::Model model = tinyModel(0.25, 0.75);
+    std::atomic<bool> cancel{true};
+    pmsc::cli::ReplayOptions options;
+    options.cancel = &cancel;
+    EXPECT_THROW(pmsc::cli::replay(model, rec, options), pmsc::Cancelled);
+}
+
+TEST(EvaluatorRegistry, ReplaySpecAndUnknownNames) {
+    EXPECT_THROW(pmsc::cli::makeEvaluator("nosuch:x"), std::invalid_argument);
+    EXPECT_THROW(pmsc::cli::makeEvaluator("replay"), std::invalid_argument);
+    EXPECT_THROW(pmsc::cli::makeEvaluator("replay:/no/such/file.npy"), pmsc::InputError);
+    try {
+        pmsc::cli::makeEvaluator("nosuch");
+    } catch (const std::invalid_argument& e) {
+        EXPECT_NE(std::string(e.what()).find("known: replay"), std::string::npos) << e.what();
+    }
+}
+
+TEST(ReplayEvaluator, SubsetsReadTheRecordedValues) {
+    const auto rec = recording({0, 1, 2, 10, 11, 12}, 2);
+    std::vector<double> out(2);
+    const std::vector<Index> points = {2, 0};
+    rec.evaluate(1, points, out.data());
+    EXPECT_EQ(out, (std::vector<double>{12, 10}));
+    EXPECT_THROW(rec.evaluate(2, points, out.data()), std::out_of_range);
+    const std::vector<Index> bad = {3};
+    EXPECT_THROW(rec.evaluate(0, bad, out.data()), std::out_of_range);
+}
+
+}  // namespace
