@@ -14,11 +14,13 @@
 #
 # Options: --tasks T (4) array tasks, --parallel P (2) at a time, --timeout S (150) for the whole
 # test, --keep (leave the temporary folder), --workdir DIR (instead of a new temporary folder).
-# With --asset the script makes its own training frames (pmsc export-frames) and model (pmsc train).
+# With --asset the script makes its own training frames (pmsc export-frames) and model (pmsc train
+# with --train-options, default "--max-keys 40"); the shot is then every frame of the asset.
 set -uo pipefail
 
 here=$(cd "$(dirname "$0")" && pwd)
 pmsc="" model="" evaluator="" frames="" asset="" tasks=4 parallel=2 budget=150 keep=0 work=""
+trainOptions="--max-keys 40"
 while (($#)); do
   case $1 in
     --pmsc) pmsc=$2; shift 2 ;;
@@ -26,6 +28,7 @@ while (($#)); do
     --evaluator) evaluator=$2; shift 2 ;;
     --frames) frames=$2; shift 2 ;;
     --asset) asset=$2; shift 2 ;;
+    --train-options) trainOptions=$2; shift 2 ;;
     --tasks) tasks=$2; shift 2 ;;
     --parallel) parallel=$2; shift 2 ;;
     --timeout) budget=$2; shift 2 ;;
@@ -60,16 +63,18 @@ mkdir -p "$work"/{munge,state,spool,log,run,logs}
 pidfiles=("$work/run/slurmd.pid" "$work/run/slurmctld.pid" "$work/munge/munged.pid")
 watchdog=""
 
-stop_daemons() {
-  local f pid i
+stop_daemons() {  # TERM to all three at once, then wait (bounded), then KILL what is left
+  local f pid pids=() i
   for f in "${pidfiles[@]}"; do
     [ -s "$f" ] || continue
     pid=$(cat "$f" 2>/dev/null)
-    [[ $pid =~ ^[0-9]+$ ]] || continue
-    kill -TERM "$pid" 2>/dev/null || continue
-    for i in $(seq 50); do kill -0 "$pid" 2>/dev/null || break; sleep 0.2; done
+    [[ $pid =~ ^[0-9]+$ ]] && kill -TERM "$pid" 2>/dev/null && pids+=("$pid")
+  done
+  for pid in "${pids[@]}"; do
+    for i in $(seq 100); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
     kill -0 "$pid" 2>/dev/null && kill -KILL "$pid" 2>/dev/null
   done
+  return 0
 }
 cleanup() {
   local status=$?
@@ -100,7 +105,8 @@ if [ -n "$asset" ]; then
   evaluator="skin:$asset"
   say "exporting training frames of $asset"
   timeout "$(left)" "$pmsc" export-frames "$evaluator" --out "$work/train.npy" || fail "pmsc export-frames"
-  timeout "$(left)" "$pmsc" train --frames "$work/train.npy" --out "$work/model.pmsc" >"$work/logs/train.log" ||
+  # shellcheck disable=SC2086
+  timeout "$(left)" "$pmsc" train --frames "$work/train.npy" --out "$work/model.pmsc" $trainOptions >"$work/logs/train.log" 2>&1 ||
     fail "pmsc train (see $work/logs/train.log)"
   model=$work/model.pmsc
   if [ -z "$frames" ]; then
@@ -181,8 +187,9 @@ done
 
 # --- the reference: one local run of the whole shot --------------------------------------------------
 say "local reference run: frames $frames"
+# Every core here, one per task on the farm: the frames must not depend on it.
 timeout "$(left)" "$pmsc" run --model "$model" --evaluator "$evaluator" --frames "$frames" \
-  --out "$work/local" --threads 1 >"$work/logs/local.log" 2>&1 || fail "local pmsc run (see logs/local.log)"
+  --out "$work/local" >"$work/logs/local.log" 2>&1 || fail "local pmsc run (see logs/local.log)"
 
 # --- the array job --------------------------------------------------------------------------------------
 job=$(timeout 20 sbatch --parsable --array="0-$((tasks - 1))%$parallel" --cpus-per-task=1 \
@@ -239,4 +246,5 @@ awk 'NR == 1 {t0 = $1} $2 == 1 {s[$3] = $1 - t0; r[$3] = $4} $2 == -1 {e[$3] = $
 say "most tasks running at once: $overlap by their timestamps, $mostRunning seen by squeue"
 ((overlap >= 2)) || fail "no two array tasks ran at the same time"
 
+say "stats of the array tasks: $(cat "$work/farm"/pmsc-run.*.json | grep -c '"status": "ok"') ok, frames evaluated $(grep -h '"frames_evaluated"' "$work/farm"/pmsc-run.*.json | grep -o '[0-9]*' | paste -sd+ | bc)"
 say "PASSED: $tasks tasks ($parallel at a time) wrote $nframes frames ($bytes bytes), byte-identical to the local run, in $(($(date +%s) - start)) s"
