@@ -93,7 +93,64 @@ CornellEvaluator::CornellEvaluator(std::shared_ptr<const CornellWorld> world, st
     if (samples_ < 1) throw std::invalid_argument("CornellEvaluator: samples per point must be >= 1, got " + std::to_string(samples_));
 }
 
-void CornellEvaluator::gather(const PointLight& light, Index point, double* rgb) const {
+/// The light paths of one frame: kPoolSets shifted Hammersley sets of sB directions from the
+/// light, traced to their first hit. Entry (set, i) is valid when it hit a front face.
+struct CornellEvaluator::LightPool {
+    std::uint32_t sets = 0, perSet = 0;
+    std::vector<Vec3> y;
+    std::vector<int> quad;  // -1: missed or back face
+};
+
+namespace {
+constexpr std::uint32_t kPoolSets = 64;
+constexpr std::size_t kPoolCache = 16;
+}  // namespace
+
+std::shared_ptr<const CornellEvaluator::LightPool> CornellEvaluator::lightPool(Index frame) const {
+    {
+        std::lock_guard<std::mutex> lock(poolMutex_);
+        for (const auto& [f, p] : pools_)
+            if (f == frame) return p;
+    }
+    // Built outside the lock: two threads may build the same pool; both results are identical.
+    auto pool = std::make_shared<LightPool>();
+    const PointLight& light = lights_[static_cast<std::size_t>(frame)];
+    pool->sets = kPoolSets;
+    pool->perSet = static_cast<std::uint32_t>(samples_ / 2);
+    const std::size_t n = static_cast<std::size_t>(pool->sets) * pool->perSet;
+    std::vector<Ray> rays(n);
+    std::vector<Hit> hits(n);
+    for (std::uint32_t set = 0; set < pool->sets; ++set)
+        for (std::uint32_t i = 0; i < pool->perSet; ++i) {
+            double u, v;
+            hammersleyShifted(set ^ 0x5bd1e995U, i, pool->perSet, u, v);
+            const double z = 1.0 - 2.0 * u, r = std::sqrt(std::max(0.0, 1.0 - z * z)), phi = 2.0 * M_PI * v;
+            rays[set * pool->perSet + i] = makeRay(light.position, {r * std::cos(phi), r * std::sin(phi), z}, 1e30);
+        }
+    // Traced in fixed batches of one set, so the pool never depends on how it was scheduled.
+    for (std::uint32_t set = 0; set < pool->sets && pool->perSet > 0; ++set)
+        world_->tracer->intersect(std::span<const Ray>(rays.data() + set * pool->perSet, pool->perSet),
+                                  std::span<Hit>(hits.data() + set * pool->perSet, pool->perSet));
+    pool->y.resize(n);
+    pool->quad.assign(n, -1);
+    const auto& quads = world_->scene.quads();
+    for (std::size_t k = 0; k < n; ++k) {
+        if (hits[k].quad < 0) continue;
+        const Quad& q = quads[static_cast<std::size_t>(hits[k].quad)];
+        const Vec3 d{rays[k].dir[0], rays[k].dir[1], rays[k].dir[2]};
+        if (dot(d, q.normal) >= 0) continue;
+        pool->y[k] = light.position + d * static_cast<double>(hits[k].t);
+        pool->quad[k] = hits[k].quad;
+    }
+    std::lock_guard<std::mutex> lock(poolMutex_);
+    for (const auto& [f, p] : pools_)
+        if (f == frame) return p;
+    if (pools_.size() >= kPoolCache) pools_.erase(pools_.begin());
+    pools_.emplace_back(frame, pool);
+    return pool;
+}
+
+void CornellEvaluator::gather(const PointLight& light, const LightPool& pool, Index point, double* rgb) const {
     const SurfaceVoxels& vox = world_->voxels;
     const auto& quads = world_->scene.quads();
     const Vec3 x = vox.position[static_cast<size_t>(point)];
@@ -103,51 +160,47 @@ void CornellEvaluator::gather(const PointLight& light, Index point, double* rgb)
     const Vec3 o = x + nx * kOffsetMm;
     const Vec3 lp = light.position;
     const auto id = static_cast<std::uint32_t>(point);
-    const auto sA = static_cast<std::uint32_t>(samples_ / 2 + samples_ % 2);  // cosine gathers
-    const auto sB = static_cast<std::uint32_t>(samples_ / 2);                 // light paths
-    const double nA = sA, nB = sB;
+    const auto sA = static_cast<std::uint32_t>(samples_ / 2 + samples_ % 2);
+    const double nA = sA, nB = pool.perSet;  // cosine gathers, light paths
 
     Scratch& s = scratch();
-    s.rays.resize(sA + sB);
-    s.hits.resize(sA + sB);
+    s.rays.resize(sA);
+    s.hits.resize(sA);
     for (std::uint32_t i = 0; i < sA; ++i) {
         double u, v;
         hammersleyShifted(id, i, sA, u, v);
         s.rays[i] = makeRay(o, cosineDirection(nx, t, b, u, v), 1e30);
     }
-    for (std::uint32_t i = 0; i < sB; ++i) {
-        double u, v;
-        hammersleyShifted(id ^ 0x5bd1e995U, i, sB, u, v);
-        const double z = 1.0 - 2.0 * u, r = std::sqrt(std::max(0.0, 1.0 - z * z)), phi = 2.0 * M_PI * v;
-        s.rays[sA + i] = makeRay(lp, {r * std::cos(phi), r * std::sin(phi), z}, 1e30);
-    }
     world_->tracer->intersect(s.rays, s.hits);
 
-    // Candidates y: A = cosine-gather hits (need a shadow ray y -> light), B = light-path hits
-    // (need a connection ray x -> y). One occlusion batch for both.
+    // Candidates y: A = cosine-gather hits (need a shadow ray y -> light), B = this point's set
+    // of the frame's light paths (need a connection ray x -> y). One occlusion batch for both.
     s.cand.clear();
     s.occ.clear();
-    for (std::uint32_t i = 0; i < sA + sB; ++i) {
+    for (std::uint32_t i = 0; i < sA; ++i) {
         const Hit& h = s.hits[i];
         if (h.quad < 0) continue;
         const Quad& q = quads[static_cast<size_t>(h.quad)];
         const Ray& ray = s.rays[i];
         const Vec3 d{ray.dir[0], ray.dir[1], ray.dir[2]};
-        if (dot(d, q.normal) >= 0) continue;  // back face: nothing leaves it toward x / the light
-        const Vec3 org{ray.org[0], ray.org[1], ray.org[2]};
-        const Vec3 y = org + d * static_cast<double>(h.t);
+        if (dot(d, q.normal) >= 0) continue;  // back face: nothing leaves it toward x
+        const Vec3 y = o + d * static_cast<double>(h.t);
         const Vec3 yo = y + q.normal * kOffsetMm;
-        if (i < sA) {
-            const Vec3 toLight = lp - yo;
-            if (dot(q.normal, toLight) <= 0) continue;
-            s.cand.push_back({y, h.quad, true});
-            s.occ.push_back(makeRay(yo, toLight, 1.0 - 1e-4));
-        } else {
-            const Vec3 toY = yo - o;
-            if (dot(nx, toY) <= 0 || dot(q.normal, toY) >= 0) continue;
-            s.cand.push_back({y, h.quad, false});
-            s.occ.push_back(makeRay(o, toY, 1.0 - 1e-4));
-        }
+        const Vec3 toLight = lp - yo;
+        if (dot(q.normal, toLight) <= 0) continue;
+        s.cand.push_back({y, h.quad, true});
+        s.occ.push_back(makeRay(yo, toLight, 1.0 - 1e-4));
+    }
+    const std::size_t first = static_cast<std::size_t>(hash32(id ^ 0x27d4eb2fU) % pool.sets) * pool.perSet;
+    for (std::uint32_t i = 0; i < pool.perSet; ++i) {
+        const int qi = pool.quad[first + i];
+        if (qi < 0) continue;
+        const Quad& q = quads[static_cast<size_t>(qi)];
+        const Vec3 y = pool.y[first + i];
+        const Vec3 toY = y + q.normal * kOffsetMm - o;
+        if (dot(nx, toY) <= 0 || dot(q.normal, toY) >= 0) continue;
+        s.cand.push_back({y, qi, false});
+        s.occ.push_back(makeRay(o, toY, 1.0 - 1e-4));
     }
     s.blocked.assign(s.occ.size(), 0);
     world_->tracer->occluded(s.occ, s.blocked);
@@ -189,10 +242,11 @@ void CornellEvaluator::evaluate(Index frame, std::span<const Index> points, doub
         throw std::out_of_range("cornell: frame " + std::to_string(frame) + " outside [0, " + std::to_string(frameCount()) + ")");
     const Index n = pointCount();
     const PointLight& light = lights_[static_cast<size_t>(frame)];
+    const auto pool = lightPool(frame);
     for (size_t i = 0; i < points.size(); ++i) {
         if (points[i] < 0 || points[i] >= n)
             throw std::out_of_range("cornell: point " + std::to_string(points[i]) + " outside [0, " + std::to_string(n) + ")");
-        gather(light, points[i], out + 3 * i);
+        gather(light, *pool, points[i], out + 3 * i);
     }
 }
 
@@ -200,8 +254,9 @@ void CornellEvaluator::evaluateAll(Index frame, double* out) const {
     if (frame < 0 || frame >= frameCount())
         throw std::out_of_range("cornell: frame " + std::to_string(frame) + " outside [0, " + std::to_string(frameCount()) + ")");
     const PointLight& light = lights_[static_cast<size_t>(frame)];
+    const auto pool = lightPool(frame);
     tbb::parallel_for(tbb::blocked_range<Index>(0, pointCount(), 256), [&](const tbb::blocked_range<Index>& r) {
-        for (Index p = r.begin(); p != r.end(); ++p) gather(light, p, out + 3 * p);
+        for (Index p = r.begin(); p != r.end(); ++p) gather(light, *pool, p, out + 3 * p);
     });
 }
 

@@ -156,11 +156,11 @@ std::vector<PointLight> LightRig::scatteredLights(int count, unsigned seed) cons
     std::vector<PointLight> lights;
     const double y = 548.8 - belowCeilingMm;
     for (int i = 0; i < count; ++i) {
-        // Between two grid nodes in both x and z: 15-50% of the pitch off a node, either side.
+        // Between two grid nodes in both x and z: at least 15% of the pitch off any node.
         const auto off = [&] { return spacingMm * (0.15 + 0.7 * u01(rng)); };
         const double x = 278.0 + (cell(rng) - 0.5 * (gridSide - 1)) * spacingMm + off();
         const double z = 279.6 + (cell(rng) - 0.5 * (gridSide - 1)) * spacingMm + off();
-        const double dy = -6.0 + 12.0 * u01(rng);
+        const double dy = -4.0 + 8.0 * u01(rng);
         lights.push_back({v(x, y + dy, z), intensity});
     }
     return lights;

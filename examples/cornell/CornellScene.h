@@ -91,7 +91,7 @@ struct LightRig {
     /// The 12 x 12 training grid, row-major in (z, x), centred on the ceiling.
     std::vector<PointLight> trainingLights() const;
     /// `count` lights near the training grid but never on it: jittered off the grid nodes by
-    /// 15-50% of the pitch in x and z and a few millimetres in y (deterministic for a seed).
+    /// 15-85% of the pitch in x and z and up to 4 mm in y (deterministic for a seed).
     std::vector<PointLight> scatteredLights(int count, unsigned seed = 7) const;
     /// A smooth closed `frames`-frame path (a Lissajous figure) across the grid's extent.
     std::vector<PointLight> animationPath(int frames) const;

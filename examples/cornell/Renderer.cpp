@@ -3,6 +3,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -68,7 +69,9 @@ std::vector<Image> renderWithCaches(const CornellWorld& world, const Camera& cam
                     const Rgb& albedo = quads[static_cast<size_t>(quadOf[j])].albedo;
                     float* px = images[c].pixel(pixelOf[j], y);
                     for (int k = 0; k < 3; ++k)
-                        px[k] += w * static_cast<float>(albedo[k] / M_PI * (direct[3 * j + k] + indirect[3 * j + k]));
+                        // A PM reconstruction may undershoot a dark voxel slightly below zero; light
+                        // is never negative, so the lookup is clamped (the cache keeps the raw values).
+                        px[k] += w * static_cast<float>(albedo[k] / M_PI * (direct[3 * j + k] + std::max(0.0, indirect[3 * j + k])));
                 }
             }
         }
