@@ -14,11 +14,13 @@
 #include <oneapi/tbb/flow_graph.h>
 #include <oneapi/tbb/info.h>
 #include <oneapi/tbb/task_arena.h>
+#include <oneapi/tbb/task_scheduler_observer.h>
 
 #include <algorithm>
 #include <array>
 #include <chrono>
 #include <string>
+#include <thread>
 #include <tuple>
 
 namespace pmsc::engine {
@@ -38,6 +40,105 @@ constexpr std::array<const char*, kNodeCount> kNodeNames = {
     nodes::ErrorMonitor::kName,      nodes::Reconstructor::kName,
     nodes::FailThroughEvaluator::kName, nodes::Blender::kName,
     "sink"};
+
+// ThreadSanitizer and the uninstrumented libtbb (Debian's build). TSan cannot see libtbb's
+// synchronization, so (1) every hand-over of a frame slot from one node body to the next looks
+// like a race, and (2) so does TBB's own bookkeeping in its headers (task objects recycled by its
+// allocator, buffer nodes' arrays). Suppressing by pattern does not work: TSan matches a
+// suppression against every frame of a stack, and every node body runs under TBB frames, so a
+// pattern broad enough for (2) hides races in our bodies too. Instead, in TSan builds only:
+//  - handOver/takeOver state the flow graph's real happens-before edges, one per message: the
+//    sender releases the slot after its last write, the receiver acquires it before its first
+//    read. Branches of one fail-through do NOT release the slot to each other (they meet through
+//    the chunksLeft atomic), so a race between two branches is still reported.
+//  - TBB's own code on the arena's threads runs with TSan's access checks off (an arena
+//    observer), and every node body and sink call turns them back on (CheckedScope), so the
+//    engine's and the user's code (evaluators, sinks) is checked, TBB's internals are not.
+// Everything here compiles to nothing in other builds.
+#if defined(__SANITIZE_THREAD__)
+extern "C" void __tsan_acquire(void* addr);
+extern "C" void __tsan_release(void* addr);
+extern "C" void AnnotateIgnoreReadsBegin(const char* file, int line);
+extern "C" void AnnotateIgnoreReadsEnd(const char* file, int line);
+extern "C" void AnnotateIgnoreWritesBegin(const char* file, int line);
+extern "C" void AnnotateIgnoreWritesEnd(const char* file, int line);
+inline void handOver(const void* p) { __tsan_release(const_cast<void*>(p)); }
+inline void takeOver(const void* p) { __tsan_acquire(const_cast<void*>(p)); }
+
+thread_local bool tIgnoring = false;  // this thread's accesses are not checked (TBB code runs)
+void setIgnoring(bool on) {
+    if (on == tIgnoring) return;
+    if (on) {
+        AnnotateIgnoreReadsBegin(__FILE__, __LINE__);
+        AnnotateIgnoreWritesBegin(__FILE__, __LINE__);
+    } else {
+        AnnotateIgnoreReadsEnd(__FILE__, __LINE__);
+        AnnotateIgnoreWritesEnd(__FILE__, __LINE__);
+    }
+    tIgnoring = on;
+}
+/// Checks on (`checked` = true, our code) or off (TBB code) for a scope, then back as it was.
+class CheckScope {
+public:
+    explicit CheckScope(bool checked) : before_(tIgnoring) { setIgnoring(!checked); }
+    ~CheckScope() { setIgnoring(before_); }
+    CheckScope(const CheckScope&) = delete;
+    CheckScope& operator=(const CheckScope&) = delete;
+
+private:
+    bool before_;
+};
+/// Turns checks off on TBB's worker threads while they are in the engine's arena. Owned by the
+/// engine; before it stops observing it waits (bounded) for the workers to leave the arena, so
+/// that each gets its exit notification and no thread is left with checks off.
+class TsanWorkerObserver : public tbb::task_scheduler_observer {
+public:
+    explicit TsanWorkerObserver(tbb::task_arena& arena) : tbb::task_scheduler_observer(arena) {
+        handOver(this);  // constructed before any notification (registered inside libtbb)
+        observe(true);
+    }
+    ~TsanWorkerObserver() override {
+        for (int i = 0; i < 5000 && inside_.load() > 0; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        observe(false);  // waits for notifications in progress (inside libtbb, so say it to TSan)
+        takeOver(this);
+    }
+    void on_scheduler_entry(bool isWorker) override {
+        takeOver(this);
+        if (isWorker && !tIgnoring) {
+            setIgnoring(true);
+            inside_.fetch_add(1);
+        }
+        handOver(this);
+    }
+    void on_scheduler_exit(bool isWorker) override {
+        takeOver(this);
+        if (isWorker && tIgnoring) {
+            setIgnoring(false);
+            inside_.fetch_sub(1);
+        }
+        handOver(this);
+    }
+
+private:
+    std::atomic<int> inside_{0};
+};
+#define PMSC_CHECKED_SCOPE CheckScope pmscChecked_(true)
+#define PMSC_UNCHECKED_SCOPE CheckScope pmscUnchecked_(false)
+#else
+inline void handOver(const void*) {}
+inline void takeOver(const void*) {}
+#define PMSC_CHECKED_SCOPE
+#define PMSC_UNCHECKED_SCOPE
+#endif
+
+/// Opens every node body: TSan checks on (in TSan builds), and at the end a release on
+/// `done`, which the thread that waits for the graph acquires before it frees anything.
+#define PMSC_NODE_BODY(done)      \
+    PMSC_CHECKED_SCOPE;           \
+    struct DoneOnExit {           \
+        const void* p;            \
+        ~DoneOnExit() { handOver(p); } \
+    } pmscDone_{done}
 
 /// Body time of one node kind, summed over threads. Integers, so adding from several threads
 /// needs no lock and loses nothing.
@@ -90,6 +191,9 @@ struct Engine::Impl {
     int threads;
     Index maxInFlight;
     tbb::task_arena arena;
+#if defined(__SANITIZE_THREAD__)
+    TsanWorkerObserver tsanObserver{arena};
+#endif
     RunStats last;
 
     Impl(const Model& m, const PointEvaluator& e, EngineOptions o)
@@ -221,17 +325,31 @@ RunStats Engine::Impl::run(FrameRange range, FrameSink& sink) {
         // number with a free slot, and the slot comes back only after the sink, so at most
         // maxInFlight frames are anywhere in the graph.
         using Token = FrameSlot*;
-        using MonitorNode = flow::multifunction_node<Token, std::tuple<Token, ChunkMsg, Token>>;
+        using MonitorNode = flow::multifunction_node<Token, std::tuple<Token, ChunkMsg, Token>, flow::queueing_lightweight>;
         using ReconstructNode = flow::multifunction_node<Token, std::tuple<Token, ChunkMsg>>;
-        using GatherNode = flow::multifunction_node<ChunkMsg, std::tuple<Token>>;
+        using GatherNode = flow::multifunction_node<ChunkMsg, std::tuple<Token>, flow::queueing_lightweight>;
 
+#if defined(__SANITIZE_THREAD__)
+        // Declared first, so it runs last: this thread leaves with checks back on.
+        struct ChecksBackOn {
+            ~ChecksBackOn() { setIgnoring(false); }
+        } checksBackOn;
+        setIgnoring(true);  // from here this thread runs TBB's code too (building, waiting, destroying)
+#endif
         flow::graph g;
-        control.setCancelHook([&g] { g.cancel(); });
+        const char runDone = 0;  // sync object only (TSan): every body's end -> after wait_for_all
+        control.setCancelHook([&g] {
+            PMSC_UNCHECKED_SCOPE;  // TBB's code, called from inside a node body
+            g.cancel();
+        });
 
         nodes::FrameSource source(range, control);
         flow::input_node<Index> sourceNode(g, [&](tbb::flow_control& fc) -> Index {
+            PMSC_NODE_BODY(&runDone);
+            takeOver(&source);
             Index seq = 0;
             if (!source.next(seq)) fc.stop();
+            handOver(&source);
             return seq;
         });
         flow::buffer_node<Token> tokens(g);
@@ -239,69 +357,97 @@ RunStats Engine::Impl::run(FrameRange range, FrameSink& sink) {
 
         flow::function_node<std::tuple<Index, Token>, Token> keys(
             g, flow::unlimited, [&](const std::tuple<Index, Token>& in) -> Token {
+                PMSC_NODE_BODY(&runDone);
                 Token slot = std::get<1>(in);
+                takeOver(slot);
                 const Index seq = std::get<0>(in);
                 slot->reset(seq, range.frame(seq));
                 control.frameStarted();
-                if (control.cancelled()) return slot;
-                timed(clocks[kKeys], [&] { keysBody(*slot); });
+                if (!control.cancelled()) timed(clocks[kKeys], [&] { keysBody(*slot); });
                 if (slot->failed() && stopOnFailure) control.stopAfter(seq);
+                handOver(slot);
                 return slot;
             });
         // Cheap bodies run as lightweight nodes: in the task of the node before them.
         flow::function_node<Token, Token, flow::queueing_lightweight> project(
             g, flow::unlimited, [&](Token slot) -> Token {
+                PMSC_NODE_BODY(&runDone);
+                takeOver(slot);
                 if (!control.cancelled()) timed(clocks[kProject], [&] { projectBody(*slot); });
+                handOver(slot);
                 return slot;
             });
         MonitorNode monitor(g, flow::unlimited, [&](Token slot, MonitorNode::output_ports_type& out) {
+            PMSC_NODE_BODY(&runDone);
+            takeOver(slot);
+            const auto send = [&](auto& port, const auto& message) {
+                handOver(slot);
+                PMSC_UNCHECKED_SCOPE;
+                port.try_put(message);
+            };
             if (control.cancelled()) {
-                std::get<2>(out).try_put(slot);
+                send(std::get<2>(out), slot);
                 return;
             }
             const Route route = timed(clocks[kMonitor], [&] { return monitorBody(*slot); });
             if (route == Route::Reconstruct) {
-                std::get<0>(out).try_put(slot);
+                send(std::get<0>(out), slot);
             } else if (route == Route::FailThrough) {
                 slot->chunksLeft.store(chunkCount, std::memory_order_relaxed);
-                for (Index c = 0; c < chunkCount; ++c) std::get<1>(out).try_put(ChunkMsg{slot, c});
+                for (Index c = 0; c < chunkCount; ++c) send(std::get<1>(out), ChunkMsg{slot, c});
             } else {
-                std::get<2>(out).try_put(slot);
+                send(std::get<2>(out), slot);
             }
         });
         ReconstructNode reconstruct(g, flow::unlimited, [&](Token slot, ReconstructNode::output_ports_type& out) {
+            PMSC_NODE_BODY(&runDone);
+            takeOver(slot);
+            const auto send = [&](auto& port, const auto& message) {
+                handOver(slot);
+                PMSC_UNCHECKED_SCOPE;
+                port.try_put(message);
+            };
             if (control.cancelled()) {
-                std::get<0>(out).try_put(slot);
+                send(std::get<0>(out), slot);
                 return;
             }
             const bool done = timed(clocks[kReconstruct], [&] { return reconstructBody(*slot); });
             if (done) {
-                std::get<0>(out).try_put(slot);
+                send(std::get<0>(out), slot);
             } else {
                 slot->chunksLeft.store(chunkCount, std::memory_order_relaxed);
-                for (Index c = 0; c < chunkCount; ++c) std::get<1>(out).try_put(ChunkMsg{slot, c});
+                for (Index c = 0; c < chunkCount; ++c) send(std::get<1>(out), ChunkMsg{slot, c});
             }
         });
         flow::function_node<ChunkMsg, ChunkMsg> failThrough(g, flow::unlimited, [&](ChunkMsg m) {
+            PMSC_NODE_BODY(&runDone);
+            takeOver(m.slot);
             if (!control.cancelled()) timed(clocks[kFailThrough], [&] { failThroughBody(*m.slot, m.chunk); });
             return m;
         });
         flow::function_node<ChunkMsg, ChunkMsg, flow::queueing_lightweight> blend(
             g, flow::unlimited, [&](ChunkMsg m) {
+                PMSC_NODE_BODY(&runDone);
                 if (m.slot->decision.state == CacheState::Blend && !control.cancelled()) {
                     timed(clocks[kBlend], [&] { blendBody(*m.slot, m.chunk); });
                 }
                 return m;
             });
         GatherNode gather(g, flow::unlimited, [&](ChunkMsg m, GatherNode::output_ports_type& out) {
+            PMSC_NODE_BODY(&runDone);
             // acq_rel: the last branch sees every other branch's writes before the frame moves on.
             if (m.slot->chunksLeft.fetch_sub(1, std::memory_order_acq_rel) == 1) {
                 if (m.slot->failed() && stopOnFailure) control.stopAfter(m.slot->sequence);
+                handOver(m.slot);
+                PMSC_UNCHECKED_SCOPE;
                 std::get<0>(out).try_put(m.slot);
             }
         });
         flow::sequencer_node<Token> sequencer(g, [](const Token& slot) { return size_t(slot->sequence); });
         flow::function_node<Token, Token> sinkNode(g, flow::serial, [&](Token slot) -> Token {
+            PMSC_NODE_BODY(&runDone);
+            takeOver(slot);
+            takeOver(&sinkBody);  // the serial sink's calls follow one another
             timed(clocks[kSink], [&] { sinkBody(*slot); });
             control.frameFinished();
             if (options.progress && !control.cancelled()) {
@@ -315,6 +461,8 @@ RunStats Engine::Impl::run(FrameRange range, FrameSink& sink) {
                 p.elapsedSeconds = seconds(Clock::now() - start);
                 options.progress(p);
             }
+            handOver(&sinkBody);
+            handOver(slot);
             return slot;
         });
 
@@ -334,9 +482,18 @@ RunStats Engine::Impl::run(FrameRange range, FrameSink& sink) {
         flow::make_edge(sequencer, sinkNode);
         flow::make_edge(sinkNode, tokens);
 
-        for (auto& slot : slots) tokens.try_put(slot.get());
+        for (auto& slot : slots) {
+            handOver(slot.get());
+            tokens.try_put(slot.get());
+        }
+        handOver(&source);
         sourceNode.activate();
         g.wait_for_all();
+        // Everything the graph's threads wrote is visible after wait_for_all().
+        for (auto& slot : slots) takeOver(slot.get());
+        takeOver(&sinkBody);
+        takeOver(&source);
+        takeOver(&runDone);
     };
     try {
         arena.execute(runGraph);

@@ -1,0 +1,200 @@
+// Engine benchmarks (issue 3, "Must show"). Each speed goal is a ratio of two benchmarks run in
+// the same process: pmsc_engine_report runs these and prints the ratios as one JSON object.
+//
+//   overhead:     plain serial loop vs the graph at 1 thread, trivial (recorded) evaluator, all hits
+//   scaling:      the graph at 1 vs 2 threads, evaluator costing ~1 ms per frame (busy work)
+//   miss:         a missed frame through the graph vs a plain full evaluation, linear-cost evaluator
+//   reconstruct:  one frame's PM reconstruction at 160,000 points x 3 channels x 32 basis vs a
+//                 memcpy of the basis' bytes (the memory roofline)
+#include "bench/EngineBenchSupport.h"
+#include "engine/Engine.h"
+#include "pmsc/PointMultiplier.h"
+#include "pmsc/SoftCache.h"
+
+#include <benchmark/benchmark.h>
+
+#include <cstring>
+#include <memory>
+#include <vector>
+
+namespace pmsc::bench {
+namespace {
+
+// The paper's face (section 7): 2986 points, 85 basis vectors, 170 key points.
+constexpr Index kFacePoints = 2986, kFaceBasis = 85, kFaceKeys = 170;
+constexpr Index kFramesPerRun = 256;
+
+const Model& faceModel() {
+    static const Model m = makeModel(kFacePoints, 3, kFaceBasis, kFaceKeys);
+    return m;
+}
+
+/// A sink that touches every frame's output the same way in both loops.
+class ChecksumSink : public engine::FrameSink {
+public:
+    void write(const engine::FrameResult& r) override { sum_ += r.values[0] + double(r.state); }
+    double sum() const { return sum_; }
+
+private:
+    double sum_ = 0;
+};
+
+/// The plain way (sections 5-6), serial, no graph: key evaluation, projection, key error,
+/// decision, reconstruction (or full evaluation and blend), hand the frame to the sink.
+void plainLoop(const Model& model, const PointEvaluator& e, const PointMultiplier& pm, const SoftCachePolicy& policy,
+               Index frames, engine::FrameSink& sink) {
+    const Index c = model.channels;
+    std::vector<double> keys(size_t(model.keyCount() * c)), coords(size_t(model.basisSize()));
+    std::vector<double> out(size_t(model.points * c)), full(size_t(model.points * c));
+    engine::FrameResult r;
+    for (Index f = 0; f < frames; ++f) {
+        e.evaluate(f, model.keyPoints, keys.data());
+        pm.project(keys.data(), coords.data());
+        const double err = pm.keyRmsError(keys.data(), coords.data());
+        const CacheDecision d = policy.decide(err);
+        if (d.state == CacheState::Hit) {
+            pm.reconstruct(coords.data(), out.data());
+        } else {
+            e.evaluateAll(f, full.data());
+            if (d.state == CacheState::Blend) {
+                pm.reconstruct(coords.data(), out.data());
+                for (size_t x = 0; x < out.size(); ++x) out[x] = (1 - d.weight) * out[x] + d.weight * full[x];
+            } else {
+                out.swap(full);
+            }
+        }
+        r.sequence = f;
+        r.frame = f;
+        r.state = d.state;
+        r.weight = d.weight;
+        r.keyRmsError = err;
+        r.values = out;
+        sink.write(r);
+    }
+}
+
+// ---- overhead: plain loop vs graph at 1 thread ---------------------------------------------
+
+void BM_Overhead_PlainLoop(benchmark::State& state) {
+    const Model& model = faceModel();
+    const RecordedEvaluator e(model, kFramesPerRun);
+    const PointMultiplier pm(model);
+    const SoftCachePolicy policy(model.epsMin, model.epsMax);
+    ChecksumSink sink;
+    for (auto _ : state) plainLoop(model, e, pm, policy, kFramesPerRun, sink);
+    benchmark::DoNotOptimize(sink.sum());
+    state.SetItemsProcessed(state.iterations() * kFramesPerRun);
+}
+
+void BM_Overhead_Graph1Thread(benchmark::State& state) {
+    const Model& model = faceModel();
+    const RecordedEvaluator e(model, kFramesPerRun);
+    engine::EngineOptions o;
+    o.threads = 1;
+    engine::Engine engine(model, e, o);
+    ChecksumSink sink;
+    for (auto _ : state) engine.run({0, kFramesPerRun, 1}, sink);
+    if (engine.lastStats().hits != kFramesPerRun) state.SkipWithError("expected every frame to hit");
+    benchmark::DoNotOptimize(sink.sum());
+    state.SetItemsProcessed(state.iterations() * kFramesPerRun);
+}
+
+// ---- scaling: 1 vs 2 threads, ~1 ms of busy work per frame ----------------------------------
+
+void BM_Scaling_Graph(benchmark::State& state) {
+    const Model& model = faceModel();
+    RecordedEvaluator e(model, 64);
+    // A hit evaluates the 170 key points: 1 ms / 170 per point makes the frame cost ~1 ms.
+    e.setMicrosecondsPerPoint(1000.0 / double(kFaceKeys));
+    engine::EngineOptions o;
+    o.threads = int(state.range(0));
+    engine::Engine engine(model, e, o);
+    ChecksumSink sink;
+    for (auto _ : state) engine.run({0, 64, 1}, sink);
+    if (engine.lastStats().hits != 64) state.SkipWithError("expected every frame to hit");
+    state.SetItemsProcessed(state.iterations() * 64);
+}
+
+// ---- miss: a missed frame through the graph vs a plain full evaluation ----------------------
+
+constexpr double kMissMicrosPerPoint = 1.0;  // a full frame costs ~3 ms, linear in the points
+constexpr Index kMissFrames = 8;
+
+void BM_Miss_PlainFullEvaluation(benchmark::State& state) {
+    const Model& model = faceModel();
+    RecordedEvaluator e(model, kMissFrames);
+    e.setMicrosecondsPerPoint(kMissMicrosPerPoint);
+    std::vector<double> out(size_t(model.points * model.channels));
+    ChecksumSink sink;
+    engine::FrameResult r;
+    for (auto _ : state) {
+        for (Index f = 0; f < kMissFrames; ++f) {
+            e.evaluateAll(f, out.data());
+            r.values = out;
+            sink.write(r);
+        }
+    }
+    benchmark::DoNotOptimize(sink.sum());
+    state.SetItemsProcessed(state.iterations() * kMissFrames);
+}
+
+void BM_Miss_Graph(benchmark::State& state) {
+    const Model& model = faceModel();
+    RecordedEvaluator e(model, kMissFrames);
+    e.setMicrosecondsPerPoint(kMissMicrosPerPoint);
+    engine::EngineOptions o;
+    o.threads = int(state.range(0));
+    o.policy = SoftCachePolicy(0, 0);  // every key error > 0: every frame is a miss
+    engine::Engine engine(model, e, o);
+    ChecksumSink sink;
+    for (auto _ : state) engine.run({0, kMissFrames, 1}, sink);
+    if (engine.lastStats().misses != kMissFrames) state.SkipWithError("expected every frame to miss");
+    state.SetItemsProcessed(state.iterations() * kMissFrames);
+}
+
+// ---- reconstruction bandwidth vs memcpy ------------------------------------------------------
+
+constexpr Index kBigPoints = 160000, kBigBasis = 32;
+
+const Model& bigModel() {
+    static const Model m = makeModel(kBigPoints, 3, kBigBasis, 64);
+    return m;
+}
+
+std::int64_t basisBytes() { return std::int64_t(kBigPoints) * 3 * kBigBasis * std::int64_t(sizeof(double)); }
+
+void BM_Reconstruct_Frame(benchmark::State& state) {
+    const Model& model = bigModel();
+    const PointMultiplier pm(model);
+    std::vector<double> coords(static_cast<size_t>(kBigBasis)), out(static_cast<size_t>(kBigPoints * 3));
+    for (Index j = 0; j < kBigBasis; ++j) coords[size_t(j)] = unit(5, std::uint64_t(j));
+    for (auto _ : state) {
+        pm.reconstruct(coords.data(), out.data());
+        benchmark::DoNotOptimize(out.data());
+        benchmark::ClobberMemory();
+    }
+    state.SetBytesProcessed(state.iterations() * basisBytes());
+}
+
+void BM_Memcpy_BasisBytes(benchmark::State& state) {
+    const size_t n = size_t(basisBytes());
+    std::vector<char> src(n, 1), dst(n, 0);
+    for (auto _ : state) {
+        std::memcpy(dst.data(), src.data(), n);
+        benchmark::DoNotOptimize(dst.data());
+        benchmark::ClobberMemory();
+    }
+    state.SetBytesProcessed(state.iterations() * std::int64_t(n));
+}
+
+}  // namespace
+
+BENCHMARK(BM_Overhead_PlainLoop)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Overhead_Graph1Thread)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Scaling_Graph)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Miss_PlainFullEvaluation)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Miss_Graph)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Reconstruct_Frame)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Memcpy_BasisBytes)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+}  // namespace pmsc::bench
