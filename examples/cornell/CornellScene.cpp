@@ -74,8 +74,12 @@ bool insideXz(const std::array<Vec3, 4>& poly, double x, double z, double margin
 }  // namespace
 
 Vec3 Quad::closestPoint(Vec3 p) const {
-    const Vec3 a = closestOnTriangle(p, corners[0], corners[1], corners[2]);
-    const Vec3 b = closestOnTriangle(p, corners[0], corners[2], corners[3]);
+    // The same two triangles Embree makes of a quad (v0 v1 v3 and v2 v3 v1): the measured left
+    // wall is not planar (its corners bend by about a millimetre), and a gather point on the
+    // other diagonal's triangles would sit behind the surface Embree traces, so every gather
+    // ray would leave through the wall's back face.
+    const Vec3 a = closestOnTriangle(p, corners[0], corners[1], corners[3]);
+    const Vec3 b = closestOnTriangle(p, corners[2], corners[3], corners[1]);
     return dot(a - p, a - p) <= dot(b - p, b - p) ? a : b;
 }
 

@@ -34,7 +34,7 @@ struct Quad {
     Rgb albedo;
     Vec3 normal;  ///< unit, pointing to the side the box's light reaches
     double area() const;
-    /// Closest point of the quad to p (as two triangles 0-1-2 and 0-2-3).
+    /// Closest point of the quad to p, on the two triangles Embree traces (0-1-3 and 2-3-1).
     Vec3 closestPoint(Vec3 p) const;
 };
 

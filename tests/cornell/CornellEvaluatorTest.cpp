@@ -135,6 +135,47 @@ TEST(CornellEvaluator, EstimatesAgreeAcrossSampleCounts) {
     }
 }
 
+TEST(CornellEvaluator, GatherPointsSitOnTheSurfaceEmbreeTraces) {
+    // A ray leaving a gather point along its normal must never hit a back face right away: that
+    // would mean the point lies behind the traced surface (the measured red wall is not planar,
+    // and a point on the other diagonal's triangles sat up to a millimetre behind it).
+    const auto world = smallWorld();
+    const auto& vox = world->voxels;
+    std::vector<Ray> rays(vox.size());
+    std::vector<Hit> hits(vox.size());
+    for (std::size_t i = 0; i < vox.size(); ++i) {
+        const Vec3 o = vox.position[i] + vox.normal[i] * 0.01;
+        rays[i] = Ray{{float(o.x), float(o.y), float(o.z)},
+                      {float(vox.normal[i].x), float(vox.normal[i].y), float(vox.normal[i].z)}, 0.0f, 1e30f};
+    }
+    world->tracer->intersect(rays, hits);
+    for (std::size_t i = 0; i < vox.size(); ++i) {
+        if (hits[i].quad < 0) continue;
+        const Quad& q = world->scene.quads()[static_cast<std::size_t>(hits[i].quad)];
+        EXPECT_LT(dot(q.normal, vox.normal[i]), 0.0) << "voxel " << i << " on " << world->scene.quads()[vox.quad[i]].name
+                                                     << " hits the back of " << q.name << " at t = " << hits[i].t;
+    }
+}
+
+TEST(CornellEvaluator, EverySurfaceReceivesIndirectLight) {
+    const auto world = smallWorld();
+    const CornellEvaluator ev(world, {{{278, 488.8, 279.6}, {1.6e5, 1.6e5, 1.6e5}}}, 32);
+    std::vector<double> v(static_cast<std::size_t>(3 * ev.pointCount()));
+    ev.evaluateAll(0, v.data());
+    const auto& quads = world->scene.quads();
+    std::vector<double> sum(quads.size(), 0.0), count(quads.size(), 0.0);
+    double all = 0;
+    for (std::size_t p = 0; p < world->voxels.size(); ++p) {
+        const double lum = v[3 * p] + v[3 * p + 1] + v[3 * p + 2];
+        sum[static_cast<std::size_t>(world->voxels.quad[p])] += lum;
+        count[static_cast<std::size_t>(world->voxels.quad[p])] += 1;
+        all += lum;
+    }
+    all /= static_cast<double>(world->voxels.size());
+    for (std::size_t q = 0; q < 5; ++q)  // the five walls
+        EXPECT_GT(sum[q] / count[q], 0.2 * all) << quads[q].name;
+}
+
 TEST(CornellEvaluator, RejectsBadFramesAndPoints) {
     const CornellEvaluator ev(smallWorld(), LightRig{}.scatteredLights(2), 4);
     double out[3];
