@@ -14,5 +14,7 @@ int runTrain(const std::vector<std::string>& args);         // cli/TrainCommand.
 int runReplay(const std::vector<std::string>& args);        // cli/ReplayCommand.cpp
 int runInspect(const std::vector<std::string>& args);       // cli/InspectCommand.cpp
 int runDemo(const std::vector<std::string>& args);          // cli/DemoCommand.cpp
+int runRun(const std::vector<std::string>& args);           // cli/RunCommand.cpp (render farm)
+int runExportFrames(const std::vector<std::string>& args);  // cli/ExportFramesCommand.cpp
 
 }  // namespace pmsc::cli
