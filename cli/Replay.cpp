@@ -1,17 +1,12 @@
 #include "cli/Replay.h"
 
+#include "engine/Engine.h"
 #include "pmsc/Training.h"  // pmsc::Cancelled
 
-#include <tbb/blocked_range.h>
-#include <tbb/global_control.h>
-#include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
-
 #include <algorithm>
-#include <chrono>
 #include <cmath>
+#include <limits>
 #include <memory>
-#include <mutex>
 
 namespace pmsc::cli {
 
@@ -71,51 +66,68 @@ ReplayFrame replayFrame(const PointMultiplier& multiplier, const SoftCachePolicy
     return row;
 }
 
+namespace {
+
+/// The serial, in-order end of a replay on the engine: measures each finished frame against
+/// the recording (the errors of the report) and writes it to the output file.
+class ReplaySink : public engine::FrameSink {
+public:
+    ReplaySink(const Model& model, const PointEvaluator& recorded, ReplayResult& result, NpyFrameWriter* out)
+        : model_(model), recorded_(recorded), result_(result), out_(out),
+          full_(static_cast<std::size_t>(model.points * model.channels)) {}
+
+    void write(const engine::FrameResult& r) override {
+        ReplayFrame& row = result_.frames[static_cast<std::size_t>(r.sequence)];
+        row.frame = r.frame;
+        row.keyRms = r.keyRmsError;
+        row.decision = CacheDecision{r.state, r.weight};
+        // The recorded frame is the reference for both errors, whatever the decision.
+        recorded_.evaluateAll(r.frame, full_.data());
+        const Index n = model_.points, c = model_.channels;
+        // Recorded frames are finite (the reader rejects NaN/Inf), so the keys are too and the
+        // engine always hands over the PM result (keepPointMultiplication).
+        row.pmMaxPointError = r.pmValues.empty() ? std::numeric_limits<double>::quiet_NaN()
+                                                 : maxPointError(r.pmValues.data(), full_.data(), n, c);
+        row.softMaxPointError = maxPointError(r.values.data(), full_.data(), n, c);
+        if (out_) out_->writeFrame(r.sequence, r.values.data());
+    }
+
+private:
+    const Model& model_;
+    const PointEvaluator& recorded_;
+    ReplayResult& result_;
+    NpyFrameWriter* out_;
+    std::vector<double> full_;
+};
+
+}  // namespace
+
 ReplayResult replay(const Model& model, const PointEvaluator& recorded, const ReplayOptions& options,
                     NpyFrameWriter* out) {
     ReplayResult result;
     result.epsMin = options.eps ? options.eps->first : model.epsMin;
     result.epsMax = options.eps ? options.eps->second : model.epsMax;
-    const SoftCachePolicy policy(result.epsMin, result.epsMax);
-    const PointMultiplier multiplier(model);
     const Index frames = recorded.frameCount();
     result.frames.resize(static_cast<std::size_t>(frames));
 
-    std::unique_ptr<tbb::global_control> limit;
-    if (options.threads > 0)
-        limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
-                                                      static_cast<std::size_t>(options.threads));
-    result.threads =
-        static_cast<int>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
-
-    std::atomic<Index> done{0};
-    std::atomic<bool> stopped{false};
-    std::mutex progressMutex;
-    const auto start = std::chrono::steady_clock::now();
-    // Grain 1: frames are large (a whole frame's reconstruction each), so per-frame tasks
-    // balance hits against the costlier blends and misses.
-    tbb::parallel_for(tbb::blocked_range<Index>(0, frames, 1), [&](const tbb::blocked_range<Index>& range) {
-        ReplayScratch scratch(model);
-        std::vector<double> soft(scratch.pm.size());
-        for (Index f = range.begin(); f != range.end(); ++f) {
-            if (options.cancel && options.cancel->load(std::memory_order_relaxed)) {
-                stopped = true;
-                return;
-            }
-            result.frames[static_cast<std::size_t>(f)] =
-                replayFrame(multiplier, policy, recorded, f, scratch, soft.data());
-            if (out) out->writeFrame(f, soft.data());
-            const Index now = ++done;
-            if (options.progress) {
-                std::unique_lock lock(progressMutex, std::try_to_lock);
-                if (lock.owns_lock()) options.progress(now, frames);
-            }
-        }
-    });
-    result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    if (stopped)
-        throw Cancelled("replay interrupted after " + std::to_string(done.load()) + " of " +
-                        std::to_string(frames) + " frames");
+    // The frames stream through the evaluation engine (issue 3): key values, projection, the
+    // soft-cache decision, PM reconstruction or the (chunked, parallel) fail-through, in frame
+    // order to the sink. Its output is the same, bit for bit, as replayFrame() computes, and
+    // does not depend on the thread count.
+    engine::EngineOptions engineOptions;
+    engineOptions.threads = options.threads;
+    engineOptions.policy = SoftCachePolicy(result.epsMin, result.epsMax);
+    engineOptions.keepPointMultiplication = true;  // the report needs PM's error on every frame
+    engineOptions.cancel = options.cancel;
+    if (options.progress) {
+        engineOptions.progress = [&](const engine::Progress& p) { options.progress(p.framesDone, p.framesTotal); };
+    }
+    engine::Engine engine(model, recorded, std::move(engineOptions));
+    ReplaySink sink(model, recorded, result, out);
+    // pmsc::Cancelled (interrupt) and pmsc::EvaluatorError propagate unchanged.
+    const engine::RunStats stats = engine.run({0, frames, 1}, sink);
+    result.threads = stats.threads;
+    result.seconds = stats.wallSeconds;
     return result;
 }
 

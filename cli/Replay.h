@@ -29,7 +29,7 @@ struct ReplayFrame {
 struct ReplayOptions {
     /// Overrides the model's [eps_min, eps_max] (`--eps`).
     std::optional<std::pair<double, double>> eps;
-    /// Worker threads (tbb::global_control); 0 = every core. Results do not depend on it.
+    /// Worker threads (the engine's task arena); 0 = every core. Results do not depend on it.
     int threads = 0;
     /// Set by another thread (SIGINT) to stop; replay() then throws pmsc::Cancelled.
     const std::atomic<bool>* cancel = nullptr;
@@ -64,7 +64,7 @@ struct ReplayScratch {
 ReplayFrame replayFrame(const PointMultiplier& multiplier, const SoftCachePolicy& policy,
                         const PointEvaluator& recorded, Index frame, ReplayScratch& scratch, double* out);
 
-/// Replays every frame of `recorded`, in parallel over frames (tbb::parallel_for),
+/// Replays every frame of `recorded` on the evaluation engine (engine/Engine.h),
 /// writing each soft-cached frame to `out` when given.
 /// @pre recorded's N and C equal the model's (the command checks and names the files).
 /// @throws std::invalid_argument for bad eps; pmsc::Cancelled when options.cancel is raised.
