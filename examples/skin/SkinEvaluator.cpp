@@ -265,8 +265,12 @@ std::unique_ptr<SkinEvaluator::Data> SkinEvaluator::load(const SkinOptions& opti
     Assimp::Importer importer;
     const aiScene* scene =
         importer.ReadFile(options.path, aiProcess_Triangulate | aiProcess_ValidateDataStructure);
-    if (!scene || !scene->mRootNode || (scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE))
-        throw InputError(where + "Assimp cannot read it: " + oneLine(importer.GetErrorString()));
+    if (scene && scene->mNumMeshes == 0)  // Assimp flags such a scene incomplete, without a message
+        throw InputError(where + "has no vertices (no mesh in the scene)");
+    if (!scene || !scene->mRootNode || (scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE)) {
+        std::string why = oneLine(importer.GetErrorString());
+        throw InputError(where + "Assimp cannot read it: " + (why.empty() ? "incomplete scene" : why));
+    }
 
     // --- animation ---------------------------------------------------------------------------------
     if (scene->mNumAnimations == 0) throw InputError(where + "has no animation to pose");

@@ -21,6 +21,8 @@
 #include <thread>
 #include <vector>
 
+#include <unistd.h>
+
 namespace fs = std::filesystem;
 using pmsc::Index;
 using pmsc::skin::SkinEvaluator;
@@ -44,13 +46,20 @@ std::string testModel(const std::string& relative) {
     if (var.empty()) GTEST_SKIP() << "assimp-testmodels not installed (" rel " not found); " \
                                      "install the Debian package assimp-testmodels";
 
-fs::path tempDir() {
-    fs::path d = fs::temp_directory_path() /
-                 ("pmsc-skin-test-" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) + "-" +
-                  ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::create_directories(d);
-    return d;
-}
+// A fresh folder per test, removed when the test ends.
+struct ScratchDir {
+    fs::path path = fs::temp_directory_path() /
+                    ("pmsc-skin-test-" + std::to_string(::getpid()) + "-" +
+                     ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    ScratchDir() {
+        fs::remove_all(path);
+        fs::create_directories(path);
+    }
+    ~ScratchDir() {
+        std::error_code ec;
+        fs::remove_all(path, ec);
+    }
+};
 
 // --- a tiny glTF writer: a buffer of little-endian floats/shorts, base64 data URI -----------------
 
@@ -176,7 +185,8 @@ std::vector<double> evaluateAll(const SkinEvaluator& e, Index frame) {
 // ------------------------------------------------------------------------------------------------
 
 TEST(SkinEvaluator, LinearBlendSkinningMatchesHandComputedPoses) {
-    const fs::path dir = tempDir();
+    const ScratchDir scratch;
+    const fs::path& dir = scratch.path;
     SkinOptions o;
     o.path = writeTwoJointRig(dir);
     o.fps = 4;  // frames at 0, 0.25, ..., 1 s
@@ -213,7 +223,8 @@ TEST(SkinEvaluator, LinearBlendSkinningMatchesHandComputedPoses) {
 }
 
 TEST(SkinEvaluator, MorphTargetsBlendByAnimatedWeights) {
-    const fs::path dir = tempDir();
+    const ScratchDir scratch;
+    const fs::path& dir = scratch.path;
     SkinOptions o;
     o.path = writeMorphTriangle(dir);
     o.fps = 4;
@@ -234,7 +245,8 @@ TEST(SkinEvaluator, MorphTargetsBlendByAnimatedWeights) {
 }
 
 TEST(SkinEvaluator, FramesOutsideTheAnimationAndBadPointsThrow) {
-    const fs::path dir = tempDir();
+    const ScratchDir scratch;
+    const fs::path& dir = scratch.path;
     SkinOptions o;
     o.path = writeTwoJointRig(dir);
     SkinEvaluator e(o);
@@ -248,7 +260,8 @@ TEST(SkinEvaluator, FramesOutsideTheAnimationAndBadPointsThrow) {
 }
 
 TEST(SkinEvaluator, UnreadableAssetsAreInputErrorsOnOneLine) {
-    const fs::path dir = tempDir();
+    const ScratchDir scratch;
+    const fs::path& dir = scratch.path;
     auto message = [](const std::string& path) {
         try {
             SkinOptions o;
@@ -274,6 +287,19 @@ TEST(SkinEvaluator, UnreadableAssetsAreInputErrorsOnOneLine) {
     std::ofstream(still) << "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
     const std::string s = message(still.string());
     EXPECT_NE(s.find("has no animation"), std::string::npos) << s;
+
+    // An animated node and no mesh at all: nothing to evaluate.
+    GltfBuffer b;
+    const int in = b.add(std::vector<float>{0, 1}, 5126, "SCALAR", 2, ",\"min\":[0],\"max\":[1]");
+    const int out = b.add(std::vector<float>{0, 0, 0, 1, 0, 0}, 5126, "VEC3", 2);
+    const fs::path empty = dir / "no-vertices.gltf";
+    std::ofstream(empty) << b.json(
+        "\"scene\":0,\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"name\":\"empty\"}],"
+        "\"animations\":[{\"channels\":[{\"sampler\":0,\"target\":{\"node\":0,\"path\":\"translation\"}}],"
+        "\"samplers\":[{\"input\":" + std::to_string(in) + ",\"output\":" + std::to_string(out) + "}]}]");
+    const std::string e = message(empty.string());
+    EXPECT_NE(e.find("has no vertices"), std::string::npos) << e;
+    EXPECT_EQ(e.find('\n'), std::string::npos) << e;
 }
 
 TEST(SkinEvaluator, ParsesOptionsFromTheEndOfTheSpec) {
@@ -389,7 +415,8 @@ TEST(SkinEvaluatorOnTestModels, AssetWithoutAnimationIsRejected) {
 // --- .obj frames --------------------------------------------------------------------------------------
 
 TEST(ObjFrameWriter, RoundTripsValuesExactlyAndRejectsDamagedFiles) {
-    const fs::path dir = tempDir();
+    const ScratchDir scratch;
+    const fs::path& dir = scratch.path;
     const std::vector<std::int64_t> tris{0, 1, 2, 1, 3, 2};
     pmsc::skin::ObjFrameWriter w(4, &tris);
     EXPECT_EQ(w.extension(), ".obj");
