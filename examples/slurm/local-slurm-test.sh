@@ -82,7 +82,7 @@ cleanup() {
   [ -n "$watchdog" ] && kill "$watchdog" 2>/dev/null
   stop_daemons
   if ((status != 0 && status != 77)); then
-    for f in "$work"/log/*.log "$work"/munge/munged.log; do
+    for f in "$work"/logs/*.log "$work"/log/*.log "$work"/munge/munged.log; do
       [ -f "$f" ] && { echo "--- tail of $f"; tail -n 15 "$f"; }
     done >&2
   fi
@@ -107,7 +107,7 @@ if [ -n "$asset" ]; then
   timeout "$(left)" "$pmsc" export-frames "$evaluator" --out "$work/train.npy" || fail "pmsc export-frames"
   # shellcheck disable=SC2086
   timeout "$(left)" "$pmsc" train --frames "$work/train.npy" --out "$work/model.pmsc" $trainOptions >"$work/logs/train.log" 2>&1 ||
-    fail "pmsc train (see $work/logs/train.log)"
+    fail "pmsc train"
   model=$work/model.pmsc
   if [ -z "$frames" ]; then
     count=$(head -c 256 "$work/train.npy" | tr -d '\0' | grep -ao "'shape': *([0-9]*" | grep -o '[0-9]*$')
@@ -189,7 +189,7 @@ done
 say "local reference run: frames $frames"
 # Every core here, one per task on the farm: the frames must not depend on it.
 timeout "$(left)" "$pmsc" run --model "$model" --evaluator "$evaluator" --frames "$frames" \
-  --out "$work/local" >"$work/logs/local.log" 2>&1 || fail "local pmsc run (see logs/local.log)"
+  --out "$work/local" >"$work/logs/local.log" 2>&1 || fail "local pmsc run"
 
 # --- the array job --------------------------------------------------------------------------------------
 job=$(timeout 20 sbatch --parsable --array="0-$((tasks - 1))%$parallel" --cpus-per-task=1 \
