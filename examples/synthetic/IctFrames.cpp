@@ -132,7 +132,17 @@ IctRig loadIctRig(const std::string& folder) {
     return rig;
 }
 
-FrameSet poseIctFrames(const IctRig& rig, Index frames, unsigned seed) {
+FrameSet poseIctFrames(const IctRig& rig, Index frames, unsigned seed,
+                       const std::vector<std::string>& without) {
+    std::vector<char> held(rig.shapes.size(), 0);
+    for (const auto& name : without) {
+        const auto it = std::find_if(rig.shapes.begin(), rig.shapes.end(),
+                                     [&](const IctRig::Shape& s) { return s.name == name; });
+        if (it == rig.shapes.end())
+            throw InputError("no blendshape '" + name +
+                             "' in the rig (jawOpen is the hinge, not a blendshape)");
+        held[static_cast<std::size_t>(it - rig.shapes.begin())] = 1;
+    }
     FrameSet out(frames, rig.points, 3);
     std::mt19937_64 rng(0x1C7FACEull ^ (static_cast<std::uint64_t>(seed) * 0x9E3779B97F4A7C15ull));
     std::uniform_real_distribution<double> threshold(0.0, 0.45), gain(1.5, 2.5);
@@ -157,6 +167,7 @@ FrameSet poseIctFrames(const IctRig& rig, Index frames, unsigned seed) {
         Eigen::Map<Eigen::VectorXd> x(out.frame(f), 3 * rig.points);
         x = rig.neutral;
         for (std::size_t s = 0; s < rig.shapes.size(); ++s) {
+            if (held[s]) continue;
             const Curve& c = curves[s];
             const double signal = 0.75 * (*c.common)(t) + 0.25 * c.own(t);
             const double w = std::clamp(c.gain * (signal - c.threshold), 0.0, 1.0);

@@ -47,6 +47,11 @@ IctRig loadIctRig(const std::string& folder);
 /// right pairs mostly move together) and a jaw opening between 0 and 1: point
 /// positions, shape (frames, N, 3). Deterministic for a seed; different seeds
 /// give different motion of the same rig.
-FrameSet poseIctFrames(const IctRig& rig, Index frames, unsigned seed);
+/// @param without blendshapes held at 0 (e.g. train without "mouthPucker", then test
+///        with it: a control the training set never exercised, section 5). The curves
+///        of the others do not change.
+/// @throws InputError for a name in `without` that is not a blendshape of the rig.
+FrameSet poseIctFrames(const IctRig& rig, Index frames, unsigned seed,
+                       const std::vector<std::string>& without = {});
 
 }  // namespace pmsc::synthetic

@@ -1,4 +1,5 @@
 // pmsc_ict_frames --data DIR --out F.npy --frames N --seed S [--dtype float32|float64]
+//                 [--without SHAPE,SHAPE...]
 //
 // Poses the ICT FaceKit meshes (blendshapes + a rotational jaw, IctFrames.h) into a frames file
 // for `pmsc train` / `pmsc replay`. The folder is always an argument: users clone ICT-FaceKit
@@ -12,6 +13,7 @@
 #include <cstdlib>
 #include <exception>
 #include <string>
+#include <vector>
 
 namespace {
 
@@ -19,7 +21,7 @@ int usage(const char* why) {
     std::fprintf(
         stderr,
         "pmsc_ict_frames: %s\nusage: pmsc_ict_frames --data ICT_FACEKIT_DIR --out FRAMES.npy --frames N "
-        "--seed S [--dtype float32|float64]\n",
+        "--seed S [--dtype float32|float64] [--without SHAPE,...]\n",
         why);
     return 2;
 }
@@ -28,6 +30,7 @@ int usage(const char* why) {
 
 int main(int argc, char** argv) {
     std::string data, out, dtype = "float32";
+    std::vector<std::string> without;
     long frames = 0;
     long long seed = -1;
     for (int i = 1; i < argc; ++i) {
@@ -43,6 +46,13 @@ int main(int argc, char** argv) {
             data = v;
         } else if (a == "--out") {
             out = v;
+        } else if (a == "--without") {
+            for (std::size_t start = 0;;) {
+                const auto comma = v.find(',', start);
+                without.push_back(v.substr(start, comma - start));
+                if (comma == std::string::npos) break;
+                start = comma + 1;
+            }
         } else if (a == "--dtype") {
             dtype = v;
         } else if (a == "--frames") {
@@ -62,7 +72,7 @@ int main(int argc, char** argv) {
     try {
         const auto start = std::chrono::steady_clock::now();
         const auto rig = pmsc::synthetic::loadIctRig(data);
-        const auto set = pmsc::synthetic::poseIctFrames(rig, frames, static_cast<unsigned>(seed));
+        const auto set = pmsc::synthetic::poseIctFrames(rig, frames, static_cast<unsigned>(seed), without);
         pmsc::writeFrames(out, set, dtype == "float32" ? pmsc::NpyDtype::Float32 : pmsc::NpyDtype::Float64);
         const double seconds =
             std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
