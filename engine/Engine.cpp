@@ -18,6 +18,7 @@
 
 #include <algorithm>
 #include <array>
+#include <span>
 #include <chrono>
 #include <string>
 #include <thread>
@@ -191,6 +192,7 @@ struct Engine::Impl {
     int threads;
     Index maxInFlight;
     tbb::task_arena arena;
+    std::vector<std::unique_ptr<FrameSlot>> pool;  ///< frame slots, reused run after run
 #if defined(__SANITIZE_THREAD__)
     TsanWorkerObserver tsanObserver{arena};
 #endif
@@ -286,13 +288,15 @@ RunStats Engine::Impl::run(FrameRange range, FrameSink& sink) {
         return last;
     }
 
-    // The frame buffers are the tokens: maxInFlight of them, allocated once, recycled.
-    std::vector<std::unique_ptr<FrameSlot>> slots;
+    // The frame buffers are the tokens: at most maxInFlight of them, allocated on the first run
+    // that needs them and kept by the engine, so repeated runs (a render farm's chunks) neither
+    // allocate nor page-fault frame buffers again.
     const Index slotCount = std::min(maxInFlight, range.count);
-    for (Index i = 0; i < slotCount; ++i) {
-        slots.push_back(std::make_unique<FrameSlot>(plan, model.keyCount(), model.basisSize(),
-                                                    options.keepPointMultiplication));
+    while (Index(pool.size()) < slotCount) {
+        pool.push_back(std::make_unique<FrameSlot>(plan, model.keyCount(), model.basisSize(),
+                                                   options.keepPointMultiplication));
     }
+    const std::span<const std::unique_ptr<FrameSlot>> slots(pool.data(), size_t(slotCount));
 
     const nodes::KeyPointEvaluator keysBody(model, evaluator);
     const nodes::Projector projectBody(pm);

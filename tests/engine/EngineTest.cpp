@@ -343,13 +343,19 @@ TEST(EngineMemory, HundredThousandFramesRunInBoundedMemory) {
     o.threads = 2;
     o.maxFramesInFlight = 4;
     o.policy = testing::syntheticPolicy(model, evaluator);
-    Engine engine(model, evaluator, o);
     CheckingSink sink(&evaluator, false);
-    RunStats stats;
-    withWatchdog(300, "100k frames", [&] { stats = engine.run({0, 100000, 1}, sink); });
-    EXPECT_EQ(stats.framesDelivered, 100000);
-    EXPECT_LE(sink.peakLiveSlots, 4) << "frame buffers grew with the range";
-    EXPECT_LE(evaluator.peakInFlight(), 4);
+    {
+        Engine engine(model, evaluator, o);
+        RunStats stats;
+        withWatchdog(300, "100k frames", [&] { stats = engine.run({0, 100000, 1}, sink); });
+        EXPECT_EQ(stats.framesDelivered, 100000);
+        EXPECT_LE(sink.peakLiveSlots, 4) << "frame buffers grew with the range";
+        EXPECT_LE(evaluator.peakInFlight(), 4);
+        // A second run reuses the engine's buffers.
+        CheckingSink second(&evaluator, false);
+        withWatchdog(60, "second run", [&] { engine.run({0, 1000, 1}, second); });
+        EXPECT_EQ(nodes::FrameSlot::liveCount(), 4);
+    }
     EXPECT_EQ(nodes::FrameSlot::liveCount(), 0);
 }
 
