@@ -86,8 +86,10 @@ IctRig loadIctRig(const std::string& folder) {
     }
     if (jawOpen.empty()) throw InputError(folder + ": no jawOpen.obj (needed for the jaw hinge)");
 
-    // Fit the hinge: d = alpha e_x x (p - c) gives d_y = -alpha p_z + alpha c_z and
-    // d_z = alpha p_y - alpha c_y, linear in (alpha, alpha c_z, alpha c_y).
+    // Fit the hinge over the vertices that move most (the rigid part of the jaw): a rotation
+    // about the x axis through c maps (y, z) to R (y, z) + (I - R) c, which is linear in
+    // (cos, sin, t_y, t_z) with t = (I - R) c: y' = cos y - sin z + t_y, z' = sin y + cos z + t_z.
+    // Exact for a rigid rotation, unlike a tangent (small-angle) fit.
     std::vector<double> moved(static_cast<std::size_t>(rig.points));
     double most = 0;
     for (Index p = 0; p < rig.points; ++p) {
@@ -100,26 +102,33 @@ IctRig loadIctRig(const std::string& folder) {
     std::vector<Index> fit;
     for (Index p = 0; p < rig.points; ++p)
         if (moved[static_cast<std::size_t>(p)] >= 0.5 * most) fit.push_back(p);
-    Eigen::MatrixXd a(2 * static_cast<Index>(fit.size()), 3);
+    Eigen::MatrixXd a(2 * static_cast<Index>(fit.size()), 4);
     Eigen::VectorXd b(a.rows());
     for (std::size_t i = 0; i < fit.size(); ++i) {
         const Index p = fit[i];
         const Index r = 2 * static_cast<Index>(i);
-        a.row(r) << -neutral[3 * p + 2], 1, 0;
-        b[r] = jawOpen[3 * p + 1] - neutral[3 * p + 1];
-        a.row(r + 1) << neutral[3 * p + 1], 0, -1;
-        b[r + 1] = jawOpen[3 * p + 2] - neutral[3 * p + 2];
+        const double y = neutral[3 * p + 1], z = neutral[3 * p + 2];
+        a.row(r) << y, -z, 1, 0;
+        b[r] = jawOpen[3 * p + 1];
+        a.row(r + 1) << z, y, 0, 1;
+        b[r + 1] = jawOpen[3 * p + 2];
     }
-    const Eigen::Vector3d u = a.colPivHouseholderQr().solve(b);
-    rig.jawAngle = u[0];
-    rig.jawPivotYZ = Eigen::Vector2d(u[2] / u[0], u[1] / u[0]);
+    const Eigen::Vector4d u = a.colPivHouseholderQr().solve(b);
+    rig.jawAngle = std::atan2(u[1], u[0]);
+    Eigen::Matrix2d rotation;
+    rotation << std::cos(rig.jawAngle), -std::sin(rig.jawAngle), std::sin(rig.jawAngle),
+        std::cos(rig.jawAngle);
+    if (std::abs(rig.jawAngle) < 1e-9) throw InputError(folder + "/jawOpen.obj: the jaw does not rotate");
+    rig.jawPivotYZ = (Eigen::Matrix2d::Identity() - rotation).inverse() * Eigen::Vector2d(u[2], u[3]);
+    // A vertex's weight: the fraction of the full rotation's chord it travels.
+    const double chordPerLever = 2 * std::abs(std::sin(0.5 * rig.jawAngle));
     for (Index p = 0; p < rig.points; ++p) {
         const double lever =
             std::hypot(neutral[3 * p + 1] - rig.jawPivotYZ[0], neutral[3 * p + 2] - rig.jawPivotYZ[1]);
-        const double arc = std::abs(rig.jawAngle) * lever;
-        if (moved[static_cast<std::size_t>(p)] < 1e-9 || arc < 1e-9) continue;
+        const double chord = chordPerLever * lever;
+        if (moved[static_cast<std::size_t>(p)] < 1e-9 || chord < 1e-9) continue;
         rig.jawVertices.push_back(p);
-        rig.jawWeights.push_back(std::min(1.0, moved[static_cast<std::size_t>(p)] / arc));
+        rig.jawWeights.push_back(std::min(1.0, moved[static_cast<std::size_t>(p)] / chord));
     }
 
     Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;

@@ -18,10 +18,11 @@ namespace pmsc::synthetic {
 ///
 /// The jaw is not the linear jawOpen blendshape but a rotation about a hinge,
 /// which is what makes the data nonlinear in the animation controls (section 2):
-/// the hinge (an axis along x through a point fitted in the y-z plane) and each
-/// vertex's skin weight are derived from the jawOpen delta, by least squares
-/// fitting d_p = alpha * e_x x (p - c) over the vertices that move most, then
-/// weight_p = |d_p| / (alpha * |e_x x (p - c)|) clamped to [0, 1].
+/// the hinge (an axis along x through a point c fitted in the y-z plane) and each
+/// vertex's skin weight are derived from the jawOpen delta: a least-squares fit
+/// of the rigid rotation jawOpen = c + R(alpha)(neutral - c) over the vertices
+/// that move most, then weight_p = |d_p| / (2 |sin(alpha/2)| |p - c|) (the
+/// fraction of the full rotation's chord the vertex travels), clamped to [0, 1].
 struct IctRig {
     Index points = 0;
     Eigen::VectorXd neutral;  ///< 3N, point-major
