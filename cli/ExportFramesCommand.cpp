@@ -43,17 +43,21 @@ int runExportFrames(const std::vector<std::string>& args) {
                      ".npy file for `pmsc train`. SPEC is an evaluator (skin:ASSET[:fps=F][:animation=A],\n"
                      "face:DIR, cornell, replay:FILE.npy); a plain ASSET path means skin:ASSET. The file\n"
                      "appears only when complete. Default frames: all the evaluator has.");
-    parser.positional("SPEC|ASSET", "evaluator spec or animated asset (glTF 2, FBX, Collada, X, BVH, ...)", spec);
+    parser.positional("SPEC|ASSET", "evaluator spec or animated asset (glTF 2, FBX, Collada, X, BVH, ...)",
+                      spec);
     parser.option("--out", "FRAMES.npy", "frames file to write", outPath, true);
     parser.option("--frames", "A-B[:STEP]", "frames to export (default: all)", framesText);
     parser.option("--dtype", "float64|float32", "element type (default float64)", dtype);
-    parser.option("--threads", "T", "worker threads (default: every core; the file does not depend on it)",
-                  [&](const std::string& v) { threads = static_cast<int>(parseIndex("--threads", v, 1, 4096)); });
+    parser.option(
+        "--threads", "T", "worker threads (default: every core; the file does not depend on it)",
+        [&](const std::string& v) { threads = static_cast<int>(parseIndex("--threads", v, 1, 4096)); });
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
     NpyDtype type = NpyDtype::Float64;
-    if (dtype == "float32") type = NpyDtype::Float32;
-    else if (dtype != "float64") parser.fail("--dtype: expected float64 or float32, got '" + dtype + "'");
+    if (dtype == "float32")
+        type = NpyDtype::Float32;
+    else if (dtype != "float64")
+        parser.fail("--dtype: expected float64 or float32, got '" + dtype + "'");
 
     spec = specOrAsset(spec);
     const std::unique_ptr<PointEvaluator> evaluator = makeEvaluator(spec);
@@ -89,7 +93,8 @@ int runExportFrames(const std::vector<std::string>& args) {
                 } catch (const InputError&) {
                     throw;
                 } catch (const std::exception& e) {
-                    throw EvaluatorError("frame " + std::to_string(frame) + ": " + evaluator->name() + ": " + e.what());
+                    throw EvaluatorError("frame " + std::to_string(frame) + ": " + evaluator->name() + ": " +
+                                         e.what());
                 }
                 writer.writeFrame(i, buffer.data());
                 const Index d = ++done;

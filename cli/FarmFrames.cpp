@@ -29,13 +29,13 @@ FrameSpan parseFrameSpan(const std::string& option, const std::string& text) {
     static const std::regex pattern(R"(^(\d+)(?:-(\d+))?(?::(\d+))?$)");
     std::smatch m;
     if (!std::regex_match(text, m, pattern))
-        throw UsageError(option + ": expected FIRST-LAST[:STEP] (for example 0-99 or 0-99:2), got '" + text + "'");
+        throw UsageError(option + ": expected FIRST-LAST[:STEP] (for example 0-99 or 0-99:2), got '" + text +
+                         "'");
     FrameSpan s;
     s.first = parseIndex(option, m[1].str());
     s.last = m[2].matched ? parseIndex(option, m[2].str()) : s.first;
     s.step = m[3].matched ? parseIndex(option, m[3].str(), 1) : 1;
-    if (s.last < s.first)
-        throw UsageError(option + ": the range " + text + " ends before it starts");
+    if (s.last < s.first) throw UsageError(option + ": the range " + text + " ends before it starts");
     // Keep `last` on the grid, so count() and text() agree with what runs.
     s.last = s.first + (s.last - s.first) / s.step * s.step;
     return s;
@@ -65,8 +65,8 @@ void fsyncPath(const std::string& path, bool directory) {
 }  // namespace
 
 FrameOutput::FrameOutput(std::string dir, const std::string& format,
-                         std::vector<std::shared_ptr<const FrameWriter>> writers, Index points, Index channels,
-                         NpyDtype dtype)
+                         std::vector<std::shared_ptr<const FrameWriter>> writers, Index points,
+                         Index channels, NpyDtype dtype)
     : dir_(std::move(dir)), points_(points), channels_(channels), dtype_(dtype) {
     if (format == "npy") {
         extension_ = ".npy";
@@ -84,7 +84,9 @@ FrameOutput::FrameOutput(std::string dir, const std::string& format,
     throw UsageError("--format: this evaluator writes " + offered + ", not '" + format + "'");
 }
 
-std::string FrameOutput::path(Index frame) const { return (fs::path(dir_) / frameName(frame, extension_)).string(); }
+std::string FrameOutput::path(Index frame) const {
+    return (fs::path(dir_) / frameName(frame, extension_)).string();
+}
 
 bool FrameOutput::isValid(Index frame) const {
     const std::string p = path(frame);
@@ -93,7 +95,8 @@ bool FrameOutput::isValid(Index frame) const {
     if (writer_) return writer_->isValid(p);
     try {
         const NpyInfo info = readNpyInfo(p);  // checks the length against the shape
-        return info.frames == 1 && info.points == points_ && info.channels == channels_ && info.dtype == dtype_;
+        return info.frames == 1 && info.points == points_ && info.channels == channels_ &&
+               info.dtype == dtype_;
     } catch (const std::exception&) {
         return false;
     }
@@ -114,7 +117,8 @@ void FrameOutput::write(Index frame, const double* values) const {
     try {
         writer_->write(temp, frame, values);
         fsyncPath(temp, false);
-        if (::rename(temp.c_str(), p.c_str()) != 0) throw IoError(p + ": cannot rename into place: " + systemError(errno));
+        if (::rename(temp.c_str(), p.c_str()) != 0)
+            throw IoError(p + ": cannot rename into place: " + systemError(errno));
     } catch (const IoError&) {
         ::unlink(temp.c_str());
         throw;
@@ -141,7 +145,8 @@ Index FrameOutput::removeStaleTemporaries(const std::vector<Index>& frames) cons
 }
 
 std::vector<std::shared_ptr<const FrameWriter>> offeredWriters(const PointEvaluator& evaluator) {
-    if (const auto* provider = dynamic_cast<const FrameWriterProvider*>(&evaluator)) return provider->frameWriters();
+    if (const auto* provider = dynamic_cast<const FrameWriterProvider*>(&evaluator))
+        return provider->frameWriters();
     return {};
 }
 

@@ -108,15 +108,16 @@ RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const R
 
     // --- every check that can fail on bad input, before any work or any file -----------------------
     if (evaluator.pointCount() != model.points || evaluator.channelCount() != model.channels)
-        throw InputError("evaluator '" + options.evaluatorSpec + "' has " + std::to_string(evaluator.pointCount()) +
-                         " points x " + std::to_string(evaluator.channelCount()) + " channels, but the model " +
-                         options.modelPath + " was trained on " + std::to_string(model.points) + " points x " +
-                         std::to_string(model.channels) + " channels");
+        throw InputError("evaluator '" + options.evaluatorSpec + "' has " +
+                         std::to_string(evaluator.pointCount()) + " points x " +
+                         std::to_string(evaluator.channelCount()) + " channels, but the model " +
+                         options.modelPath + " was trained on " + std::to_string(model.points) +
+                         " points x " + std::to_string(model.channels) + " channels");
     if (span.last >= evaluator.frameCount())
         throw InputError("frames " + span.text() + " are outside the evaluator's frames 0-" +
                          std::to_string(evaluator.frameCount() - 1) + " (" + options.evaluatorSpec + ")");
-    FrameOutput output(options.outDir, options.format, offeredWriters(evaluator), model.points, model.channels,
-                       options.dtype);
+    FrameOutput output(options.outDir, options.format, offeredWriters(evaluator), model.points,
+                       model.channels, options.dtype);
     ensureWritableFolder(options.outDir);
 
     RunReport report;
@@ -158,11 +159,11 @@ RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const R
         const double elapsed = since(wallStart);
         const Index decided = report.hits + report.blends + report.misses + p.hits + p.blends + p.misses;
         char stage[160];
-        std::snprintf(stage, sizeof stage, "%lld/%lld frames, %.1f frames/s, hits %.0f%%",
-                      static_cast<long long>(done), static_cast<long long>(total),
-                      elapsed > 0 ? static_cast<double>(done) / elapsed : 0.0,
-                      decided > 0 ? 100.0 * static_cast<double>(report.hits + p.hits) / static_cast<double>(decided)
-                                  : 0.0);
+        std::snprintf(
+            stage, sizeof stage, "%lld/%lld frames, %.1f frames/s, hits %.0f%%", static_cast<long long>(done),
+            static_cast<long long>(total), elapsed > 0 ? static_cast<double>(done) / elapsed : 0.0,
+            decided > 0 ? 100.0 * static_cast<double>(report.hits + p.hits) / static_cast<double>(decided)
+                        : 0.0);
         progress.update(stage, static_cast<double>(done), static_cast<double>(total));
     };
 
@@ -193,15 +194,18 @@ RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const R
             i = j;
         }
     } catch (const Cancelled& e) {
-        status = "interrupted", error = e.what(), exitCode = kExitInterrupted, failure = std::current_exception();
+        status = "interrupted", error = e.what(), exitCode = kExitInterrupted,
+        failure = std::current_exception();
     } catch (const EvaluatorError& e) {
-        status = "evaluator failure", error = e.what(), exitCode = kExitEvaluator, failure = std::current_exception();
+        status = "evaluator failure", error = e.what(), exitCode = kExitEvaluator,
+        failure = std::current_exception();
     } catch (const IoError& e) {
         status = "io failure", error = e.what(), exitCode = kExitIo, failure = std::current_exception();
     } catch (const InputError& e) {
         status = "bad input", error = e.what(), exitCode = kExitBadInput, failure = std::current_exception();
     } catch (const std::exception& e) {
-        status = "internal error", error = e.what(), exitCode = kExitInternal, failure = std::current_exception();
+        status = "internal error", error = e.what(), exitCode = kExitInternal,
+        failure = std::current_exception();
     }
     progress.finish();
     const double engineSeconds = since(engineStart);
@@ -232,7 +236,10 @@ RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const R
     j["evaluator"] = options.evaluatorSpec;
     j["points"] = model.points;
     j["channels"] = model.channels;
-    j["frames"] = {{"range", span.text()}, {"first", span.first}, {"last", span.last}, {"step", span.step},
+    j["frames"] = {{"range", span.text()},
+                   {"first", span.first},
+                   {"last", span.last},
+                   {"step", span.step},
                    {"count", span.count()}};
     j["out"] = options.outDir;
     j["format"] = output.extension().substr(1);
@@ -245,8 +252,11 @@ RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const R
     j["hits"] = report.hits;
     j["blends"] = report.blends;
     j["misses"] = report.misses;
-    j["hit_rate"] = report.evaluated > 0 ? static_cast<double>(report.hits) / static_cast<double>(report.evaluated) : 0.0;
-    j["seconds"] = {{"wall", report.seconds}, {"scan", scanSeconds}, {"engine", engineSeconds},
+    j["hit_rate"] =
+        report.evaluated > 0 ? static_cast<double>(report.hits) / static_cast<double>(report.evaluated) : 0.0;
+    j["seconds"] = {{"wall", report.seconds},
+                    {"scan", scanSeconds},
+                    {"engine", engineSeconds},
                     {"write", sink.writeSeconds}};
     j["frames_per_second"] = engineSeconds > 0 ? static_cast<double>(report.evaluated) / engineSeconds : 0.0;
     j["engine_runs"] = std::move(engineRuns);
@@ -295,17 +305,19 @@ int runRun(const std::vector<std::string>& args) {
         "DIR/pmsc-run.A-B.json. Exit codes: 0 ok, 2 bad input, 3 evaluator failure, 4 cannot write\n"
         "output, 130 interrupted (SIGINT/SIGTERM: finished frames are kept).");
     parser.option("--model", "MODEL.pmsc", "model from pmsc train", o.modelPath, true);
-    parser.option("--evaluator", "NAME[:ARGS]", "replay:FILE.npy, skin:ASSET, face:DIR, cornell", o.evaluatorSpec,
-                  true);
+    parser.option("--evaluator", "NAME[:ARGS]", "replay:FILE.npy, skin:ASSET, face:DIR, cornell",
+                  o.evaluatorSpec, true);
     parser.option("--frames", "A-B[:STEP]", "the frames of this task", framesText, true);
     parser.option("--out", "DIR", "output folder (created if missing)", o.outDir, true);
-    parser.option("--threads", "T", "worker threads (default: every core; outputs do not depend on it)",
-                  [&](const std::string& v) { o.threads = static_cast<int>(parseIndex("--threads", v, 1, 4096)); });
-    parser.option("--format", "npy|obj|vdb", "frame file format (default npy; others if the evaluator offers them)",
-                  o.format);
+    parser.option(
+        "--threads", "T", "worker threads (default: every core; outputs do not depend on it)",
+        [&](const std::string& v) { o.threads = static_cast<int>(parseIndex("--threads", v, 1, 4096)); });
+    parser.option("--format", "npy|obj|vdb",
+                  "frame file format (default npy; others if the evaluator offers them)", o.format);
     parser.option("--dtype", "float64|float32", ".npy element type (default float64)", dtype);
     parser.option("--stats", "FILE.json", "stats file (default DIR/pmsc-run.A-B.json)", o.statsPath);
-    parser.option("--log-every", "SECONDS", "progress line interval when stderr is not a terminal (default 10)",
+    parser.option("--log-every", "SECONDS",
+                  "progress line interval when stderr is not a terminal (default 10)",
                   [&](const std::string& v) { o.logSeconds = parseDouble("--log-every", v, 0.0, 1e6); });
     parser.flag("--force", "redo frames whose output already exists", o.force);
     parser.flag("--quiet", "no progress display", o.quiet);
@@ -315,9 +327,12 @@ int runRun(const std::vector<std::string>& args) {
     } catch (const UsageError& e) {
         parser.fail(e.what());
     }
-    if (dtype == "float64") o.dtype = NpyDtype::Float64;
-    else if (dtype == "float32") o.dtype = NpyDtype::Float32;
-    else parser.fail("--dtype: expected float64 or float32, got '" + dtype + "'");
+    if (dtype == "float64")
+        o.dtype = NpyDtype::Float64;
+    else if (dtype == "float32")
+        o.dtype = NpyDtype::Float32;
+    else
+        parser.fail("--dtype: expected float64 or float32, got '" + dtype + "'");
     o.commandLine = "pmsc run";
     for (const auto& a : args) o.commandLine += " " + quoteForShell(a);
     o.cancel = &interruptFlag();
@@ -326,9 +341,9 @@ int runRun(const std::vector<std::string>& args) {
     const std::unique_ptr<PointEvaluator> evaluator = makeEvaluator(o.evaluatorSpec);
     const RunReport r = runFrames(model, *evaluator, o);
 
-    std::cout << "pmsc run: frames " << o.frames.text() << " -> " << o.outDir << ": " << r.evaluated << " evaluated ("
-              << r.hits << " hits, " << r.blends << " blends, " << r.misses << " misses), " << r.skipped
-              << " skipped as done";
+    std::cout << "pmsc run: frames " << o.frames.text() << " -> " << o.outDir << ": " << r.evaluated
+              << " evaluated (" << r.hits << " hits, " << r.blends << " blends, " << r.misses << " misses), "
+              << r.skipped << " skipped as done";
     if (r.replaced) std::cout << ", " << r.replaced << " invalid redone";
     char seconds[32];
     std::snprintf(seconds, sizeof seconds, "%.2f", r.seconds);

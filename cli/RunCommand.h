@@ -13,18 +13,18 @@ namespace pmsc::cli {
 
 /// What `pmsc run` was asked to do (issue 6: render-farm use).
 struct RunOptions {
-    std::string modelPath;      ///< for the stats only (the model is passed in)
-    std::string evaluatorSpec;  ///< NAME[:ARGS], for the stats only
-    FrameSpan frames;           ///< the task's frames
-    std::string outDir;         ///< one file per frame goes here
-    std::string format = "npy"; ///< "npy" or an extension the evaluator offers ("obj", "vdb")
+    std::string modelPath;               ///< for the stats only (the model is passed in)
+    std::string evaluatorSpec;           ///< NAME[:ARGS], for the stats only
+    FrameSpan frames;                    ///< the task's frames
+    std::string outDir;                  ///< one file per frame goes here
+    std::string format = "npy";          ///< "npy" or an extension the evaluator offers ("obj", "vdb")
     NpyDtype dtype = NpyDtype::Float64;  ///< of .npy frames
-    std::string statsPath;      ///< empty: OUT/pmsc-run.<A-B>.json
-    int threads = 0;            ///< 0: every core
-    bool force = false;         ///< redo frames whose output is already valid
-    bool quiet = false;         ///< no progress display
-    double logSeconds = 10;     ///< plain progress lines this often when stderr is not a terminal
-    std::string commandLine;    ///< as typed, for the stats
+    std::string statsPath;               ///< empty: OUT/pmsc-run.<A-B>.json
+    int threads = 0;                     ///< 0: every core
+    bool force = false;                  ///< redo frames whose output is already valid
+    bool quiet = false;                  ///< no progress display
+    double logSeconds = 10;              ///< plain progress lines this often when stderr is not a terminal
+    std::string commandLine;             ///< as typed, for the stats
     const std::atomic<bool>* cancel = nullptr;  ///< set by another thread (SIGINT/SIGTERM) to stop
 };
 
@@ -36,7 +36,7 @@ struct RunReport {
     Index replaced = 0;          ///< frames whose existing output was invalid (redone)
     Index staleTemporaries = 0;  ///< temporary files of a killed run, removed
     Index hits = 0, blends = 0, misses = 0;
-    double seconds = 0;          ///< wall time of the whole run
+    double seconds = 0;  ///< wall time of the whole run
     std::string statsPath;
 };
 

@@ -8,9 +8,9 @@
 #include "examples/skin/ObjFrameWriter.h"
 #include "pmsc/Errors.h"
 
-#include <assimp/Importer.hpp>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
+#include <assimp/Importer.hpp>
 
 #include <Eigen/Geometry>
 
@@ -163,8 +163,9 @@ SkinEvaluator::Data::Pose SkinEvaluator::Data::pose(Index frame) const {
     Pose p;
     p.palette.resize(paletteNode.size());
     for (std::size_t i = 0; i < paletteNode.size(); ++i)
-        p.palette[i] = paletteNode[i] < 0 ? paletteOffset[i]
-                                          : compose(global[static_cast<std::size_t>(paletteNode[i])], paletteOffset[i]);
+        p.palette[i] = paletteNode[i] < 0
+                           ? paletteOffset[i]
+                           : compose(global[static_cast<std::size_t>(paletteNode[i])], paletteOffset[i]);
 
     p.morphWeights.resize(morphs.size());
     for (std::size_t m = 0; m < morphs.size(); ++m) {
@@ -180,7 +181,8 @@ SkinEvaluator::Data::Pose SkinEvaluator::Data::pose(Index frame) const {
         w.assign(mo.keyWeights.begin() + static_cast<std::ptrdiff_t>(s.key * T),
                  mo.keyWeights.begin() + static_cast<std::ptrdiff_t>((s.key + 1) * T));
         if (s.fraction > 0)
-            for (std::size_t i = 0; i < T; ++i) w[i] += s.fraction * (mo.keyWeights[(s.key + 1) * T + i] - w[i]);
+            for (std::size_t i = 0; i < T; ++i)
+                w[i] += s.fraction * (mo.keyWeights[(s.key + 1) * T + i] - w[i]);
     }
     return p;
 }
@@ -494,7 +496,8 @@ std::unique_ptr<SkinEvaluator::Data> SkinEvaluator::load(const SkinOptions& opti
                 }
             }
             if (!std::is_sorted(mo.keyTimes.begin(), mo.keyTimes.end()))
-                throw InputError(where + "morph channel '" + ma->mName.C_Str() + "' keys are not in time order");
+                throw InputError(where + "morph channel '" + ma->mName.C_Str() +
+                                 "' keys are not in time order");
         }
     }
     for (const auto& ch : d->channels)
@@ -527,7 +530,8 @@ void SkinEvaluator::evaluate(Index frame, std::span<const Index> points, double*
     const Index n = d.points();
     for (Index p : points)
         if (p < 0 || p >= n)
-            throw std::out_of_range("skin: point " + std::to_string(p) + " outside 0.." + std::to_string(n - 1));
+            throw std::out_of_range("skin: point " + std::to_string(p) + " outside 0.." +
+                                    std::to_string(n - 1));
     // The pose costs O(nodes + bones), independent of how many points are asked for, so a hit frame
     // that evaluates only the key points stays cheap.
     const Data::Pose pose = d.pose(frame);

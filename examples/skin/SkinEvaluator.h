@@ -13,9 +13,9 @@ namespace pmsc::skin {
 
 /// How to pose an asset: which file, which animation, how frames map to time.
 struct SkinOptions {
-    std::string path;        ///< any format Assimp reads (glTF 2, FBX, Collada, X, BVH, ...)
-    double fps = 24;         ///< frame f is posed at time f / fps seconds of the animation
-    std::string animation;   ///< animation name or index; empty = the first one (index 0)
+    std::string path;       ///< any format Assimp reads (glTF 2, FBX, Collada, X, BVH, ...)
+    double fps = 24;        ///< frame f is posed at time f / fps seconds of the animation
+    std::string animation;  ///< animation name or index; empty = the first one (index 0)
 };
 
 /// Parses the ARGS of the command line's `skin:ARGS`:

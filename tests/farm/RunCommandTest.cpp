@@ -13,6 +13,10 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
 #include <algorithm>
 #include <chrono>
 #include <csignal>
@@ -21,12 +25,8 @@
 #include <fstream>
 #include <iterator>
 #include <map>
-#include <fcntl.h>
-#include <spawn.h>
 #include <string>
-#include <sys/wait.h>
 #include <thread>
-#include <unistd.h>
 #include <vector>
 
 extern char** environ;
@@ -118,7 +118,8 @@ std::vector<std::string> listDir(const fs::path& dir) {
 
 Index countFrames(const fs::path& dir) {
     Index n = 0;
-    for (const auto& name : listDir(dir)) n += name.rfind("frame.", 0) == 0 && name.find(".tmp-") == std::string::npos;
+    for (const auto& name : listDir(dir))
+        n += name.rfind("frame.", 0) == 0 && name.find(".tmp-") == std::string::npos;
     return n;
 }
 
@@ -143,10 +144,11 @@ protected:
         fs::create_directories(root / "logs");
         model = (root / "clip.pmsc").string();
         const std::string train = (root / "train.npy").string();
-        Result e = pmscRun({"export-frames", kSpec, "--out", train, "--frames", "0-1375:4", "--quiet"}, root / "logs",
-                           "export");
+        Result e = pmscRun({"export-frames", kSpec, "--out", train, "--frames", "0-1375:4", "--quiet"},
+                           root / "logs", "export");
         ASSERT_EQ(e.code, 0) << e.err;
-        Result t = pmscRun({"train", "--frames", train, "--out", model, "--max-keys", "40"}, root / "logs", "train");
+        Result t =
+            pmscRun({"train", "--frames", train, "--out", model, "--max-keys", "40"}, root / "logs", "train");
         ASSERT_EQ(t.code, 0) << t.err;
     }
     static void TearDownTestSuite() {
@@ -156,7 +158,8 @@ protected:
     }
     void SetUp() override {
         if (!fs::exists(kClip))
-            GTEST_SKIP() << "assimp-testmodels not installed (" << kClip << " not found); install the Debian package";
+            GTEST_SKIP() << "assimp-testmodels not installed (" << kClip
+                         << " not found); install the Debian package";
         ASSERT_TRUE(fs::exists(model)) << "the suite's model was not made";
     }
 
@@ -200,17 +203,19 @@ TEST_F(FarmRun, KilledRunResumesToByteIdenticalOutputsEvaluatingOnlyMissingFrame
     EXPECT_FALSE(hasTemporaries(killed)) << "the resumed run removes the killed run's temporary file";
     Index identical = 0;
     for (const auto& name : listDir(reference))
-        if (name.rfind("frame.", 0) == 0) identical += slurp((reference / name).string()) == slurp((killed / name).string());
+        if (name.rfind("frame.", 0) == 0)
+            identical += slurp((reference / name).string()) == slurp((killed / name).string());
     EXPECT_EQ(identical, total);
 
-    std::printf("[ figures  ] SIGKILL after %lld of %lld frames written (%lld temporary file(s) left); "
-                "second run evaluated %lld, skipped %lld, removed %lld temporary; %lld/%lld frames byte-identical\n",
-                static_cast<long long>(present), static_cast<long long>(total),
-                static_cast<long long>(stats["stale_temporaries_removed"].get<Index>()),
-                static_cast<long long>(stats["frames_evaluated"].get<Index>()),
-                static_cast<long long>(stats["frames_skipped"].get<Index>()),
-                static_cast<long long>(stats["stale_temporaries_removed"].get<Index>()),
-                static_cast<long long>(identical), static_cast<long long>(total));
+    std::printf(
+        "[ figures  ] SIGKILL after %lld of %lld frames written (%lld temporary file(s) left); "
+        "second run evaluated %lld, skipped %lld, removed %lld temporary; %lld/%lld frames byte-identical\n",
+        static_cast<long long>(present), static_cast<long long>(total),
+        static_cast<long long>(stats["stale_temporaries_removed"].get<Index>()),
+        static_cast<long long>(stats["frames_evaluated"].get<Index>()),
+        static_cast<long long>(stats["frames_skipped"].get<Index>()),
+        static_cast<long long>(stats["stale_temporaries_removed"].get<Index>()),
+        static_cast<long long>(identical), static_cast<long long>(total));
     RecordProperty("killed_after_frames", static_cast<int>(present));
     RecordProperty("second_run_evaluated", static_cast<int>(stats["frames_evaluated"].get<Index>()));
 }
@@ -321,7 +326,8 @@ TEST_F(FarmRun, PlainProgressLinesWhenNotATerminal) {
 TEST_F(FarmRun, EveryBadInputHasItsExitCodeOneLineAndNoPartialFile) {
     const fs::path bad = root / "bad";
     fs::create_directories(bad);
-    const std::string corrupt = (bad / "corrupt.pmsc").string(), truncated = (bad / "truncated.pmsc").string();
+    const std::string corrupt = (bad / "corrupt.pmsc").string(),
+                      truncated = (bad / "truncated.pmsc").string();
     {
         std::string bytes = slurp(model);
         std::string flipped = bytes;
@@ -341,8 +347,15 @@ TEST_F(FarmRun, EveryBadInputHasItsExitCodeOneLineAndNoPartialFile) {
     };
     auto run = [&](const std::string& out, std::vector<std::string> extra, std::string modelPath = "",
                    std::string spec = "", std::string frames = "0-9") {
-        std::vector<std::string> a{"run", "--model", modelPath.empty() ? model : modelPath, "--evaluator",
-                                   spec.empty() ? kSpec : spec, "--frames", frames, "--out", out};
+        std::vector<std::string> a{"run",
+                                   "--model",
+                                   modelPath.empty() ? model : modelPath,
+                                   "--evaluator",
+                                   spec.empty() ? kSpec : spec,
+                                   "--frames",
+                                   frames,
+                                   "--out",
+                                   out};
         a.insert(a.end(), extra.begin(), extra.end());
         return a;
     };
@@ -369,7 +382,8 @@ TEST_F(FarmRun, EveryBadInputHasItsExitCodeOneLineAndNoPartialFile) {
         EXPECT_EQ(r.code, c.code) << c.what << ": " << r.err;
         EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << c.what << ": " << r.err;
         EXPECT_EQ(r.err.rfind("pmsc: ", 0), 0u) << c.what << ": " << r.err;
-        EXPECT_TRUE(listDir(out).empty()) << c.what << ": left " << (listDir(out).empty() ? "" : listDir(out)[0]);
+        EXPECT_TRUE(listDir(out).empty())
+            << c.what << ": left " << (listDir(out).empty() ? "" : listDir(out)[0]);
         table += "             " + c.what + " -> " + std::to_string(r.code) + "  " + r.err;
     }
     std::printf("%s", table.c_str());
@@ -380,7 +394,8 @@ TEST_F(FarmRun, ExportFramesWritesWhatRunEvaluatesAndRejectsBadInput) {
     fs::create_directories(dir);
     const std::string npy = (dir / "poses.npy").string();
     // A plain asset path means skin:ASSET (24 fps by default).
-    Result r = pmscRun({"export-frames", kClip, "--out", npy, "--frames", "5-9"}, root / "logs", "export-asset");
+    Result r =
+        pmscRun({"export-frames", kClip, "--out", npy, "--frames", "5-9"}, root / "logs", "export-asset");
     ASSERT_EQ(r.code, 0) << r.err;
     const pmsc::FrameFile f = pmsc::readFrames(npy);
     EXPECT_EQ(f.frames.frames, 5);
@@ -391,11 +406,12 @@ TEST_F(FarmRun, ExportFramesWritesWhatRunEvaluatesAndRejectsBadInput) {
                 root / "logs", "export-bad");
     EXPECT_EQ(r.code, 2);
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
-    r = pmscRun({"export-frames", kClip, "--out", (dir / "y.npy").string(), "--frames", "0-99999"}, root / "logs",
-                "export-range");
+    r = pmscRun({"export-frames", kClip, "--out", (dir / "y.npy").string(), "--frames", "0-99999"},
+                root / "logs", "export-range");
     EXPECT_EQ(r.code, 2) << r.err;
-    r = pmscRun({"export-frames", kClip, "--out", (dir / "missing-folder" / "z.npy").string(), "--frames", "0-1"},
-                root / "logs", "export-io");
+    r = pmscRun(
+        {"export-frames", kClip, "--out", (dir / "missing-folder" / "z.npy").string(), "--frames", "0-1"},
+        root / "logs", "export-io");
     EXPECT_EQ(r.code, 4) << r.err;
     EXPECT_EQ(listDir(dir), std::vector<std::string>{"poses.npy"}) << "no partial file";
 }
@@ -460,14 +476,18 @@ TEST(FarmRunCornell, VdbFramesAreWrittenSkippedWhenValidAndRedoneWhenDamaged) {
     // A small box (3000 voxels, 8 samples) keeps this a few seconds on two cores.
     const std::string spec = "cornell:points=3000,samples=8";
     const std::string train = (dir / "train.npy").string(), model = (dir / "box.pmsc").string();
-    Result r = pmscRun({"export-frames", spec, "--out", train, "--frames", "0-143:6", "--quiet"}, dir / "logs", "export");
+    Result r = pmscRun({"export-frames", spec, "--out", train, "--frames", "0-143:6", "--quiet"},
+                       dir / "logs", "export");
     if (r.code == 2 && r.err.find("unknown evaluator") != std::string::npos)
         GTEST_SKIP() << "this build has no cornell evaluator";
     ASSERT_EQ(r.code, 0) << r.err;
-    ASSERT_EQ(pmscRun({"train", "--frames", train, "--out", model, "--max-keys", "40"}, dir / "logs", "train").code, 0);
+    ASSERT_EQ(
+        pmscRun({"train", "--frames", train, "--out", model, "--max-keys", "40"}, dir / "logs", "train").code,
+        0);
 
-    const std::vector<std::string> args{"run", "--model", model, "--evaluator", spec, "--frames", "144-149",
-                                        "--out", (dir / "vdb").string(), "--format", "vdb"};
+    const std::vector<std::string> args{"run",      "--model", model,   "--evaluator",          spec,
+                                        "--frames", "144-149", "--out", (dir / "vdb").string(), "--format",
+                                        "vdb"};
     r = pmscRun(args, dir / "logs", "run1");
     ASSERT_EQ(r.code, 0) << r.err;
     EXPECT_EQ(countFrames(dir / "vdb"), 6);

@@ -41,16 +41,18 @@ std::string testModel(const std::string& relative) {
     return fs::exists(path) ? path : std::string();
 }
 
-#define REQUIRE_MODEL(var, rel)                                                               \
-    const std::string var = testModel(rel);                                                   \
-    if (var.empty()) GTEST_SKIP() << "assimp-testmodels not installed (" rel " not found); " \
-                                     "install the Debian package assimp-testmodels";
+#define REQUIRE_MODEL(var, rel)                                 \
+    const std::string var = testModel(rel);                     \
+    if (var.empty())                                            \
+        GTEST_SKIP() << "assimp-testmodels not installed (" rel \
+                        " not found); "                         \
+                        "install the Debian package assimp-testmodels";
 
 // A fresh folder per test, removed when the test ends.
 struct ScratchDir {
-    fs::path path = fs::temp_directory_path() /
-                    ("pmsc-skin-test-" + std::to_string(::getpid()) + "-" +
-                     ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::path path =
+        fs::temp_directory_path() / ("pmsc-skin-test-" + std::to_string(::getpid()) + "-" +
+                                     ::testing::UnitTest::GetInstance()->current_test_info()->name());
     ScratchDir() {
         fs::remove_all(path);
         fs::create_directories(path);
@@ -68,7 +70,8 @@ std::string base64(const std::string& bytes) {
     std::string out;
     std::size_t i = 0;
     for (; i + 2 < bytes.size(); i += 3) {
-        const auto b = (std::uint32_t(std::uint8_t(bytes[i])) << 16) | (std::uint32_t(std::uint8_t(bytes[i + 1])) << 8) |
+        const auto b = (std::uint32_t(std::uint8_t(bytes[i])) << 16) |
+                       (std::uint32_t(std::uint8_t(bytes[i + 1])) << 8) |
                        std::uint32_t(std::uint8_t(bytes[i + 2]));
         for (int k = 3; k >= 0; --k) out += table[(b >> (6 * k)) & 63];
     }
@@ -78,7 +81,8 @@ std::string base64(const std::string& bytes) {
         out += table[(b >> 12) & 63];
         out += "==";
     } else if (i + 2 == bytes.size()) {
-        const auto b = (std::uint32_t(std::uint8_t(bytes[i])) << 16) | (std::uint32_t(std::uint8_t(bytes[i + 1])) << 8);
+        const auto b =
+            (std::uint32_t(std::uint8_t(bytes[i])) << 16) | (std::uint32_t(std::uint8_t(bytes[i + 1])) << 8);
         out += table[(b >> 18) & 63];
         out += table[(b >> 12) & 63];
         out += table[(b >> 6) & 63];
@@ -92,7 +96,8 @@ struct GltfBuffer {
     std::string views, accessors;
     int count = 0;
     template <class T>
-    int add(const std::vector<T>& v, int componentType, const char* type, int elements, const std::string& minmax = "") {
+    int add(const std::vector<T>& v, int componentType, const char* type, int elements,
+            const std::string& minmax = "") {
         while (bytes.size() % 4) bytes += '\0';
         const std::size_t offset = bytes.size();
         bytes.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
@@ -102,14 +107,16 @@ struct GltfBuffer {
         }
         views += "{\"buffer\":0,\"byteOffset\":" + std::to_string(offset) +
                  ",\"byteLength\":" + std::to_string(v.size() * sizeof(T)) + "}";
-        accessors += "{\"bufferView\":" + std::to_string(count) + ",\"componentType\":" + std::to_string(componentType) +
+        accessors += "{\"bufferView\":" + std::to_string(count) +
+                     ",\"componentType\":" + std::to_string(componentType) +
                      ",\"count\":" + std::to_string(elements) + ",\"type\":\"" + type + "\"" + minmax + "}";
         return count++;
     }
     std::string json(const std::string& rest) const {
-        return "{\"asset\":{\"version\":\"2.0\"}," + rest + ",\"buffers\":[{\"byteLength\":" +
-               std::to_string(bytes.size()) + ",\"uri\":\"data:application/octet-stream;base64," + base64(bytes) +
-               "\"}],\"bufferViews\":[" + views + "],\"accessors\":[" + accessors + "]}";
+        return "{\"asset\":{\"version\":\"2.0\"}," + rest +
+               ",\"buffers\":[{\"byteLength\":" + std::to_string(bytes.size()) +
+               ",\"uri\":\"data:application/octet-stream;base64," + base64(bytes) + "\"}],\"bufferViews\":[" +
+               views + "],\"accessors\":[" + accessors + "]}";
     }
 };
 
@@ -126,7 +133,7 @@ std::string writeTwoJointRig(const fs::path& dir) {
     const std::vector<std::uint16_t> indices{0, 1, 2, 1, 3, 2};
     const int idx = b.add(indices, 5123, "SCALAR", 6);
     // glTF matrices are column-major: identity, and the inverse of translate(0,1,0).
-    const std::vector<float> ibm{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1,
+    const std::vector<float> ibm{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0,  0, 1,
                                  1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, -1, 0, 1};
     const int inv = b.add(ibm, 5126, "MAT4", 2);
     const std::vector<float> times{0, 1};
@@ -137,13 +144,16 @@ std::string writeTwoJointRig(const fs::path& dir) {
     const std::string json = b.json(
         "\"scene\":0,\"scenes\":[{\"nodes\":[0,1]}],"
         "\"nodes\":[{\"mesh\":0,\"skin\":0},{\"children\":[2]},{\"translation\":[0,1,0]}],"
-        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":" + std::to_string(pos) +
-        ",\"JOINTS_0\":" + std::to_string(jts) + ",\"WEIGHTS_0\":" + std::to_string(wts) +
-        "},\"indices\":" + std::to_string(idx) + "}]}],"
-        "\"skins\":[{\"inverseBindMatrices\":" + std::to_string(inv) + ",\"joints\":[1,2]}],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":" +
+        std::to_string(pos) + ",\"JOINTS_0\":" + std::to_string(jts) +
+        ",\"WEIGHTS_0\":" + std::to_string(wts) + "},\"indices\":" + std::to_string(idx) +
+        "}]}],"
+        "\"skins\":[{\"inverseBindMatrices\":" +
+        std::to_string(inv) +
+        ",\"joints\":[1,2]}],"
         "\"animations\":[{\"channels\":[{\"sampler\":0,\"target\":{\"node\":2,\"path\":\"rotation\"}}],"
-        "\"samplers\":[{\"input\":" + std::to_string(in) + ",\"output\":" + std::to_string(out) +
-        ",\"interpolation\":\"LINEAR\"}]}]");
+        "\"samplers\":[{\"input\":" +
+        std::to_string(in) + ",\"output\":" + std::to_string(out) + ",\"interpolation\":\"LINEAR\"}]}]");
     const fs::path path = dir / "two-joint-rig.gltf";
     std::ofstream(path) << json;
     return path.string();
@@ -164,11 +174,12 @@ std::string writeMorphTriangle(const fs::path& dir) {
     const std::string json = b.json(
         "\"scene\":0,\"scenes\":[{\"nodes\":[0]}],"
         "\"nodes\":[{\"mesh\":0,\"name\":\"lifted\",\"translation\":[2,0,0]}],"
-        "\"meshes\":[{\"weights\":[0],\"primitives\":[{\"attributes\":{\"POSITION\":" + std::to_string(pos) +
-        "},\"targets\":[{\"POSITION\":" + std::to_string(target) + "}]}]}],"
+        "\"meshes\":[{\"weights\":[0],\"primitives\":[{\"attributes\":{\"POSITION\":" +
+        std::to_string(pos) + "},\"targets\":[{\"POSITION\":" + std::to_string(target) +
+        "}]}]}],"
         "\"animations\":[{\"channels\":[{\"sampler\":0,\"target\":{\"node\":0,\"path\":\"weights\"}}],"
-        "\"samplers\":[{\"input\":" + std::to_string(in) + ",\"output\":" + std::to_string(out) +
-        ",\"interpolation\":\"LINEAR\"}]}]");
+        "\"samplers\":[{\"input\":" +
+        std::to_string(in) + ",\"output\":" + std::to_string(out) + ",\"interpolation\":\"LINEAR\"}]}]");
     const fs::path path = dir / "morph-triangle.gltf";
     std::ofstream(path) << json;
     return path.string();
@@ -296,7 +307,8 @@ TEST(SkinEvaluator, UnreadableAssetsAreInputErrorsOnOneLine) {
     std::ofstream(empty) << b.json(
         "\"scene\":0,\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"name\":\"empty\"}],"
         "\"animations\":[{\"channels\":[{\"sampler\":0,\"target\":{\"node\":0,\"path\":\"translation\"}}],"
-        "\"samplers\":[{\"input\":" + std::to_string(in) + ",\"output\":" + std::to_string(out) + "}]}]");
+        "\"samplers\":[{\"input\":" +
+        std::to_string(in) + ",\"output\":" + std::to_string(out) + "}]}]");
     const std::string e = message(empty.string());
     EXPECT_NE(e.find("has no vertices"), std::string::npos) << e;
     EXPECT_EQ(e.find('\n'), std::string::npos) << e;
@@ -335,7 +347,8 @@ void expectSubsetsMatchFullPose(const SkinEvaluator& e) {
             std::vector<double> sub(pts.size() * 3);
             e.evaluate(f, pts, sub.data());
             for (std::size_t i = 0; i < pts.size(); ++i)
-                ASSERT_EQ(0, std::memcmp(&sub[3 * i], &full[static_cast<std::size_t>(3 * pts[i])], 3 * sizeof(double)))
+                ASSERT_EQ(0, std::memcmp(&sub[3 * i], &full[static_cast<std::size_t>(3 * pts[i])],
+                                         3 * sizeof(double)))
                     << e.name() << " frame " << f << " point " << pts[i] << " (subset of " << size << ")";
         }
     }
@@ -399,7 +412,8 @@ TEST(SkinEvaluatorOnTestModels, ConcurrentEvaluationEqualsSerial) {
             for (Index f = t; f < frames; f += 4) parallel[static_cast<std::size_t>(f)] = evaluateAll(*e, f);
         });
     for (auto& t : threads) t.join();
-    for (Index f = 0; f < frames; ++f) ASSERT_EQ(serial[static_cast<std::size_t>(f)], parallel[static_cast<std::size_t>(f)]) << f;
+    for (Index f = 0; f < frames; ++f)
+        ASSERT_EQ(serial[static_cast<std::size_t>(f)], parallel[static_cast<std::size_t>(f)]) << f;
 }
 
 TEST(SkinEvaluatorOnTestModels, AssetWithoutAnimationIsRejected) {
