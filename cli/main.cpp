@@ -111,9 +111,9 @@ int main(int argc, char** argv) {
 
     installInterruptHandler();
     try {
-        const int code = command->run(args);
-        if (interrupted()) return fail(kExitInterrupted, "interrupted");
-        return code;
+        // A signal that arrives after the command finished its outputs changes nothing: the
+        // outputs are complete, so the command's own code stands.
+        return command->run(args);
     } catch (const pmsc::Cancelled& e) {
         return fail(kExitInterrupted, std::string("interrupted: ") + e.what());
     } catch (const pmsc::InputError& e) {
