@@ -79,6 +79,7 @@ stop_daemons() {  # TERM to all three at once, then wait (bounded), then KILL wh
 cleanup() {
   local status=$?
   trap - EXIT INT TERM
+  trap '' PIPE  # a reader that went away (| head) must not stop the clean-up half way
   [ -n "$watchdog" ] && kill "$watchdog" 2>/dev/null
   stop_daemons
   if ((status != 0 && status != 77)); then
