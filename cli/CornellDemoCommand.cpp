@@ -25,7 +25,7 @@ int runDemoCornell(const std::vector<std::string>& args) {
                      "cameras. Writes DIR/report.json, DIR/*.vdb (vdb_print -l), DIR/*.png and DIR/*.pfm.");
     parser.option("--out", "DIR", "output folder (created if missing)", out, true);
     parser.option("--points", "N", "active voxels of the lighting cache (default 160000; --quick 6000)", points);
-    parser.option("--samples", "S", "paths per point per frame (default 128; --quick 32)", samples);
+    parser.option("--samples", "S", "paths per point per frame (default 160; --quick 32)", samples);
     parser.option("--threads", "T", "worker threads (default: every core)", threads);
     parser.flag("--quick", "small settings, a smoke test of the whole pipeline (under 30 s)", quick);
     parser.flag("--quiet", "no progress display", quiet);

@@ -295,7 +295,7 @@ std::vector<std::shared_ptr<const FrameWriter>> CornellEvaluator::frameWriters()
 
 std::unique_ptr<CornellEvaluator> makeCornellEvaluator(const std::string& options) {
     std::size_t points = 160000;
-    int samples = 128;
+    int samples = 160;
     std::string lights = "all";
     std::stringstream in(options);
     std::string item;

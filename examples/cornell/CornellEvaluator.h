@@ -96,7 +96,7 @@ private:
 };
 
 /// The `cornell` evaluator of the command line (spec "cornell[:OPTIONS]"), OPTIONS a comma-separated
-/// list of points=N (default 160000), samples=S (default 128) and lights=SET, SET one of
+/// list of points=N (default 160000), samples=S (default 160) and lights=SET, SET one of
 ///   all (default): the 144 training lights, then 16 scattered validation lights, then the 60-frame
 ///                  path (frames 0-143, 144-159, 160-219), so one spec serves export-frames and run;
 ///   training | scattered | path: only that set, from frame 0.
