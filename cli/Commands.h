@@ -16,5 +16,6 @@ int runInspect(const std::vector<std::string>& args);       // cli/InspectComman
 int runDemo(const std::vector<std::string>& args);          // cli/DemoCommand.cpp
 int runRun(const std::vector<std::string>& args);           // cli/RunCommand.cpp (render farm)
 int runExportFrames(const std::vector<std::string>& args);  // cli/ExportFramesCommand.cpp
+int runDemoCornell(const std::vector<std::string>& args);   // cli/CornellDemoCommand.cpp (examples/cornell)
 
 }  // namespace pmsc::cli

@@ -86,6 +86,9 @@ Speed measureSpeed(const PointEvaluator& evaluator, const Model& model, Index fr
 }  // namespace
 
 int runDemo(const std::vector<std::string>& args) {
+    // `pmsc demo` alone (what ./pmsc.sh demo runs) is the paper's main experiment, the Cornell box
+    // (issue 4, cli/CornellDemoCommand.cpp); with options it is this generated shot.
+    if (args.empty()) return runDemoCornell({"--out", "pmsc-demo-cornell"});
     std::string outDir = "pmsc-demo-out";
     synthetic::SurfaceOptions trainShot, testShot;
     trainShot.frames = 1000;

@@ -35,6 +35,7 @@ const Command kCommands[] = {
     {"replay", "replay recorded frames through a model's soft cache and report its errors", runReplay},
     {"inspect", "show a model file: sizes, key points, basis energy, thresholds", runInspect},
     {"demo", "train and replay on generated data, and print what the soft cache did", runDemo},
+    {"demo cornell", "section 8: Cornell box indirect light, OpenVDB lighting cache, moving cameras", runDemoCornell},
     {"run", "render-farm task: a frame range through the soft cache, one resumable file per frame", runRun},
     {"export-frames", "write an evaluator's frames (e.g. an animated asset's poses) as training .npy", runExportFrames},
 };
