@@ -41,8 +41,8 @@ private:
 
 /// The plain way (sections 5-6), serial, no graph: key evaluation, projection, key error,
 /// decision, reconstruction (or full evaluation and blend), hand the frame to the sink.
-void plainLoop(const Model& model, const PointEvaluator& e, const PointMultiplier& pm, const SoftCachePolicy& policy,
-               Index frames, engine::FrameSink& sink) {
+void plainLoop(const Model& model, const PointEvaluator& e, const PointMultiplier& pm,
+               const SoftCachePolicy& policy, Index frames, engine::FrameSink& sink) {
     const Index c = model.channels;
     std::vector<double> keys(size_t(model.keyCount() * c)), coords(size_t(model.basisSize()));
     std::vector<double> out(size_t(model.points * c)), full(size_t(model.points * c));

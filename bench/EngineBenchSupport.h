@@ -7,8 +7,8 @@
 #include <Eigen/QR>
 
 #include <chrono>
-#include <ctime>
 #include <cstdint>
+#include <ctime>
 #include <span>
 #include <string>
 #include <vector>
@@ -82,7 +82,10 @@ inline double spinsPerMicrosecond() {
 class RecordedEvaluator : public PointEvaluator {
 public:
     RecordedEvaluator(const Model& model, Index frames, Index recorded = 32)
-        : points_(model.points), channels_(model.channels), frames_(frames), recorded_(recorded),
+        : points_(model.points),
+          channels_(model.channels),
+          frames_(frames),
+          recorded_(recorded),
           table_(size_t(recorded * model.points * model.channels)) {
         const Index rows = model.points * model.channels;
         Eigen::VectorXd b(model.basisSize());
@@ -100,7 +103,8 @@ public:
         double acc = 0;
         if (spinsPerPoint_ > 0) acc += spin(std::uint64_t(frame), spinsPerPoint_ * long(points.size()));
         for (size_t i = 0; i < points.size(); ++i) {
-            for (Index c = 0; c < channels_; ++c) out[Index(i) * channels_ + c] = src[points[i] * channels_ + c];
+            for (Index c = 0; c < channels_; ++c)
+                out[Index(i) * channels_ + c] = src[points[i] * channels_ + c];
         }
         // The busy work must not be optimized away; adding 0 * acc keeps the values exact.
         if (spinsPerPoint_ > 0 && acc == -1.0) out[0] += 1.0;

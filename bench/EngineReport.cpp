@@ -29,8 +29,10 @@ public:
             const std::string name = run.run_name.str();
             if (!median && rates.count(name) && hasMedian[name]) continue;
             Rates& r = rates[name];
-            if (auto it = run.counters.find("items_per_second"); it != run.counters.end()) r.items = it->second;
-            if (auto it = run.counters.find("bytes_per_second"); it != run.counters.end()) r.bytes = it->second;
+            if (auto it = run.counters.find("items_per_second"); it != run.counters.end())
+                r.items = it->second;
+            if (auto it = run.counters.find("bytes_per_second"); it != run.counters.end())
+                r.bytes = it->second;
             if (median) hasMedian[name] = true;
         }
     }
@@ -76,7 +78,9 @@ int main(int argc, char** argv) {
         if (it == reporter.rates.end()) return 0.0;
         return bytes ? it->second.bytes : it->second.items;
     };
-    const auto ratio = [](double a, double b) { return b > 0 ? nlohmann::json(a / b) : nlohmann::json(nullptr); };
+    const auto ratio = [](double a, double b) {
+        return b > 0 ? nlohmann::json(a / b) : nlohmann::json(nullptr);
+    };
 
     const double plain = rate("BM_Overhead_PlainLoop/real_time");
     const double graph1 = rate("BM_Overhead_Graph1Thread/real_time");
@@ -98,21 +102,24 @@ int main(int argc, char** argv) {
                   {"scaling_2_threads", ">= 1.8"},
                   {"miss_cost_ratio", "<= 1.05"},
                   {"reconstruct_bandwidth_ratio", ">= 0.7"}};
-    j["overhead"] = {{"what", "frames/s: plain serial loop vs graph at 1 thread; recorded evaluator, all hits, "
-                              "2986 points x 3 x 85 basis, 170 keys"},
+    j["overhead"] = {{"what",
+                      "frames/s: plain serial loop vs graph at 1 thread; recorded evaluator, all hits, "
+                      "2986 points x 3 x 85 basis, 170 keys"},
                      {"plain_loop_frames_per_second", plain},
                      {"graph_1_thread_frames_per_second", graph1}};
     j["scaling"] = {{"what", "frames/s of the graph; evaluator ~1 ms of busy work per frame, all hits"},
                     {"graph_1_thread_frames_per_second", scale1},
                     {"graph_2_threads_frames_per_second", scale2}};
-    j["miss"] = {{"what", "missed frames/s: plain full evaluation vs through the graph; linear-cost evaluator "
-                          "(~1 us per point, 2986 points)"},
+    j["miss"] = {{"what",
+                  "missed frames/s: plain full evaluation vs through the graph; linear-cost evaluator "
+                  "(~1 us per point, 2986 points)"},
                  {"plain_full_evaluation_frames_per_second", fullPlain},
                  {"graph_1_thread_frames_per_second", miss1},
                  {"graph_2_threads_frames_per_second", miss2},
                  {"miss_cost_ratio_2_threads", ratio(fullPlain, miss2)}};
-    j["reconstruct"] = {{"what", "bytes of basis per second: one frame's reconstruction at 160000 points x 3 x 32 "
-                                 "basis vs memcpy of the same bytes"},
+    j["reconstruct"] = {{"what",
+                         "bytes of basis per second: one frame's reconstruction at 160000 points x 3 x 32 "
+                         "basis vs memcpy of the same bytes"},
                         {"basis_bytes", 160000LL * 3 * 32 * 8},
                         {"reconstruct_bytes_per_second", reconstructBps},
                         {"memcpy_bytes_per_second", memcpyBps}};

@@ -18,8 +18,8 @@
 
 #include <algorithm>
 #include <array>
-#include <span>
 #include <chrono>
+#include <span>
 #include <string>
 #include <thread>
 #include <tuple>
@@ -36,11 +36,13 @@ namespace {
 
 /// Node kinds whose body time the stats report, in graph order.
 enum NodeId : int { kKeys, kProject, kMonitor, kReconstruct, kFailThrough, kBlend, kSink, kNodeCount };
-constexpr std::array<const char*, kNodeCount> kNodeNames = {
-    nodes::KeyPointEvaluator::kName, nodes::Projector::kName,
-    nodes::ErrorMonitor::kName,      nodes::Reconstructor::kName,
-    nodes::FailThroughEvaluator::kName, nodes::Blender::kName,
-    "sink"};
+constexpr std::array<const char*, kNodeCount> kNodeNames = {nodes::KeyPointEvaluator::kName,
+                                                            nodes::Projector::kName,
+                                                            nodes::ErrorMonitor::kName,
+                                                            nodes::Reconstructor::kName,
+                                                            nodes::FailThroughEvaluator::kName,
+                                                            nodes::Blender::kName,
+                                                            "sink"};
 
 // ThreadSanitizer and the uninstrumented libtbb (Debian's build). TSan cannot see libtbb's
 // synchronization, so (1) every hand-over of a frame slot from one node body to the next looks
@@ -99,7 +101,8 @@ public:
         observe(true);
     }
     ~TsanWorkerObserver() override {
-        for (int i = 0; i < 5000 && inside_.load() > 0; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        for (int i = 0; i < 5000 && inside_.load() > 0; ++i)
+            std::this_thread::sleep_for(std::chrono::milliseconds(1));
         observe(false);  // waits for notifications in progress (inside libtbb, so say it to TSan)
         takeOver(this);
     }
@@ -134,12 +137,14 @@ inline void takeOver(const void*) {}
 
 /// Opens every node body: TSan checks on (in TSan builds), and at the end a release on
 /// `done`, which the thread that waits for the graph acquires before it frees anything.
-#define PMSC_NODE_BODY(done)      \
-    PMSC_CHECKED_SCOPE;           \
-    struct DoneOnExit {           \
-        const void* p;            \
+#define PMSC_NODE_BODY(done)           \
+    PMSC_CHECKED_SCOPE;                \
+    struct DoneOnExit {                \
+        const void* p;                 \
         ~DoneOnExit() { handOver(p); } \
-    } pmscDone_{done}
+    } pmscDone_ {                      \
+        done                           \
+    }
 
 /// Body time of one node kind, summed over threads. Integers, so adding from several threads
 /// needs no lock and loses nothing.
@@ -204,13 +209,13 @@ struct Engine::Impl {
           options(std::move(o)),
           pm(checked(m, e, options)),
           policy(options.policy ? *options.policy : SoftCachePolicy(m.epsMin, m.epsMax)),
-          plan(FramePlan::make(m, options.pointsWanted,
-                               options.chunkPoints > 0
-                                   ? options.chunkPoints
-                                   : automaticChunkPoints(options.pointsWanted.empty()
-                                                              ? m.points
-                                                              : Index(options.pointsWanted.size())),
-                               options.wholeFrameFailThrough)),
+          plan(FramePlan::make(
+              m, options.pointsWanted,
+              options.chunkPoints > 0
+                  ? options.chunkPoints
+                  : automaticChunkPoints(options.pointsWanted.empty() ? m.points
+                                                                      : Index(options.pointsWanted.size())),
+              options.wholeFrameFailThrough)),
           threads(options.threads > 0 ? options.threads : tbb::info::default_concurrency()),
           maxInFlight(options.maxFramesInFlight > 0 ? options.maxFramesInFlight : 2 * Index(threads)),
           arena(threads) {}
@@ -252,8 +257,8 @@ RunStats Engine::Impl::run(FrameRange range, FrameSink& sink) {
         (range.count > 0 && range.last() >= evaluator.frameCount())) {
         throw InputError("engine: frames " + std::to_string(range.first) + " + " +
                          std::to_string(range.count) + " x step " + std::to_string(range.step) +
-                         " outside the " + std::to_string(evaluator.frameCount()) +
-                         " frames of evaluator '" + evaluator.name() + "'");
+                         " outside the " + std::to_string(evaluator.frameCount()) + " frames of evaluator '" +
+                         evaluator.name() + "'");
     }
     last = RunStats{};
     last.framesRequested = range.count;
@@ -319,9 +324,10 @@ RunStats Engine::Impl::run(FrameRange range, FrameSink& sink) {
         //    │                                                          │                v            │
         //    │                                                          │   fail-through (unlimited)   │
         //    │                                                          │                v            │
-        //    │                                                          │           blend (unlimited)  │
+        //    │                                                          │     blend (same task)        │
         //    │                                                          │                v            │
-        //    │                                                          │   gather (last chunk sends)  │
+        //    │                                                          │  gather (the last branch     │
+        //    │                                                          │   sends the frame on)        │
         //    │                                                          v                v            v
         //    └──────────────── slot ── sink (serial) <── sequencer (restores order) <──────────────────┘
         //
@@ -329,7 +335,8 @@ RunStats Engine::Impl::run(FrameRange range, FrameSink& sink) {
         // number with a free slot, and the slot comes back only after the sink, so at most
         // maxInFlight frames are anywhere in the graph.
         using Token = FrameSlot*;
-        using MonitorNode = flow::multifunction_node<Token, std::tuple<Token, ChunkMsg, Token>, flow::queueing_lightweight>;
+        using MonitorNode =
+            flow::multifunction_node<Token, std::tuple<Token, ChunkMsg, Token>, flow::queueing_lightweight>;
         using ReconstructNode = flow::multifunction_node<Token, std::tuple<Token, ChunkMsg>>;
         using GatherNode = flow::multifunction_node<ChunkMsg, std::tuple<Token>, flow::queueing_lightweight>;
 
@@ -403,26 +410,27 @@ RunStats Engine::Impl::run(FrameRange range, FrameSink& sink) {
                 send(std::get<2>(out), slot);
             }
         });
-        ReconstructNode reconstruct(g, flow::unlimited, [&](Token slot, ReconstructNode::output_ports_type& out) {
-            PMSC_NODE_BODY(&runDone);
-            takeOver(slot);
-            const auto send = [&](auto& port, const auto& message) {
-                handOver(slot);
-                PMSC_UNCHECKED_SCOPE;
-                port.try_put(message);
-            };
-            if (control.cancelled()) {
-                send(std::get<0>(out), slot);
-                return;
-            }
-            const bool done = timed(clocks[kReconstruct], [&] { return reconstructBody(*slot); });
-            if (done) {
-                send(std::get<0>(out), slot);
-            } else {
-                slot->chunksLeft.store(chunkCount, std::memory_order_relaxed);
-                for (Index c = 0; c < chunkCount; ++c) send(std::get<1>(out), ChunkMsg{slot, c});
-            }
-        });
+        ReconstructNode reconstruct(
+            g, flow::unlimited, [&](Token slot, ReconstructNode::output_ports_type& out) {
+                PMSC_NODE_BODY(&runDone);
+                takeOver(slot);
+                const auto send = [&](auto& port, const auto& message) {
+                    handOver(slot);
+                    PMSC_UNCHECKED_SCOPE;
+                    port.try_put(message);
+                };
+                if (control.cancelled()) {
+                    send(std::get<0>(out), slot);
+                    return;
+                }
+                const bool done = timed(clocks[kReconstruct], [&] { return reconstructBody(*slot); });
+                if (done) {
+                    send(std::get<0>(out), slot);
+                } else {
+                    slot->chunksLeft.store(chunkCount, std::memory_order_relaxed);
+                    for (Index c = 0; c < chunkCount; ++c) send(std::get<1>(out), ChunkMsg{slot, c});
+                }
+            });
         flow::function_node<ChunkMsg, ChunkMsg> failThrough(g, flow::unlimited, [&](ChunkMsg m) {
             PMSC_NODE_BODY(&runDone);
             takeOver(m.slot);

@@ -21,7 +21,8 @@ std::string RunStats::toJson(int indent) const {
     j["fail_through_chunks"] = chunks;
     j["cancelled"] = cancelled;
     nlohmann::json list = nlohmann::json::array();
-    for (const NodeTiming& n : nodes) list.push_back({{"node", n.node}, {"seconds", n.seconds}, {"calls", n.calls}});
+    for (const NodeTiming& n : nodes)
+        list.push_back({{"node", n.node}, {"seconds", n.seconds}, {"calls", n.calls}});
     j["nodes"] = std::move(list);
     return j.dump(indent);
 }

@@ -11,7 +11,7 @@ namespace pmsc::engine {
 /// Time spent in one kind of node body over a run (summed over threads, so it
 /// can exceed the wall time on several cores).
 struct NodeTiming {
-    std::string node;   ///< "keys", "project", "monitor", "reconstruct", "fail-through", "blend", "sink"
+    std::string node;    ///< "keys", "project", "monitor", "reconstruct", "fail-through", "blend", "sink"
     double seconds = 0;  ///< sum of body durations
     Index calls = 0;     ///< bodies run (one per frame; one per chunk for fail-through and blend)
 };
@@ -21,8 +21,8 @@ struct RunStats {
     Index framesRequested = 0;  ///< the frame range's count
     Index framesDelivered = 0;  ///< frames handed to the sink (including failed ones under MarkFailed)
     Index hits = 0, blends = 0, misses = 0;  ///< section 5 states of delivered, non-failed frames
-    Index failed = 0;            ///< frames the evaluator failed on (delivered marked, or the one that stopped the run)
-    Index forcedMisses = 0;      ///< misses forced by non-finite key values (counted in misses)
+    Index failed = 0;  ///< frames the evaluator failed on (delivered marked, or the one that stopped the run)
+    Index forcedMisses = 0;  ///< misses forced by non-finite key values (counted in misses)
     double wallSeconds = 0;
     double framesPerSecond = 0;  ///< framesDelivered / wallSeconds
     int threads = 0;

@@ -32,8 +32,8 @@ struct FramePlan {
         std::vector<Index> keyNumber;   ///< their index in Model::keyPoints
     };
 
-    Index points = 0;    ///< N of the model and evaluator
-    Index channels = 0;  ///< C
+    Index points = 0;                 ///< N of the model and evaluator
+    Index channels = 0;               ///< C
     std::vector<Index> outputPoints;  ///< the points a frame's output holds, in output order
     bool allPoints = true;            ///< outputPoints == 0 .. N-1
     bool wholeFrame = false;          ///< fail-through by one evaluateAll() call instead of chunks

@@ -49,8 +49,8 @@ struct FrameSlot {
     double keyRmsError = 0;         ///< section 5's key-point error (NaN if keys not finite)
     CacheDecision decision;         ///< hit / blend / miss and the weight of the full result
 
-    std::vector<double> values;   ///< output: plan.outputCount() * C
-    std::vector<double> scratch;  ///< fail-through / blend workspace (plan.scratchSize())
+    std::vector<double> values;    ///< output: plan.outputCount() * C
+    std::vector<double> scratch;   ///< fail-through / blend workspace (plan.scratchSize())
     std::vector<double> pmValues;  ///< PM result of the output points (only when kept)
     bool pmValid = false;          ///< pmValues holds this frame's PM result
 

@@ -49,9 +49,15 @@ void OrderedSink::operator()(FrameSlot& slot) {
     control_.delivered.fetch_add(1, std::memory_order_relaxed);
     if (result.failed) return;
     switch (slot.decision.state) {
-        case CacheState::Hit: control_.hits.fetch_add(1, std::memory_order_relaxed); break;
-        case CacheState::Blend: control_.blends.fetch_add(1, std::memory_order_relaxed); break;
-        case CacheState::Miss: control_.misses.fetch_add(1, std::memory_order_relaxed); break;
+        case CacheState::Hit:
+            control_.hits.fetch_add(1, std::memory_order_relaxed);
+            break;
+        case CacheState::Blend:
+            control_.blends.fetch_add(1, std::memory_order_relaxed);
+            break;
+        case CacheState::Miss:
+            control_.misses.fetch_add(1, std::memory_order_relaxed);
+            break;
     }
     if (!slot.keysFinite) control_.forcedMisses.fetch_add(1, std::memory_order_relaxed);
 }

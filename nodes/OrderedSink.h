@@ -13,8 +13,8 @@ namespace pmsc::nodes {
 /// One finished frame as a sink sees it. The spans point into the engine's
 /// frame buffer and are valid only during FrameSink::write(); copy what you keep.
 struct FrameResult {
-    Index sequence = 0;  ///< 0, 1, 2, ... in the run's order (frames arrive in this order)
-    Index frame = 0;     ///< the evaluator's frame number
+    Index sequence = 0;   ///< 0, 1, 2, ... in the run's order (frames arrive in this order)
+    Index frame = 0;      ///< the evaluator's frame number
     bool failed = false;  ///< MarkFailedAndContinue: the evaluator failed; values are empty
     std::string error;    ///< why, when failed ("frame F: node 'N': ...")
 

@@ -22,14 +22,16 @@ using testing::withWatchdog;
 /// Checks order and finiteness as frames arrive; keeps a copy of what it is told to keep.
 class CheckingSink : public FrameSink {
 public:
-    explicit CheckingSink(const SyntheticEvaluator* e = nullptr, bool keep = true) : evaluator_(e), keep_(keep) {}
+    explicit CheckingSink(const SyntheticEvaluator* e = nullptr, bool keep = true)
+        : evaluator_(e), keep_(keep) {}
     void write(const FrameResult& r) override {
         if (evaluator_) evaluator_->frameDelivered();
         EXPECT_EQ(r.sequence, Index(frames.size())) << "frames out of order";
         frames.push_back(r.frame);
         states.push_back(r.state);
         failed.push_back(r.failed);
-        for (const double v : r.values) ASSERT_TRUE(std::isfinite(v)) << "non-finite output, frame " << r.frame;
+        for (const double v : r.values)
+            ASSERT_TRUE(std::isfinite(v)) << "non-finite output, frame " << r.frame;
         if (keep_) values.emplace_back(r.values.begin(), r.values.end());
         if (throwAt == Index(frames.size()) - 1) throw IoError("disk full (injected)");
         peakLiveSlots = std::max(peakLiveSlots, nodes::FrameSlot::liveCount());
@@ -313,7 +315,8 @@ TEST_F(Fixture, WholeFrameFailThroughGivesTheSameResult) {
     EXPECT_EQ(engine.lastStats().chunks, 1);
     for (Index f = 0; f < 12; ++f) {
         const auto expected = testing::referenceFrame(model, evaluator, policy, f);
-        for (size_t x = 0; x < expected.size(); ++x) ASSERT_NEAR(sink.values[size_t(f)][x], expected[x], 1e-9);
+        for (size_t x = 0; x < expected.size(); ++x)
+            ASSERT_NEAR(sink.values[size_t(f)][x], expected[x], 1e-9);
     }
 }
 
@@ -325,9 +328,11 @@ TEST_F(Fixture, KeepPointMultiplicationHandsThePmResultOfEveryFrame) {
     withWatchdog(60, "run", [&] { engine.run({0, 12, 1}, sink); });
     const PointMultiplier pm(model);
     for (Index f = 0; f < 12; ++f) {
-        std::vector<double> k(size_t(model.keyCount() * 3)), b(size_t(model.basisSize())), r(size_t(model.points * 3));
+        std::vector<double> k(size_t(model.keyCount() * 3)), b(size_t(model.basisSize())),
+            r(size_t(model.points * 3));
         for (Index i = 0; i < model.keyCount(); ++i)
-            for (Index c = 0; c < 3; ++c) k[size_t(i * 3 + c)] = evaluator.value(f, model.keyPoints[size_t(i)], c);
+            for (Index c = 0; c < 3; ++c)
+                k[size_t(i * 3 + c)] = evaluator.value(f, model.keyPoints[size_t(i)], c);
         pm.project(k.data(), b.data());
         pm.reconstruct(b.data(), r.data());
         for (size_t x = 0; x < r.size(); ++x) ASSERT_EQ(sink.pmValues().frame(f)[x], r[x]) << f;

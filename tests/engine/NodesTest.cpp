@@ -70,7 +70,8 @@ TEST_F(Nodes, FramePlanValidatesTheWantedPoints) {
 
 /// Runs the bodies of one frame in graph order, serially.
 std::vector<double> runFrame(const Model& model, const PointEvaluator& e, const PointMultiplier& pm,
-                             const SoftCachePolicy& policy, const FramePlan& plan, FrameSlot& slot, Index frame) {
+                             const SoftCachePolicy& policy, const FramePlan& plan, FrameSlot& slot,
+                             Index frame) {
     slot.reset(0, frame);
     KeyPointEvaluator{model, e}(slot);
     Projector{pm}(slot);
@@ -104,7 +105,8 @@ TEST_F(Nodes, ErrorMonitorRoutesByTheSoftCachePolicy) {
     FrameSlot slot(plan, model.keyCount(), model.basisSize(), false);
     const ErrorMonitor monitor(pm, policy, false);
     const ErrorMonitor keeping(pm, policy, true);
-    const Route expected[4] = {Route::Reconstruct, Route::FailThrough, Route::FailThrough, Route::Reconstruct};
+    const Route expected[4] = {Route::Reconstruct, Route::FailThrough, Route::FailThrough,
+                               Route::Reconstruct};
     for (Index f = 0; f < 4; ++f) {
         slot.reset(0, f);
         KeyPointEvaluator{model, evaluator}(slot);

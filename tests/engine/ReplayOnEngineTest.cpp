@@ -31,7 +31,8 @@ TEST(ReplayOnEngine, SameBitsAsThePlainLoopAndAtAnyThreadCount) {
     cli::ReplayScratch scratch(model);
     FrameSet expected(48, model.points, 3);
     std::vector<cli::ReplayFrame> expectedRows;
-    for (Index f = 0; f < 48; ++f) expectedRows.push_back(cli::replayFrame(pm, policy, recorded, f, scratch, expected.frame(f)));
+    for (Index f = 0; f < 48; ++f)
+        expectedRows.push_back(cli::replayFrame(pm, policy, recorded, f, scratch, expected.frame(f)));
 
     test::TempDir dir;
     int states[3] = {0, 0, 0};

@@ -68,9 +68,12 @@ inline Model makeModel(Index points, Index channels, Index basis, Index keys, un
 /// frame class (f % 4: 0,3 in the subspace -> hits; 1 small noise -> blend; 2 large -> miss).
 inline double noiseAmplitude(Index frame) {
     switch (frame % 4) {
-        case 1: return 0.01;
-        case 2: return 1.0;
-        default: return 0.0;
+        case 1:
+            return 0.01;
+        case 2:
+            return 1.0;
+        default:
+            return 0.0;
     }
 }
 
@@ -90,7 +93,8 @@ public:
     Index frameCount() const override { return frames_; }
 
     void evaluate(Index frame, std::span<const Index> points, double* out) const override {
-        if (frame < 0 || frame >= frames_) throw std::out_of_range("synthetic: frame " + std::to_string(frame));
+        if (frame < 0 || frame >= frames_)
+            throw std::out_of_range("synthetic: frame " + std::to_string(frame));
         const bool keyCall = points.data() == model_.keyPoints.data();
         if (keyCall) {
             keyCalls_[size_t(frame)].fetch_add(1);
@@ -126,7 +130,9 @@ public:
         for (Index j = 0; j < model_.basisSize(); ++j) v += model_.basis(x, j) * coord(frame, j);
         return v + noiseAmplitude(frame) * unit(std::uint64_t(frame) + 1000, std::uint64_t(x));
     }
-    static double coord(Index frame, Index j) { return 2.0 * unit(std::uint64_t(frame) * 7919 + 17, std::uint64_t(j)); }
+    static double coord(Index frame, Index j) {
+        return 2.0 * unit(std::uint64_t(frame) * 7919 + 17, std::uint64_t(j));
+    }
 
     /// Called by the test sink when a frame arrives (the other end of the in-flight count).
     void frameDelivered() const { inFlight_.fetch_sub(1); }
@@ -173,21 +179,25 @@ inline SoftCachePolicy syntheticPolicy(const Model& model, const SyntheticEvalua
         return pm.keyRmsError(k.data(), b.data());
     };
     double blendMax = 0, missMin = std::numeric_limits<double>::max();
-    for (Index f = 1; f < std::min<Index>(e.frameCount(), 200); f += 4) blendMax = std::max(blendMax, keyError(f));
-    for (Index f = 2; f < std::min<Index>(e.frameCount(), 200); f += 4) missMin = std::min(missMin, keyError(f));
+    for (Index f = 1; f < std::min<Index>(e.frameCount(), 200); f += 4)
+        blendMax = std::max(blendMax, keyError(f));
+    for (Index f = 2; f < std::min<Index>(e.frameCount(), 200); f += 4)
+        missMin = std::min(missMin, keyError(f));
     if (!(blendMax * 2 < missMin)) throw std::logic_error("synthetic frame classes overlap");
     return SoftCachePolicy(blendMax * 0.05, blendMax * 2);
 }
 
 /// The soft-cached value of every point of a frame computed the plain way, serially, straight
 /// from the paper's section 5 and 6 (the independent reference the engine is checked against).
-inline std::vector<double> referenceFrame(const Model& model, const SyntheticEvaluator& e, const SoftCachePolicy& policy,
-                                          Index frame, CacheDecision* decisionOut = nullptr) {
+inline std::vector<double> referenceFrame(const Model& model, const SyntheticEvaluator& e,
+                                          const SoftCachePolicy& policy, Index frame,
+                                          CacheDecision* decisionOut = nullptr) {
     const PointMultiplier pm(model);
     const Index c = model.channels;
     std::vector<double> k(size_t(model.keyCount() * c)), b(size_t(model.basisSize()));
     for (Index i = 0; i < model.keyCount(); ++i)
-        for (Index ch = 0; ch < c; ++ch) k[size_t(i * c + ch)] = e.value(frame, model.keyPoints[size_t(i)], ch);
+        for (Index ch = 0; ch < c; ++ch)
+            k[size_t(i * c + ch)] = e.value(frame, model.keyPoints[size_t(i)], ch);
     pm.project(k.data(), b.data());
     const CacheDecision d = policy.decide(pm.keyRmsError(k.data(), b.data()));
     if (decisionOut) *decisionOut = d;
