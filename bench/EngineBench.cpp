@@ -14,6 +14,7 @@
 #include <benchmark/benchmark.h>
 
 #include <cstring>
+#include <ctime>
 #include <memory>
 #include <vector>
 
@@ -27,6 +28,21 @@ constexpr Index kFramesPerRun = 256;
 const Model& faceModel() {
     static const Model m = makeModel(kFacePoints, 3, kFaceBasis, kFaceKeys);
     return m;
+}
+
+/// Process CPU seconds (all threads). Reported per frame beside the wall-time rates, so a run
+/// on a busy machine still shows whether the graph adds work (CPU per frame) even when other
+/// programs keep it from getting the second core (wall-time scaling).
+double processCpuSeconds() {
+    timespec ts{};
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return double(ts.tv_sec) + double(ts.tv_nsec) * 1e-9;
+}
+
+/// Sets the "cpu_seconds_per_frame" counter of a benchmark from a start time.
+void setCpuPerFrame(benchmark::State& state, double cpuStart, Index framesPerIteration) {
+    const double frames = double(state.iterations()) * double(framesPerIteration);
+    if (frames > 0) state.counters["cpu_seconds_per_frame"] = (processCpuSeconds() - cpuStart) / frames;
 }
 
 /// A sink that touches every frame's output the same way in both loops.
@@ -81,9 +97,11 @@ void BM_Overhead_PlainLoop(benchmark::State& state) {
     const PointMultiplier pm(model);
     const SoftCachePolicy policy(model.epsMin, model.epsMax);
     ChecksumSink sink;
+    const double cpuStart = processCpuSeconds();
     for (auto _ : state) plainLoop(model, e, pm, policy, kFramesPerRun, sink);
     benchmark::DoNotOptimize(sink.sum());
     state.SetItemsProcessed(state.iterations() * kFramesPerRun);
+    setCpuPerFrame(state, cpuStart, kFramesPerRun);
 }
 
 void BM_Overhead_Graph1Thread(benchmark::State& state) {
@@ -93,10 +111,12 @@ void BM_Overhead_Graph1Thread(benchmark::State& state) {
     o.threads = 1;
     engine::Engine engine(model, e, o);
     ChecksumSink sink;
+    const double cpuStart = processCpuSeconds();
     for (auto _ : state) engine.run({0, kFramesPerRun, 1}, sink);
     if (engine.lastStats().hits != kFramesPerRun) state.SkipWithError("expected every frame to hit");
     benchmark::DoNotOptimize(sink.sum());
     state.SetItemsProcessed(state.iterations() * kFramesPerRun);
+    setCpuPerFrame(state, cpuStart, kFramesPerRun);
 }
 
 // ---- scaling: 1 vs 2 threads, ~1 ms of busy work per frame ----------------------------------
@@ -110,9 +130,11 @@ void BM_Scaling_Graph(benchmark::State& state) {
     o.threads = int(state.range(0));
     engine::Engine engine(model, e, o);
     ChecksumSink sink;
+    const double cpuStart = processCpuSeconds();
     for (auto _ : state) engine.run({0, 64, 1}, sink);
     if (engine.lastStats().hits != 64) state.SkipWithError("expected every frame to hit");
     state.SetItemsProcessed(state.iterations() * 64);
+    setCpuPerFrame(state, cpuStart, 64);
 }
 
 // ---- miss: a missed frame through the graph vs a plain full evaluation ----------------------
@@ -127,6 +149,7 @@ void BM_Miss_PlainFullEvaluation(benchmark::State& state) {
     std::vector<double> out(size_t(model.points * model.channels));
     ChecksumSink sink;
     engine::FrameResult r;
+    const double cpuStart = processCpuSeconds();
     for (auto _ : state) {
         for (Index f = 0; f < kMissFrames; ++f) {
             e.evaluateAll(f, out.data());
@@ -136,6 +159,7 @@ void BM_Miss_PlainFullEvaluation(benchmark::State& state) {
     }
     benchmark::DoNotOptimize(sink.sum());
     state.SetItemsProcessed(state.iterations() * kMissFrames);
+    setCpuPerFrame(state, cpuStart, kMissFrames);
 }
 
 void BM_Miss_Graph(benchmark::State& state) {
@@ -147,9 +171,11 @@ void BM_Miss_Graph(benchmark::State& state) {
     o.policy = SoftCachePolicy(0, 0);  // every key error > 0: every frame is a miss
     engine::Engine engine(model, e, o);
     ChecksumSink sink;
+    const double cpuStart = processCpuSeconds();
     for (auto _ : state) engine.run({0, kMissFrames, 1}, sink);
     if (engine.lastStats().misses != kMissFrames) state.SkipWithError("expected every frame to miss");
     state.SetItemsProcessed(state.iterations() * kMissFrames);
+    setCpuPerFrame(state, cpuStart, kMissFrames);
 }
 
 // ---- reconstruction bandwidth vs memcpy ------------------------------------------------------
