@@ -2,7 +2,6 @@
 
 #include "pmsc/Model.h"
 
-#include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 
 #include <algorithm>
@@ -103,7 +102,9 @@ Index determinedBasisSize(const Eigen::MatrixXd& basis, Index channels, const st
     const Eigen::MatrixXd bk = gatherKeyRows(basis, channels, keys);
     auto determined = [&](Index m) {
         if (m > bk.rows()) return false;
-        const Eigen::VectorXd s = Eigen::BDCSVD<Eigen::MatrixXd>(bk.leftCols(m)).singularValues();
+        // B_K is small ((K*C) x M, a few hundred square): one-sided Jacobi after a QR is fast and
+        // the most accurate for small singular values, which is what the condition number needs.
+        const Eigen::VectorXd s = Eigen::JacobiSVD<Eigen::MatrixXd>(bk.leftCols(m)).singularValues();
         return s[m - 1] > 0 && s[0] / s[m - 1] <= maxCondition;
     };
     Index lo = 0;  // largest size known determined (0 trivially)
@@ -144,6 +145,15 @@ KeySelection selectKeysTeleconnection(const Eigen::Ref<const Eigen::MatrixXd>& q
     Eigen::MatrixXd coords;
     Eigen::MatrixXd projected;  // W = B^T Q, for the frame-space residual Gram
     double sigmaQ = 0;
+    // The frame-space route costs an F x F eigensolver per round: worth it only while that is
+    // cheaper than the randomized SVD of the explicit residual (true for hundreds of frames, not
+    // for thousands).
+    {
+        const double f = static_cast<double>(q.cols());
+        const double frameSpace = 9 * f * f * f + 2 * static_cast<double>(q.rows()) * f * static_cast<double>(options.block);
+        const Index sketch = std::min({options.block + options.svd.oversampling, q.rows(), q.cols()});
+        if (frameSpace > randomizedRouteFlops(q.rows(), q.cols(), sketch, options.svd.powerIterations)) gram = nullptr;
+    }
     if (gram) {
         if (gram->rows() != q.cols() || gram->cols() != q.cols()) {
             throw std::invalid_argument("selectKeysTeleconnection: Gram matrix is not F x F");
@@ -190,7 +200,7 @@ KeySelection selectKeysTeleconnection(const Eigen::Ref<const Eigen::MatrixXd>& q
             rtr -= cross;
             rtr -= cross.transpose();
             rtr.noalias() += coords.transpose() * coords;
-            next = svdFromGram(residual, rtr, options.block, -1, 1e-7 * sigmaQ);
+            next = svdFromGram(residual, rtr, options.block, -1, 1e-6 * sigmaQ);
         }
         if (next.sigma.size() == 0) {
             SvdOptions svdOptions = options.svd;

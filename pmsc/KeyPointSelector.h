@@ -106,9 +106,12 @@ struct KeySelection {
 /// the residual's leading vectors are found in frame space: with W = B^T Q (once) and the round's
 /// coordinates C, R^T R = G - W^T C - C^T W + C^T C (B orthonormal), an F x F eigenproblem, and
 /// U_R = R V_R S_R^-1 is one skinny product. That replaces the six (N*C) x F x (B+10) products and
-/// three tall QRs of the randomized SVD per round (measured: keys stage 8.1 s -> see report). If
-/// the residual is too small for this to be accurate (sigma_R <= 1e-7 sigma_1(Q): the subtraction
-/// cancels), the randomized SVD of the explicit residual is used as without `gram`.
+/// three tall QRs of the randomized SVD per round (a third of the key-selection time at the face
+/// scale). It is used only while 9 F^3 + 2 (N*C) F B flops undercut the randomized SVD (hundreds
+/// of frames, not thousands), and not when the residual is too small for it to be accurate
+/// (sigma_R <= 1e-6 sigma_1(Q): the subtraction cancels, errors ~ eps sigma_1^2 would swamp
+/// sigma_R^2); then the randomized SVD of the explicit
+/// residual is used, as without `gram`.
 /// @param q the mean-removed training matrix, (N*C) x F
 /// @param basis the runtime basis (N*C) x M computed from q, orthonormal columns
 /// @param gram Q^T Q or null

@@ -59,7 +59,10 @@ TruncatedSvd randomizedSvd(const Eigen::Ref<const Eigen::MatrixXd>& q, Index ran
     // B = Y^T Q is l x n: small. Its SVD gives Q ~= (Y U_B) S V_B^T.
     Eigen::MatrixXd b(l, n);
     b.noalias() = y.transpose() * q;
-    Eigen::BDCSVD<Eigen::MatrixXd> svd(b, Eigen::ComputeThinU | Eigen::ComputeThinV);
+    // B is l x n with l small (the Auto route only sketches when l is far below n): a QR then
+    // Jacobi on l x l. (JacobiSVD rather than BDCSVD: as fast at this size and much lighter to
+    // compile, which matters for the sanitizer builds.)
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd(b, Eigen::ComputeThinU | Eigen::ComputeThinV);
     TruncatedSvd s;
     const Index r = std::min(rank, svd.singularValues().size());
     s.sigma = svd.singularValues().head(r);
@@ -69,8 +72,7 @@ TruncatedSvd randomizedSvd(const Eigen::Ref<const Eigen::MatrixXd>& q, Index ran
     while (keep < r && s.sigma[keep] > threshold) ++keep;
     s.sigma.conservativeResize(keep);
     s.v.conservativeResize(Eigen::NoChange, keep);
-    const Index formed = options.leftVectors < 0 ? keep : std::min(options.leftVectors, keep);
-    s.u.noalias() = y * svd.matrixU().leftCols(formed);
+    s.u.noalias() = y * svd.matrixU().leftCols(keep);
     return s;
 }
 
@@ -90,13 +92,10 @@ TruncatedSvd truncatedSvd(const Eigen::Ref<const Eigen::MatrixXd>& q, Index rank
     if (route == SvdOptions::Route::Auto) {
         // Flop counts of the two routes (see header); the constant factors of Eigen's GEMM and
         // Householder QR are close enough that the counts decide.
-        const double m = static_cast<double>(q.rows());
-        const double n = static_cast<double>(q.cols());
-        const double l = static_cast<double>(std::min({rank + options.oversampling, q.rows(), q.cols()}));
-        const double r = static_cast<double>(options.leftVectors < 0 ? rank : std::min(rank, options.leftVectors));
-        const double pq = options.powerIterations;
-        const double gram = m * n * n + 2 * m * n * r;
-        const double randomized = 2 * m * n * l * (2 * pq + 2) + 4 * m * l * l * (pq + 1);
+        const Index l = std::min({rank + options.oversampling, q.rows(), q.cols()});
+        const Index r = options.leftVectors < 0 ? rank : std::min(rank, options.leftVectors);
+        const double gram = gramRouteFlops(q.rows(), q.cols(), r);
+        const double randomized = randomizedRouteFlops(q.rows(), q.cols(), l, options.powerIterations);
         route = tall && gram <= randomized ? SvdOptions::Route::Gram : SvdOptions::Route::Randomized;
     }
     if (route == SvdOptions::Route::Gram) {
@@ -107,6 +106,29 @@ TruncatedSvd truncatedSvd(const Eigen::Ref<const Eigen::MatrixXd>& q, Index rank
         return s;
     }
     return randomizedSvd(q, rank, options);
+}
+
+double gramRouteFlops(Index rows, Index cols, Index leftVectors) {
+    const double m = static_cast<double>(rows);
+    const double n = static_cast<double>(cols);
+    return m * n * n + 9 * n * n * n + 2 * m * n * static_cast<double>(std::max<Index>(leftVectors, 0));
+}
+
+double randomizedRouteFlops(Index rows, Index cols, Index sketch, int powerIterations) {
+    const double m = static_cast<double>(rows);
+    const double n = static_cast<double>(cols);
+    const double l = static_cast<double>(sketch);
+    const double q = powerIterations;
+    return 2 * m * n * l * (2 * q + 2) + 4 * m * l * l * (q + 1);
+}
+
+void formLeftVectors(const Eigen::Ref<const Eigen::MatrixXd>& q, TruncatedSvd& svd, Index count) {
+    count = std::min(count, svd.sigma.size());
+    const Index have = svd.u.cols();
+    if (!svd.gramRoute || have >= count) return;
+    svd.u.conservativeResize(q.rows(), count);
+    svd.u.rightCols(count - have).noalias() = q * svd.v.middleCols(have, count - have);
+    for (Index i = have; i < count; ++i) svd.u.col(i) /= svd.sigma[i];
 }
 
 Eigen::MatrixXd gramMatrix(const Eigen::Ref<const Eigen::MatrixXd>& q) {

@@ -18,8 +18,10 @@ struct SvdOptions {
     int powerIterations = 2;   ///< subspace iterations q (each one a Q^T and a Q product)
     unsigned seed = 20070101;  ///< seed of the Gaussian test matrix (std::mt19937_64): deterministic
     Route route = Route::Auto; ///< Auto picks the cheaper route by flop count; tests force one
-    /// Left singular vectors to form: -1 = all `rank`; fewer saves the (rows x cols x count) product
-    /// U = Q V S^-1 when only the leading ones are needed (sigma and V are always complete).
+    /// Gram route only: left singular vectors to form, -1 = all `rank`. U = Q V S^-1 costs a
+    /// rows x cols product per column, so a caller that needs only the leading ones (or learns how
+    /// many later: formLeftVectors) saves it. sigma and V are always complete; the randomized
+    /// route always forms all of U (there U = Y U_B is cheap).
     Index leftVectors = -1;
 };
 
@@ -33,6 +35,18 @@ struct TruncatedSvd {
     /// blocks of key selection and the calibration folds are then solved in frame space.
     Eigen::MatrixXd gram;
 };
+
+/// Flop estimates of the two routes for a rows x cols matrix (see truncatedSvd), shared by the
+/// callers that choose between a frame-space (Gram) and a randomized computation.
+/// gramRouteFlops includes the cols x cols symmetric eigensolver (~9 cols^3), which dominates
+/// when there are thousands of frames.
+double gramRouteFlops(Index rows, Index cols, Index leftVectors);
+double randomizedRouteFlops(Index rows, Index cols, Index sketch, int powerIterations);
+
+/// Makes sure a Gram-route result has at least `count` left singular vectors (U = Q V S^-1 for
+/// the missing columns, capped by sigma.size()). A randomized-route result already has all.
+/// @param q the same matrix the SVD was computed from
+void formLeftVectors(const Eigen::Ref<const Eigen::MatrixXd>& q, TruncatedSvd& svd, Index count);
 
 /// Q^T Q by a symmetric rank-k update (half the flops of a general product), both triangles filled.
 Eigen::MatrixXd gramMatrix(const Eigen::Ref<const Eigen::MatrixXd>& q);
@@ -51,8 +65,8 @@ TruncatedSvd svdFromGram(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen
 /// between steps, then the SVD of the small l x cols matrix B = Y^T Q, l = rank + oversampling.
 ///
 /// Decision (revised from "Gram iff l >= cols/2" after profiling the face-scale training): Auto
-/// takes the route with fewer flops. For a tall m x n matrix, Gram costs about m n^2 + 2 m n r
-/// and randomized about 2 m n l (2q + 2) + 4 m l^2 (q + 1); with n = 600 frames and q = 2 the
+/// takes the route with fewer flops. For a tall m x n matrix, Gram costs about m n^2 + 9 n^3 +
+/// 2 m n r and randomized about 2 m n l (2q + 2) + 4 m l^2 (q + 1); with n = 600 frames and q = 2 the
 /// randomized route is cheaper only for l below ~50, not below n/2 = 300: at l = 266 (the default
 /// basis cap) it measured 8 s of CPU against under 1 s for the Gram route on 80,157 x 600. The
 /// randomized route keeps its place for narrow sketches (residual blocks of B ~ 16 vectors) and for

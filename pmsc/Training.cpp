@@ -140,7 +140,12 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
     }
     // The first key-selection block needs the top `block` vectors of Q even when M is smaller.
     const Index svdRank = std::min(std::max(wanted, options.block), std::min(f, q.rows()));
-    const TruncatedSvd svd = truncatedSvd(q, svdRank, svdOptions);
+    // U = Q V S^-1 costs a full product per column on the Gram route: form only what the M rule
+    // needs now (the max-error rule scans all of U) and the rest once M is known.
+    const bool needAllU = options.basis <= 0 && options.energy <= 0 && options.basisMaxError > 0;
+    svdOptions.leftVectors = needAllU ? -1 : std::min(svdRank, options.block);
+    TruncatedSvd svd = truncatedSvd(q, svdRank, svdOptions);
+    svdOptions.leftVectors = -1;
     const Index available = std::min<Index>(cap, svd.sigma.size());
     if (available < 1) throw InputError("train: the training frames have no usable variation");
     progress("svd", 1, 1);
@@ -175,6 +180,7 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
         progress("basis-error", 1, 1);
     }
     report.requestedBasis = m;
+    formLeftVectors(q, svd, std::max(m, options.block));
     Eigen::MatrixXd basis = svd.u.leftCols(m);
 
     // --- Key points (section 4).
@@ -200,8 +206,10 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
         report.residualPerRound = std::move(sel.residualPerRound);
     } else {
         progress("keys", 0, static_cast<double>(options.maxKeys));
-        std::vector<Index> seeds = options.fiducials;
-        seeds.insert(seeds.end(), options.gridPoints.begin(), options.gridPoints.end());
+        // Validate here so a bad grid point is named as a grid point, not as a fiducial.
+        KeySet check(n);
+        seedKeys(check, options.fiducials, options.gridPoints);
+        const std::vector<Index> seeds = check.keys();
         QDeimSelection sel = selectKeysQDeim(basis, channels, options.maxKeys, seeds);
         keys = std::move(sel.keys);
         report.iterations = sel.passes;
@@ -220,6 +228,8 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
         throw InputError("train: the " + std::to_string(keys.size()) +
                          " key points determine no basis vector (their basis rows are all zero)");
     }
+    const bool reportedResidualIsFinal =
+        options.selector == Selector::Teleconnection && determined >= m && !report.residualPerRound.empty();
     if (determined < m) {
         const std::string why = kc < m ? "the " + std::to_string(keys.size()) + " keys give only K*C = " +
                                              std::to_string(kc) + " values"
@@ -239,7 +249,11 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
     model.singularValues = svd.sigma.head(m);
     model.keyPoints = keys;
     model.projector = makeProjector(model.basis, channels, keys);
-    {
+    if (reportedResidualIsFinal) {
+        // The last selection round already approximated the training set with exactly these keys
+        // and this basis; recomputing would cost another (N*C) x M x F product.
+        model.trainMaxPointResidual = report.residualPerRound.back();
+    } else {
         Eigen::MatrixXd residual;
         model.trainMaxPointResidual = pmResidual(q, model.basis, channels, keys, residual);
     }

@@ -73,6 +73,9 @@ struct TrainingReport {
 /// RMS error seen on the training frames and epsMax = 1.5 x epsMin (the ratio of
 /// the paper's hand-picked [0.1, 0.15]); `pmsc replay --eps` can override both.
 /// @throws std::invalid_argument for unusable data or options (message names the value).
+/// @throws pmsc::InputError (also bad input, exit code 2 on the command line) for training data
+///         that cannot be used: a NaN or Inf (message names frame, point and channel), fewer than
+///         2 frames, or frames that do not vary.
 Model train(const FrameSet& frames, const TrainingOptions& options, TrainingReport* report = nullptr);
 
 }  // namespace pmsc

@@ -2,6 +2,7 @@
 
 #include <Eigen/SVD>
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -41,44 +42,53 @@ VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const V
             if (scale[i] > 0) x.row(i) /= scale[i];
     }
 
-    // Per iteration: two (p x k)(k x k) products and ONE pass over Z that yields Z.^3 and both
-    // column moments (criterion and the diag term of G at once). The blocks are tall (N*C rows
-    // of 16 columns), so passes over Z, not flops, are what an iteration costs.
-    // G = X^T (Z.^3 - Z diag(colSquares)/p) = X^T Z.^3 - (X^T X) T diag(colSquares)/p.
+    // G = X^T (Z.^3 - Z diag(colSquares)/p) = X^T Z.^3 - (X^T X) T diag(colSquares)/p, Z = X T.
+    // The blocks are tall (N*C rows, ~16 columns), so memory passes, not flops, set the cost of an
+    // iteration. Each iteration therefore streams X once, in row chunks small enough to stay in
+    // cache: Z, Z.^3, the column moments (criterion) and X^T Z.^3 are all made from the chunk
+    // while it is hot, and Z itself is never stored until the end.
     const Eigen::MatrixXd xtx = x.transpose() * x;
-    Eigen::MatrixXd z = x;
-    Eigen::MatrixXd cubes(p, k);
+    const Index chunk = std::min<Index>(p, 512);
+    Eigen::MatrixXd zc(chunk, k);
+    Eigen::MatrixXd cubes(chunk, k);
     Eigen::VectorXd colSquares(k);
+    Eigen::VectorXd colQuartics(k);
     Eigen::MatrixXd g(k, k);
     const double inverseRows = 1.0 / static_cast<double>(p);
-    auto moments = [&]() {
-        double total = 0;
-        for (Index j = 0; j < k; ++j) {
-            const double* zc = z.col(j).data();
-            double* cc = cubes.col(j).data();
-            double s2 = 0, s4 = 0;
-            for (Index i = 0; i < p; ++i) {
-                const double v = zc[i];
-                const double v2 = v * v;
-                cc[i] = v2 * v;
-                s2 += v2;
-                s4 += v2 * v2;
+    // Fills g (the gradient matrix) for the current rotation and returns the criterion there.
+    auto evaluate = [&]() {
+        g.setZero();
+        colSquares.setZero();
+        colQuartics.setZero();
+        for (Index r0 = 0; r0 < p; r0 += chunk) {
+            const Index h = std::min(chunk, p - r0);
+            auto z = zc.topRows(h);
+            auto c = cubes.topRows(h);
+            z.noalias() = x.middleRows(r0, h) * result.rotation;
+            for (Index j = 0; j < k; ++j) {
+                double s2 = 0, s4 = 0;
+                for (Index i = 0; i < h; ++i) {
+                    const double v = z(i, j);
+                    const double v2 = v * v;
+                    c(i, j) = v2 * v;
+                    s2 += v2;
+                    s4 += v2 * v2;
+                }
+                colSquares[j] += s2;
+                colQuartics[j] += s4;
             }
-            colSquares[j] = s2;
-            const double m2 = s2 * inverseRows;
-            total += s4 * inverseRows - m2 * m2;
+            g.noalias() += x.middleRows(r0, h).transpose() * c;
         }
-        return total;  // == varimaxCriterion(z)
+        g.noalias() -= xtx * result.rotation * (colSquares * inverseRows).asDiagonal();
+        const Eigen::ArrayXd m2 = colSquares.array() * inverseRows;
+        return (colQuartics.array() * inverseRows - m2 * m2).sum();  // == varimaxCriterion(X T)
     };
-    double criterion = moments();
+    double criterion = evaluate();
     result.objective.push_back(criterion);
     for (int it = 0; it < options.maxIterations; ++it) {
-        g.noalias() = x.transpose() * cubes;
-        g.noalias() -= xtx * result.rotation * (colSquares * inverseRows).asDiagonal();
         Eigen::JacobiSVD<Eigen::MatrixXd> svd(g, Eigen::ComputeFullU | Eigen::ComputeFullV);
         result.rotation.noalias() = svd.matrixU() * svd.matrixV().transpose();
-        z.noalias() = x * result.rotation;
-        const double next = moments();
+        const double next = evaluate();
         result.objective.push_back(next);
         ++result.iterations;
         // Relative gain of the criterion itself (R stops on the sum of G's singular values, a
@@ -90,6 +100,7 @@ VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const V
             break;
         }
     }
+    Eigen::MatrixXd z = x * result.rotation;
     if (options.normalize) {
         for (Index i = 0; i < p; ++i)
             if (scale[i] > 0) z.row(i) *= scale[i];

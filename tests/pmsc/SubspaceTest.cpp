@@ -40,14 +40,14 @@ TEST_P(SubspaceRoutes, RecoversLowRankDataExactly) {
     EXPECT_EQ(s.gramRoute, GetParam() == Route::Gram);
 }
 
-TEST_P(SubspaceRoutes, OrthonormalAndMatchesBdcsvdOnSmallData) {
+TEST_P(SubspaceRoutes, OrthonormalAndMatchesJacobiSvdOnSmallData) {
     // Full-rank data with a decaying spectrum plus noise: compare the leading 8 triplets.
     Eigen::MatrixXd q = pmsc::test::lowRank(200, 60, 20, 32, 0.75) + 1e-3 * pmsc::test::gaussian(200, 60, 33);
     const pmsc::TruncatedSvd s = pmsc::truncatedSvd(q, 8, route(GetParam()));
     ASSERT_EQ(s.sigma.size(), 8);
     EXPECT_LT((s.u.transpose() * s.u - Eigen::MatrixXd::Identity(8, 8)).norm(), 1e-10);
     EXPECT_LT((s.v.transpose() * s.v - Eigen::MatrixXd::Identity(8, 8)).norm(), 1e-10);
-    Eigen::BDCSVD<Eigen::MatrixXd> ref(q, Eigen::ComputeThinU | Eigen::ComputeThinV);
+    Eigen::JacobiSVD<Eigen::MatrixXd> ref(q, Eigen::ComputeThinU | Eigen::ComputeThinV);
     for (int i = 0; i < 8; ++i) {
         EXPECT_NEAR(s.sigma[i], ref.singularValues()[i], 1e-9 * ref.singularValues()[0]) << i;
         // Singular vectors up to sign.
@@ -84,16 +84,24 @@ TEST(Subspace, RandomizedRouteIsDeterministicForASeed) {
     EXPECT_LT(outside(c.u.leftCols(3), a.u.leftCols(3)), 1e-6);
 }
 
-TEST(Subspace, LeftVectorsLimitsOnlyU) {
+TEST(Subspace, LeftVectorsLimitsTheGramRouteAndCanBeCompletedLater) {
     const Eigen::MatrixXd q = pmsc::test::lowRank(300, 50, 10, 36);
-    for (Route r : {Route::Gram, Route::Randomized}) {
-        pmsc::SvdOptions o = route(r);
-        o.leftVectors = 3;
-        const pmsc::TruncatedSvd s = pmsc::truncatedSvd(q, 8, o);
-        EXPECT_EQ(s.u.cols(), 3);
-        EXPECT_EQ(s.sigma.size(), 8);
-        EXPECT_EQ(s.v.cols(), 8);
-    }
+    pmsc::SvdOptions o = route(Route::Gram);
+    o.leftVectors = 3;
+    pmsc::TruncatedSvd s = pmsc::truncatedSvd(q, 8, o);
+    EXPECT_EQ(s.u.cols(), 3);
+    EXPECT_EQ(s.sigma.size(), 8);
+    EXPECT_EQ(s.v.cols(), 8);
+    pmsc::formLeftVectors(q, s, 6);
+    ASSERT_EQ(s.u.cols(), 6);
+    const pmsc::TruncatedSvd full = pmsc::truncatedSvd(q, 8, route(Route::Gram));
+    EXPECT_LT((s.u - full.u.leftCols(6)).cwiseAbs().maxCoeff(), 1e-12);
+    pmsc::formLeftVectors(q, s, 100);  // capped by the singular values there are
+    EXPECT_EQ(s.u.cols(), 8);
+    // The randomized route forms all of U regardless (it is cheap there).
+    pmsc::SvdOptions r = route(Route::Randomized);
+    r.leftVectors = 3;
+    EXPECT_EQ(pmsc::truncatedSvd(q, 8, r).u.cols(), 8);
 }
 
 TEST(Subspace, RemoveRowMeanAndPointNorms) {
@@ -156,7 +164,7 @@ TEST(Subspace, SvdFromGramOfAResidualMatchesTheExplicitSvd) {
     const Eigen::MatrixXd w = s.u.transpose() * q;
     const Eigen::MatrixXd rtr = g - w.transpose() * c - c.transpose() * w + c.transpose() * c;
     const pmsc::TruncatedSvd fromGram = pmsc::svdFromGram(r, rtr, 5);
-    Eigen::BDCSVD<Eigen::MatrixXd> ref(r, Eigen::ComputeThinU);
+    Eigen::JacobiSVD<Eigen::MatrixXd> ref(r, Eigen::ComputeThinU);
     for (int i = 0; i < 5; ++i) EXPECT_NEAR(fromGram.sigma[i], ref.singularValues()[i], 1e-9 * ref.singularValues()[0]);
     EXPECT_LT(outside(fromGram.u, ref.matrixU().leftCols(5)), 1e-6);
 }

@@ -1,6 +1,7 @@
 #include "pmsc/Training.h"
 
 #include "pmsc/Errors.h"
+#include "pmsc/KeyPointSelector.h"
 #include "pmsc/PointMultiplier.h"
 #include "Synthetic.h"
 
@@ -233,4 +234,23 @@ TEST(Training, BasisMaxErrorRulePicksTheSmallestSufficientM) {
     const pmsc::Index mm = model.basisSize();
     EXPECT_LE(err(mm), 0.01);
     for (pmsc::Index k = 1; k < mm; ++k) EXPECT_GT(err(k), 0.01) << k;
+}
+
+TEST(Training, TrainMaxPointResidualIsThePmErrorOfTheFinalModel) {
+    // Checked against a direct recomputation for a plain run, a run whose M is reduced, and Q-DEIM.
+    const pmsc::FrameSet frames = pmsc::test::patchFrames(10, 12, 3, 80, 13);
+    Eigen::MatrixXd q;
+    pmsc::removeRowMean(frames.matrix(), q);
+    for (int variant = 0; variant < 3; ++variant) {
+        pmsc::TrainingOptions o;
+        o.basis = variant == 1 ? 10 : 6;
+        o.maxKeys = variant == 1 ? 2 : 9;  // variant 1: K*C = 6 < M = 10
+        o.block = 4;
+        if (variant == 2) o.selector = pmsc::Selector::QDeim;
+        const pmsc::Model model = pmsc::train(frames, o);
+        Eigen::MatrixXd residual;
+        const double direct = pmsc::pmResidual(q, model.basis, 3, model.keyPoints, residual);
+        EXPECT_NEAR(model.trainMaxPointResidual, direct, 1e-12 * (1 + direct)) << "variant " << variant;
+        EXPECT_GT(direct, 0.0);
+    }
 }
