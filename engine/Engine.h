@@ -38,8 +38,9 @@ struct EngineOptions {
     /// this many frame buffers, however long the range.
     Index maxFramesInFlight = 0;
     FailurePolicy failurePolicy = FailurePolicy::StopRun;
-    /// Output points per fail-through branch; 0 = automatic (about 8 branches per
-    /// thread, at least 256 points each).
+    /// Output points per fail-through branch; 0 = automatic: about 64 branches per frame, at
+    /// least 256 points each. The automatic size depends on the point count only, never on the
+    /// thread count, so the output is bit-identical at any `threads`.
     Index chunkPoints = 0;
     /// Fail through with one PointEvaluator::evaluateAll() call per frame instead of
     /// chunks (for evaluators whose full evaluation shares work between points).
