@@ -14,6 +14,7 @@ int runTrain(const std::vector<std::string>& args);         // cli/TrainCommand.
 int runReplay(const std::vector<std::string>& args);        // cli/ReplayCommand.cpp
 int runInspect(const std::vector<std::string>& args);       // cli/InspectCommand.cpp
 int runDemo(const std::vector<std::string>& args);          // cli/DemoCommand.cpp
+int runDemoSynthetic(const std::vector<std::string>& args);  // cli/DemoCommand.cpp (examples/synthetic)
 int runRun(const std::vector<std::string>& args);           // cli/RunCommand.cpp (render farm)
 int runExportFrames(const std::vector<std::string>& args);  // cli/ExportFramesCommand.cpp
 int runDemoCornell(const std::vector<std::string>& args);   // cli/CornellDemoCommand.cpp (examples/cornell)

@@ -89,6 +89,10 @@ int runDemo(const std::vector<std::string>& args) {
     // `pmsc demo` alone (what ./pmsc.sh demo runs) is the paper's main experiment, the Cornell box
     // (issue 4, cli/CornellDemoCommand.cpp); with options it is this generated shot.
     if (args.empty()) return runDemoCornell({"--out", "pmsc-demo-cornell"});
+    return runDemoSynthetic(args);
+}
+
+int runDemoSynthetic(const std::vector<std::string>& args) {
     std::string outDir = "pmsc-demo-out";
     synthetic::SurfaceOptions trainShot, testShot;
     trainShot.frames = 1000;
@@ -100,7 +104,7 @@ int runDemo(const std::vector<std::string>& args) {
     Index maxKeys = 48;
     bool quiet = false;
     ArgParser parser(
-        "demo", "[--out DIR] [options]",
+        "demo synthetic", "[--out DIR] [options]",
         "Generates a shot of a deforming surface (a sheet with sliding bumps and a twisting\n"
         "\"jaw\"; examples/synthetic), trains a model on one take, replays another take through\n"
         "the soft cache, and prints what happened. The test take ends with a motion the\n"

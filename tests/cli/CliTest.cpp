@@ -248,8 +248,9 @@ TEST_F(Cli, InspectTextAndJson) {
 TEST_F(Cli, DemoRunsEndToEnd) {
     TempDir dir;
     const auto out = dir.file("demo");
-    const RunResult r = runPmsc(dir, {"demo", "--out", out, "--grid", "12", "--train-frames", "240",
-                                      "--test-frames", "60", "--novel-frames", "20", "--max-keys", "24"});
+    const RunResult r =
+        runPmsc(dir, {"demo", "synthetic", "--out", out, "--grid", "12", "--train-frames", "240",
+                      "--test-frames", "60", "--novel-frames", "20", "--max-keys", "24"});
     ASSERT_EQ(r.exitCode, 0) << r.err;
     for (const char* f : {"train.npy", "test.npy", "model.pmsc", "report.json", "out.npy"})
         EXPECT_TRUE(fs::exists(fs::path(out) / f)) << f;
@@ -263,10 +264,18 @@ TEST_F(Cli, DemoRunsEndToEnd) {
 
 TEST_F(Cli, HelpForEveryCommand) {
     TempDir dir;
-    for (const char* command : {"train", "replay", "inspect", "demo"}) {
-        const RunResult r = runPmsc(dir, {command, "--help"});
+    for (const std::string command : {"train", "replay", "inspect", "demo synthetic"}) {
+        std::vector<std::string> args;
+        for (std::size_t start = 0;;) {
+            const auto space = command.find(' ', start);
+            args.push_back(command.substr(start, space - start));
+            if (space == std::string::npos) break;
+            start = space + 1;
+        }
+        args.push_back("--help");
+        const RunResult r = runPmsc(dir, args);
         EXPECT_EQ(r.exitCode, 0);
-        EXPECT_NE(r.out.find(std::string("usage: pmsc ") + command), std::string::npos) << r.out;
+        EXPECT_NE(r.out.find("usage: pmsc " + command + " "), std::string::npos) << r.out;
         EXPECT_EQ(r.err, "");
     }
     RunResult r = runPmsc(dir, {"--help"});
