@@ -70,6 +70,12 @@ double pmResidual(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::Matri
 Index determinedBasisSize(const Eigen::MatrixXd& basis, Index channels, const std::vector<Index>& keys,
                           double maxCondition = 1e8);
 
+/// The largest point residual of q - basis * coords (max over points and frames of the Euclidean
+/// norm over channels) without materialising the residual: rows are processed in cache-sized
+/// blocks, so the training matrix is read once and nothing of its size is written.
+double maxPointResidual(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::MatrixXd& basis,
+                        const Eigen::MatrixXd& coords, Index channels);
+
 /// Options of the teleconnection key selection (section 4).
 struct TeleconnectionOptions {
     Index maxKeys = 200;   ///< key budget K
@@ -105,7 +111,8 @@ struct KeySelection {
 /// Speed decision: with `gram` = Q^T Q (available when the subspace came from the Gram route),
 /// the residual's leading vectors are found in frame space: with W = B^T Q (once) and the round's
 /// coordinates C, R^T R = G - W^T C - C^T W + C^T C (B orthonormal), an F x F eigenproblem, and
-/// U_R = R V_R S_R^-1 is one skinny product. That replaces the six (N*C) x F x (B+10) products and
+/// U_R = R V_R S_R^-1 = Q (V_R S_R^-1) - B (C V_R S_R^-1) is two skinny products: the residual
+/// is never formed (its largest point error comes from maxPointResidual, block by block). That replaces the six (N*C) x F x (B+10) products and
 /// three tall QRs of the randomized SVD per round (a third of the key-selection time at the face
 /// scale). It is used only while 9 F^3 + 2 (N*C) F B flops undercut the randomized SVD (hundreds
 /// of frames, not thousands), and not when the residual is too small for it to be accurate

@@ -211,6 +211,17 @@ TEST(Determinacy, TooFewKeyValuesOrDependentKeysReduceM) {
     EXPECT_EQ(pmsc::determinedBasisSize(zero, 3, {0}), 0);
 }
 
+TEST(Determinacy, BlockwiseMaxResidualMatchesTheExplicitResidual) {
+    // More rows than one block (96 points) and a ragged last block.
+    const Eigen::MatrixXd q = pmsc::test::lowRank(250 * 3, 40, 12, 48, 0.8);
+    const pmsc::TruncatedSvd svd = pmsc::truncatedSvd(q, 5);
+    const std::vector<pmsc::Index> keys = {3, 77, 140, 201, 249};
+    Eigen::MatrixXd residual, coords;
+    const double explicitWorst = pmsc::pmResidual(q, svd.u, 3, keys, residual, &coords);
+    EXPECT_GT(explicitWorst, 1e-3);
+    EXPECT_NEAR(pmsc::maxPointResidual(q, svd.u, coords, 3), explicitWorst, 1e-13);
+}
+
 TEST(Determinacy, PmResidualIsTheProjectionErrorWhenAllPointsAreKeys) {
     const Eigen::MatrixXd q = pmsc::test::lowRank(20 * 3, 15, 6, 47);
     const pmsc::TruncatedSvd svd = pmsc::truncatedSvd(q, 4);
