@@ -18,5 +18,6 @@ int runDemoSynthetic(const std::vector<std::string>& args);  // cli/DemoCommand.
 int runRun(const std::vector<std::string>& args);           // cli/RunCommand.cpp (render farm)
 int runExportFrames(const std::vector<std::string>& args);  // cli/ExportFramesCommand.cpp
 int runDemoCornell(const std::vector<std::string>& args);   // cli/CornellDemoCommand.cpp (examples/cornell)
+int runDemoFace(const std::vector<std::string>& args);      // cli/FaceDemoCommand.cpp (examples/face)
 
 }  // namespace pmsc::cli

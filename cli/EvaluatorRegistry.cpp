@@ -2,6 +2,7 @@
 
 #include "cli/ReplayEvaluator.h"
 #include "examples/cornell/CornellEvaluator.h"
+#include "examples/face/FaceEvaluator.h"
 #include "examples/skin/SkinEvaluator.h"
 
 #include <stdexcept>
@@ -27,6 +28,7 @@ const std::vector<EvaluatorKind>& evaluatorKinds() {
         {"replay", "FILE.npy", "recorded frames (F, N, C) stand in for the calculation", [](const std::string& a) { return std::make_unique<ReplayEvaluator>(requireArgs("replay", "FILE.npy", a)); }},
         {"cornell", "[points=N,samples=S,lights=all|training|scattered|path]", "section 8: indirect light in the Cornell box at the voxels of an OpenVDB lighting cache (writes .vdb)", [](const std::string& a) -> std::unique_ptr<PointEvaluator> { return cornell::makeCornellEvaluator(a); }},
         {"skin", "ASSET[:fps=F][:animation=A]", "an animated, skinned asset (glTF 2, FBX, Collada, X, BVH, ...) posed by linear blend skinning", [](const std::string& a) -> std::unique_ptr<PointEvaluator> { return skin::makeSkinEvaluator(requireArgs("skin", "ASSET", a)); }},
+        {"face", "DIR", "section 7: the ICT face rig (DIR = ICT-FaceKit FaceXModel folder) posing its 44-sequence animation (writes .obj)", [](const std::string& a) -> std::unique_ptr<PointEvaluator> { return face::makeFaceEvaluator(requireArgs("face", "DIR", a)); }},
     };
     // clang-format on
     return kinds;

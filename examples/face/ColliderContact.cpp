@@ -5,8 +5,9 @@
 
 namespace pmsc::face {
 
-ColliderContact::ColliderContact(std::string name, const std::vector<double>& rest, const MeshTopology& topology,
-                                 const std::vector<char>& skin, const std::vector<char>& collider,
+ColliderContact::ColliderContact(std::string name, const std::vector<double>& rest,
+                                 const MeshTopology& topology, const std::vector<char>& skin,
+                                 const std::vector<char>& collider,
                                  const std::vector<Eigen::Vector3d>& inside)
     : name_(std::move(name)), triangles_(topology.triangles()) {
     const Index n = topology.vertexCount();

@@ -16,15 +16,13 @@
 namespace pmsc::face {
 
 /// One-sided contact of skin against a rigid part that moves under it: the eyelids against the
-/// eyeballs (which turn with the gaze and carry the cornea's bulge under the lids) and the lips
-/// against the teeth (the lower teeth ride the jaw; rolled or pressed lips must not pass
-/// through them).
+/// eyeballs, which turn with the gaze and carry the cornea's bulge under the lids. (The same
+/// class was tried for the lips against the teeth and rejected: see FaceRig.)
 ///
 /// A vertex of the contact zone (a candidate skin vertex within kZoneRadius of the collider at
-/// rest, and outside it: vertices the scan already has inside, like a few inner-lip vertices
-/// cutting into a tooth, are left out) finds the closest point of the collider among its
-/// candidate triangles (within kCandidateRadius at rest) and its signed distance s along that
-/// triangle's outward normal. A penetration (s < 0) is pushed out with the C1 ramp of
+/// rest, and outside it: vertices the scan already has inside are left out) finds the closest point of the
+/// collider among its candidate triangles (within kCandidateRadius at rest) and its signed distance s along
+/// that triangle's outward normal. A penetration (s < 0) is pushed out with the C1 ramp of
 /// LipContact::response, in full: the collider does not give way. The rest pose is untouched.
 ///
 /// Uneven cost and a neighbourhood: only zone vertices pay, each testing its candidate
@@ -55,12 +53,14 @@ public:
     }
     std::span<const std::int32_t> candidates(Index v) const {
         const auto z = static_cast<size_t>(zoneIndex_[static_cast<size_t>(v)]);
-        return {candidates_.data() + candidateStart_[z], static_cast<size_t>(candidateStart_[z + 1] - candidateStart_[z])};
+        return {candidates_.data() + candidateStart_[z],
+                static_cast<size_t>(candidateStart_[z + 1] - candidateStart_[z])};
     }
     /// Signed distance of zone vertex v at x to the posed collider (outward positive), and the
     /// outward normal of the nearest triangle.
     template <class Posed>
-    double signedDistance(Index v, const Eigen::Vector3d& x, const Posed& posed, Eigen::Vector3d& normal) const;
+    double signedDistance(Index v, const Eigen::Vector3d& x, const Posed& posed,
+                          Eigen::Vector3d& normal) const;
     /// The contact of zone vertex v at x; other vertices are returned as is.
     template <class Posed>
     Eigen::Vector3d apply(Index v, const Eigen::Vector3d& x, const Posed& posed) const;

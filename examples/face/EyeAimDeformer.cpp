@@ -20,16 +20,17 @@ EyeAimDeformer::Aim EyeAimDeformer::aim(const ControlVector& controls) const {
     const double distance = std::max(controls[GazeDistance], kMinTargetDistance);
     const Eigen::Vector3d mid = 0.5 * (centres_[0] + centres_[1]);
     const Eigen::Vector3d target =
-        mid + distance * Eigen::Vector3d(std::cos(pitch) * std::sin(yaw), std::sin(pitch), std::cos(pitch) * std::cos(yaw));
+        mid + distance * Eigen::Vector3d(std::cos(pitch) * std::sin(yaw), std::sin(pitch),
+                                         std::cos(pitch) * std::cos(yaw));
     Aim a;
     for (int e = 0; e < 2; ++e) {
         const Eigen::Vector3d u = (target - centres_[static_cast<size_t>(e)]).normalized();
         const double eyeYaw = std::atan2(u[0], u[2]);
         const double eyePitch = std::asin(std::clamp(u[1], -1.0, 1.0));
         // Ry(yaw) Rx(-pitch) turns the rest gaze +z into u.
-        a.rotation[static_cast<size_t>(e)] =
-            (Eigen::AngleAxisd(eyeYaw, Eigen::Vector3d::UnitY()) * Eigen::AngleAxisd(-eyePitch, Eigen::Vector3d::UnitX()))
-                .toRotationMatrix();
+        a.rotation[static_cast<size_t>(e)] = (Eigen::AngleAxisd(eyeYaw, Eigen::Vector3d::UnitY()) *
+                                              Eigen::AngleAxisd(-eyePitch, Eigen::Vector3d::UnitX()))
+                                                 .toRotationMatrix();
         a.yawDegrees[static_cast<size_t>(e)] = eyeYaw / kDeg;
         a.pitchDegrees[static_cast<size_t>(e)] = eyePitch / kDeg;
     }

@@ -60,7 +60,8 @@ EyelidDeformer::EyelidDeformer(const IctFace& face) {
     }
 }
 
-Eigen::Vector3d EyelidDeformer::apply(Index v, const Eigen::Vector3d& q, const std::array<double, 2>& blink) const {
+Eigen::Vector3d EyelidDeformer::apply(Index v, const Eigen::Vector3d& q,
+                                      const std::array<double, 2>& blink) const {
     const int e = eye_[static_cast<size_t>(v)];
     if (e < 0) return q;
     const double a = blink[static_cast<size_t>(e)] * angle_[static_cast<size_t>(v)];

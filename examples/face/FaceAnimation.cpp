@@ -16,7 +16,9 @@ public:
     explicit Random(std::uint64_t seed) : engine_(seed) {}
     double uniform() { return static_cast<double>(engine_() >> 11) * 0x1.0p-53; }
     double uniform(double lo, double hi) { return lo + (hi - lo) * uniform(); }
-    Index integer(Index lo, Index hi) { return lo + static_cast<Index>(uniform() * static_cast<double>(hi - lo + 1)); }
+    Index integer(Index lo, Index hi) {
+        return lo + static_cast<Index>(uniform() * static_cast<double>(hi - lo + 1));
+    }
     bool chance(double p) { return uniform() < p; }
 
 private:
@@ -38,7 +40,8 @@ public:
         }
         if (t <= keys_.front().first) return keys_.front().second;
         if (t >= keys_.back().first) return keys_.back().second;
-        const auto hi = std::upper_bound(keys_.begin(), keys_.end(), t, [](double x, auto& k) { return x < k.first; });
+        const auto hi =
+            std::upper_bound(keys_.begin(), keys_.end(), t, [](double x, auto& k) { return x < k.first; });
         const auto lo = hi - 1;
         const double span = hi->first - lo->first;
         const double s = span > 0 ? (t - lo->first) / span : 1.0;
@@ -55,15 +58,41 @@ private:
 // to read, lips that round, spread, press and roll.
 const std::vector<Target>& visemes() {
     static const std::vector<Target> table = {
-        /* AA */ {{JawOpen, 0.55}, {MouthLowerDownL, 0.25}, {MouthLowerDownR, 0.25}, {MouthStretchL, 0.1}, {MouthStretchR, 0.1}},
-        /* EH */ {{JawOpen, 0.35}, {MouthStretchL, 0.3}, {MouthStretchR, 0.3}, {MouthSmileL, 0.15}, {MouthSmileR, 0.15}, {MouthUpperUpL, 0.1}, {MouthUpperUpR, 0.1}},
-        /* IY */ {{JawOpen, 0.15}, {MouthStretchL, 0.45}, {MouthStretchR, 0.45}, {MouthSmileL, 0.3}, {MouthSmileR, 0.3}},
+        /* AA */ {{JawOpen, 0.55},
+                  {MouthLowerDownL, 0.25},
+                  {MouthLowerDownR, 0.25},
+                  {MouthStretchL, 0.1},
+                  {MouthStretchR, 0.1}},
+        /* EH */
+        {{JawOpen, 0.35},
+         {MouthStretchL, 0.3},
+         {MouthStretchR, 0.3},
+         {MouthSmileL, 0.15},
+         {MouthSmileR, 0.15},
+         {MouthUpperUpL, 0.1},
+         {MouthUpperUpR, 0.1}},
+        /* IY */
+        {{JawOpen, 0.15},
+         {MouthStretchL, 0.45},
+         {MouthStretchR, 0.45},
+         {MouthSmileL, 0.3},
+         {MouthSmileR, 0.3}},
         /* OW */ {{JawOpen, 0.35}, {MouthFunnel, 0.5}, {MouthPucker, 0.3}},
         /* UW */ {{JawOpen, 0.15}, {MouthPucker, 0.75}, {MouthFunnel, 0.3}},
-        /* MBP */ {{JawOpen, 0.04}, {MouthPressL, 0.45}, {MouthPressR, 0.45}, {MouthRollLower, 0.15}, {MouthRollUpper, 0.1}},
+        /* MBP */
+        {{JawOpen, 0.04},
+         {MouthPressL, 0.45},
+         {MouthPressR, 0.45},
+         {MouthRollLower, 0.15},
+         {MouthRollUpper, 0.1}},
         /* FV */ {{JawOpen, 0.12}, {MouthRollLower, 0.5}, {MouthUpperUpL, 0.2}, {MouthUpperUpR, 0.2}},
         /* TH/L/D */ {{JawOpen, 0.25}, {MouthStretchL, 0.2}, {MouthStretchR, 0.2}},
-        /* S/Z */ {{JawOpen, 0.08}, {MouthStretchL, 0.35}, {MouthStretchR, 0.35}, {MouthSmileL, 0.2}, {MouthSmileR, 0.2}},
+        /* S/Z */
+        {{JawOpen, 0.08},
+         {MouthStretchL, 0.35},
+         {MouthStretchR, 0.35},
+         {MouthSmileL, 0.2},
+         {MouthSmileR, 0.2}},
         /* CH/SH */ {{JawOpen, 0.2}, {MouthFunnel, 0.45}, {MouthShrugUpper, 0.2}, {MouthPucker, 0.2}},
         /* R/W */ {{JawOpen, 0.15}, {MouthPucker, 0.5}, {MouthFunnel, 0.25}},
         /* K/G */ {{JawOpen, 0.3}, {MouthStretchL, 0.15}, {MouthStretchR, 0.15}, {MouthClose, 0.05}},
@@ -73,36 +102,96 @@ const std::vector<Target>& visemes() {
 
 const std::vector<int>& speechControls() {
     static const std::vector<int> controls = {
-        JawOpen, MouthLowerDownL, MouthLowerDownR, MouthStretchL, MouthStretchR, MouthSmileL, MouthSmileR,
-        MouthUpperUpL, MouthUpperUpR, MouthFunnel, MouthPucker, MouthPressL, MouthPressR, MouthRollLower,
-        MouthRollUpper, MouthShrugUpper, MouthClose};
+        JawOpen,     MouthLowerDownL, MouthLowerDownR, MouthStretchL,   MouthStretchR, MouthSmileL,
+        MouthSmileR, MouthUpperUpL,   MouthUpperUpR,   MouthFunnel,     MouthPucker,   MouthPressL,
+        MouthPressR, MouthRollLower,  MouthRollUpper,  MouthShrugUpper, MouthClose};
     return controls;
 }
 
 const std::vector<Target>& emotions() {
     static const std::vector<Target> table = {
         /* neutral */ {},
-        /* happy */ {{MouthSmileL, 0.65}, {MouthSmileR, 0.65}, {CheekSquintL, 0.5}, {CheekSquintR, 0.5}, {EyeSquintL, 0.25}, {EyeSquintR, 0.25}, {CheekRaiserL, 0.3}, {CheekRaiserR, 0.3}, {MouthDimpleL, 0.2}, {MouthDimpleR, 0.2}},
-        /* sad */ {{MouthFrownL, 0.55}, {MouthFrownR, 0.55}, {BrowInnerUpL, 0.6}, {BrowInnerUpR, 0.6}, {MouthShrugLower, 0.3}},
-        /* surprise */ {{BrowInnerUpL, 0.7}, {BrowInnerUpR, 0.7}, {BrowOuterUpL, 0.7}, {BrowOuterUpR, 0.7}, {EyeWideL, 0.6}, {EyeWideR, 0.6}, {JawOpen, 0.2}},
-        /* anger */ {{BrowDownL, 0.7}, {BrowDownR, 0.7}, {NoseSneerL, 0.35}, {NoseSneerR, 0.35}, {EyeSquintL, 0.35}, {EyeSquintR, 0.35}, {MouthPressL, 0.3}, {MouthPressR, 0.3}},
-        /* disgust */ {{NoseSneerL, 0.6}, {NoseSneerR, 0.6}, {MouthUpperUpL, 0.45}, {MouthUpperUpR, 0.45}, {BrowDownL, 0.3}, {BrowDownR, 0.3}, {CheekSquintL, 0.3}, {CheekSquintR, 0.3}, {MouthFrownL, 0.2}, {MouthFrownR, 0.2}},
+        /* happy */
+        {{MouthSmileL, 0.65},
+         {MouthSmileR, 0.65},
+         {CheekSquintL, 0.5},
+         {CheekSquintR, 0.5},
+         {EyeSquintL, 0.25},
+         {EyeSquintR, 0.25},
+         {CheekRaiserL, 0.3},
+         {CheekRaiserR, 0.3},
+         {MouthDimpleL, 0.2},
+         {MouthDimpleR, 0.2}},
+        /* sad */
+        {{MouthFrownL, 0.55},
+         {MouthFrownR, 0.55},
+         {BrowInnerUpL, 0.6},
+         {BrowInnerUpR, 0.6},
+         {MouthShrugLower, 0.3}},
+        /* surprise */
+        {{BrowInnerUpL, 0.7},
+         {BrowInnerUpR, 0.7},
+         {BrowOuterUpL, 0.7},
+         {BrowOuterUpR, 0.7},
+         {EyeWideL, 0.6},
+         {EyeWideR, 0.6},
+         {JawOpen, 0.2}},
+        /* anger */
+        {{BrowDownL, 0.7},
+         {BrowDownR, 0.7},
+         {NoseSneerL, 0.35},
+         {NoseSneerR, 0.35},
+         {EyeSquintL, 0.35},
+         {EyeSquintR, 0.35},
+         {MouthPressL, 0.3},
+         {MouthPressR, 0.3}},
+        /* disgust */
+        {{NoseSneerL, 0.6},
+         {NoseSneerR, 0.6},
+         {MouthUpperUpL, 0.45},
+         {MouthUpperUpR, 0.45},
+         {BrowDownL, 0.3},
+         {BrowDownR, 0.3},
+         {CheekSquintL, 0.3},
+         {CheekSquintR, 0.3},
+         {MouthFrownL, 0.2},
+         {MouthFrownR, 0.2}},
         /* contempt */ {{MouthSmileL, 0.45}, {MouthDimpleL, 0.45}, {EyeSquintL, 0.15}, {BrowDownR, 0.2}},
-        /* fear */ {{BrowInnerUpL, 0.6}, {BrowInnerUpR, 0.6}, {BrowOuterUpL, 0.3}, {BrowOuterUpR, 0.3}, {EyeWideL, 0.5}, {EyeWideR, 0.5}, {MouthStretchL, 0.45}, {MouthStretchR, 0.45}},
+        /* fear */
+        {{BrowInnerUpL, 0.6},
+         {BrowInnerUpR, 0.6},
+         {BrowOuterUpL, 0.3},
+         {BrowOuterUpR, 0.3},
+         {EyeWideL, 0.5},
+         {EyeWideR, 0.5},
+         {MouthStretchL, 0.45},
+         {MouthStretchR, 0.45}},
     };
     return table;
 }
 
 // The character's left and right swapped (x -> -x): used to vary asymmetric expressions.
 int mirror(int c) {
-    static const std::vector<std::pair<int, int>> pairs = {
-        {BrowDownL, BrowDownR},       {BrowInnerUpL, BrowInnerUpR},   {BrowOuterUpL, BrowOuterUpR},
-        {CheekPuffL, CheekPuffR},     {CheekRaiserL, CheekRaiserR},   {CheekSquintL, CheekSquintR},
-        {EyeSquintL, EyeSquintR},     {EyeWideL, EyeWideR},           {MouthDimpleL, MouthDimpleR},
-        {MouthFrownL, MouthFrownR},   {MouthLowerDownL, MouthLowerDownR}, {MouthPressL, MouthPressR},
-        {MouthSmileL, MouthSmileR},   {MouthStretchL, MouthStretchR}, {MouthUpperUpL, MouthUpperUpR},
-        {NoseSneerL, NoseSneerR},     {PupilDilateL, PupilDilateR},   {EyeBlinkL, EyeBlinkR},
-        {MouthLeft, MouthRight},      {JawLeft, JawRight}};
+    static const std::vector<std::pair<int, int>> pairs = {{BrowDownL, BrowDownR},
+                                                           {BrowInnerUpL, BrowInnerUpR},
+                                                           {BrowOuterUpL, BrowOuterUpR},
+                                                           {CheekPuffL, CheekPuffR},
+                                                           {CheekRaiserL, CheekRaiserR},
+                                                           {CheekSquintL, CheekSquintR},
+                                                           {EyeSquintL, EyeSquintR},
+                                                           {EyeWideL, EyeWideR},
+                                                           {MouthDimpleL, MouthDimpleR},
+                                                           {MouthFrownL, MouthFrownR},
+                                                           {MouthLowerDownL, MouthLowerDownR},
+                                                           {MouthPressL, MouthPressR},
+                                                           {MouthSmileL, MouthSmileR},
+                                                           {MouthStretchL, MouthStretchR},
+                                                           {MouthUpperUpL, MouthUpperUpR},
+                                                           {NoseSneerL, NoseSneerR},
+                                                           {PupilDilateL, PupilDilateR},
+                                                           {EyeBlinkL, EyeBlinkR},
+                                                           {MouthLeft, MouthRight},
+                                                           {JawLeft, JawRight}};
     for (auto [a, b] : pairs) {
         if (c == a) return b;
         if (c == b) return a;
@@ -125,7 +214,8 @@ void generateSequence(Random& rng, Index frames, const std::vector<int>& novelPo
     while (t < end) {
         const double utteranceEnd = t + rng.uniform(24, 72);
         while (t < std::min(utteranceEnd, end)) {
-            const Target& v = visemes()[static_cast<size_t>(rng.integer(0, static_cast<Index>(visemes().size()) - 1))];
+            const Target& v =
+                visemes()[static_cast<size_t>(rng.integer(0, static_cast<Index>(visemes().size()) - 1))];
             const double amplitude = rng.uniform(0.7, 1.15);
             const double asymmetry = rng.uniform(-0.1, 0.1);
             for (int c : speechControls()) {
@@ -154,7 +244,8 @@ void generateSequence(Random& rng, Index frames, const std::vector<int>& novelPo
     t = 0;
     Target previous;
     while (t <= end) {
-        const Target& e = emotions()[static_cast<size_t>(rng.integer(0, static_cast<Index>(emotions().size()) - 1))];
+        const Target& e =
+            emotions()[static_cast<size_t>(rng.integer(0, static_cast<Index>(emotions().size()) - 1))];
         const double intensity = rng.uniform(0.4, 1.0);
         const bool mirrored = rng.chance(0.5);
         Target now;
@@ -242,7 +333,8 @@ void generateSequence(Random& rng, Index frames, const std::vector<int>& novelPo
                 pose[c] = eyes[c].at(x);
                 continue;
             }
-            const double v = speech[c].at(x) + emotion[c].at(x) + accent[c].at(x) + eyes[c].at(x) + extra[c].at(x);
+            const double v =
+                speech[c].at(x) + emotion[c].at(x) + accent[c].at(x) + eyes[c].at(x) + extra[c].at(x);
             pose[c] = std::clamp(v, 0.0, 1.0);
         }
         pose[GazeDistance] = gazeDistance;
@@ -256,7 +348,8 @@ void generateSequence(Random& rng, Index frames, const std::vector<int>& novelPo
 FaceAnimation FaceAnimation::generate(const FaceAnimationOptions& options) {
     if (options.sequences < 1 || options.novelSequences < 0 || options.minFrames < 8 ||
         options.maxFrames < options.minFrames) {
-        throw std::invalid_argument("FaceAnimation: needs sequences >= 1, novelSequences >= 0 and 8 <= minFrames <= maxFrames");
+        throw std::invalid_argument(
+            "FaceAnimation: needs sequences >= 1, novelSequences >= 0 and 8 <= minFrames <= maxFrames");
     }
     if (options.novelSequences > 0 && options.novelControls.empty()) {
         throw std::invalid_argument("FaceAnimation: novel sequences need novel controls");
@@ -265,16 +358,19 @@ FaceAnimation FaceAnimation::generate(const FaceAnimationOptions& options) {
     const Index total = options.sequences + options.novelSequences;
     for (Index s = 0; s < total; ++s) {
         // Each sequence has its own stream, so adding sequences does not change the others.
-        Random rng(static_cast<std::uint64_t>(options.seed) * 0x9E3779B97F4A7C15ull + static_cast<std::uint64_t>(s) * 0xD1B54A32D192ED03ull + 1);
+        Random rng(static_cast<std::uint64_t>(options.seed) * 0x9E3779B97F4A7C15ull +
+                   static_cast<std::uint64_t>(s) * 0xD1B54A32D192ED03ull + 1);
         const bool novel = s >= options.sequences;
         FaceSequence seq;
         char name[32];
-        std::snprintf(name, sizeof name, novel ? "novel%03ld" : "seq%03ld", static_cast<long>(novel ? s - options.sequences : s));
+        std::snprintf(name, sizeof name, novel ? "novel%03ld" : "seq%03ld",
+                      static_cast<long>(novel ? s - options.sequences : s));
         seq.name = name;
         seq.novel = novel;
         seq.firstFrame = animation.frameCount();
         seq.frameCount = rng.integer(options.minFrames, options.maxFrames);
-        generateSequence(rng, seq.frameCount, options.novelControls, novel, animation.frames_, seq.novelControls);
+        generateSequence(rng, seq.frameCount, options.novelControls, novel, animation.frames_,
+                         seq.novelControls);
         animation.sequences_.push_back(std::move(seq));
     }
     return animation;
@@ -299,8 +395,9 @@ void FaceAnimation::splitOrdinary(double fraction, unsigned seed, std::vector<In
     for (Index i = static_cast<Index>(ordinary.size()) - 1; i > 0; --i) {  // Fisher-Yates
         std::swap(ordinary[i], ordinary[rng.integer(0, i)]);
     }
-    const Index count = std::clamp<Index>(static_cast<Index>(std::lround(fraction * static_cast<double>(ordinary.size()))), 1,
-                                          static_cast<Index>(ordinary.size()));
+    const Index count =
+        std::clamp<Index>(static_cast<Index>(std::lround(fraction * static_cast<double>(ordinary.size()))), 1,
+                          static_cast<Index>(ordinary.size()));
     training.assign(ordinary.begin(), ordinary.begin() + count);
     validation.assign(ordinary.begin() + count, ordinary.end());
     std::sort(training.begin(), training.end());

@@ -25,12 +25,13 @@ struct FaceSequence {
 /// "animation control that was not exercised in the training set" of paper section 5.
 struct FaceAnimationOptions {
     unsigned seed = 7;
-    Index sequences = 36;       ///< ordinary sequences
+    Index sequences = 36;  ///< ordinary sequences
     Index novelSequences = 8;
-    Index minFrames = 60;       ///< per sequence, at 24 frames per second
+    Index minFrames = 60;  ///< per sequence, at 24 frames per second
     Index maxFrames = 110;
     /// Controls only novel sequences move (and nothing else does).
-    std::vector<int> novelControls = {CheekPuffL, CheekPuffR, JawForward, JawLeft, JawRight, MouthLeft, MouthRight};
+    std::vector<int> novelControls = {CheekPuffL, CheekPuffR, JawForward, JawLeft,
+                                      JawRight,   MouthLeft,  MouthRight};
 };
 
 /// A seeded, deterministic set of control curves: frame f -> ControlVector.

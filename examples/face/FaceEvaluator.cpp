@@ -7,15 +7,18 @@
 
 namespace pmsc::face {
 
-FaceEvaluator::FaceEvaluator(std::shared_ptr<const FaceRig> rig, std::shared_ptr<const FaceAnimation> animation,
+FaceEvaluator::FaceEvaluator(std::shared_ptr<const FaceRig> rig,
+                             std::shared_ptr<const FaceAnimation> animation,
                              std::shared_ptr<const ObjMesh> mesh)
     : rig_(std::move(rig)), animation_(std::move(animation)), mesh_(std::move(mesh)) {
-    if (!rig_ || !animation_ || !mesh_) throw std::invalid_argument("FaceEvaluator: needs a rig, an animation and a mesh");
+    if (!rig_ || !animation_ || !mesh_)
+        throw std::invalid_argument("FaceEvaluator: needs a rig, an animation and a mesh");
 }
 
 const ControlVector& FaceEvaluator::controls(Index frame) const {
     if (frame < 0 || frame >= frameCount()) {
-        throw std::out_of_range("face: frame " + std::to_string(frame) + " outside [0, " + std::to_string(frameCount()) + ")");
+        throw std::out_of_range("face: frame " + std::to_string(frame) + " outside [0, " +
+                                std::to_string(frameCount()) + ")");
     }
     return animation_->frame(frame);
 }
@@ -30,7 +33,8 @@ std::vector<std::shared_ptr<const FrameWriter>> FaceEvaluator::frameWriters() co
     return {std::make_shared<ObjFrameWriter>(mesh_)};
 }
 
-std::unique_ptr<FaceEvaluator> makeFaceEvaluator(const std::string& folder, const FaceAnimationOptions& options) {
+std::unique_ptr<FaceEvaluator> makeFaceEvaluator(const std::string& folder,
+                                                 const FaceAnimationOptions& options) {
     const IctFace face = loadIctFace(folder);
     auto rig = std::make_shared<const FaceRig>(face);
     auto animation = std::make_shared<const FaceAnimation>(FaceAnimation::generate(options));

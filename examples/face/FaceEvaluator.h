@@ -45,6 +45,7 @@ private:
 /// Loads the ICT face from `folder`, builds the rig and the default animation
 /// (FaceAnimationOptions{}): what "face:DIR" means on the command line.
 /// @throws InputError naming the file for a missing or bad ICT folder.
-std::unique_ptr<FaceEvaluator> makeFaceEvaluator(const std::string& folder, const FaceAnimationOptions& options = {});
+std::unique_ptr<FaceEvaluator> makeFaceEvaluator(const std::string& folder,
+                                                 const FaceAnimationOptions& options = {});
 
 }  // namespace pmsc::face

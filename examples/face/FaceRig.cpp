@@ -39,12 +39,12 @@ struct FaceRig::Plan {
 
 const std::vector<FaceRig::Combination>& FaceRig::combinations() {
     static const std::vector<Combination> pairs = {
-        {MouthSmileL, CheekSquintL}, {MouthSmileR, CheekSquintR},   {CheekSquintL, EyeSquintL},
-        {CheekSquintR, EyeSquintR},  {BrowInnerUpL, BrowOuterUpL},  {BrowInnerUpR, BrowOuterUpR},
-        {BrowDownL, NoseSneerL},     {BrowDownR, NoseSneerR},       {MouthPucker, MouthFunnel},
+        {MouthSmileL, CheekSquintL},  {MouthSmileR, CheekSquintR},  {CheekSquintL, EyeSquintL},
+        {CheekSquintR, EyeSquintR},   {BrowInnerUpL, BrowOuterUpL}, {BrowInnerUpR, BrowOuterUpR},
+        {BrowDownL, NoseSneerL},      {BrowDownR, NoseSneerR},      {MouthPucker, MouthFunnel},
         {MouthFrownL, MouthStretchL}, {MouthFrownR, MouthStretchR}, {JawOpen, MouthSmileL},
-        {JawOpen, MouthSmileR},      {JawOpen, MouthPucker},        {JawOpen, MouthFunnel},
-        {JawOpen, MouthStretchL},    {JawOpen, MouthStretchR},
+        {JawOpen, MouthSmileR},       {JawOpen, MouthPucker},       {JawOpen, MouthFunnel},
+        {JawOpen, MouthStretchL},     {JawOpen, MouthStretchR},
     };
     return pairs;
 }
@@ -71,33 +71,8 @@ FaceRig::FaceRig(const IctFace& face)
         };
         lidContact_ = std::make_unique<ColliderContact>(
             "eyelids/eyeballs", rest_, topology_, mark({"face", "eye_socket_left", "eye_socket_right"}),
-            mark({"sclera_left", "sclera_right"}), std::vector<Eigen::Vector3d>{eyelids_.centre(0), eyelids_.centre(1)});
-        // Each tooth is its own mesh piece; its centroid is inside it.
-        const std::vector<char> teeth = mark({"teeth"});
-        std::vector<Eigen::Vector3d> toothCentres;
-        std::vector<char> seen(static_cast<size_t>(n), 0);
-        for (Index v = 0; v < n; ++v) {
-            if (!teeth[v] || seen[v]) continue;
-            Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-            Index count = 0;
-            std::vector<Index> stack = {v};
-            seen[v] = 1;
-            while (!stack.empty()) {
-                const Index u = stack.back();
-                stack.pop_back();
-                sum += Eigen::Vector3d(&rest_[3 * u]);
-                ++count;
-                for (std::int32_t w : topology_.neighbours(u)) {
-                    if (teeth[w] && !seen[w]) {
-                        seen[w] = 1;
-                        stack.push_back(w);
-                    }
-                }
-            }
-            toothCentres.push_back(sum / static_cast<double>(count));
-        }
-        teethContact_ = std::make_unique<ColliderContact>("lips/teeth", rest_, topology_, mark({"face", "mouth_socket"}),
-                                                          teeth, toothCentres);
+            mark({"sclera_left", "sclera_right"}),
+            std::vector<Eigen::Vector3d>{eyelids_.centre(0), eyelids_.centre(1)});
     }
 
     // --- blendshape channels ---
@@ -136,7 +111,8 @@ FaceRig::FaceRig(const IctFace& face)
     for (Index v = 0; v < n; ++v) {
         for (size_t ch = 0; ch < channels.size(); ++ch) {
             const double* d = &(*channels[ch])[3 * v];
-            if (std::abs(d[0]) > kDeltaThreshold || std::abs(d[1]) > kDeltaThreshold || std::abs(d[2]) > kDeltaThreshold) {
+            if (std::abs(d[0]) > kDeltaThreshold || std::abs(d[1]) > kDeltaThreshold ||
+                std::abs(d[2]) > kDeltaThreshold) {
                 entries_.push_back({static_cast<std::int32_t>(ch), {d[0], d[1], d[2]}});
             }
         }
@@ -207,7 +183,8 @@ FaceRig::Pose FaceRig::prepare(const ControlVector& controls) const {
     Pose pose;
     pose.channelWeights.assign(channelNames_.size(), 0.0);
     for (int c = 0; c < kShapeControlCount; ++c) pose.channelWeights[c] = controls[c];
-    for (int k = 0; k < 4; ++k) pose.channelWeights[kShapeControlCount + k] = controls[JawDeformer::kControls[k]];
+    for (int k = 0; k < 4; ++k)
+        pose.channelWeights[kShapeControlCount + k] = controls[JawDeformer::kControls[k]];
     pose.channelWeights[kShapeControlCount + 4] = controls[EyeBlinkL];
     pose.channelWeights[kShapeControlCount + 5] = controls[EyeBlinkR];
     pose.aim = eyes_.aim(controls);
@@ -244,15 +221,15 @@ std::shared_ptr<const FaceRig::Plan> FaceRig::buildPlan(std::span<const Index> p
     std::vector<char> in2(static_cast<size_t>(n), 0), in1, inA;
     auto plan = std::make_shared<Plan>();
     for (Index p : points) {
-        if (p < 0 || p >= n) throw std::out_of_range("face rig: point " + std::to_string(p) + " outside [0, " + std::to_string(n) + ")");
+        if (p < 0 || p >= n)
+            throw std::out_of_range("face rig: point " + std::to_string(p) + " outside [0, " +
+                                    std::to_string(n) + ")");
         in2[p] = 1;
         if (contact_.inZone(p)) {
             for (std::int32_t u : contact_.inputVertices(p)) in2[u] = 1;
         }
-        for (const ColliderContact* c : {lidContact_.get(), teethContact_.get()}) {
-            if (c->inZone(p)) {
-                for (std::int32_t u : c->inputVertices(p)) in2[u] = 1;
-            }
+        if (lidContact_->inZone(p)) {
+            for (std::int32_t u : lidContact_->inputVertices(p)) in2[u] = 1;
         }
     }
     // One relax sweep needs its input at the vertex and, where it relaxes, at its neighbours.
@@ -267,7 +244,8 @@ std::shared_ptr<const FaceRig::Plan> FaceRig::buildPlan(std::span<const Index> p
     };
     in1 = widen(in2);
     inA = widen(in1);
-    auto list = [&](const std::vector<char>& mark, std::vector<std::int32_t>& set, std::vector<std::int32_t>& map) {
+    auto list = [&](const std::vector<char>& mark, std::vector<std::int32_t>& set,
+                    std::vector<std::int32_t>& map) {
         map.assign(static_cast<size_t>(n), -1);
         for (Index v = 0; v < n; ++v) {
             if (mark[v]) {
@@ -280,7 +258,7 @@ std::shared_ptr<const FaceRig::Plan> FaceRig::buildPlan(std::span<const Index> p
     list(in1, plan->set1, plan->map1);
     list(inA, plan->setA, plan->mapA);
     for (Index p : points) {
-        plan->contacts += (contact_.inZone(p) ? 1 : 0) + (lidContact_->inZone(p) ? 1 : 0) + (teethContact_->inZone(p) ? 1 : 0);
+        plan->contacts += (contact_.inZone(p) ? 1 : 0) + (lidContact_->inZone(p) ? 1 : 0);
     }
     return plan;
 }
@@ -361,7 +339,6 @@ void FaceRig::run(const Plan& plan, const Pose& pose, std::span<const Index> poi
         // positions are their final positions before contact.
         x = contact_.apply(p, x, pose.lipStick, posed);
         x = lidContact_->apply(p, x, posed);
-        x = teethContact_->apply(p, x, posed);
         out[3 * i] = x[0];
         out[3 * i + 1] = x[1];
         out[3 * i + 2] = x[2];

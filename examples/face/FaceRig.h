@@ -39,10 +39,14 @@ namespace pmsc::face {
 ///     weight that is 1 on the skin and fades to 0 over kFleshFadeRings rings towards the mouth
 ///     box, whose lips are shaped by their scans and their contact;
 ///  7. contact, last so that nothing pushes a surface back through another: lip contact and
-///     sticky lips (LipContact), then the eyelids against the turning eyeballs and the lips
-///     against the teeth (ColliderContact). Uneven cost; each reads the posed surface it touches
-///     (the opposite lip has flesh weight 0, eyeballs and teeth are rigid and do not relax, so
-///     the contacts read relaxed positions and the closure stays small).
+///     sticky lips (LipContact), then the eyelids against the turning eyeballs
+///     (ColliderContact). Uneven cost; each reads the posed surface it touches (the opposite
+///     lip has flesh weight 0, the eyeballs are rigid and do not relax, so the contacts read
+///     relaxed positions and the closure stays small). Decision: no lips-against-teeth contact.
+///     It was tried with the same closest-triangle method and made inner-lip vertices pop
+///     between the separate tooth meshes (the nearest triangle jumps across the gaps between
+///     teeth, and its normal with it): 2% point errors no smooth subspace can follow. A smooth
+///     proxy of the dental arch would be the way to add it.
 ///
 /// Any subset of points is evaluated WITHOUT posing the others: the rig poses the dependency
 /// closure of the subset (the contact's input triangles, then kRelaxIterations rings around
@@ -95,7 +99,7 @@ public:
     struct ClosureSize {
         Index blendshapes = 0;  ///< stages 1-4
         Index relax = 0;        ///< vertices whose relaxed value is needed (last sweep)
-        Index contact = 0;      ///< contact evaluations (lips, lids, teeth)
+        Index contact = 0;      ///< contact evaluations (lips, lids)
     };
     ClosureSize closureSize(std::span<const Index> points) const;
 
@@ -107,7 +111,6 @@ public:
     const EyeAimDeformer& eyes() const { return eyes_; }
     const LipContact& lipContact() const { return contact_; }
     const ColliderContact& lidContact() const { return *lidContact_; }
-    const ColliderContact& teethContact() const { return *teethContact_; }
     const FleshDeformer& flesh() const { return flesh_; }
     double fleshWeight(Index v) const { return fleshWeight_[static_cast<size_t>(v)]; }
     double relaxWeight(Index v) const { return relax_[static_cast<size_t>(v)]; }
@@ -135,13 +138,12 @@ private:
     LipContact contact_;
     FleshDeformer flesh_;
     std::unique_ptr<ColliderContact> lidContact_;
-    std::unique_ptr<ColliderContact> teethContact_;
     std::vector<double> relax_;
     std::vector<double> fleshWeight_;
     std::vector<std::string> channelNames_;
     std::vector<std::int32_t> entryStart_;
     std::vector<Entry> entries_;
-    int lookChannel_ = 0;        // first of the 8 eyeLook channels
+    int lookChannel_ = 0;         // first of the 8 eyeLook channels
     int combinationChannel_ = 0;  // first combination corrective channel
 
     std::shared_ptr<const Plan> fullPlan_;

@@ -50,7 +50,7 @@ public:
         double bulge = 0;   ///< model units of outward bulge at full contraction
         double radius = 1;  ///< eps of the Kelvinlets
         double width = 1;   ///< across the fibres (model units)
-        Eigen::Vector3d outward = Eigen::Vector3d::UnitZ();  ///< rest direction of the bulge
+        Eigen::Vector3d outward = Eigen::Vector3d::UnitZ();       ///< rest direction of the bulge
         std::function<double(const ControlVector&)> contraction;  ///< in [0, 1]
     };
 

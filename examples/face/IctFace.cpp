@@ -12,18 +12,18 @@ namespace pmsc::face {
 
 const std::vector<std::string>& IctFace::expressionNames() {
     static const std::vector<std::string> names = {
-        "browDown_L",       "browDown_R",       "browInnerUp_L",   "browInnerUp_R",  "browOuterUp_L",
-        "browOuterUp_R",    "cheekPuff_L",      "cheekPuff_R",     "cheekRaiser_L",  "cheekRaiser_R",
-        "cheekSquint_L",    "cheekSquint_R",    "eyeBlink_L",      "eyeBlink_R",     "eyeLookDown_L",
-        "eyeLookDown_R",    "eyeLookIn_L",      "eyeLookIn_R",     "eyeLookOut_L",   "eyeLookOut_R",
-        "eyeLookUp_L",      "eyeLookUp_R",      "eyeSquint_L",     "eyeSquint_R",    "eyeWide_L",
-        "eyeWide_R",        "jawForward",       "jawLeft",         "jawOpen",        "jawRight",
-        "mouthClose",       "mouthDimple_L",    "mouthDimple_R",   "mouthFrown_L",   "mouthFrown_R",
-        "mouthFunnel",      "mouthLeft",        "mouthLowerDown_L", "mouthLowerDown_R", "mouthPress_L",
-        "mouthPress_R",     "mouthPucker",      "mouthRight",      "mouthRollLower", "mouthRollUpper",
-        "mouthShrugLower",  "mouthShrugUpper",  "mouthSmile_L",    "mouthSmile_R",   "mouthStretch_L",
-        "mouthStretch_R",   "mouthUpperUp_L",   "mouthUpperUp_R",  "noseSneer_L",    "noseSneer_R",
-        "PupilDilate_L",    "PupilDilate_R",
+        "browDown_L",      "browDown_R",      "browInnerUp_L",    "browInnerUp_R",    "browOuterUp_L",
+        "browOuterUp_R",   "cheekPuff_L",     "cheekPuff_R",      "cheekRaiser_L",    "cheekRaiser_R",
+        "cheekSquint_L",   "cheekSquint_R",   "eyeBlink_L",       "eyeBlink_R",       "eyeLookDown_L",
+        "eyeLookDown_R",   "eyeLookIn_L",     "eyeLookIn_R",      "eyeLookOut_L",     "eyeLookOut_R",
+        "eyeLookUp_L",     "eyeLookUp_R",     "eyeSquint_L",      "eyeSquint_R",      "eyeWide_L",
+        "eyeWide_R",       "jawForward",      "jawLeft",          "jawOpen",          "jawRight",
+        "mouthClose",      "mouthDimple_L",   "mouthDimple_R",    "mouthFrown_L",     "mouthFrown_R",
+        "mouthFunnel",     "mouthLeft",       "mouthLowerDown_L", "mouthLowerDown_R", "mouthPress_L",
+        "mouthPress_R",    "mouthPucker",     "mouthRight",       "mouthRollLower",   "mouthRollUpper",
+        "mouthShrugLower", "mouthShrugUpper", "mouthSmile_L",     "mouthSmile_R",     "mouthStretch_L",
+        "mouthStretch_R",  "mouthUpperUp_L",  "mouthUpperUp_R",   "noseSneer_L",      "noseSneer_R",
+        "PupilDilate_L",   "PupilDilate_R",
     };
     return names;
 }
@@ -68,11 +68,10 @@ const VertexRegion& IctFace::region(std::string_view name) {
 
 const std::array<Index, 68>& IctFace::multiPie68() {
     static const std::array<Index, 68> landmarks = {
-        1225, 1888, 1052, 367,  1719, 1722, 2199, 1447, 966,  3661, 4390, 3927, 3924, 2608,
-        3272, 4088, 3443, 268,  493,  1914, 2044, 1401, 3615, 4240, 4114, 2734, 2509, 978,
-        4527, 4942, 4857, 1140, 2075, 1147, 4269, 3360, 1507, 1542, 1537, 1528, 1518, 1511,
-        3742, 3751, 3756, 3721, 3725, 3732, 5708, 5695, 2081, 0,    4275, 6200, 6213, 6346,
-        6461, 5518, 5957, 5841, 5702, 5711, 5533, 6216, 6207, 6470, 5517, 5966,
+        1225, 1888, 1052, 367,  1719, 1722, 2199, 1447, 966,  3661, 4390, 3927, 3924, 2608, 3272, 4088, 3443,
+        268,  493,  1914, 2044, 1401, 3615, 4240, 4114, 2734, 2509, 978,  4527, 4942, 4857, 1140, 2075, 1147,
+        4269, 3360, 1507, 1542, 1537, 1528, 1518, 1511, 3742, 3751, 3756, 3721, 3725, 3732, 5708, 5695, 2081,
+        0,    4275, 6200, 6213, 6346, 6461, 5518, 5957, 5841, 5702, 5711, 5533, 6216, 6207, 6470, 5517, 5966,
     };
     return landmarks;
 }
@@ -106,8 +105,8 @@ IctFace loadIctFace(const std::string& folder) {
     face.neutral = readObj(neutralPath, ObjContent::PositionsAndPolygons);
     const Index n = face.neutral.vertexCount();
     if (n != IctFace::kVertexCount) {
-        throw InputError(neutralPath + ": " + std::to_string(n) + " vertices, but the ICT face topology has " +
-                         std::to_string(IctFace::kVertexCount));
+        throw InputError(neutralPath + ": " + std::to_string(n) +
+                         " vertices, but the ICT face topology has " + std::to_string(IctFace::kVertexCount));
     }
     const Index polygons = face.neutral.polygonCount();
 
@@ -127,8 +126,9 @@ IctFace loadIctFace(const std::string& folder) {
                                  " (an expression must be the whole mesh in the same vertex order)");
             }
             if (faceLines != polygons) {
-                throw InputError(path + ": " + std::to_string(faceLines) + " faces, but the neutral mesh has " +
-                                 std::to_string(polygons) + " (not the same topology)");
+                throw InputError(path + ": " + std::to_string(faceLines) +
+                                 " faces, but the neutral mesh has " + std::to_string(polygons) +
+                                 " (not the same topology)");
             }
             std::vector<double>& delta = mesh.positions;
             for (size_t i = 0; i < delta.size(); ++i) delta[i] -= face.neutral.positions[i];

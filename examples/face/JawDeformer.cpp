@@ -37,7 +37,8 @@ JawDeformer::JawDeformer(const IctFace& face, const MeshTopology& topology) {
     const std::vector<double>& rest = face.neutral.positions;
     const VertexRegion& lower = IctFace::region("teeth_lower");
     const VertexRegion& upper = IctFace::region("teeth_upper");
-    const std::span<const double> lowerRest(rest.data() + 3 * lower.first, static_cast<size_t>(3 * lower.size()));
+    const std::span<const double> lowerRest(rest.data() + 3 * lower.first,
+                                            static_cast<size_t>(3 * lower.size()));
 
     std::array<RigidTransform, 4> fitted;
     for (size_t k = 0; k < kControls.size(); ++k) {
@@ -94,7 +95,8 @@ JawDeformer::JawDeformer(const IctFace& face, const MeshTopology& topology) {
             }
             double sum = 0;
             for (std::int32_t u : nb) sum += weights_[u];
-            next[v] = weights_[v] + kWeightSmoothingStep * (sum / static_cast<double>(nb.size()) - weights_[v]);
+            next[v] =
+                weights_[v] + kWeightSmoothingStep * (sum / static_cast<double>(nb.size()) - weights_[v]);
         }
         weights_.swap(next);
     }

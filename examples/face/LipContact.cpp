@@ -5,8 +5,8 @@
 
 namespace pmsc::face {
 
-Eigen::Vector3d closestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
-                                       const Eigen::Vector3d& c) {
+Eigen::Vector3d closestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
+                                       const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
     const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
     const double d1 = ab.dot(ap), d2 = ac.dot(ap);
     if (d1 <= 0 && d2 <= 0) return a;
@@ -21,7 +21,8 @@ Eigen::Vector3d closestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Ve
     const double vb = d5 * d2 - d1 * d6;
     if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + (d2 / (d2 - d6)) * ac;
     const double va = d3 * d6 - d5 * d4;
-    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + ((d4 - d3) / ((d4 - d3) + (d5 - d6))) * (c - b);
+    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
+        return b + ((d4 - d3) / ((d4 - d3) + (d5 - d6))) * (c - b);
     const double denom = 1.0 / (va + vb + vc);
     return a + ab * (vb * denom) + ac * (vc * denom);
 }
@@ -42,7 +43,8 @@ double LipContact::response(double s, double stick) {
     return 0.5 * (push - pull);
 }
 
-LipContact::LipContact(const IctFace& face, const MeshTopology& topology, const std::vector<double>& jawWeights)
+LipContact::LipContact(const IctFace& face, const MeshTopology& topology,
+                       const std::vector<double>& jawWeights)
     : triangles_(topology.triangles()) {
     const Index n = face.vertexCount();
     const std::vector<double>& rest = face.neutral.positions;
@@ -72,7 +74,8 @@ LipContact::LipContact(const IctFace& face, const MeshTopology& topology, const 
     for (size_t t = 0; t < triangles_.size(); ++t) {
         const auto& tri = triangles_[t];
         const int s0 = side[tri[0]];
-        if (s0 >= 0 && side[tri[1]] == s0 && side[tri[2]] == s0) sideTris[s0].push_back(static_cast<std::int32_t>(t));
+        if (s0 >= 0 && side[tri[1]] == s0 && side[tri[2]] == s0)
+            sideTris[s0].push_back(static_cast<std::int32_t>(t));
     }
     zoneIndex_.assign(static_cast<size_t>(n), -1);
     candidateStart_.push_back(0);

@@ -7,8 +7,8 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
-#include <cmath>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -78,7 +78,9 @@ public:
     Eigen::Vector3d apply(Index v, const Eigen::Vector3d& x, double lipStick, const Posed& posed) const;
 
     /// The stickiness of zone vertex v in [0, 1] (1 mid-mouth, 0 at the corners).
-    double stickiness(Index v) const { return stickiness_[static_cast<size_t>(zoneIndex_[static_cast<size_t>(v)])]; }
+    double stickiness(Index v) const {
+        return stickiness_[static_cast<size_t>(zoneIndex_[static_cast<size_t>(v)])];
+    }
 
 private:
     const std::vector<std::array<std::int32_t, 3>>& triangles_;
@@ -93,11 +95,12 @@ private:
 };
 
 /// Closest point of triangle (a, b, c) to p (Ericson, Real-Time Collision Detection, 5.1.5).
-Eigen::Vector3d closestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
-                                       const Eigen::Vector3d& c);
+Eigen::Vector3d closestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
+                                       const Eigen::Vector3d& b, const Eigen::Vector3d& c);
 
 template <class Posed>
-Eigen::Vector3d LipContact::apply(Index v, const Eigen::Vector3d& x, double lipStick, const Posed& posed) const {
+Eigen::Vector3d LipContact::apply(Index v, const Eigen::Vector3d& x, double lipStick,
+                                  const Posed& posed) const {
     const std::int32_t z = zoneIndex_[static_cast<size_t>(v)];
     if (z < 0) return x;
     double best = INFINITY;
@@ -121,7 +124,8 @@ Eigen::Vector3d LipContact::apply(Index v, const Eigen::Vector3d& x, double lipS
     normal *= orientation_ / len;
     const double s = (x - nearest).dot(normal);
     const double allowance = allowance_[static_cast<size_t>(z)];
-    const double push = s < 0 ? response(s - allowance, 0.0) : response(s, lipStick * stickiness_[static_cast<size_t>(z)]);
+    const double push =
+        s < 0 ? response(s - allowance, 0.0) : response(s, lipStick * stickiness_[static_cast<size_t>(z)]);
     return x + push * normal;
 }
 

@@ -21,7 +21,8 @@ MeshTopology::MeshTopology(const ObjMesh& mesh) {
             edges.emplace_back(b, a);
         }
         for (std::int32_t i = begin + 1; i + 1 < end; ++i) {
-            triangles_.push_back({mesh.polygonVertices[begin], mesh.polygonVertices[i], mesh.polygonVertices[i + 1]});
+            triangles_.push_back(
+                {mesh.polygonVertices[begin], mesh.polygonVertices[i], mesh.polygonVertices[i + 1]});
             triangleToPolygon_.push_back(static_cast<std::int32_t>(f));
         }
     }
@@ -42,7 +43,8 @@ std::vector<double> MeshTopology::vertexNormals(std::span<const double> position
         const double* c = &positions[3 * t[2]];
         const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
         const double w[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-        const double cross[3] = {u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]};
+        const double cross[3] = {u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2],
+                                 u[0] * w[1] - u[1] * w[0]};
         for (int k = 0; k < 3; ++k) {
             for (int c2 = 0; c2 < 3; ++c2) normals[3 * t[k] + c2] += cross[c2];
         }

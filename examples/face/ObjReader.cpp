@@ -59,7 +59,8 @@ ObjMesh readObj(const std::string& path, ObjContent content, Index* polygonLines
                 q = skipBlanks(q, lineEnd);
                 double value = 0;
                 const auto [next, ec] = std::from_chars(q, lineEnd, value);
-                if (ec != std::errc{}) malformed(path, lineNumber, "malformed vertex line (expected 'v x y z')");
+                if (ec != std::errc{})
+                    malformed(path, lineNumber, "malformed vertex line (expected 'v x y z')");
                 if (!std::isfinite(value)) malformed(path, lineNumber, "non-finite vertex coordinate");
                 mesh.positions.push_back(value);
                 q = next;

@@ -10,13 +10,15 @@
 
 namespace pmsc::face {
 
-std::string formatObj(const ObjMesh& topology, std::span<const double> positions, const std::string& comment) {
+std::string formatObj(const ObjMesh& topology, std::span<const double> positions,
+                      const std::string& comment) {
     std::string text;
     text.reserve(static_cast<size_t>(topology.vertexCount()) * 40 + topology.polygonVertices.size() * 8);
     if (!comment.empty()) text += "# " + comment + "\n";
     char line[128];
     for (size_t i = 0; i + 2 < positions.size(); i += 3) {
-        const int len = std::snprintf(line, sizeof line, "v %.6g %.6g %.6g\n", positions[i], positions[i + 1], positions[i + 2]);
+        const int len = std::snprintf(line, sizeof line, "v %.6g %.6g %.6g\n", positions[i], positions[i + 1],
+                                      positions[i + 2]);
         text.append(line, static_cast<size_t>(len));
     }
     for (Index f = 0; f < topology.polygonCount(); ++f) {
@@ -36,8 +38,9 @@ void writeObj(const std::string& path, const ObjMesh& topology, std::span<const 
 }
 
 void ObjFrameWriter::write(const std::string& path, Index frame, const double* values) const {
-    const std::string text = formatObj(*topology_, {values, static_cast<size_t>(3 * topology_->vertexCount())},
-                                       "pmsc face frame " + std::to_string(frame));
+    const std::string text =
+        formatObj(*topology_, {values, static_cast<size_t>(3 * topology_->vertexCount())},
+                  "pmsc face frame " + std::to_string(frame));
     std::unique_ptr<std::FILE, int (*)(std::FILE*)> file(std::fopen(path.c_str(), "wb"), &std::fclose);
     if (!file) throw IoError(path + ": cannot create: " + std::strerror(errno));
     if (std::fwrite(text.data(), 1, text.size(), file.get()) != text.size() || std::fflush(file.get()) != 0) {

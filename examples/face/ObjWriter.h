@@ -12,7 +12,8 @@ namespace pmsc::face {
 
 /// Writes a posed mesh as Wavefront OBJ text: "v" lines from `positions` (3 per vertex, the
 /// mesh's vertex order) and the mesh's polygons. %.6g keeps a micro-unit at head scale.
-std::string formatObj(const ObjMesh& topology, std::span<const double> positions, const std::string& comment = "");
+std::string formatObj(const ObjMesh& topology, std::span<const double> positions,
+                      const std::string& comment = "");
 
 /// Writes an OBJ file atomically (temporary file + rename). @throws IoError naming the path.
 void writeObj(const std::string& path, const ObjMesh& topology, std::span<const double> positions,

@@ -19,7 +19,8 @@ struct RigidTransform {
         return {rotation * other.rotation, rotation * other.translation + translation};
     }
     /// Rotation by `angle` radians about the unit `axis` through `centre`.
-    static RigidTransform aboutAxis(const Eigen::Vector3d& axis, double angle, const Eigen::Vector3d& centre) {
+    static RigidTransform aboutAxis(const Eigen::Vector3d& axis, double angle,
+                                    const Eigen::Vector3d& centre) {
         RigidTransform t;
         t.rotation = Eigen::AngleAxisd(angle, axis).toRotationMatrix();
         t.translation = centre - t.rotation * centre;

