@@ -6,6 +6,7 @@
 #include "examples/face/ObjWriter.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
+#include "pmsc/ModelIO.h"
 #include "pmsc/PointMultiplier.h"
 #include "pmsc/SoftCache.h"
 #include "pmsc/Training.h"
@@ -446,6 +447,8 @@ nlohmann::json runFaceDemo(const FaceDemoOptions& options) {
         writePng(out + "keys.png", image);
         files.push_back("keys.png");
     }
+    writeModel(out + "face.pmsc", model);
+    files.push_back("face.pmsc");
     {
         std::ostringstream csv;
         csv << "frame,sequence,set,key_rms,state,weight,pm_max_error_pct_bbox,soft_max_error_pct_bbox,engine_"
@@ -515,6 +518,26 @@ nlohmann::json runFaceDemo(const FaceDemoOptions& options) {
                          {{"full_pose", wallFull / static_cast<double>(timed)},
                           {"pmsc", (wallKeys + wallProject + wallReconstruct) / static_cast<double>(timed)},
                           {"speedup", wallFull / (wallKeys + wallProject + wallReconstruct)}}}};
+    {
+        // Where the selector put the key points (upstream region table, face split by the mouth box).
+        nlohmann::json where = nlohmann::json::object();
+        for (Index k : model.keyPoints) {
+            std::string name = "other";
+            for (const char* r : {"face", "head_and_neck", "mouth_socket", "eye_socket_left", "eye_socket_right",
+                                  "gums_and_tongue", "teeth", "eyeball_left", "eyeball_right", "eyelashes_left",
+                                  "eyelashes_right", "lacrimal_left", "lacrimal_right", "eye_occlusion_left",
+                                  "eye_occlusion_right", "eye_blend_left", "eye_blend_right"}) {
+                if (IctFace::region(r).contains(k)) {
+                    name = r;
+                    break;
+                }
+            }
+            if (name == "face" && rig->lipContact().inMouthBox(k)) name = "face (mouth)";
+            where[name] = where.value(name, 0) + 1;
+        }
+        report["key_points_by_region"] = where;
+        report["key_point_indices"] = model.keyPoints;
+    }
     report["dependency_closure_of_keys"] = {{"blendshape_stage", closure.blendshapes},
                                             {"relaxed", closure.relax},
                                             {"contact_evaluations", closure.contact},
