@@ -21,10 +21,10 @@ int runDemoFace(const std::vector<std::string>& args) {
         "demo face", "--data DIR --out DIR2 [--quick] [--threads T] [--tolerance PCT] [--basis M] [--quiet]",
         "Section 7 of the paper on the ICT face (26,719 points): a rig with a jaw rotating about its\n"
         "hinge, eyelids rotating over the eyeballs, eyes that aim, correctives, relax, muscle flesh\n"
-        "and lip/lid/teeth contact poses 36 animated sequences (speech, emotions, blinks, gaze);\n"
+        "and lip and eyelid contact poses 36 animated sequences (speech, emotions, blinks, gaze);\n"
         "30% of them train the model (170 key points seeded by the Multi-PIE 68 landmarks), the rest\n"
         "and 8 sequences moving controls never seen in training go through the soft-cache engine.\n"
-        "Writes DIR2/report.json, frames.csv, keys.png and full/PM/soft-cached .obj and .png of\n"
+        "Writes DIR2/report.json, frames.csv, face.pmsc, keys.png and full/PM/soft-cached .obj and .png of\n"
         "three frames (error colours: grey 0, yellow 0.5%, red >= 1% of the head diagonal).");
     parser.option("--data", "DIR",
                   "the ICT-FaceKit FaceXModel folder (generic_neutral_mesh.obj + 57 expressions)", data,
