@@ -78,8 +78,11 @@ TEST(FaceDemoSmoke, QuickRunWritesACompleteReport) {
     EXPECT_GT(r.at("test_frames").get<long>(), 0);
     EXPECT_GT(r.at("full_seconds_per_frame").get<double>(), 0);
     EXPECT_GT(r.at("pmsc_seconds_per_frame").get<double>(), 0);
-    // Thread CPU time, so a loaded machine does not change it much; the full figure is ~8-10x.
-    EXPECT_GT(r.at("speedup").get<double>(), 2.0);
+    // No speed goal here (speed is checked by bench/FaceRigBench.cpp, never by a timed test):
+    // only that the ratio is the ratio of the two timings the report gives.
+    EXPECT_NEAR(r.at("speedup").get<double>(),
+                r.at("full_seconds_per_frame").get<double>() / r.at("pmsc_seconds_per_frame").get<double>(),
+                1e-9);
     const double hit = r.at("hit_rate").get<double>(), blend = r.at("blend_rate").get<double>(),
                  miss = r.at("miss_rate").get<double>();
     for (double rate : {hit, blend, miss, r.at("novel_nonhit_rate").get<double>()}) {
