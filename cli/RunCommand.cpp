@@ -317,7 +317,7 @@ int runRun(const std::vector<std::string>& args) {
     parser.option("--dtype", "float64|float32", ".npy element type (default float64)", dtype);
     parser.option("--stats", "FILE.json", "stats file (default DIR/pmsc-run.A-B.json)", o.statsPath);
     parser.option("--log-every", "SECONDS",
-                  "progress line interval when stderr is not a terminal (default 10)",
+                  "progress line interval when stderr is not a terminal (default 10; 0 = every update)",
                   [&](const std::string& v) { o.logSeconds = parseDouble("--log-every", v, 0.0, 1e6); });
     parser.flag("--force", "redo frames whose output already exists", o.force);
     parser.flag("--quiet", "no progress display", o.quiet);
