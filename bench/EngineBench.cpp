@@ -133,6 +133,7 @@ void BM_Scaling_Graph(benchmark::State& state) {
     const double cpuStart = processCpuSeconds();
     for (auto _ : state) engine.run({0, 64, 1}, sink);
     if (engine.lastStats().hits != 64) state.SkipWithError("expected every frame to hit");
+    state.counters["peak_in_flight"] = double(engine.lastStats().peakFramesInFlight);
     state.SetItemsProcessed(state.iterations() * 64);
     setCpuPerFrame(state, cpuStart, 64);
 }

@@ -52,9 +52,12 @@ constexpr size_t kChunk = 256;
 }  // namespace
 
 RayTracer::RayTracer(const CornellScene& scene, TraceMode mode) : impl_(std::make_unique<Impl>()), mode_(mode) {
-    // One worker-free device: the BVH of 20 quads builds in microseconds, and the engine's
-    // threads, not Embree's, do the tracing.
-    impl_->device = rtcNewDevice("threads=1,set_affinity=0");
+    // No "threads=N" in the configuration: Debian's Embree 3 runs on oneTBB, and a thread count
+    // makes it install tbb::global_control(max_allowed_parallelism, N) for the whole process while
+    // the device lives. "threads=1" once did exactly that and silently ran every parallel_for and
+    // the engine's flow graph on one core. With the default, Embree leaves oneTBB alone; the
+    // callers' arenas (the engine's, the demo's) decide how many threads trace.
+    impl_->device = rtcNewDevice("set_affinity=0");
     if (!impl_->device) throw std::runtime_error("cornell: cannot create an Embree device");
     impl_->scene = rtcNewScene(impl_->device);
     rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_HIGH);

@@ -4,6 +4,8 @@
 #include "pmsc/Errors.h"
 
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
+#include <tbb/info.h>
 #include <tbb/task_arena.h>
 
 #include <cmath>
@@ -37,6 +39,18 @@ TEST(CornellEvaluator, PointAloneEqualsPointAmongAllBitForBit) {
     ev.evaluate(2, subset, some.data());
     for (std::size_t i = 0; i < subset.size(); ++i)
         EXPECT_EQ(0, std::memcmp(&some[3 * i], all.data() + 3 * subset[i], 3 * sizeof(double)));
+}
+
+// Embree on oneTBB caps the whole process's parallelism when its device is given a thread count;
+// the ray tracer must not (it once did, and every Cornell run used one core of two).
+TEST(CornellEvaluator, TheRayTracerLeavesTheProcesssParallelismAlone) {
+    const auto before = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism);
+    const auto world = CornellWorld::create(500);
+    const CornellEvaluator ev(world, LightRig{}.trainingLights(), 8);
+    std::vector<double> v(static_cast<std::size_t>(3 * ev.pointCount()));
+    ev.evaluateAll(0, v.data());
+    EXPECT_EQ(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism), before);
+    EXPECT_GE(before, static_cast<std::size_t>(tbb::info::default_concurrency()));
 }
 
 TEST(CornellEvaluator, ThreadCountDoesNotChangeAnyBit) {
