@@ -1,5 +1,6 @@
 // `pmsc inspect`: what a model file holds.
 #include "cli/Args.h"
+#include "cli/Format.h"
 #include "cli/Commands.h"
 #include "cli/ExitCodes.h"
 #include "pmsc/ModelIO.h"
@@ -13,12 +14,6 @@
 namespace pmsc::cli {
 
 namespace {
-
-std::string fmt(const char* format, double v) {
-    char buffer[64];
-    std::snprintf(buffer, sizeof buffer, format, v);
-    return buffer;
-}
 
 /// Fraction of the training energy captured by the first m basis vectors.
 double capturedBy(const Model& model, Index m) {

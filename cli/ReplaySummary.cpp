@@ -1,4 +1,5 @@
 #include "cli/ReplaySummary.h"
+#include "cli/Format.h"
 
 #include <algorithm>
 #include <cstdio>
@@ -8,12 +9,6 @@
 namespace pmsc::cli {
 
 namespace {
-
-std::string fmt(const char* format, double v) {
-    char buffer[64];
-    std::snprintf(buffer, sizeof buffer, format, v);
-    return buffer;
-}
 
 std::string row(const char* label, const Percentiles& p) {
     char buffer[160];

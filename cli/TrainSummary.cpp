@@ -1,18 +1,9 @@
 #include "cli/TrainSummary.h"
+#include "cli/Format.h"
 
 #include <cstdio>
 
 namespace pmsc::cli {
-
-namespace {
-
-std::string fmt(const char* format, double v) {
-    char buffer[64];
-    std::snprintf(buffer, sizeof buffer, format, v);
-    return buffer;
-}
-
-}  // namespace
 
 void printTrainSummary(std::ostream& out, const std::string& modelPath, const FrameSet& frames,
                        const Model& model, const TrainingReport& report, double seconds) {

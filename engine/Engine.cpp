@@ -388,47 +388,46 @@ RunStats Engine::Impl::run(FrameRange range, FrameSink& sink) {
                 handOver(slot);
                 return slot;
             });
+        // A multifunction body's output: the slot's happens-before edge first (TSan builds), then
+        // TBB's try_put, unchecked. A frame for the fail-through branches goes out as one message per chunk.
+        const auto send = [](Token slot, auto& port, const auto& message) {
+            handOver(slot);
+            PMSC_UNCHECKED_SCOPE;
+            port.try_put(message);
+        };
+        const auto sendChunks = [&](Token slot, auto& port) {
+            slot->chunksLeft.store(chunkCount, std::memory_order_relaxed);
+            for (Index c = 0; c < chunkCount; ++c) send(slot, port, ChunkMsg{slot, c});
+        };
         MonitorNode monitor(g, flow::unlimited, [&](Token slot, MonitorNode::output_ports_type& out) {
             PMSC_NODE_BODY(&runDone);
             takeOver(slot);
-            const auto send = [&](auto& port, const auto& message) {
-                handOver(slot);
-                PMSC_UNCHECKED_SCOPE;
-                port.try_put(message);
-            };
             if (control.cancelled()) {
-                send(std::get<2>(out), slot);
+                send(slot, std::get<2>(out), slot);
                 return;
             }
             const Route route = timed(clocks[kMonitor], [&] { return monitorBody(*slot); });
             if (route == Route::Reconstruct) {
-                send(std::get<0>(out), slot);
+                send(slot, std::get<0>(out), slot);
             } else if (route == Route::FailThrough) {
-                slot->chunksLeft.store(chunkCount, std::memory_order_relaxed);
-                for (Index c = 0; c < chunkCount; ++c) send(std::get<1>(out), ChunkMsg{slot, c});
+                sendChunks(slot, std::get<1>(out));
             } else {
-                send(std::get<2>(out), slot);
+                send(slot, std::get<2>(out), slot);
             }
         });
         ReconstructNode reconstruct(
             g, flow::unlimited, [&](Token slot, ReconstructNode::output_ports_type& out) {
                 PMSC_NODE_BODY(&runDone);
                 takeOver(slot);
-                const auto send = [&](auto& port, const auto& message) {
-                    handOver(slot);
-                    PMSC_UNCHECKED_SCOPE;
-                    port.try_put(message);
-                };
                 if (control.cancelled()) {
-                    send(std::get<0>(out), slot);
+                    send(slot, std::get<0>(out), slot);
                     return;
                 }
                 const bool done = timed(clocks[kReconstruct], [&] { return reconstructBody(*slot); });
                 if (done) {
-                    send(std::get<0>(out), slot);
+                    send(slot, std::get<0>(out), slot);
                 } else {
-                    slot->chunksLeft.store(chunkCount, std::memory_order_relaxed);
-                    for (Index c = 0; c < chunkCount; ++c) send(std::get<1>(out), ChunkMsg{slot, c});
+                    sendChunks(slot, std::get<1>(out));
                 }
             });
         flow::function_node<ChunkMsg, ChunkMsg> failThrough(g, flow::unlimited, [&](ChunkMsg m) {
@@ -450,9 +449,7 @@ RunStats Engine::Impl::run(FrameRange range, FrameSink& sink) {
             // acq_rel: the last branch sees every other branch's writes before the frame moves on.
             if (m.slot->chunksLeft.fetch_sub(1, std::memory_order_acq_rel) == 1) {
                 if (m.slot->failed() && stopOnFailure) control.stopAfter(m.slot->sequence);
-                handOver(m.slot);
-                PMSC_UNCHECKED_SCOPE;
-                std::get<0>(out).try_put(m.slot);
+                send(m.slot, std::get<0>(out), m.slot);
             }
         });
         flow::sequencer_node<Token> sequencer(g, [](const Token& slot) { return size_t(slot->sequence); });

@@ -61,31 +61,23 @@ Image absDifference(const Image& a, const Image& b, float scale) {
 }
 
 void writePng(const std::string& path, const Image& image, float exposure) {
+    std::vector<std::uint8_t> pixels(image.rgb.size());
+    for (size_t i = 0; i < pixels.size(); ++i) pixels[i] = toSrgb8(image.rgb[i], exposure);
+    // libpng's simplified API: no setjmp/longjmp in this function (the classic API's error
+    // handling made GCC warn that locals might be clobbered, and rightly so).
+    png_image png;
+    std::memset(&png, 0, sizeof png);
+    png.version = PNG_IMAGE_VERSION;
+    png.width = static_cast<png_uint_32>(image.width);
+    png.height = static_cast<png_uint_32>(image.height);
+    png.format = PNG_FORMAT_RGB;
     const std::string tmp = path + ".tmp";
-    FILE* fp = std::fopen(tmp.c_str(), "wb");
-    if (!fp) throw IoError("cannot write " + path + ": " + std::strerror(errno));
-    png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
-    png_infop info = png ? png_create_info_struct(png) : nullptr;
-    std::vector<std::uint8_t> row(static_cast<size_t>(image.width) * 3);
-    bool ok = png && info;
-    if (ok && setjmp(png_jmpbuf(png))) ok = false;
-    if (ok) {
-        png_init_io(png, fp);
-        png_set_IHDR(png, info, static_cast<png_uint_32>(image.width), static_cast<png_uint_32>(image.height), 8,
-                     PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
-        png_write_info(png, info);
-        for (int y = 0; y < image.height; ++y) {
-            const float* src = image.pixel(0, y);
-            for (size_t i = 0; i < row.size(); ++i) row[i] = toSrgb8(src[i], exposure);
-            png_write_row(png, row.data());
-        }
-        png_write_end(png, nullptr);
-    }
-    png_destroy_write_struct(png ? &png : nullptr, info ? &info : nullptr);
-    const bool closed = std::fclose(fp) == 0;
-    if (!ok || !closed) {
+    const bool ok = png_image_write_to_file(&png, tmp.c_str(), 0, pixels.data(), 0, nullptr) != 0;
+    const std::string why = ok ? "" : png.message;
+    png_image_free(&png);
+    if (!ok) {
         std::remove(tmp.c_str());
-        throw IoError("cannot write " + path + ": libpng failed");
+        throw IoError("cannot write " + path + ": " + why);
     }
     commit(tmp, path);
 }

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <numbers>
 #include <string>
 
@@ -152,38 +153,26 @@ std::array<float, 3> errorColour(double error, double full) {
     return out;
 }
 
-namespace {
-
-void appendBytes(png_structp png, png_bytep data, png_size_t length) {
-    auto* out = static_cast<std::string*>(png_get_io_ptr(png));
-    out->append(reinterpret_cast<const char*>(data), length);
-}
-void flushNothing(png_structp) {}
-
-}  // namespace
-
 void writePng(const std::string& path, const RgbImage& image) {
+    // libpng's simplified API: no setjmp/longjmp, so no C++ object lives across a longjmp.
+    // The first call measures the encoded size, the second encodes.
+    png_image png;
+    std::memset(&png, 0, sizeof png);
+    png.version = PNG_IMAGE_VERSION;
+    png.width = static_cast<png_uint_32>(image.width);
+    png.height = static_cast<png_uint_32>(image.height);
+    png.format = PNG_FORMAT_RGB;
+    png_alloc_size_t size = 0;
     std::string bytes;
-    png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
-    png_infop info = png ? png_create_info_struct(png) : nullptr;
-    if (!png || !info) {
-        png_destroy_write_struct(&png, nullptr);
-        throw IoError(path + ": cannot create a PNG encoder");
+    bool ok = png_image_write_to_memory(&png, nullptr, &size, 0, image.pixels.data(), 0, nullptr) != 0;
+    if (ok) {
+        bytes.resize(size);
+        ok = png_image_write_to_memory(&png, bytes.data(), &size, 0, image.pixels.data(), 0, nullptr) != 0;
+        bytes.resize(size);
     }
-    if (setjmp(png_jmpbuf(png))) {
-        png_destroy_write_struct(&png, &info);
-        throw IoError(path + ": PNG encoding failed");
-    }
-    png_set_write_fn(png, &bytes, appendBytes, flushNothing);
-    png_set_IHDR(png, info, static_cast<png_uint_32>(image.width), static_cast<png_uint_32>(image.height), 8,
-                 PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT,
-                 PNG_FILTER_TYPE_DEFAULT);
-    png_write_info(png, info);
-    for (int y = 0; y < image.height; ++y) {
-        png_write_row(png, const_cast<png_bytep>(&image.pixels[3 * static_cast<size_t>(y) * image.width]));
-    }
-    png_write_end(png, nullptr);
-    png_destroy_write_struct(&png, &info);
+    const std::string why = ok ? "" : png.message;
+    png_image_free(&png);
+    if (!ok) throw IoError(path + ": PNG encoding failed: " + why);
     writeFileAtomically(path, bytes);
 }
 

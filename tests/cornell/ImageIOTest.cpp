@@ -3,9 +3,12 @@
 #include "pmsc/Errors.h"
 
 #include <gtest/gtest.h>
+#include <png.h>
 
 #include <filesystem>
+#include <cstring>
 #include <fstream>
+#include <vector>
 
 namespace pmsc::cornell {
 namespace {
@@ -39,8 +42,23 @@ TEST(ImageIO, PngHasTheSignatureAndSideBySideStacksPanels) {
     std::ifstream f(path, std::ios::binary);
     char sig[8] = {};
     f.read(sig, 8);
-    std::filesystem::remove(path);
     EXPECT_EQ(std::string(sig + 1, 3), "PNG");
+    // Decoded by libpng: the size, and the tone map (x / (1 + x), sRGB): 0 -> 0, 2 -> 2/3 -> 213,
+    // 20 -> 20/21 -> 250.
+    png_image back;
+    std::memset(&back, 0, sizeof back);
+    back.version = PNG_IMAGE_VERSION;
+    ASSERT_NE(png_image_begin_read_from_file(&back, path.c_str()), 0) << back.message;
+    back.format = PNG_FORMAT_RGB;
+    std::vector<unsigned char> rgb(PNG_IMAGE_SIZE(back));
+    ASSERT_NE(png_image_finish_read(&back, nullptr, rgb.data(), 0, nullptr), 0) << back.message;
+    std::filesystem::remove(path);
+    EXPECT_EQ(back.width, 12u);
+    EXPECT_EQ(back.height, 2u);
+    EXPECT_EQ(rgb[3 * (1 * 12 + 0)], 0);
+    EXPECT_EQ(rgb[3 * (1 * 12 + 5)], 213);
+    EXPECT_EQ(rgb[3 * (1 * 12 + 9)], 250);
+    EXPECT_FALSE(std::filesystem::exists(path + ".tmp"));
     EXPECT_THROW(writePng("/nonexistent-folder-pmsc/a.png", s, 1.0f), IoError);
     const Image tall(2, 5);
     EXPECT_THROW(sideBySide({&a, &tall}), std::invalid_argument);

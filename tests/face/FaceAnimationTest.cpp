@@ -62,7 +62,9 @@ TEST(FaceAnimation, NovelControlsMoveOnlyInNovelSequencesAndThroughout) {
                 }
             }
         }
-        if (s.novel) EXPECT_FALSE(s.novelControls.empty());
+        if (s.novel) {
+            EXPECT_FALSE(s.novelControls.empty());
+        }
     }
 }
 

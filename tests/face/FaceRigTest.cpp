@@ -316,7 +316,9 @@ TEST(FaceRig, FleshIsZeroInTheMouthBoxAndOnRigidParts) {
     PMSC_REQUIRE_ICT();
     const FaceRig& rig = *fixture().rig;
     for (Index v = 0; v < rig.pointCount(); ++v) {
-        if (rig.lipContact().inMouthBox(v)) ASSERT_EQ(rig.fleshWeight(v), 0.0) << v;
+        if (rig.lipContact().inMouthBox(v)) {
+            ASSERT_EQ(rig.fleshWeight(v), 0.0) << v;
+        }
     }
     for (const char* r : {"teeth", "eyeball_left", "eyeball_right", "eyelashes_left", "gums_and_tongue"}) {
         const VertexRegion& region = IctFace::region(r);

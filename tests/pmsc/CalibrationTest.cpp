@@ -55,7 +55,9 @@ TEST(Calibration, RecoversTheKnownErrorRatioAndSetsEps) {
     for (size_t i = 0; i < s.frames.size(); ++i) EXPECT_EQ(s.frames[i], static_cast<pmsc::Index>(i));
     // The guarantee eps_min is built for: every held-out frame under eps_min had error <= T.
     for (size_t i = 0; i < s.keyRms.size(); ++i)
-        if (s.keyRms[i] <= s.epsMin) EXPECT_LE(s.maxPointError[i], tolerance * (1 + 1e-12));
+        if (s.keyRms[i] <= s.epsMin) {
+            EXPECT_LE(s.maxPointError[i], tolerance * (1 + 1e-12));
+        }
     EXPECT_EQ(s.blindFrames, 0);
 }
 

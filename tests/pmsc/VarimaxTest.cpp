@@ -140,7 +140,9 @@ TEST(Varimax, RotationIsOrthogonalAndObjectiveNeverDecreases) {
         for (size_t i = 1; i < r.objective.size(); ++i)
             EXPECT_GE(r.objective[i], r.objective[i - 1] * (1 - 1e-13) - 1e-300) << "step " << i;
         EXPECT_GT(r.objective.back(), r.objective.front());
-        if (!normalize) EXPECT_NEAR(r.objective.back(), pmsc::varimaxCriterion(r.rotated), 1e-12);
+        if (!normalize) {
+            EXPECT_NEAR(r.objective.back(), pmsc::varimaxCriterion(r.rotated), 1e-12);
+        }
         // An orthogonal rotation keeps the block orthonormal.
         if (!normalize) {
             EXPECT_LT((r.rotated.transpose() * r.rotated - Eigen::MatrixXd::Identity(12, 12)).norm(), 1e-10);
