@@ -6,10 +6,21 @@
 
 namespace pmsc::cli {
 
-ReplayEvaluator::ReplayEvaluator(const std::string& path) : file_(readFrames(path)), source_(path) {}
+ReplayEvaluator::ReplayEvaluator(const std::string& path)
+    : mapped_(std::make_unique<const MappedFrames>(path)),
+      source_(path),
+      frames_(mapped_->info().frames),
+      points_(mapped_->info().points),
+      channels_(mapped_->info().channels),
+      dtype_(mapped_->info().dtype) {}
 
 ReplayEvaluator::ReplayEvaluator(FrameFile frames, std::string source)
-    : file_(std::move(frames)), source_(std::move(source)) {}
+    : memory_(std::move(frames)),
+      source_(std::move(source)),
+      frames_(memory_.frames.frames),
+      points_(memory_.frames.points),
+      channels_(memory_.frames.channels),
+      dtype_(memory_.dtype) {}
 
 void ReplayEvaluator::checkFrame(Index frame) const {
     if (frame < 0 || frame >= frameCount())
@@ -19,8 +30,12 @@ void ReplayEvaluator::checkFrame(Index frame) const {
 
 void ReplayEvaluator::evaluate(Index frame, std::span<const Index> points, double* out) const {
     checkFrame(frame);
+    if (mapped_) {
+        mapped_->read(frame, points, out);
+        return;
+    }
     const Index c = channelCount();
-    const double* values = file_.frames.frame(frame);
+    const double* values = memory_.frames.frame(frame);
     for (std::size_t i = 0; i < points.size(); ++i) {
         const Index p = points[i];
         if (p < 0 || p >= pointCount())
@@ -32,7 +47,11 @@ void ReplayEvaluator::evaluate(Index frame, std::span<const Index> points, doubl
 
 void ReplayEvaluator::evaluateAll(Index frame, double* out) const {
     checkFrame(frame);
-    std::copy_n(file_.frames.frame(frame), file_.frames.rows(), out);
+    if (mapped_) {
+        mapped_->readFrame(frame, out);
+        return;
+    }
+    std::copy_n(memory_.frames.frame(frame), memory_.frames.rows(), out);
 }
 
 }  // namespace pmsc::cli

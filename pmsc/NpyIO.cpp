@@ -13,6 +13,7 @@
 #include <vector>
 
 #include <fcntl.h>
+#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -57,6 +58,7 @@ public:
     ReadFile& operator=(const ReadFile&) = delete;
 
     std::uint64_t size() const { return size_; }
+    int fd() const { return fd_; }
 
     /// Reads exactly `bytes` at `offset`; a short read is truncation.
     void readAt(std::uint64_t offset, void* out, std::size_t bytes) const {
@@ -291,6 +293,20 @@ NpyInfo parseInfo(const std::string& path, const ReadFile& file) {
     return info;
 }
 
+/// Throws InputError naming the first non-finite value of values[0, count), which are
+/// values [first, first + count) of the file (the message gives frame, point and channel).
+void checkFinite(const std::string& path, const NpyInfo& info, std::uint64_t first, const double* values,
+                 std::uint64_t count) {
+    const double* bad_value = std::find_if(values, values + count, [](double v) { return !std::isfinite(v); });
+    if (bad_value == values + count) return;
+    const std::uint64_t i = first + static_cast<std::uint64_t>(bad_value - values);
+    const std::uint64_t c = static_cast<std::uint64_t>(info.channels);
+    const std::uint64_t n = static_cast<std::uint64_t>(info.points);
+    const std::string what = std::isnan(*bad_value) ? "NaN" : (*bad_value > 0 ? "+Inf" : "-Inf");
+    bad(path, what + " at frame " + std::to_string(i / (n * c)) + ", point " + std::to_string((i / c) % n) +
+                  ", channel " + std::to_string(i % c) + " (frames must be finite)");
+}
+
 /// Reads `count` values starting at value index `first` into `out` as doubles and
 /// reports the first non-finite one (indices in the whole file).
 void readValues(const std::string& path, const ReadFile& file, const NpyInfo& info, std::uint64_t first,
@@ -310,16 +326,7 @@ void readValues(const std::string& path, const ReadFile& file, const NpyInfo& in
             done += n;
         }
     }
-    const double* bad_value = std::find_if(out, out + count, [](double v) { return !std::isfinite(v); });
-    if (bad_value != out + count) {
-        const std::uint64_t i = first + static_cast<std::uint64_t>(bad_value - out);
-        const std::uint64_t c = static_cast<std::uint64_t>(info.channels);
-        const std::uint64_t n = static_cast<std::uint64_t>(info.points);
-        const std::string what = std::isnan(*bad_value) ? "NaN" : (*bad_value > 0 ? "+Inf" : "-Inf");
-        bad(path, what + " at frame " + std::to_string(i / (n * c)) + ", point " +
-                      std::to_string((i / c) % n) + ", channel " + std::to_string(i % c) +
-                      " (frames must be finite)");
-    }
+    checkFinite(path, info, first, out, count);
 }
 
 std::string makeHeader(Index frames, Index points, Index channels, NpyDtype dtype) {
@@ -378,6 +385,73 @@ FrameFile readFrameRange(const std::string& path, Index first, Index count) {
     readValues(path, file, info, static_cast<std::uint64_t>(first) * perFrame, out.frames.values.size(),
                out.frames.values.data());
     return out;
+}
+
+MappedFrames::MappedFrames(const std::string& path) : path_(path) {
+    ReadFile file(path);
+    info_ = parseInfo(path, file);
+    void* p = ::mmap(nullptr, static_cast<std::size_t>(file.size()), PROT_READ, MAP_PRIVATE, file.fd(), 0);
+    if (p == MAP_FAILED) bad(path, std::string("cannot map: ") + std::strerror(errno));
+    base_ = static_cast<const unsigned char*>(p);
+    mappedBytes_ = static_cast<std::size_t>(file.size());
+    // One streaming pass checks every value, as readFrames() does, in chunks of a fixed size: the
+    // pages read stay in the page cache (which the kernel may drop), not in this process's heap.
+    try {
+        ::madvise(p, mappedBytes_, MADV_SEQUENTIAL);
+        const std::uint64_t total = static_cast<std::uint64_t>(info_.frames * info_.points * info_.channels);
+        constexpr std::uint64_t kChunk = 1 << 16;
+        std::vector<double> buffer(static_cast<std::size_t>(std::min(total, kChunk)));
+        for (std::uint64_t done = 0; done < total;) {
+            const std::uint64_t n = std::min(kChunk, total - done);
+            convert(done, n, buffer.data());
+            checkFinite(path, info_, done, buffer.data(), n);
+            done += n;
+        }
+        ::madvise(p, mappedBytes_, MADV_RANDOM);  // the engine asks for key points here and there
+    } catch (...) {
+        ::munmap(p, mappedBytes_);
+        throw;
+    }
+}
+
+MappedFrames::~MappedFrames() {
+    if (base_) ::munmap(const_cast<unsigned char*>(base_), mappedBytes_);
+}
+
+void MappedFrames::convert(std::uint64_t first, std::uint64_t count, double* out) const {
+    const unsigned char* src = base_ + info_.dataOffset + first * itemSize(info_.dtype);
+    if (info_.dtype == NpyDtype::Float64) {
+        std::memcpy(out, src, static_cast<std::size_t>(count) * sizeof(double));  // any alignment
+    } else {
+        for (std::uint64_t i = 0; i < count; ++i) {
+            float v;
+            std::memcpy(&v, src + i * sizeof(float), sizeof v);
+            out[i] = v;
+        }
+    }
+}
+
+void MappedFrames::read(Index frame, std::span<const Index> points, double* out) const {
+    if (frame < 0 || frame >= info_.frames)
+        throw std::out_of_range(path_ + ": frame " + std::to_string(frame) + " outside the " +
+                                std::to_string(info_.frames) + " frames");
+    const Index c = info_.channels;
+    for (std::size_t i = 0; i < points.size(); ++i) {
+        const Index p = points[i];
+        if (p < 0 || p >= info_.points)
+            throw std::out_of_range(path_ + ": point " + std::to_string(p) + " outside [0, " +
+                                    std::to_string(info_.points) + ")");
+        convert(static_cast<std::uint64_t>((frame * info_.points + p) * c), static_cast<std::uint64_t>(c),
+                out + static_cast<Index>(i) * c);
+    }
+}
+
+void MappedFrames::readFrame(Index frame, double* out) const {
+    if (frame < 0 || frame >= info_.frames)
+        throw std::out_of_range(path_ + ": frame " + std::to_string(frame) + " outside the " +
+                                std::to_string(info_.frames) + " frames");
+    const Index perFrame = info_.points * info_.channels;
+    convert(static_cast<std::uint64_t>(frame * perFrame), static_cast<std::uint64_t>(perFrame), out);
 }
 
 NpyFrameWriter::NpyFrameWriter(std::string path, Index frames, Index points, Index channels, NpyDtype dtype)

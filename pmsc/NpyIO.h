@@ -5,6 +5,7 @@
 #include "pmsc/FrameSet.h"
 
 #include <cstdint>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -64,6 +65,38 @@ FrameFile readFrames(const std::string& path);
 /// the file, not in the slice).
 /// @throws InputError also when the range is empty or outside [0, F).
 FrameFile readFrameRange(const std::string& path, Index first, Index count);
+
+/// A frames file mapped read-only into memory (mmap), for inputs larger than memory: values
+/// are read where they lie, so the process holds no copy of the file (the page cache holds what
+/// was read, and the kernel may drop it). Opening checks the header as readNpyInfo() and every
+/// value for NaN/Inf in one streaming pass, so a bad file fails at once, as with readFrames().
+/// Reading is thread-safe. The file must not be truncated while it is mapped (reading a page
+/// past the new end raises SIGBUS, as for any mapping).
+class MappedFrames {
+public:
+    /// @throws InputError for everything readFrames() rejects, or if the file cannot be mapped.
+    explicit MappedFrames(const std::string& path);
+    ~MappedFrames();
+    MappedFrames(const MappedFrames&) = delete;
+    MappedFrames& operator=(const MappedFrames&) = delete;
+
+    const NpyInfo& info() const { return info_; }
+    const std::string& path() const { return path_; }
+
+    /// The C values of each of `points` in `frame`, as doubles, point after point.
+    /// @throws std::out_of_range for a frame or point outside the file.
+    void read(Index frame, std::span<const Index> points, double* out) const;
+    /// All N*C values of `frame`. @throws std::out_of_range.
+    void readFrame(Index frame, double* out) const;
+
+private:
+    void convert(std::uint64_t first, std::uint64_t count, double* out) const;
+
+    std::string path_;
+    NpyInfo info_;
+    const unsigned char* base_ = nullptr;
+    std::size_t mappedBytes_ = 0;
+};
 
 /// Writes frames to a .npy file of shape (F, N, C) in the given dtype (values
 /// are rounded to nearest when writing float32). The file appears atomically:

@@ -8,7 +8,9 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace {
 
@@ -132,6 +134,66 @@ TEST(NpyRead, FrameRangeChecksOnlyTheFramesItReadsButTheWholeFileLength) {
     expectInputError([&] { pmsc::readFrameRange(path, 1, 1); }, path, {"NaN at frame 1, point 0, channel 1"});
     writeBytes(path, npy(dict("<f8", "(2, 2, 3)"), sequenceF8().substr(0, 90)));
     expectInputError([&] { pmsc::readFrameRange(path, 0, 1); }, path, {"truncated"});
+}
+
+TEST(NpyMapped, ReadsWhatReadFramesReadsInBothDtypesAndVersions) {
+    TempDir dir;
+    const auto f8 = dir.file("f8.npy"), f4 = dir.file("f4.npy");
+    writeBytes(f8, npy(dict("<f8", "(2, 2, 3)"), sequenceF8(), 2));
+    writeBytes(f4, npy(dict("<f4", "(1, 2, 1)"), values<float>({0.1f, -3.5f})));
+    const pmsc::MappedFrames m8(f8), m4(f4);
+    EXPECT_EQ(m8.info().dtype, NpyDtype::Float64);
+    EXPECT_EQ(m8.info().frames, 2);
+    EXPECT_EQ(m4.info().dtype, NpyDtype::Float32);
+    const auto all = pmsc::readFrames(f8);
+    double frame[6];
+    for (pmsc::Index f = 0; f < 2; ++f) {
+        m8.readFrame(f, frame);
+        for (int i = 0; i < 6; ++i) EXPECT_EQ(frame[i], all.frames.frame(f)[i]);
+    }
+    const pmsc::Index some[] = {1, 0, 1};
+    double picked[9];
+    m8.read(1, some, picked);
+    EXPECT_EQ(picked[0], 110.0);
+    EXPECT_EQ(picked[2], 112.0);
+    EXPECT_EQ(picked[3], 100.0);
+    EXPECT_EQ(picked[8], 112.0);
+    double two[2];
+    m4.readFrame(0, two);
+    EXPECT_EQ(two[0], static_cast<double>(0.1f));
+    EXPECT_EQ(two[1], -3.5);
+    EXPECT_THROW(m8.readFrame(2, frame), std::out_of_range);
+    EXPECT_THROW(m8.readFrame(-1, frame), std::out_of_range);
+    const pmsc::Index outside[] = {2};
+    EXPECT_THROW(m8.read(0, outside, picked), std::out_of_range);
+}
+
+TEST(NpyMapped, ChecksEveryValueAcrossChunksAndRejectsWhatReadFramesRejects) {
+    TempDir dir;
+    // 3 frames x 30,000 points x 3: 270,000 values, more than the 65,536 checked at a time.
+    FrameSet big(3, 30000, 3);
+    for (std::size_t i = 0; i < big.values.size(); ++i) big.values[i] = std::sin(0.001 * static_cast<double>(i));
+    const auto good = dir.file("good.npy");
+    pmsc::writeFrames(good, big, NpyDtype::Float32);
+    const pmsc::MappedFrames m(good);
+    std::vector<double> frame(90000);
+    m.readFrame(2, frame.data());
+    EXPECT_EQ(frame[89999], static_cast<double>(static_cast<float>(big.values.back())));
+
+    big.values[2 * 90000 + 3 * 29999 + 1] = std::numeric_limits<double>::infinity();  // in the last chunk
+    const auto inf = dir.file("inf.npy");
+    pmsc::writeFrames(inf, big, NpyDtype::Float64);
+    expectInputError([&] { pmsc::MappedFrames bad(inf); }, inf, {"+Inf at frame 2, point 29999, channel 1"});
+
+    const auto missing = dir.file("missing.npy");
+    expectInputError([&] { pmsc::MappedFrames bad(missing); }, missing, {"no such file"});
+    const auto truncated = dir.file("truncated.npy");
+    writeBytes(truncated, npy(dict("<f8", "(2, 2, 3)"), sequenceF8().substr(0, 95)));
+    expectInputError([&] { pmsc::MappedFrames bad(truncated); }, truncated, {"truncated data"});
+    const auto empty = dir.file("empty.npy");
+    writeBytes(empty, "");
+    EXPECT_THROW(pmsc::MappedFrames bad(empty), InputError);
+    EXPECT_THROW(pmsc::MappedFrames bad(dir.path().string()), InputError);
 }
 
 TEST(NpyReadBad, MissingFile) {
