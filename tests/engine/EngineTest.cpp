@@ -240,6 +240,7 @@ TEST_F(Fixture, CancellationFromAnotherThreadStopsWithinAFrame) {
     SyntheticEvaluator slow(model, 400);
     slow.busyMicros = 2000;  // ~2 ms per evaluator call
     std::atomic<bool> cancel{false};
+    slow.cancelWatch = &cancel;
     EngineOptions o = options(2);
     o.cancel = &cancel;
     o.maxFramesInFlight = 8;
@@ -264,11 +265,15 @@ TEST_F(Fixture, CancellationFromAnotherThreadStopsWithinAFrame) {
     EXPECT_TRUE(threwCancelled);
     EXPECT_TRUE(engine.lastStats().cancelled);
     EXPECT_LT(sink.frames.size(), 400u);
-    // Delivered frames are a prefix, and the run ended within about one frame's time
-    // (a frame costs up to ~2 evaluator calls of 2 ms; generous for sanitizer builds).
+    // Delivered frames are a prefix, and the run ended within about one frame's time. The
+    // measure that does not depend on how busy the machine is: no evaluator call (2 ms each)
+    // begins after the flag, except one per thread that was already past its check when the
+    // flag flipped. The wall-time bound only catches a run that keeps going; it is loose
+    // (a frame is ~4 ms) because a loaded CI machine under a sanitizer may not schedule us.
     for (size_t i = 0; i < sink.frames.size(); ++i) EXPECT_EQ(sink.frames[i], Index(i));
+    EXPECT_LE(slow.callsAfterCancel(), 2) << "evaluator calls began after the cancellation";
     const double ms = std::chrono::duration<double, std::milli>(returnedAt - cancelledAt).count();
-    EXPECT_LT(ms, 50.0) << "took " << ms << " ms to stop";
+    EXPECT_LT(ms, 250.0) << "took " << ms << " ms to stop";
 }
 
 TEST_F(Fixture, HitsNeverCallTheFailThroughEvaluator) {

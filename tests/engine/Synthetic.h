@@ -95,6 +95,7 @@ public:
     void evaluate(Index frame, std::span<const Index> points, double* out) const override {
         if (frame < 0 || frame >= frames_)
             throw std::out_of_range("synthetic: frame " + std::to_string(frame));
+        if (cancelWatch && cancelWatch->load()) callsAfterCancel_.fetch_add(1);
         const bool keyCall = points.data() == model_.keyPoints.data();
         if (keyCall) {
             keyCalls_[size_t(frame)].fetch_add(1);
@@ -140,6 +141,8 @@ public:
     int keyCalls(Index frame) const { return keyCalls_[size_t(frame)].load(); }
     int fullCalls(Index frame) const { return fullCalls_[size_t(frame)].load(); }
     long pointsEvaluated() const { return pointsEvaluated_.load(); }
+    /// Evaluator calls that began after *cancelWatch became true.
+    int callsAfterCancel() const { return callsAfterCancel_.load(); }
 
     static void busyWait(int micros) {
         const auto end = std::chrono::steady_clock::now() + std::chrono::microseconds(micros);
@@ -155,6 +158,7 @@ public:
     Index nanInKeysAt = -1;
     Index nanInFullAt = -1;
     Index nanPoint = 0;
+    const std::atomic<bool>* cancelWatch = nullptr;  ///< counts calls begun after it turned true
 
 private:
     const Model& model_;
@@ -164,6 +168,7 @@ private:
     mutable std::atomic<long> inFlight_{0};
     mutable std::atomic<long> peakInFlight_{0};
     mutable std::atomic<long> pointsEvaluated_{0};
+    mutable std::atomic<int> callsAfterCancel_{0};
 };
 
 /// Thresholds that make the synthetic frame classes hit / blend / miss: measured key errors of
