@@ -2,6 +2,7 @@
 #include "cli/FarmFrames.h"
 
 #include "cli/Args.h"
+#include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 
 #include <cerrno>
@@ -110,7 +111,7 @@ void FrameOutput::write(Index frame, const double* values) const {
         writeFrames(p, one, dtype_);  // AtomicFile: temporary, fsync, rename, fsync folder
         return;
     }
-    std::string temp = p + ".tmp-XXXXXX";
+    std::string temp = p + ".tmp-" + temporaryTag() + "XXXXXX";
     const int fd = ::mkstemp(temp.data());
     if (fd < 0) throw IoError(p + ": cannot create a temporary file: " + systemError(errno));
     ::close(fd);
@@ -138,6 +139,9 @@ Index FrameOutput::removeStaleTemporaries(const std::vector<Index>& frames) cons
         const std::string name = entry.path().filename().string();
         const auto tmp = name.find(".tmp-");
         if (tmp == std::string::npos || !ours.count(name.substr(0, tmp))) continue;
+        // Another live run writing the same frame (overlapping ranges, or the same task started
+        // twice): leave its file alone; both runs write identical bytes and each renames its own.
+        if (temporaryMayBeInUse(entry.path().string())) continue;
         std::error_code rm;
         if (fs::remove(entry.path(), rm)) ++removed;
     }

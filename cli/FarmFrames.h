@@ -34,7 +34,7 @@ FrameSpan parseFrameSpan(const std::string& option, const std::string& text);
 /// Names: DIR/frame.NNNNNN.EXT, the frame number zero-padded to six digits (wider
 /// when larger), so a shell glob lists frames in order.
 ///
-/// Every file appears atomically: it is written to "<name>.tmp-XXXXXX" in the same
+/// Every file appears atomically: it is written to "<name>.tmp-<pid>@<host>-XXXXXX" in the same
 /// folder, flushed to disk (fsync), then renamed; a run killed at any instant leaves
 /// either no file for a frame or a complete one, plus at most stray temporary files,
 /// which the next run on those frames removes (removeStaleTemporaries()).
@@ -67,9 +67,10 @@ public:
     /// @throws IoError naming the path; no temporary file is left behind.
     void write(Index frame, const double* values) const;
 
-    /// Removes "<frame name>.tmp-*" files of the given frames, left by a killed run.
-    /// Two runs must not work on the same frames at once (a farm gives each task its own range).
-    /// @return how many were removed.
+    /// Removes "<frame name>.tmp-*" files of the given frames, left by a killed run, but not
+    /// those another live process may still be writing (pmsc::temporaryMayBeInUse()), so two
+    /// runs on overlapping frames both finish: each renames its own temporary file, and the
+    /// frame's bytes are the same whichever lands last. @return how many were removed.
     Index removeStaleTemporaries(const std::vector<Index>& frames) const;
 
 private:

@@ -3,7 +3,10 @@
 #include "pmsc/Errors.h"
 
 #include <cerrno>
+#include <charconv>
+#include <csignal>
 #include <cstring>
+#include <ctime>
 #include <string>
 #include <utility>
 #include <vector>
@@ -13,6 +16,39 @@
 #include <unistd.h>
 
 namespace pmsc {
+
+namespace {
+
+std::string hostName() {
+    char host[256] = {};
+    if (::gethostname(host, sizeof host - 1) != 0 || host[0] == '\0') return "unknown-host";
+    return host;
+}
+
+}  // namespace
+
+std::string temporaryTag() { return std::to_string(::getpid()) + "@" + hostName() + "-"; }
+
+bool temporaryMayBeInUse(const std::string& path, double otherHostSeconds) {
+    const auto tmp = path.rfind(".tmp-");
+    const auto at = path.find('@', tmp == std::string::npos ? 0 : tmp);
+    const auto dash = path.rfind('-');
+    if (tmp == std::string::npos || at == std::string::npos || dash == std::string::npos || dash < at ||
+        path.size() - dash != 7)
+        return false;  // no tag: a temporary file from before tags, or not ours at all
+    long long pid = 0;
+    const char* first = path.data() + tmp + 5;
+    const auto parsed = std::from_chars(first, path.data() + at, pid);
+    if (parsed.ec != std::errc() || parsed.ptr != path.data() + at || pid <= 0) return false;
+    const std::string host = path.substr(at + 1, dash - at - 1);
+    if (host == hostName()) {
+        if (pid == ::getpid()) return false;
+        return ::kill(static_cast<pid_t>(pid), 0) == 0 || errno == EPERM;
+    }
+    struct stat st {};
+    if (::stat(path.c_str(), &st) != 0) return false;
+    return std::difftime(std::time(nullptr), st.st_mtime) < otherHostSeconds;
+}
 
 namespace {
 
@@ -29,7 +65,7 @@ AtomicFile::AtomicFile(std::string path) : path_(std::move(path)) {
     if (path_.empty()) throw IoError("cannot write a file with an empty name");
     // mkstemp keeps concurrent writers of the same output (two farm tasks, two
     // threads) from sharing a temporary file.
-    std::string pattern = path_ + ".tmp-XXXXXX";
+    std::string pattern = path_ + ".tmp-" + temporaryTag() + "XXXXXX";
     std::vector<char> buffer(pattern.begin(), pattern.end());
     buffer.push_back('\0');
     fd_ = ::mkstemp(buffer.data());

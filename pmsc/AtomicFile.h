@@ -21,7 +21,7 @@ namespace pmsc {
 /// everything else from one thread.
 class AtomicFile {
 public:
-    /// Creates the temporary file "<path>.tmp-XXXXXX".
+    /// Creates the temporary file "<path>.tmp-<pid>@<host>-XXXXXX" (temporaryTag()).
     /// @throws IoError naming `path` and the system's reason.
     explicit AtomicFile(std::string path);
     ~AtomicFile();
@@ -53,6 +53,20 @@ private:
     bool pending_ = false;  // the temporary file exists and is ours to remove
     bool committed_ = false;
 };
+
+/// "<pid>@<host>-": what a temporary file's name holds between ".tmp-" and mkstemp's six
+/// characters, so that another process can tell whose temporary file it sees.
+std::string temporaryTag();
+
+/// Whether the temporary file at `path` ("....tmp-<pid>@<host>-XXXXXX") may still be written by
+/// a running process, so that cleaning up after a killed run must leave it alone:
+///  - written on this host by another process that is still alive: yes;
+///  - on this host by this process, or by a process that has ended: no;
+///  - on another host: yes if it was modified in the last `otherHostSeconds` (its writer cannot be
+///    asked; an abandoned one is removed once it is that old);
+///  - a name without the tag (written before tags existed): no.
+/// Never throws; a file that cannot be examined counts as not in use.
+bool temporaryMayBeInUse(const std::string& path, double otherHostSeconds = 600);
 
 /// Writes `bytes` to `path` atomically (an AtomicFile in one call).
 /// @throws IoError naming the path.

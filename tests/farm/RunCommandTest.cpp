@@ -6,6 +6,7 @@
 // partial file. Figures are printed (and recorded as test properties) for the issue's closing note.
 #include "cli/EvaluatorRegistry.h"
 #include "cli/RunCommand.h"
+#include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/NpyIO.h"
@@ -255,6 +256,54 @@ TEST_F(FarmRun, DamagedOutputIsRedoneAndForceRedoesEverything) {
     EXPECT_EQ(stats["frames"]["range"], "10-29");
     EXPECT_FALSE(stats["host"].get<std::string>().empty());
     EXPECT_NE(stats["command"].get<std::string>().find("--force"), std::string::npos);
+}
+
+TEST_F(FarmRun, OverlappingRunsBothFinishAndALiveRunsTemporaryIsLeftAlone) {
+    const fs::path out = root / "overlap";
+    fs::create_directories(out);
+    const std::string tag = pmsc::temporaryTag();
+    const std::string host = tag.substr(tag.find('@') + 1, tag.size() - tag.find('@') - 2);
+    // A live writer of frame 12 on this host (a child that waits) and a dead one of frame 13.
+    const pid_t live = ::fork();
+    ASSERT_GE(live, 0);
+    if (live == 0) {
+        ::pause();
+        ::_exit(0);
+    }
+    const pid_t dead = ::fork();
+    ASSERT_GE(dead, 0);
+    if (dead == 0) ::_exit(0);
+    ::waitpid(dead, nullptr, 0);
+    const std::string liveTemp = "frame.000012.npy.tmp-" + std::to_string(live) + "@" + host + "-Live01";
+    const std::string deadTemp = "frame.000013.npy.tmp-" + std::to_string(dead) + "@" + host + "-Dead01";
+    std::ofstream(out / liveTemp) << "being written";
+    std::ofstream(out / deadTemp) << "left by a killed run";
+    Result r = pmscRun(runArgs(out, "10-19"), root / "logs", "overlap-temporaries");
+    ::kill(live, SIGKILL);
+    ::waitpid(live, nullptr, 0);
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_TRUE(fs::exists(out / liveTemp)) << "a live process's temporary file was removed";
+    EXPECT_FALSE(fs::exists(out / deadTemp));
+    EXPECT_EQ(readJson(out / "pmsc-run.10-19.json")["stale_temporaries_removed"].get<Index>(), 1);
+    fs::remove(out / liveTemp);
+
+    // Two runs at once on overlapping frames (the same array task submitted twice): both succeed,
+    // and every frame is the one a single run writes.
+    const fs::path both = root / "overlap-both", single = root / "overlap-single";
+    auto a = runArgs(both, "0-299"), b = runArgs(both, "100-399");
+    a.push_back("--force");
+    b.push_back("--force");
+    Child ca = spawn(a, root / "logs", "overlap-a"), cb = spawn(b, root / "logs", "overlap-b");
+    const Result ra = wait(ca), rb = wait(cb);
+    EXPECT_EQ(ra.code, 0) << ra.err;
+    EXPECT_EQ(rb.code, 0) << rb.err;
+    ASSERT_EQ(pmscRun(runArgs(single, "0-399"), root / "logs", "overlap-single").code, 0);
+    EXPECT_EQ(countFrames(both), 400);
+    EXPECT_FALSE(hasTemporaries(both));
+    Index identical = 0;
+    for (const auto& name : listDir(single))
+        if (name.rfind("frame.", 0) == 0) identical += slurp((single / name).string()) == slurp((both / name).string());
+    EXPECT_EQ(identical, 400);
 }
 
 TEST_F(FarmRun, StepsThreadCountsAndFormatsGiveTheSameFrames) {

@@ -6,9 +6,13 @@
 #include <gtest/gtest.h>
 
 #include <csignal>
+#include <ctime>
 #include <string>
 
 #include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <utime.h>
 
 namespace {
 
@@ -26,6 +30,45 @@ TEST(AtomicFile, NothingAtThePathUntilCommit) {
     file.commit();
     EXPECT_EQ(pmsc::test::readBytes(path), "hello");
     EXPECT_EQ(dir.entries(), std::vector<std::string>{"out.bin"});
+}
+
+TEST(AtomicFile, TemporaryNamesTellWhoseTheyAreAndWhetherTheWriterLives) {
+    TempDir dir;
+    pmsc::AtomicFile mine(dir.file("frame.npy"));
+    const std::string tag = pmsc::temporaryTag();
+    EXPECT_NE(mine.temporaryPath().find(".tmp-" + tag), std::string::npos) << mine.temporaryPath();
+    EXPECT_FALSE(pmsc::temporaryMayBeInUse(mine.temporaryPath())) << "our own: the caller decides";
+
+    const std::string host = tag.substr(tag.find('@') + 1, tag.size() - tag.find('@') - 2);
+    const auto touch = [&](const std::string& name) {
+        pmsc::test::writeBytes(dir.file(name), "x");
+        return dir.file(name);
+    };
+    // A live process of this host (a child that waits), then the same pid once it has ended.
+    const pid_t child = ::fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+        ::pause();
+        ::_exit(0);
+    }
+    const std::string live = touch("frame.npy.tmp-" + std::to_string(child) + "@" + host + "-Ab3dE9");
+    EXPECT_TRUE(pmsc::temporaryMayBeInUse(live));
+    ::kill(child, SIGKILL);
+    ::waitpid(child, nullptr, 0);
+    EXPECT_FALSE(pmsc::temporaryMayBeInUse(live)) << "its writer has ended";
+
+    // Another host: in use while recent, abandoned once older than the limit.
+    const std::string other = touch("frame.npy.tmp-4242@some-other-node.farm-Zz9yY8");
+    EXPECT_TRUE(pmsc::temporaryMayBeInUse(other));
+    const utimbuf old{std::time(nullptr) - 3600, std::time(nullptr) - 3600};
+    ASSERT_EQ(::utime(other.c_str(), &old), 0);
+    EXPECT_FALSE(pmsc::temporaryMayBeInUse(other));
+
+    // Names without a tag, or with a malformed one, are not in use.
+    EXPECT_FALSE(pmsc::temporaryMayBeInUse(touch("frame.npy.tmp-Qw12Er")));
+    EXPECT_FALSE(pmsc::temporaryMayBeInUse(touch("frame.npy.tmp-12x@" + host + "-Qw12Er")));
+    EXPECT_FALSE(pmsc::temporaryMayBeInUse(touch("frame.npy.tmp-@" + host + "-Qw12Er")));
+    EXPECT_FALSE(pmsc::temporaryMayBeInUse(dir.file("frame.npy.tmp-1@other-node-gone00"))) << "no such file";
 }
 
 TEST(AtomicFile, AbandonedOrDestroyedLeavesNoTemporaryFile) {
