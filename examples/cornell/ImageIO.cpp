@@ -1,30 +1,19 @@
 #include "examples/cornell/ImageIO.h"
 
+#include "examples/common/Png.h"
+#include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
-
-#include <png.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <filesystem>
 #include <fstream>
-#include <memory>
 #include <stdexcept>
 
 namespace pmsc::cornell {
 
 namespace {
-
-void commit(const std::string& tmp, const std::string& path) {
-    std::error_code ec;
-    std::filesystem::rename(tmp, path, ec);
-    if (ec) {
-        std::remove(tmp.c_str());
-        throw IoError("cannot write " + path + ": " + ec.message());
-    }
-}
 
 std::uint8_t toSrgb8(float linear, float exposure) {
     float x = std::max(0.0f, linear * exposure);
@@ -63,41 +52,15 @@ Image absDifference(const Image& a, const Image& b, float scale) {
 void writePng(const std::string& path, const Image& image, float exposure) {
     std::vector<std::uint8_t> pixels(image.rgb.size());
     for (size_t i = 0; i < pixels.size(); ++i) pixels[i] = toSrgb8(image.rgb[i], exposure);
-    // libpng's simplified API: no setjmp/longjmp in this function (the classic API's error
-    // handling made GCC warn that locals might be clobbered, and rightly so).
-    png_image png;
-    std::memset(&png, 0, sizeof png);
-    png.version = PNG_IMAGE_VERSION;
-    png.width = static_cast<png_uint_32>(image.width);
-    png.height = static_cast<png_uint_32>(image.height);
-    png.format = PNG_FORMAT_RGB;
-    const std::string tmp = path + ".tmp";
-    const bool ok = png_image_write_to_file(&png, tmp.c_str(), 0, pixels.data(), 0, nullptr) != 0;
-    const std::string why = ok ? "" : png.message;
-    png_image_free(&png);
-    if (!ok) {
-        std::remove(tmp.c_str());
-        throw IoError("cannot write " + path + ": " + why);
-    }
-    commit(tmp, path);
+    examples::writePngRgb8(path, image.width, image.height, pixels.data());
 }
 
 void writePfm(const std::string& path, const Image& image) {
-    const std::string tmp = path + ".tmp";
-    {
-        std::ofstream f(tmp, std::ios::binary);
-        if (!f) throw IoError("cannot write " + path + ": " + std::strerror(errno));
-        f << "PF\n" << image.width << " " << image.height << "\n-1.0\n";
-        for (int y = image.height - 1; y >= 0; --y)
-            f.write(reinterpret_cast<const char*>(image.pixel(0, y)),
-                    static_cast<std::streamsize>(sizeof(float) * 3 * static_cast<size_t>(image.width)));
-        f.flush();
-        if (!f) {
-            std::remove(tmp.c_str());
-            throw IoError("cannot write " + path + ": write failed");
-        }
-    }
-    commit(tmp, path);
+    std::string bytes = "PF\n" + std::to_string(image.width) + " " + std::to_string(image.height) + "\n-1.0\n";
+    const size_t rowBytes = sizeof(float) * 3 * static_cast<size_t>(image.width);
+    for (int y = image.height - 1; y >= 0; --y)
+        bytes.append(reinterpret_cast<const char*>(image.pixel(0, y)), rowBytes);
+    writeFileAtomically(path, bytes);
 }
 
 Image readPfm(const std::string& path) {

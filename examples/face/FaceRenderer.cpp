@@ -1,14 +1,13 @@
 #include "examples/face/FaceRenderer.h"
 
+#include "examples/common/Png.h"
 #include "examples/face/IctFace.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 
-#include <png.h>
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <numbers>
 #include <string>
 
@@ -154,26 +153,7 @@ std::array<float, 3> errorColour(double error, double full) {
 }
 
 void writePng(const std::string& path, const RgbImage& image) {
-    // libpng's simplified API: no setjmp/longjmp, so no C++ object lives across a longjmp.
-    // The first call measures the encoded size, the second encodes.
-    png_image png;
-    std::memset(&png, 0, sizeof png);
-    png.version = PNG_IMAGE_VERSION;
-    png.width = static_cast<png_uint_32>(image.width);
-    png.height = static_cast<png_uint_32>(image.height);
-    png.format = PNG_FORMAT_RGB;
-    png_alloc_size_t size = 0;
-    std::string bytes;
-    bool ok = png_image_write_to_memory(&png, nullptr, &size, 0, image.pixels.data(), 0, nullptr) != 0;
-    if (ok) {
-        bytes.resize(size);
-        ok = png_image_write_to_memory(&png, bytes.data(), &size, 0, image.pixels.data(), 0, nullptr) != 0;
-        bytes.resize(size);
-    }
-    const std::string why = ok ? "" : png.message;
-    png_image_free(&png);
-    if (!ok) throw IoError(path + ": PNG encoding failed: " + why);
-    writeFileAtomically(path, bytes);
+    examples::writePngRgb8(path, image.width, image.height, image.pixels.data());
 }
 
 }  // namespace pmsc::face
