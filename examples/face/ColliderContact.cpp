@@ -42,9 +42,7 @@ ColliderContact::ColliderContact(std::string name, const std::vector<double>& re
     }
     lo.array() -= kCandidateRadius;
     hi.array() += kCandidateRadius;
-    zoneIndex_.assign(static_cast<size_t>(n), -1);
-    candidateStart_.push_back(0);
-    inputStart_.push_back(0);
+    zone_ = ContactZone(n);
     for (Index v = 0; v < n; ++v) {
         if (!skin[v] || collider[v]) continue;
         const Eigen::Vector3d x = at(v);
@@ -76,18 +74,7 @@ ColliderContact::ColliderContact(std::string name, const std::vector<double>& re
             }
             if (s < 0) continue;
         }
-        zoneIndex_[v] = static_cast<std::int32_t>(zoneVertices_.size());
-        zoneVertices_.push_back(v);
-        candidates_.insert(candidates_.end(), cands.begin(), cands.end());
-        candidateStart_.push_back(static_cast<std::int32_t>(candidates_.size()));
-        std::vector<std::int32_t> in;
-        for (std::int32_t t : cands) {
-            for (std::int32_t u : triangles_[static_cast<size_t>(t)]) in.push_back(u);
-        }
-        std::sort(in.begin(), in.end());
-        in.erase(std::unique(in.begin(), in.end()), in.end());
-        inputs_.insert(inputs_.end(), in.begin(), in.end());
-        inputStart_.push_back(static_cast<std::int32_t>(inputs_.size()));
+        zone_.add(v, cands, triangles_);
     }
 }
 

@@ -1,6 +1,7 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include "examples/face/ContactZone.h"
 #include "examples/face/LipContact.h"
 #include "examples/face/MeshTopology.h"
 
@@ -43,19 +44,12 @@ public:
                     const std::vector<Eigen::Vector3d>& inside);
 
     const std::string& name() const { return name_; }
-    bool inZone(Index v) const { return zoneIndex_[static_cast<size_t>(v)] >= 0; }
-    Index zoneSize() const { return static_cast<Index>(zoneVertices_.size()); }
-    const std::vector<Index>& zoneVertices() const { return zoneVertices_; }
+    bool inZone(Index v) const { return zone_.contains(v); }
+    Index zoneSize() const { return zone_.size(); }
+    const std::vector<Index>& zoneVertices() const { return zone_.vertices(); }
     /// Collider vertices the contact of zone vertex v reads, ascending.
-    std::span<const std::int32_t> inputVertices(Index v) const {
-        const auto z = static_cast<size_t>(zoneIndex_[static_cast<size_t>(v)]);
-        return {inputs_.data() + inputStart_[z], static_cast<size_t>(inputStart_[z + 1] - inputStart_[z])};
-    }
-    std::span<const std::int32_t> candidates(Index v) const {
-        const auto z = static_cast<size_t>(zoneIndex_[static_cast<size_t>(v)]);
-        return {candidates_.data() + candidateStart_[z],
-                static_cast<size_t>(candidateStart_[z + 1] - candidateStart_[z])};
-    }
+    std::span<const std::int32_t> inputVertices(Index v) const { return zone_.inputVertices(v); }
+    std::span<const std::int32_t> candidates(Index v) const { return zone_.candidates(v); }
     /// Signed distance of zone vertex v at x to the posed collider (outward positive), and the
     /// outward normal of the nearest triangle.
     template <class Posed>
@@ -69,10 +63,7 @@ private:
     std::string name_;
     const std::vector<std::array<std::int32_t, 3>>& triangles_;
     std::vector<double> orientation_;  // per triangle: +1 or -1 so that the winding normal points outward
-    std::vector<std::int32_t> zoneIndex_;
-    std::vector<Index> zoneVertices_;
-    std::vector<std::int32_t> candidateStart_, candidates_;
-    std::vector<std::int32_t> inputStart_, inputs_;
+    ContactZone zone_;
 };
 
 template <class Posed>
@@ -102,8 +93,7 @@ double ColliderContact::signedDistance(Index v, const Eigen::Vector3d& x, const 
 
 template <class Posed>
 Eigen::Vector3d ColliderContact::apply(Index v, const Eigen::Vector3d& x, const Posed& posed) const {
-    const std::int32_t z = zoneIndex_[static_cast<size_t>(v)];
-    if (z < 0) return x;
+    if (!zone_.contains(v)) return x;
     Eigen::Vector3d normal;
     const double s = signedDistance(v, x, posed, normal);
     if (!std::isfinite(s)) return x;

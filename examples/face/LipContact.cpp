@@ -77,9 +77,7 @@ LipContact::LipContact(const IctFace& face, const MeshTopology& topology,
         if (s0 >= 0 && side[tri[1]] == s0 && side[tri[2]] == s0)
             sideTris[s0].push_back(static_cast<std::int32_t>(t));
     }
-    zoneIndex_.assign(static_cast<size_t>(n), -1);
-    candidateStart_.push_back(0);
-    inputStart_.push_back(0);
+    zone_ = ContactZone(n);
     for (Index v = 0; v < n; ++v) {
         if (side[v] < 0) continue;
         const Eigen::Vector3d x = at(v);
@@ -93,25 +91,14 @@ LipContact::LipContact(const IctFace& face, const MeshTopology& topology,
             if (d < kCandidateRadius) cands.push_back(t);
         }
         if (nearest >= kZoneRadius) continue;
-        zoneIndex_[v] = static_cast<std::int32_t>(zoneVertices_.size());
-        zoneVertices_.push_back(v);
+        zone_.add(v, cands, triangles_);
         const double r = std::abs(x[0]) / cornerX;
         stickiness_.push_back(std::clamp(1 - r * r, 0.0, 1.0));
-        candidates_.insert(candidates_.end(), cands.begin(), cands.end());
-        candidateStart_.push_back(static_cast<std::int32_t>(candidates_.size()));
-        std::vector<std::int32_t> in;
-        for (std::int32_t t : cands) {
-            for (std::int32_t u : triangles_[static_cast<size_t>(t)]) in.push_back(u);
-        }
-        std::sort(in.begin(), in.end());
-        in.erase(std::unique(in.begin(), in.end()), in.end());
-        inputs_.insert(inputs_.end(), in.begin(), in.end());
-        inputStart_.push_back(static_cast<std::int32_t>(inputs_.size()));
     }
     // Winding: at rest the lips touch without crossing, so most zone vertices lie on the outer
     // side of the nearest opposite triangle. Whichever sign the majority shows is "outward".
     Index outward = 0, inward = 0;
-    for (Index v : zoneVertices_) {
+    for (Index v : zone_.vertices()) {
         const Eigen::Vector3d x = at(v);
         double best = INFINITY;
         double sign = 0;
@@ -129,9 +116,9 @@ LipContact::LipContact(const IctFace& face, const MeshTopology& topology,
         if (sign < 0) ++inward;
     }
     orientation_ = inward > outward ? -1.0 : 1.0;
-    for (Index v : zoneVertices_) {
+    for (Index v : zone_.vertices()) {
         const auto posed = [&](std::int32_t u) { return at(u); };
-        const std::int32_t z = zoneIndex_[v];
+        const std::int32_t z = zone_.index(v);
         allowance_.push_back(0.0);
         // Signed distance at rest with the final orientation: apply() with a zero allowance.
         const Eigen::Vector3d x = at(v);

@@ -1,6 +1,7 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include "examples/face/ContactZone.h"
 #include "examples/face/IctFace.h"
 #include "examples/face/MeshTopology.h"
 
@@ -50,22 +51,15 @@ public:
     /// positions the contact reads.
     bool inMouthBox(Index v) const { return side_[static_cast<size_t>(v)] >= 0; }
     /// True for vertices of the lip zone.
-    bool inZone(Index v) const { return zoneIndex_[static_cast<size_t>(v)] >= 0; }
+    bool inZone(Index v) const { return zone_.contains(v); }
     /// Number of lip zone vertices.
-    Index zoneSize() const { return static_cast<Index>(zoneVertices_.size()); }
-    const std::vector<Index>& zoneVertices() const { return zoneVertices_; }
+    Index zoneSize() const { return zone_.size(); }
+    const std::vector<Index>& zoneVertices() const { return zone_.vertices(); }
     /// Vertices whose posed positions the contact of zone vertex v reads (its candidate
     /// triangles' corners), ascending.
-    std::span<const std::int32_t> inputVertices(Index v) const {
-        const auto z = static_cast<size_t>(zoneIndex_[static_cast<size_t>(v)]);
-        return {inputs_.data() + inputStart_[z], static_cast<size_t>(inputStart_[z + 1] - inputStart_[z])};
-    }
+    std::span<const std::int32_t> inputVertices(Index v) const { return zone_.inputVertices(v); }
     /// Candidate triangles (indices into MeshTopology::triangles()) of zone vertex v.
-    std::span<const std::int32_t> candidates(Index v) const {
-        const auto z = static_cast<size_t>(zoneIndex_[static_cast<size_t>(v)]);
-        return {candidates_.data() + candidateStart_[z],
-                static_cast<size_t>(candidateStart_[z + 1] - candidateStart_[z])};
-    }
+    std::span<const std::int32_t> candidates(Index v) const { return zone_.candidates(v); }
 
     /// Displacement along the opposite lip's outward normal for a signed distance s and a
     /// stickiness (lipStick x the vertex's stickiness): half the C1-ramped penetration, minus
@@ -79,18 +73,15 @@ public:
 
     /// The stickiness of zone vertex v in [0, 1] (1 mid-mouth, 0 at the corners).
     double stickiness(Index v) const {
-        return stickiness_[static_cast<size_t>(zoneIndex_[static_cast<size_t>(v)])];
+        return stickiness_[static_cast<size_t>(zone_.index(v))];
     }
 
 private:
     const std::vector<std::array<std::int32_t, 3>>& triangles_;
     std::vector<std::int8_t> side_;        // per vertex: 0 upper lip, 1 lower lip, -1 outside the mouth box
-    std::vector<std::int32_t> zoneIndex_;  // per vertex: index into the zone arrays or -1
-    std::vector<Index> zoneVertices_;
-    std::vector<double> stickiness_;
-    std::vector<double> allowance_;  // per zone vertex: min(0, signed distance at rest)
-    std::vector<std::int32_t> candidateStart_, candidates_;
-    std::vector<std::int32_t> inputStart_, inputs_;
+    ContactZone zone_;
+    std::vector<double> stickiness_;  // per zone vertex
+    std::vector<double> allowance_;   // per zone vertex: min(0, signed distance at rest)
     double orientation_ = 1.0;  // +1 if triangle winding gives outward normals, else -1
 };
 
@@ -101,7 +92,7 @@ Eigen::Vector3d closestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Ve
 template <class Posed>
 Eigen::Vector3d LipContact::apply(Index v, const Eigen::Vector3d& x, double lipStick,
                                   const Posed& posed) const {
-    const std::int32_t z = zoneIndex_[static_cast<size_t>(v)];
+    const std::int32_t z = zone_.index(v);
     if (z < 0) return x;
     double best = INFINITY;
     Eigen::Vector3d nearest = x;
