@@ -13,7 +13,6 @@
 #include <regex>
 #include <unordered_set>
 
-#include <fcntl.h>
 #include <unistd.h>
 
 namespace fs = std::filesystem;
@@ -51,17 +50,6 @@ std::string frameName(Index frame, const std::string& extension) {
 }
 
 std::string systemError(int error) { return std::strerror(error); }
-
-void fsyncPath(const std::string& path, bool directory) {
-    const int fd = ::open(path.c_str(), (directory ? O_DIRECTORY : 0) | O_RDONLY | O_CLOEXEC);
-    if (fd < 0) throw IoError(path + ": " + systemError(errno));
-    const int rc = ::fsync(fd);
-    const int error = errno;
-    ::close(fd);
-    // Some file systems do not sync folders (EINVAL); the rename itself is still atomic there.
-    if (rc != 0 && !(directory && (error == EINVAL || error == EROFS)))
-        throw IoError(path + ": cannot flush to disk: " + systemError(error));
-}
 
 }  // namespace
 
@@ -106,28 +94,22 @@ bool FrameOutput::isValid(Index frame) const {
 void FrameOutput::write(Index frame, const double* values) const {
     const std::string p = path(frame);
     if (!writer_) {
-        FrameSet one(1, points_, channels_);
-        std::copy(values, values + points_ * channels_, one.values.begin());
-        writeFrames(p, one, dtype_);  // AtomicFile: temporary, fsync, rename, fsync folder
+        NpyFrameWriter npy(p, 1, points_, channels_, dtype_);  // AtomicFile: temporary, fsync, rename
+        npy.writeFrame(0, values);
+        npy.commit();
         return;
     }
-    std::string temp = p + ".tmp-" + temporaryTag() + "XXXXXX";
-    const int fd = ::mkstemp(temp.data());
-    if (fd < 0) throw IoError(p + ": cannot create a temporary file: " + systemError(errno));
-    ::close(fd);
+    // The evaluator's writer fills AtomicFile's temporary file by name (pmsc::FrameWriter);
+    // commit() syncs it, renames it into place and syncs the folder.
+    AtomicFile file(p);
     try {
-        writer_->write(temp, frame, values);
-        fsyncPath(temp, false);
-        if (::rename(temp.c_str(), p.c_str()) != 0)
-            throw IoError(p + ": cannot rename into place: " + systemError(errno));
+        writer_->write(file.temporaryPath(), frame, values);
     } catch (const IoError&) {
-        ::unlink(temp.c_str());
         throw;
     } catch (const std::exception& e) {
-        ::unlink(temp.c_str());
         throw IoError(p + ": " + e.what());
     }
-    fsyncPath(dir_, true);
+    file.commit();
 }
 
 Index FrameOutput::removeStaleTemporaries(const std::vector<Index>& frames) const {

@@ -5,6 +5,7 @@
 #include "examples/cornell/ImageIO.h"
 #include "examples/cornell/LightingCacheGrid.h"
 #include "examples/cornell/Renderer.h"
+#include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 #include "pmsc/SpatialGrid.h"
 #include "pmsc/Training.h"
@@ -18,7 +19,6 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <map>
 #include <numeric>
 #include <random>
@@ -101,22 +101,6 @@ private:
     const std::vector<Index>& subset_;
     const std::set<Index>& subsetFrames_;
 };
-
-void writeJson(const std::string& path, const nlohmann::json& j) {
-    const std::string tmp = path + ".tmp";
-    {
-        std::ofstream f(tmp);
-        f << j.dump(2) << "\n";
-        f.flush();
-        if (!f) {
-            std::remove(tmp.c_str());
-            throw IoError("cannot write " + path);
-        }
-    }
-    std::error_code ec;
-    std::filesystem::rename(tmp, path, ec);
-    if (ec) throw IoError("cannot write " + path + ": " + ec.message());
-}
 
 float exposureFor(const Image& img) {
     double sum = 0;
@@ -394,7 +378,7 @@ nlohmann::json runCornellDemo(const CornellDemoOptions& o) {
     report["vdb_files"] = vdbs;
     timings["total"] = secondsSince(start);
     report["seconds"] = timings;
-    writeJson(o.outDir + "/report.json", report);
+    writeFileAtomically(o.outDir + "/report.json", report.dump(2) + "\n");
     progress("done", 1, 1);
     return report;
 }

@@ -272,7 +272,7 @@ public:
         const SurfaceVoxels& vox = ev_.world().voxels;
         const PointLight& light = ev_.lights().at(static_cast<std::size_t>(frame));
         CacheMetadata meta{static_cast<std::int32_t>(frame), light.position, "soft-cached", -1, 0};
-        LightingCacheGrid(vox, std::span<const double>(values, 3 * vox.size()), meta).write(path);
+        LightingCacheGrid(vox, std::span<const double>(values, 3 * vox.size()), meta).writeTo(path);
     }
     bool isValid(const std::string& path) const override {
         try {

@@ -1,13 +1,12 @@
 // The one translation unit that includes OpenVDB (its headers are heavy; see STYLE.md).
 #include "examples/cornell/LightingCacheGrid.h"
 
+#include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 
 #include <openvdb/openvdb.h>
 
 #include <cmath>
-#include <cstdio>
-#include <filesystem>
 #include <mutex>
 #include <stdexcept>
 
@@ -75,26 +74,24 @@ LightingCacheGrid::LightingCacheGrid(const SurfaceVoxels& voxels, std::span<cons
     g.insertMeta("units", openvdb::StringMetadata("world: mm"));
 }
 
-void LightingCacheGrid::write(const std::string& path) const {
-    const std::string tmp = path + ".tmp";
+void LightingCacheGrid::writeTo(const std::string& path) const {
     try {
         openvdb::GridPtrVec grids{impl_->indirect, impl_->normal, impl_->surfacePoint};
-        openvdb::io::File file(tmp);
+        openvdb::io::File file(path);
         file.setCompression(openvdb::io::COMPRESS_BLOSC | openvdb::io::COMPRESS_ACTIVE_MASK);
         openvdb::MetaMap fileMeta;
         fileMeta.insertMeta("creator", openvdb::StringMetadata("pmsc demo cornell"));
         file.write(grids, fileMeta);
         file.close();
     } catch (const std::exception& e) {
-        std::remove(tmp.c_str());
         throw IoError("cannot write " + path + ": " + e.what());
     }
-    std::error_code ec;
-    std::filesystem::rename(tmp, path, ec);
-    if (ec) {
-        std::remove(tmp.c_str());
-        throw IoError("cannot write " + path + ": " + ec.message());
-    }
+}
+
+void LightingCacheGrid::write(const std::string& path) const {
+    AtomicFile file(path);  // OpenVDB writes the temporary file by name; commit() syncs and renames it
+    writeTo(file.temporaryPath());
+    file.commit();
 }
 
 LightingCacheGrid LightingCacheGrid::read(const std::string& path) {

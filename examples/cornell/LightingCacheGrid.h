@@ -38,9 +38,12 @@ public:
     LightingCacheGrid(LightingCacheGrid&&) noexcept;
     LightingCacheGrid& operator=(LightingCacheGrid&&) noexcept;
 
-    /// Writes the three grids to a .vdb file readable by `vdb_print` (blosc/zip compressed):
-    /// to `path`.tmp in the same folder, then renamed. @throws pmsc::IoError naming the path.
+    /// Writes the three grids to a .vdb file readable by `vdb_print` (blosc/zip compressed),
+    /// atomically (pmsc::AtomicFile). @throws pmsc::IoError naming the path.
     void write(const std::string& path) const;
+    /// The same, straight to `path` with no temporary file: for callers that make the file
+    /// appear atomically themselves (pmsc::FrameWriter). @throws pmsc::IoError.
+    void writeTo(const std::string& path) const;
     /// Reads a file written by write(). @throws pmsc::InputError for a missing, unreadable
     /// or foreign file (no "indirect" Vec3SGrid, companion grids missing or mismatched).
     static LightingCacheGrid read(const std::string& path);
