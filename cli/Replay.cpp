@@ -81,14 +81,20 @@ public:
         row.frame = r.frame;
         row.keyRms = r.keyRmsError;
         row.decision = CacheDecision{r.state, r.weight};
-        // The recorded frame is the reference for both errors, whatever the decision.
-        recorded_.evaluateAll(r.frame, full_.data());
+        // The recorded frame is the reference for both errors, whatever the decision. A miss
+        // already holds it: the fail-through read exactly the recorded values.
+        const double* full = full_.data();
+        if (r.state == CacheState::Miss && !r.failed) {
+            full = r.values.data();
+        } else {
+            recorded_.evaluateAll(r.frame, full_.data());
+        }
         const Index n = model_.points, c = model_.channels;
         // Recorded frames are finite (the reader rejects NaN/Inf), so the keys are too and the
         // engine always hands over the PM result (keepPointMultiplication).
         row.pmMaxPointError = r.pmValues.empty() ? std::numeric_limits<double>::quiet_NaN()
-                                                 : maxPointError(r.pmValues.data(), full_.data(), n, c);
-        row.softMaxPointError = maxPointError(r.values.data(), full_.data(), n, c);
+                                                 : maxPointError(r.pmValues.data(), full, n, c);
+        row.softMaxPointError = maxPointError(r.values.data(), full, n, c);
         if (out_) out_->writeFrame(r.sequence, r.values.data());
     }
 

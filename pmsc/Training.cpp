@@ -254,8 +254,10 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
         // and this basis; recomputing would cost another (N*C) x M x F product.
         model.trainMaxPointResidual = report.residualPerRound.back();
     } else {
-        Eigen::MatrixXd residual;
-        model.trainMaxPointResidual = pmResidual(q, model.basis, channels, keys, residual);
+        // The projector just made gives the coordinates; the residual is reduced block by block,
+        // never formed (at the ICT face's size it would be 80,157 x 600 doubles, 385 MB).
+        model.trainMaxPointResidual =
+            maxPointResidual(q, model.basis, model.projector * gatherKeyRows(q, channels, keys), channels);
     }
     if (options.selector == Selector::QDeim) report.residualPerRound.push_back(model.trainMaxPointResidual);
     progress("projector", 1, 1);
