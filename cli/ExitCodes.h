@@ -1,6 +1,9 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include <exception>
+#include <string>
+
 namespace pmsc::cli {
 
 /// Exit codes of the `pmsc` program. Scripts (and the render farm) branch on
@@ -13,5 +16,16 @@ enum ExitCode : int {
     kExitIo = 4,            ///< an output could not be written (pmsc::IoError)
     kExitInterrupted = 130  ///< SIGINT or a cancelled run (128 + SIGINT, as shells report it)
 };
+
+/// What an exception means for the program: one place maps the error types to exit codes, so
+/// main()'s exit code and a stats file's `exit_code`/`status` (pmsc run) always agree.
+struct ExitReason {
+    ExitCode code = kExitInternal;
+    std::string status;   ///< "bad input", "evaluator failure", "io failure", "interrupted", "internal error"
+    std::string what;     ///< the exception's own message
+    std::string message;  ///< the one line to print after "pmsc: " (what, with a prefix by kind)
+};
+/// @param error a thrown exception (std::current_exception() in a catch block); never null.
+ExitReason exitReason(std::exception_ptr error);
 
 }  // namespace pmsc::cli

@@ -47,12 +47,6 @@ std::string isoTime(double unix) {
     return buf;
 }
 
-std::string hostName() {
-    char buf[256] = {};
-    if (::gethostname(buf, sizeof buf - 1) != 0) return "unknown";
-    return buf;
-}
-
 double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 /// One record per frame of the range, in range order.
@@ -193,18 +187,9 @@ RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const R
             doneBefore += s.framesDelivered;
             i = j;
         }
-    } catch (const Cancelled& e) {
-        status = "interrupted", error = e.what(), exitCode = kExitInterrupted,
-        failure = std::current_exception();
-    } catch (const EvaluatorError& e) {
-        status = "evaluator failure", error = e.what(), exitCode = kExitEvaluator,
-        failure = std::current_exception();
-    } catch (const IoError& e) {
-        status = "io failure", error = e.what(), exitCode = kExitIo, failure = std::current_exception();
-    } catch (const InputError& e) {
-        status = "bad input", error = e.what(), exitCode = kExitBadInput, failure = std::current_exception();
-    } catch (const std::exception& e) {
-        status = "internal error", error = e.what(), exitCode = kExitInternal,
+    } catch (...) {
+        const ExitReason reason = exitReason(std::current_exception());
+        status = reason.status, error = reason.what, exitCode = reason.code;
         failure = std::current_exception();
     }
     progress.finish();

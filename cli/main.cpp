@@ -117,21 +117,8 @@ int main(int argc, char** argv) {
         // A signal that arrives after the command finished its outputs changes nothing: the
         // outputs are complete, so the command's own code stands.
         return command->run(args);
-    } catch (const pmsc::Cancelled& e) {
-        return fail(kExitInterrupted, std::string("interrupted: ") + e.what());
-    } catch (const pmsc::InputError& e) {
-        return fail(kExitBadInput, e.what());
-    } catch (const pmsc::EvaluatorError& e) {
-        return fail(kExitEvaluator, std::string("evaluator failed: ") + e.what());
-    } catch (const pmsc::IoError& e) {
-        return fail(kExitIo, std::string("cannot write output: ") + e.what());
-    } catch (const std::invalid_argument& e) {
-        return fail(kExitBadInput, e.what());
-    } catch (const std::bad_alloc&) {
-        return fail(kExitInternal, "internal error: out of memory");
-    } catch (const std::exception& e) {
-        return fail(kExitInternal, std::string("internal error: ") + e.what());
     } catch (...) {
-        return fail(kExitInternal, "internal error: unknown exception");
+        const ExitReason reason = exitReason(std::current_exception());
+        return fail(reason.code, reason.message);
     }
 }

@@ -17,15 +17,11 @@
 
 namespace pmsc {
 
-namespace {
-
 std::string hostName() {
     char host[256] = {};
     if (::gethostname(host, sizeof host - 1) != 0 || host[0] == '\0') return "unknown-host";
     return host;
 }
-
-}  // namespace
 
 std::string temporaryTag() { return std::to_string(::getpid()) + "@" + hostName() + "-"; }
 

@@ -54,6 +54,9 @@ private:
     bool committed_ = false;
 };
 
+/// This machine's host name (gethostname), or "unknown-host".
+std::string hostName();
+
 /// "<pid>@<host>-": what a temporary file's name holds between ".tmp-" and mkstemp's six
 /// characters, so that another process can tell whose temporary file it sees.
 std::string temporaryTag();
