@@ -65,11 +65,12 @@ std::size_t countVoxels(const std::vector<std::uint64_t>& pairs) {
     return n;
 }
 
-}  // namespace
-
-SurfaceVoxels SurfaceVoxels::voxelize(const CornellScene& scene, double h) {
+void checkVoxelSize(double h) {
     if (!(h > 0.05 && h < 1000)) throw std::invalid_argument("SurfaceVoxels: voxel size " + std::to_string(h) + " mm out of range");
-    const std::vector<std::uint64_t> pairs = samplePairs(scene, h);
+}
+
+/// The voxels of samplePairs(scene, h).
+SurfaceVoxels fromPairs(const CornellScene& scene, double h, const std::vector<std::uint64_t>& pairs) {
     SurfaceVoxels out;
     out.voxelSizeMm = h;
     const auto& quads = scene.quads();
@@ -102,13 +103,23 @@ SurfaceVoxels SurfaceVoxels::voxelize(const CornellScene& scene, double h) {
     return out;
 }
 
+}  // namespace
+
+SurfaceVoxels SurfaceVoxels::voxelize(const CornellScene& scene, double h) {
+    checkVoxelSize(h);
+    return fromPairs(scene, h, samplePairs(scene, h));
+}
+
 SurfaceVoxels SurfaceVoxels::voxelizeToCount(const CornellScene& scene, std::size_t targetCount) {
     if (targetCount < 8) throw std::invalid_argument("SurfaceVoxels: need at least 8 points, got " + std::to_string(targetCount));
     double h = std::sqrt(scene.totalArea() / static_cast<double>(targetCount));
     for (int round = 0; round < 6; ++round) {
-        const std::size_t n = countVoxels(samplePairs(scene, h));
-        const double ratio = static_cast<double>(n) / static_cast<double>(targetCount);
-        if (std::abs(ratio - 1.0) < 0.01) break;
+        std::vector<std::uint64_t> pairs = samplePairs(scene, h);
+        const double ratio = static_cast<double>(countVoxels(pairs)) / static_cast<double>(targetCount);
+        if (std::abs(ratio - 1.0) < 0.01) {  // close enough: voxelize the pairs just sampled
+            checkVoxelSize(h);
+            return fromPairs(scene, h, pairs);
+        }
         h *= std::sqrt(ratio);
     }
     return voxelize(scene, h);
