@@ -67,12 +67,8 @@ TruncatedSvd randomizedSvd(const Eigen::Ref<const Eigen::MatrixXd>& q, Index ran
     const Index r = std::min(rank, svd.singularValues().size());
     s.sigma = svd.singularValues().head(r);
     s.v = svd.matrixV().leftCols(r);
-    const double threshold = (s.sigma.size() > 0 ? s.sigma[0] : 0.0) * 1e-12;
-    Index keep = 0;
-    while (keep < r && s.sigma[keep] > threshold) ++keep;
-    s.sigma.conservativeResize(keep);
-    s.v.conservativeResize(Eigen::NoChange, keep);
-    s.u.noalias() = y * svd.matrixU().leftCols(keep);
+    truncate(s, r, (s.sigma.size() > 0 ? s.sigma[0] : 0.0) * 1e-12);
+    s.u.noalias() = y * svd.matrixU().leftCols(s.sigma.size());
     return s;
 }
 
@@ -158,9 +154,8 @@ TruncatedSvd svdFromGram(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen
     }
     const double largest = eig.eigenvalues().size() > 0 ? std::sqrt(std::max(0.0, eig.eigenvalues()[n - 1])) : 0.0;
     truncate(s, rank, std::max(dropBelow, largest * 1e-7));
-    const Index formed = leftVectors < 0 ? s.sigma.size() : std::min(leftVectors, s.sigma.size());
-    s.u.noalias() = q * s.v.leftCols(formed);
-    for (Index i = 0; i < formed; ++i) s.u.col(i) /= s.sigma[i];
+    s.u.resize(q.rows(), 0);
+    formLeftVectors(q, s, leftVectors < 0 ? s.sigma.size() : leftVectors);
     return s;
 }
 
