@@ -176,4 +176,10 @@ std::pair<double, double> parseDoublePair(const std::string& option, const std::
     return {parseDouble(option, text.substr(0, comma)), parseDouble(option, text.substr(comma + 1))};
 }
 
+NpyDtype parseDtype(const std::string& option, const std::string& text) {
+    if (text == "float64") return NpyDtype::Float64;
+    if (text == "float32") return NpyDtype::Float32;
+    throw UsageError(option + ": expected float64 or float32, got '" + text + "'");
+}
+
 }  // namespace pmsc::cli

@@ -2,6 +2,7 @@
 #pragma once
 
 #include "pmsc/FrameSet.h"
+#include "pmsc/NpyIO.h"
 
 #include <functional>
 #include <limits>
@@ -83,5 +84,7 @@ double parseDouble(const std::string& option, const std::string& text,
 std::vector<Index> parseIndexList(const std::string& option, const std::string& text);
 /// Two comma-separated finite numbers "A,B".
 std::pair<double, double> parseDoublePair(const std::string& option, const std::string& text);
+/// An .npy element type: "float64" or "float32".
+NpyDtype parseDtype(const std::string& option, const std::string& text);
 
 }  // namespace pmsc::cli

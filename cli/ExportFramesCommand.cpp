@@ -54,10 +54,11 @@ int runExportFrames(const std::vector<std::string>& args) {
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
     NpyDtype type = NpyDtype::Float64;
-    if (dtype == "float32")
-        type = NpyDtype::Float32;
-    else if (dtype != "float64")
-        parser.fail("--dtype: expected float64 or float32, got '" + dtype + "'");
+    try {
+        type = parseDtype("--dtype", dtype);
+    } catch (const UsageError& e) {
+        parser.fail(e.what());
+    }
 
     spec = specOrAsset(spec);
     const std::unique_ptr<PointEvaluator> evaluator = makeEvaluator(spec);
@@ -69,9 +70,7 @@ int runExportFrames(const std::vector<std::string>& args) {
             parser.fail(e.what());
         }
     }
-    if (span.last >= evaluator->frameCount())
-        throw InputError("frames " + span.text() + " are outside the evaluator's frames 0-" +
-                         std::to_string(evaluator->frameCount() - 1) + " (" + spec + ")");
+    checkFramesInside(span, *evaluator, spec);
     const Index n = evaluator->pointCount(), c = evaluator->channelCount(), count = span.count();
 
     NpyFrameWriter writer(outPath, count, n, c, type);  // a temporary file until commit()

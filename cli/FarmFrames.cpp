@@ -41,6 +41,12 @@ FrameSpan parseFrameSpan(const std::string& option, const std::string& text) {
     return s;
 }
 
+void checkFramesInside(const FrameSpan& span, const PointEvaluator& evaluator, const std::string& spec) {
+    if (span.last >= evaluator.frameCount())
+        throw InputError("frames " + span.text() + " are outside the evaluator's frames 0-" +
+                         std::to_string(evaluator.frameCount() - 1) + " (" + spec + ")");
+}
+
 namespace {
 
 std::string frameName(Index frame, const std::string& extension) {

@@ -27,6 +27,10 @@ struct FrameSpan {
 /// @throws UsageError naming `option`.
 FrameSpan parseFrameSpan(const std::string& option, const std::string& text);
 
+/// @throws InputError ("frames A-B are outside the evaluator's frames 0-F (SPEC)") unless every
+/// frame of `span` is one of the evaluator's.
+void checkFramesInside(const FrameSpan& span, const PointEvaluator& evaluator, const std::string& spec);
+
 /// One output file per frame of a render-farm run (`pmsc run`), in one format:
 /// `.npy` of shape (1, N, C), or a format the evaluator offers (pmsc::FrameWriter:
 /// .obj for a mesh, .vdb for an illumination grid).

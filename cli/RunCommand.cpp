@@ -107,9 +107,7 @@ RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const R
                          std::to_string(evaluator.channelCount()) + " channels, but the model " +
                          options.modelPath + " was trained on " + std::to_string(model.points) +
                          " points x " + std::to_string(model.channels) + " channels");
-    if (span.last >= evaluator.frameCount())
-        throw InputError("frames " + span.text() + " are outside the evaluator's frames 0-" +
-                         std::to_string(evaluator.frameCount() - 1) + " (" + options.evaluatorSpec + ")");
+    checkFramesInside(span, evaluator, options.evaluatorSpec);
     FrameOutput output(options.outDir, options.format, offeredWriters(evaluator), model.points,
                        model.channels, options.dtype);
     ensureWritableFolder(options.outDir);
@@ -312,12 +310,11 @@ int runRun(const std::vector<std::string>& args) {
     } catch (const UsageError& e) {
         parser.fail(e.what());
     }
-    if (dtype == "float64")
-        o.dtype = NpyDtype::Float64;
-    else if (dtype == "float32")
-        o.dtype = NpyDtype::Float32;
-    else
-        parser.fail("--dtype: expected float64 or float32, got '" + dtype + "'");
+    try {
+        o.dtype = parseDtype("--dtype", dtype);
+    } catch (const UsageError& e) {
+        parser.fail(e.what());
+    }
     o.commandLine = "pmsc run";
     for (const auto& a : args) o.commandLine += " " + quoteForShell(a);
     o.cancel = &interruptFlag();
