@@ -22,19 +22,6 @@ namespace {
 // (positions are < 600 mm, where a float's spacing is 6e-5 mm).
 constexpr double kOffsetMm = 0.01;
 
-Ray makeRay(Vec3 o, Vec3 d, double tfar) {
-    Ray r;
-    r.org[0] = static_cast<float>(o.x);
-    r.org[1] = static_cast<float>(o.y);
-    r.org[2] = static_cast<float>(o.z);
-    r.dir[0] = static_cast<float>(d.x);
-    r.dir[1] = static_cast<float>(d.y);
-    r.dir[2] = static_cast<float>(d.z);
-    r.tnear = 0.0f;
-    r.tfar = static_cast<float>(tfar);
-    return r;
-}
-
 struct Candidate {
     Vec3 y;
     int quad;

@@ -49,6 +49,31 @@ void toEmbree(const Ray& r, RTCRay& e) {
 // Batches go through a thread-local buffer: no allocation per call after warm-up.
 constexpr size_t kChunk = 256;
 
+/// Fills a packet of 8 from rays[first, first + m), m <= 8; lanes past m repeat the last ray
+/// and are masked off in `valid`.
+void packRays8(std::span<const Ray> rays, size_t first, size_t m, RTCRay8& p, int* valid) {
+    for (size_t i = 0; i < 8; ++i) {
+        valid[i] = i < m ? -1 : 0;
+        const Ray& r = rays[first + std::min(i, m - 1)];
+        p.org_x[i] = r.org[0];
+        p.org_y[i] = r.org[1];
+        p.org_z[i] = r.org[2];
+        p.dir_x[i] = r.dir[0];
+        p.dir_y[i] = r.dir[1];
+        p.dir_z[i] = r.dir[2];
+        p.tnear[i] = r.tnear;
+        p.tfar[i] = r.tfar;
+        p.time[i] = 0;
+        p.mask[i] = 0xFFFFFFFFu;
+        p.id[i] = 0;
+        p.flags[i] = 0;
+    }
+}
+
+Hit toHit(float tfar, unsigned geomID, unsigned primID) {
+    return {tfar, geomID == RTC_INVALID_GEOMETRY_ID ? -1 : static_cast<int>(primID)};
+}
+
 }  // namespace
 
 RayTracer::RayTracer(const CornellScene& scene, TraceMode mode) : impl_(std::make_unique<Impl>()), mode_(mode) {
@@ -96,7 +121,7 @@ void RayTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) const 
             toEmbree(rays[i], rh.ray);
             rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
             rtcIntersect1(impl_->scene, &ctx, &rh);
-            hits[i] = {rh.ray.tfar, rh.hit.geomID == RTC_INVALID_GEOMETRY_ID ? -1 : static_cast<int>(rh.hit.primID)};
+            hits[i] = toHit(rh.ray.tfar, rh.hit.geomID, rh.hit.primID);
         }
     } else if (mode_ == TraceMode::Stream) {
         thread_local std::vector<RTCRayHit> buf(kChunk);
@@ -108,8 +133,7 @@ void RayTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) const 
             }
             rtcIntersect1M(impl_->scene, &ctx, buf.data(), static_cast<unsigned>(m), sizeof(RTCRayHit));
             for (size_t i = 0; i < m; ++i) {
-                const RTCRayHit& rh = buf[i];
-                hits[first + i] = {rh.ray.tfar, rh.hit.geomID == RTC_INVALID_GEOMETRY_ID ? -1 : static_cast<int>(rh.hit.primID)};
+                hits[first + i] = toHit(buf[i].ray.tfar, buf[i].hit.geomID, buf[i].hit.primID);
             }
         }
     } else {
@@ -117,26 +141,10 @@ void RayTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) const 
         alignas(32) int valid[8];
         for (size_t first = 0; first < n; first += 8) {
             const size_t m = std::min<size_t>(8, n - first);
-            for (size_t i = 0; i < 8; ++i) {
-                valid[i] = i < m ? -1 : 0;
-                const Ray& r = rays[first + std::min(i, m - 1)];
-                p.ray.org_x[i] = r.org[0];
-                p.ray.org_y[i] = r.org[1];
-                p.ray.org_z[i] = r.org[2];
-                p.ray.dir_x[i] = r.dir[0];
-                p.ray.dir_y[i] = r.dir[1];
-                p.ray.dir_z[i] = r.dir[2];
-                p.ray.tnear[i] = r.tnear;
-                p.ray.tfar[i] = r.tfar;
-                p.ray.time[i] = 0;
-                p.ray.mask[i] = 0xFFFFFFFFu;
-                p.ray.id[i] = 0;
-                p.ray.flags[i] = 0;
-                p.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
-            }
+            packRays8(rays, first, m, p.ray, valid);
+            for (size_t i = 0; i < 8; ++i) p.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
             rtcIntersect8(valid, impl_->scene, &ctx, &p);
-            for (size_t i = 0; i < m; ++i)
-                hits[first + i] = {p.ray.tfar[i], p.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID ? -1 : static_cast<int>(p.hit.primID[i])};
+            for (size_t i = 0; i < m; ++i) hits[first + i] = toHit(p.ray.tfar[i], p.hit.geomID[i], p.hit.primID[i]);
         }
     }
 }
@@ -167,22 +175,7 @@ void RayTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> bloc
         alignas(32) int valid[8];
         for (size_t first = 0; first < n; first += 8) {
             const size_t m = std::min<size_t>(8, n - first);
-            for (size_t i = 0; i < 8; ++i) {
-                valid[i] = i < m ? -1 : 0;
-                const Ray& r = rays[first + std::min(i, m - 1)];
-                p.org_x[i] = r.org[0];
-                p.org_y[i] = r.org[1];
-                p.org_z[i] = r.org[2];
-                p.dir_x[i] = r.dir[0];
-                p.dir_y[i] = r.dir[1];
-                p.dir_z[i] = r.dir[2];
-                p.tnear[i] = r.tnear;
-                p.tfar[i] = r.tfar;
-                p.time[i] = 0;
-                p.mask[i] = 0xFFFFFFFFu;
-                p.id[i] = 0;
-                p.flags[i] = 0;
-            }
+            packRays8(rays, first, m, p, valid);
             rtcOccluded8(valid, impl_->scene, &ctx, &p);
             for (size_t i = 0; i < m; ++i) blocked[first + i] = p.tfar[i] < 0 ? 1 : 0;
         }

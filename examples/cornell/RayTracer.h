@@ -17,6 +17,20 @@ struct Ray {
     float tfar = 1e30f;
 };
 
+/// A ray from o along d (single precision, tnear 0).
+inline Ray makeRay(Vec3 o, Vec3 d, double tfar) {
+    Ray r;
+    r.org[0] = static_cast<float>(o.x);
+    r.org[1] = static_cast<float>(o.y);
+    r.org[2] = static_cast<float>(o.z);
+    r.dir[0] = static_cast<float>(d.x);
+    r.dir[1] = static_cast<float>(d.y);
+    r.dir[2] = static_cast<float>(d.z);
+    r.tnear = 0.0f;
+    r.tfar = static_cast<float>(tfar);
+    return r;
+}
+
 /// The closest hit of a ray: the quad index into CornellScene::quads(), or -1 for a miss.
 struct Hit {
     float t;

@@ -33,15 +33,7 @@ std::vector<Image> renderWithCaches(const CornellWorld& world, const Camera& cam
                     const double sx = (x + (s % kSub + 0.5) / kSub) / size * 2.0 - 1.0;
                     const double sy = 1.0 - (y + (s / kSub + 0.5) / kSub) / size * 2.0;
                     const Vec3 d = normalize(forward + right * (sx * tanHalf) + up * (sy * tanHalf));
-                    Ray& r = rays[static_cast<size_t>(x * kSub * kSub + s)];
-                    r.org[0] = static_cast<float>(camera.eye.x);
-                    r.org[1] = static_cast<float>(camera.eye.y);
-                    r.org[2] = static_cast<float>(camera.eye.z);
-                    r.dir[0] = static_cast<float>(d.x);
-                    r.dir[1] = static_cast<float>(d.y);
-                    r.dir[2] = static_cast<float>(d.z);
-                    r.tnear = 0;
-                    r.tfar = 1e30f;
+                    rays[static_cast<size_t>(x * kSub * kSub + s)] = makeRay(camera.eye, d, 1e30);
                 }
             world.tracer->intersect(rays, hits);
             p.clear();

@@ -53,6 +53,25 @@ TEST(CornellEvaluator, TheRayTracerLeavesTheProcesssParallelismAlone) {
     EXPECT_GE(before, static_cast<std::size_t>(tbb::info::default_concurrency()));
 }
 
+// Single rays, streams (the default) and packets of 8 trace the same rays: the irradiance agrees
+// to float round-off whichever way Embree is called.
+TEST(CornellEvaluator, SingleRaysStreamsAndPacketsGiveTheSameIrradiance) {
+    std::vector<std::vector<double>> results;
+    for (const TraceMode mode : {TraceMode::Stream, TraceMode::Single, TraceMode::Packet8}) {
+        const CornellEvaluator ev(CornellWorld::create(1500, mode), LightRig{}.trainingLights(), 16);
+        results.emplace_back(static_cast<std::size_t>(3 * ev.pointCount()));
+        ev.evaluateAll(5, results.back().data());
+    }
+    double scale = 0;
+    for (double v : results[0]) scale = std::max(scale, std::abs(v));
+    ASSERT_GT(scale, 0);
+    for (std::size_t m = 1; m < results.size(); ++m) {
+        ASSERT_EQ(results[m].size(), results[0].size());
+        for (std::size_t i = 0; i < results[0].size(); ++i)
+            ASSERT_NEAR(results[m][i], results[0][i], 1e-6 * scale) << "mode " << m << ", value " << i;
+    }
+}
+
 TEST(CornellEvaluator, ThreadCountDoesNotChangeAnyBit) {
     const auto world = smallWorld();
     const CornellEvaluator ev(world, LightRig{}.trainingLights(), 16);
