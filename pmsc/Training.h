@@ -2,6 +2,7 @@
 #pragma once
 
 #include "pmsc/Calibration.h"
+#include "pmsc/Errors.h"  // Cancelled
 #include "pmsc/FrameSet.h"
 #include "pmsc/Model.h"
 
@@ -16,11 +17,6 @@ namespace pmsc {
 /// Progress hook for long operations: (stage, done, total). Return false to
 /// cancel (training then throws pmsc::Cancelled).
 using ProgressFn = std::function<bool(std::string_view stage, double done, double total)>;
-
-/// Thrown when a progress hook asks to stop.
-struct Cancelled : std::runtime_error {
-    using std::runtime_error::runtime_error;
-};
 
 /// Everything `pmsc train` can set. Zero means "not set" where noted.
 struct TrainingOptions {
