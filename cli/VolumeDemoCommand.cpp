@@ -16,7 +16,7 @@ int runDemoVolume(const std::vector<std::string>& args) {
     std::string out, mesh, density, grid;
     bool quick = false, quiet = false, noVdbRender = false;
     volume::VolumeDemoOptions defaults;
-    long voxels = -1, samples = -1, threads = -1;
+    long voxels = -1, samples = -1, threads = -1, basis = -1, keys = -1, azimuths = -1;
     ArgParser parser("demo volume", "--out DIR [--mesh FILE | --density FILE.vdb [--grid NAME]] [options]",
                      "Issue 11: smoke made from a mesh with OpenVDB (meshToLevelSet, fog volume, noise), lit\n"
                      "by a spherical light moving around and over it with a changing colour temperature.\n"
@@ -31,8 +31,14 @@ int runDemoVolume(const std::vector<std::string>& args) {
     parser.option("--grid", "NAME", "its float grid (default 'density', else the first float grid)", grid);
     parser.option("--voxels", "N", "active voxels of the smoke made from the mesh (default 260000; --quick 12000)",
                   [&](const std::string& v) { voxels = parseIndex("--voxels", v, 1000, 8000000); });
-    parser.option("--samples", "S", "shadow rays per voxel to the light (default 12; --quick 6)",
+    parser.option("--samples", "S", "shadow rays per voxel to the light (default 6; --quick 4)",
                   [&](const std::string& v) { samples = parseIndex("--samples", v, 1, 4096); });
+    parser.option("--basis", "M", "basis vectors (default " + std::to_string(defaults.basis) + ")",
+                  [&](const std::string& v) { basis = parseIndex("--basis", v, 1, 512); });
+    parser.option("--keys", "K", "key voxels (default " + std::to_string(defaults.keys) + ")",
+                  [&](const std::string& v) { keys = parseIndex("--keys", v, 1, 100000); });
+    parser.option("--azimuths", "A", "training light azimuths per elevation (default " + std::to_string(defaults.rig.azimuths) + ")",
+                  [&](const std::string& v) { azimuths = parseIndex("--azimuths", v, 2, 360); });
     parser.option("--threads", "T", "worker threads (default: every core)",
                   [&](const std::string& v) { threads = parseIndex("--threads", v, 0, 1024); });
     parser.flag("--no-vdb-render", "skip OpenVDB's vdb_render view of the density", noVdbRender);
@@ -49,6 +55,10 @@ int runDemoVolume(const std::vector<std::string>& args) {
     options.grid = grid;
     if (voxels > 0) options.fog.targetVoxels = static_cast<std::size_t>(voxels);
     if (samples > 0) options.medium.lightSamples = static_cast<int>(samples);
+    if (basis > 0) options.basis = static_cast<int>(basis);
+    if (keys > 0) options.keys = static_cast<int>(keys);
+    if (azimuths > 0) options.rig.azimuths = static_cast<int>(azimuths);
+    if (options.gridKeys > options.keys) options.gridKeys = options.keys;
     if (threads >= 0) options.threads = static_cast<int>(threads);
     if (noVdbRender) options.vdbRender = false;
 

@@ -79,12 +79,4 @@ Image readPfm(const std::string& path) {
     return img;
 }
 
-float exposureFor(const Image& img) {
-    double sum = 0;
-    for (std::size_t i = 0; i < img.rgb.size(); i += 3)
-        sum += 0.2126 * img.rgb[i] + 0.7152 * img.rgb[i + 1] + 0.0722 * img.rgb[i + 2];
-    const double mean = sum / std::max<std::size_t>(1, img.rgb.size() / 3);
-    return mean > 0 ? static_cast<float>(0.6 / mean) : 1.0f;
-}
-
 }  // namespace pmsc::cornell

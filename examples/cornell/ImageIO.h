@@ -22,10 +22,6 @@ Image sideBySide(const std::vector<const Image*>& panels);
 /// |a - b| * scale per channel. @throws std::invalid_argument for different sizes.
 Image absDifference(const Image& a, const Image& b, float scale);
 
-/// The exposure that maps the image's mean luminance to 0.6 (before writePng's tone curve), 1 for
-/// a black image: the demos' automatic exposure.
-float exposureFor(const Image& img);
-
 /// Writes 8-bit sRGB PNG: value * exposure, Reinhard x/(1+x) on each channel, sRGB curve.
 /// Atomic (temporary file, then rename). @throws pmsc::IoError naming the path.
 void writePng(const std::string& path, const Image& image, float exposure);

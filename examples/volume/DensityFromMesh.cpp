@@ -40,10 +40,10 @@ double valueNoise(double x, double y, double z, std::uint32_t seed) {
     return r;
 }
 
-/// Four octaves of value noise (lacunarity 2, gain 0.5), normalized to about [-1, 1].
+/// Three octaves of value noise (lacunarity 2, gain 0.5), normalized to about [-1, 1].
 double fractalNoise(double x, double y, double z, std::uint32_t seed) {
     double sum = 0, amp = 1, norm = 0;
-    for (int o = 0; o < 4; ++o) {
+    for (int o = 0; o < 3; ++o) {
         sum += amp * valueNoise(x, y, z, seed + 977u * static_cast<std::uint32_t>(o));
         norm += amp;
         amp *= 0.5;

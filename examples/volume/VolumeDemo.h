@@ -43,7 +43,7 @@ struct VolumeDemoOptions {
     /// Progress hook: (stage, done, total); return false to cancel (throws pmsc::Cancelled).
     std::function<bool(std::string_view, double, double)> progress;
 
-    /// `--quick`: 12,000 voxels, 8 x 3 training lights, 6 light samples, 128 px, no vdb_render.
+    /// `--quick`: 12,000 voxels, 8 x 3 training lights, 4 light samples, 96 px, no vdb_render.
     static VolumeDemoOptions quickOptions();
 };
 

@@ -57,7 +57,11 @@ std::vector<VolumeLight> VolumeRig::training(const VolumeWorld& world) const {
     std::vector<VolumeLight> out;
     for (std::size_t e = 0; e < elevations.size(); ++e)
         for (int a = 0; a < azimuths; ++a)
-            out.push_back(light(world, 360.0 * a / azimuths, elevations[e], (a + e) % 2 ? kelvinHigh : kelvinLow));
+            if (colourPairs) {
+                for (double k : {kelvinLow, kelvinHigh}) out.push_back(light(world, 360.0 * a / azimuths, elevations[e], k));
+            } else {
+                out.push_back(light(world, 360.0 * a / azimuths, elevations[e], (a + e) % 2 ? kelvinHigh : kelvinLow));
+            }
     return out;
 }
 
@@ -87,6 +91,16 @@ std::vector<VolumeLight> VolumeRig::path(const VolumeWorld& world, int frames) c
         out.push_back(light(world, a, e, k));
     }
     return out;
+}
+
+void recolour(const VolumeLight& from, const VolumeLight& to, double* values, Index points) {
+    if (from.position.x != to.position.x || from.position.y != to.position.y || from.position.z != to.position.z ||
+        from.radius != to.radius)
+        throw std::invalid_argument("recolour: the lights differ in more than their colour");
+    double s[3];
+    for (int c = 0; c < 3; ++c) s[c] = to.intensity[static_cast<std::size_t>(c)] / from.intensity[static_cast<std::size_t>(c)];
+    for (Index i = 0; i < points; ++i)
+        for (int c = 0; c < 3; ++c) values[3 * i + c] *= s[c];
 }
 
 VolumeEvaluator::VolumeEvaluator(std::shared_ptr<const VolumeWorld> world, std::vector<VolumeLight> lights, std::string name)

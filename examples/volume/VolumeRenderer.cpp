@@ -15,8 +15,8 @@ std::vector<Camera> volumeCameras(const VolumeWorld& w, double t) {
         const double a = azDeg * M_PI / 180, e = elDeg * M_PI / 180;
         return w.centre + Vec3{std::cos(e) * std::cos(a), std::sin(e), std::cos(e) * std::sin(a)} * (dist * r);
     };
-    Camera front{"front", orbit(80 + 40 * t, 8, 2.6), w.centre, {0, 1, 0}, 45};
-    Camera above{"above", orbit(-40 + 30 * t, 55, 2.6), w.centre, {0, 1, 0}, 45};
+    Camera front{"front", orbit(-100 + 40 * t, 8, 1.9), w.centre, {0, 1, 0}, 45};
+    Camera above{"above", orbit(-40 + 30 * t, 55, 1.9), w.centre, {0, 1, 0}, 45};
     const double look = (200 + 70 * t) * M_PI / 180;
     const Vec3 eye = w.centre + Vec3{0.08 * r, -0.05 * r, 0.05 * r};
     Camera inside{"inside", eye, eye + Vec3{std::cos(look), 0.1, std::sin(look)}, {0, 1, 0}, 75};

@@ -12,7 +12,7 @@ using cornell::Camera;
 using cornell::Image;
 
 /// The demo's three moving cameras at animation time t in [0, 1]: "front" (orbiting slowly at eye
-/// height, 2.6 radii out), "above" (looking down at 55 degrees) and "inside" (in the medium, near
+/// height, 1.9 radii out), "above" (looking down at 55 degrees) and "inside" (in the medium, near
 /// its centre, turning as it looks across the smoke).
 std::vector<Camera> volumeCameras(const VolumeWorld& world, double t);
 

@@ -46,6 +46,7 @@ TEST(VolumeDemoQuick, WritesAReportWithinBoundsImagesAndCachesThatVdbPrintLists)
         ASSERT_TRUE(r.contains(key)) << key;
     EXPECT_NEAR(r["points"].get<double>(), 12000, 12000 * 0.06);
     EXPECT_EQ(r["train_frames"].get<int>(), 24);
+    EXPECT_EQ(r["train_full_calculations"].get<int>(), 24);
     EXPECT_EQ(r["test_frames"].get<int>(), 4 + 16);
     EXPECT_GT(r["speedup"].get<double>(), 2);  // 12,000 voxels for 120 keys caps it at 100x
     EXPECT_LT(r["rms_rel_error"].get<double>(), 0.10);
