@@ -1,6 +1,7 @@
 // `pmsc demo volume --quick` end to end (the real program, its report, OpenVDB's own vdb_print on
 // a cache file) and the volume evaluator's bad inputs through the command line: one line, exit 2.
 #include "VdbFixtures.h"
+#include "examples/volume/DensityVolume.h"
 
 #include <nlohmann/json.hpp>
 
@@ -72,6 +73,28 @@ TEST(VolumeDemoQuick, WritesAReportWithinBoundsImagesAndCachesThatVdbPrintLists)
         EXPECT_NE(listing.find("light_kelvin"), std::string::npos) << listing;
     }
 #endif
+    std::filesystem::remove_all(dir);
+}
+
+TEST(VolumeEvaluatorCli, ExportTrainAndRunWriteCacheFilesWithTheDensityTopology) {
+    const std::string dir = pmsc::volume::test::tempDir("run");
+    pmsc::volume::test::writeDensityBox(dir + "/box.vdb", "density", 0.3, 0.05, 0.8f);  // 13^3 voxels
+    const std::string bin = PMSC_BINARY;
+    int status = -1;
+    std::string out = run(bin + " export-frames volume:" + dir + "/box.vdb:lights=training --quiet --out " + dir + "/t.npy", status);
+    ASSERT_EQ(status, 0) << out;
+    out = run(bin + " train --frames " + dir + "/t.npy --out " + dir + "/m.pmsc --basis 8 --max-keys 40", status);
+    ASSERT_EQ(status, 0) << out;
+    out = run(bin + " run --model " + dir + "/m.pmsc --evaluator volume:" + dir + "/box.vdb --frames 64-66 --out " + dir +
+                  "/frames --format vdb --quiet",
+              status);
+    ASSERT_EQ(status, 0) << out;
+    for (int f = 64; f <= 66; ++f) {
+        const auto cache = pmsc::volume::ScatterCache::read(dir + "/frames/frame.0000" + std::to_string(f) + ".vdb");
+        EXPECT_EQ(cache.activeVoxelCount(), 13 * 13 * 13);
+        EXPECT_EQ(cache.info().frame, f);
+        EXPECT_EQ(cache.info().state, "soft-cached");
+    }
     std::filesystem::remove_all(dir);
 }
 
