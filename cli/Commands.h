@@ -19,5 +19,6 @@ int runRun(const std::vector<std::string>& args);           // cli/RunCommand.cp
 int runExportFrames(const std::vector<std::string>& args);  // cli/ExportFramesCommand.cpp
 int runDemoCornell(const std::vector<std::string>& args);   // cli/CornellDemoCommand.cpp (examples/cornell)
 int runDemoFace(const std::vector<std::string>& args);      // cli/FaceDemoCommand.cpp (examples/face)
+int runDemoVolume(const std::vector<std::string>& args);    // cli/VolumeDemoCommand.cpp (examples/volume)
 
 }  // namespace pmsc::cli
