@@ -251,7 +251,9 @@ KeySelection selectKeysTeleconnection(RowBlocks& q, Communicator& comm, const Ei
             // it cancels to rounding). Decision: form R = Q - B C block by block and take the Gram
             // of R itself (one pass), then U_R = R V S^-1 (another). Replaces the randomized SVD
             // of the explicit residual, which needs 2q + 2 passes and a distributed tall QR out of
-            // core. A residual below 1e-12 sigma_1(Q) is numerical zero: nothing left to cue.
+            // core. As that SVD did, it keeps every vector above 1e-7 of the residual's own largest
+            // (so rounding-level residuals still cue keys until the budget is met); only an
+            // exactly zero residual ends the selection.
             Eigen::MatrixXd gr = Eigen::MatrixXd::Zero(q.frames(), q.frames());
             Eigen::MatrixXd r;
             for (Index bl = 0; bl < q.blockCount(); ++bl) {
@@ -261,7 +263,7 @@ KeySelection selectKeysTeleconnection(RowBlocks& q, Communicator& comm, const Ei
             }
             comm.sum(gr.data(), static_cast<std::size_t>(gr.size()));
             gr.triangularView<Eigen::StrictlyUpper>() = gr.transpose();
-            next = svdFromGram(Eigen::MatrixXd(0, q.frames()), gr, options.block, 0, 1e-12 * sigmaQ);
+            next = svdFromGram(Eigen::MatrixXd(0, q.frames()), gr, options.block, 0, 0.0);
             blockU.resize(q.ownedRows(), next.sigma.size());
             if (next.sigma.size() > 0) {
                 vs = next.v * next.sigma.cwiseInverse().asDiagonal();

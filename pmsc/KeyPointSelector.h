@@ -144,7 +144,8 @@ KeySelection selectKeysTeleconnection(const Eigen::Ref<const Eigen::MatrixXd>& q
 /// core every product is a read of the data and the randomized route needs 2q + 2 of them per
 /// round plus a distributed tall QR. Decision: when the frame-space subtraction cancels
 /// (sigma_R <= 1e-6 sigma_1(Q)), the Gram of the explicitly formed residual (block by block) is
-/// used instead; a residual below 1e-12 sigma_1(Q) is taken as zero and ends the selection.
+/// used instead (vectors down to 1e-7 of its own largest singular value, as the randomized SVD it
+/// replaces kept them); only an exactly zero residual ends the selection.
 KeySelection selectKeysTeleconnection(RowBlocks& q, Communicator& comm, const Eigen::MatrixXd& basis,
                                       const Eigen::Ref<const Eigen::MatrixXd>& firstBlock,
                                       const Eigen::VectorXd& firstSigma, const TeleconnectionOptions& options,
