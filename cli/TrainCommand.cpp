@@ -2,6 +2,7 @@
 #include "cli/Args.h"
 #include "cli/Commands.h"
 #include "cli/ExitCodes.h"
+#include "cli/Format.h"
 #include "cli/Interrupt.h"
 #include "cli/Progress.h"
 #include "cli/TrainSummary.h"
@@ -19,6 +20,7 @@
 #include <cstdio>
 #include <fstream>
 #include <iostream>
+#include <ctime>
 #include <memory>
 
 #include <sys/resource.h>
@@ -249,6 +251,13 @@ int runTrain(const std::vector<std::string>& args) {
             const FrameSet frames = readShots(shots);
             model = train(frames, options, &report);
         }
+        // Each rank's CPU seconds, to rank 0: the busiest rank is the critical path when every rank
+        // has a core of its own (wall time says that only on an idle machine).
+        timespec cpu{};
+        clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &cpu);
+        const double mine = static_cast<double>(cpu.tv_sec) + 1e-9 * static_cast<double>(cpu.tv_nsec);
+        std::vector<double> cpuPerRank;
+        comm.gather(&mine, 1, cpuPerRank, 0);
         if (!root) return kExitOk;
         writeModel(outPath, model);
         progress.finish();
@@ -258,6 +267,9 @@ int runTrain(const std::vector<std::string>& args) {
         sizes.points = n;
         sizes.channels = c;
         printTrainSummary(std::cout, outPath, sizes, model, report, seconds);
+        std::cout << "  cpu         ";
+        for (std::size_t r = 0; r < cpuPerRank.size(); ++r) std::cout << (r ? ", " : "") << fmt("%.2f", cpuPerRank[r]);
+        std::cout << " s of CPU" << (cpuPerRank.size() > 1 ? " per rank" : "") << "\n";
         if (shots.size() > 1) std::cout << "  shots       " << shots.size() << " --frames files, " << f << " frames in all\n";
         if (stream) {
             std::cout << "  memory      streamed from disk in blocks of " << bp << " points; bound "
