@@ -264,7 +264,8 @@ TEST(AddressLimit, ATrainingSetTwiceTheLimitTrainsToTheInMemoryModel) {
 
     auto limited = options, free = options;
     limited.insert(limited.begin(), {"train", "--frames", path, "--out", dir.file("limited.pmsc")});
-    free.insert(free.begin(), {"train", "--frames", path, "--out", dir.file("free.pmsc")});
+    // In memory whatever the machine's size (without a limit pmsc would stream above half of it).
+    free.insert(free.begin(), {"train", "--frames", path, "--out", dir.file("free.pmsc"), "--memory-limit", "64G"});
     const RunResult r = runPmsc(dir, limited, "prlimit --as=" + std::to_string(limit));
     ASSERT_EQ(r.exitCode, 0) << r.err;
     EXPECT_NE(r.out.find("streamed from disk"), std::string::npos) << r.out;
