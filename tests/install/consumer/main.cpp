@@ -1,6 +1,9 @@
 // Embeds pmsc: trains on frames it makes, saves and reloads the model, and runs the soft cache on
-// a frame inside and a frame outside the training subspace. Prints "pmsc consumer: ok".
+// a frame inside and a frame outside the training subspace, and replays the frames through
+// pmsc::evaluators. Prints "pmsc consumer: ok".
+#include <evaluators/EvaluatorRegistry.h>
 #include <pmsc/ModelIO.h>
+#include <pmsc/NpyIO.h>
 #include <pmsc/PointMultiplier.h>
 #include <pmsc/SoftCache.h>
 #include <pmsc/Training.h>
@@ -56,6 +59,18 @@ int main(int argc, char** argv) {
         std::printf("pmsc consumer: FAILED\n");
         return 1;
     }
+    // pmsc::evaluators: the training frames saved as .npy come back through the registry's
+    // "replay" evaluator, value for value.
+    const std::string npy = std::string(argv[1]) + ".npy";
+    pmsc::writeFrames(npy, set, pmsc::NpyDtype::Float64);
+    const auto replay = pmsc::evaluators::EvaluatorRegistry::withBuiltins().make("replay:" + npy);
+    std::vector<double> again(static_cast<std::size_t>(points * 3));
+    replay->evaluateAll(7, again.data());
+    for (pmsc::Index i = 0; i < points * 3; ++i)
+        if (again[i] != set.frame(7)[i] || replay->frameCount() != frames) {
+            std::printf("pmsc consumer: FAILED (replay evaluator)\n");
+            return 1;
+        }
     std::printf("pmsc consumer: ok\n");
     return 0;
 }
