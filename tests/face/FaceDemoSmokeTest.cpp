@@ -78,19 +78,14 @@ TEST(FaceDemoSmoke, QuickRunWritesACompleteReport) {
     EXPECT_GT(r.at("test_frames").get<long>(), 0);
     EXPECT_GT(r.at("full_seconds_per_frame").get<double>(), 0);
     EXPECT_GT(r.at("pmsc_seconds_per_frame").get<double>(), 0);
-    // No speed goal here (speed is checked by bench/FaceRigBench.cpp, never by a timed test):
-    // only that the ratio is the ratio of the two timings the report gives.
-    EXPECT_NEAR(r.at("speedup").get<double>(),
-                r.at("full_seconds_per_frame").get<double>() / r.at("pmsc_seconds_per_frame").get<double>(),
-                1e-9);
+    // No speed goal here: speed is checked by bench/FaceRigBench.cpp, never by a timed test.
+    // The three states partition the test frames (each rate alone in [0, 1] could not fail).
     const double hit = r.at("hit_rate").get<double>(), blend = r.at("blend_rate").get<double>(),
                  miss = r.at("miss_rate").get<double>();
-    for (double rate : {hit, blend, miss, r.at("novel_nonhit_rate").get<double>()}) {
-        EXPECT_GE(rate, 0.0);
-        EXPECT_LE(rate, 1.0);
-    }
     EXPECT_NEAR(hit + blend + miss, 1.0, 1e-12);
-    EXPECT_GE(r.at("max_error_pct_bbox_p995").get<double>(), 0.0);
+    // Point multiplication alone is not exact on unseen poses, nor far off on the trained kind.
+    EXPECT_GT(r.at("max_error_pct_bbox_p995").get<double>(), 0.0);
+    EXPECT_LT(r.at("max_error_pct_bbox_p995").get<double>(), 10.0);
     // The soft cache's promise, whatever the model's quality: every frame under the tolerance.
     EXPECT_LT(r.at("soft_max_error_pct_bbox_max").get<double>(), r.at("tolerance_pct_bbox").get<double>());
     EXPECT_GE(r.at("novel_nonhit_rate").get<double>(), 0.9);

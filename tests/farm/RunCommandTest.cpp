@@ -4,6 +4,7 @@
 // process on a real motion-capture clip from assimp-testmodels, killed with SIGKILL mid-run and
 // resumed; every bad input checked for its exit code, its one stderr line and the absence of any
 // partial file. Figures are printed (and recorded as test properties) for the closing note.
+#include "tests/common/MissingData.h"
 #include "cli/EvaluatorRegistry.h"
 #include "cli/RunCommand.h"
 #include "pmsc/AtomicFile.h"
@@ -159,8 +160,8 @@ protected:
     }
     void SetUp() override {
         if (!fs::exists(kClip))
-            GTEST_SKIP() << "assimp-testmodels not installed (" << kClip
-                         << " not found); install the Debian package";
+            PMSC_MISSING_DATA("assimp-testmodels not installed (" << kClip
+                              << " not found); install the Debian package");
         ASSERT_TRUE(fs::exists(model)) << "the suite's model was not made";
     }
 

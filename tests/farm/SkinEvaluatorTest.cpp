@@ -3,6 +3,7 @@
 // The skin:ASSET evaluator: posing checked against hand-computed linear blend skinning and morph
 // targets on small glTF files written here, then subset == full bit for bit and thread safety on
 // real animated characters from Debian's assimp-testmodels.
+#include "tests/common/MissingData.h"
 #include "evaluators/ObjFrameWriter.h"
 #include "evaluators/SkinEvaluator.h"
 #include "pmsc/Errors.h"
@@ -44,9 +45,8 @@ std::string testModel(const std::string& relative) {
 #define REQUIRE_MODEL(var, rel)                                 \
     const std::string var = testModel(rel);                     \
     if (var.empty())                                            \
-        GTEST_SKIP() << "assimp-testmodels not installed (" rel \
-                        " not found); "                         \
-                        "install the Debian package assimp-testmodels";
+        PMSC_MISSING_DATA("assimp-testmodels not installed (" rel \
+                          " not found); install the Debian package assimp-testmodels")
 
 // A fresh folder per test, removed when the test ends.
 struct ScratchDir {

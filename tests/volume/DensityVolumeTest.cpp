@@ -1,5 +1,6 @@
 // The density grid: bad inputs (one line each), the ray march against an analytic integral, the
 // smoke made from a mesh, and the cache grid's topology and file round trip.
+#include "tests/common/MissingData.h"
 #include "VdbFixtures.h"
 #include "examples/volume/DensityVolume.h"
 #include "pmsc/Errors.h"
@@ -72,7 +73,7 @@ TEST(DensityVolume, MarchIntegratesAConstantBoxExactlyAndSkipsEmptySpace) {
 
 TEST(DensityVolume, SmokeFromTheMeshHasTheWantedVoxelsAndVaryingDensity) {
     const std::string mesh = test::testMesh();
-    if (mesh.empty()) GTEST_SKIP() << "assimp-testmodels not installed";
+    if (mesh.empty()) { PMSC_MISSING_DATA("assimp-testmodels not installed"); }
     FogOptions fog;
     fog.targetVoxels = 8000;
     const DensityVolume v = DensityVolume::fromMesh(mesh, fog);

@@ -1,5 +1,6 @@
 // The full calculation per voxel: physics against closed forms, the march's convergence, the
 // determinism the engine relies on, the colour control, the light rig and the spec's errors.
+#include "tests/common/MissingData.h"
 #include "VdbFixtures.h"
 #include "examples/volume/VolumeEvaluator.h"
 #include "pmsc/Errors.h"
@@ -78,7 +79,7 @@ protected:
     }
     static void TearDownTestSuite() { world_.reset(); }
     void SetUp() override {
-        if (!world_) GTEST_SKIP() << "assimp-testmodels not installed";
+        if (!world_) { PMSC_MISSING_DATA("assimp-testmodels not installed"); }
     }
     static std::shared_ptr<const VolumeWorld> world_;
 };
