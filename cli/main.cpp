@@ -32,6 +32,7 @@ struct Command {
 // clang-format off
 const Command kCommands[] = {
     {"train", "train a model (basis, key points, thresholds) from frames in a .npy file", runTrain},
+    {"learn", "update a model with new frames (e.g. kept misses) without its training frames", runLearn},
     {"replay", "replay recorded frames through a model's soft cache and report its errors", runReplay},
     {"inspect", "show a model file: sizes, key points, basis energy, thresholds", runInspect},
     {"demo", "the main demo (the Cornell box); with options, the generated shot of 'demo synthetic'", runDemo},

@@ -2,9 +2,11 @@
 #pragma once
 
 #include "pmsc/FrameSet.h"
+#include "pmsc/LearningState.h"
 
 #include <Eigen/Core>
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -39,6 +41,12 @@ struct Model {
     double epsMax = 0;     ///< soft cache: at or above, a miss
     double tolerance = 0;  ///< calibration target (largest point error of a hit); 0 = not calibrated
     double trainMaxPointResidual = 0;  ///< largest point error of PM on the training set
+
+    // --- optional parts (issue 10), written only by `pmsc train --learn-rank` and `pmsc learn`
+    /// The incremental-SVD state beyond the basis and the key-selection settings (pmsc learn).
+    std::optional<LearningState> learning;
+    /// The held-out scores eps were calibrated from, and the rule.
+    std::optional<CalibrationRecord> calibrationRecord;
 
     Index basisSize() const { return basis.cols(); }
     Index keyCount() const { return static_cast<Index>(keyPoints.size()); }

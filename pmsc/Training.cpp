@@ -59,6 +59,14 @@ void validateOptions(const TrainingOptions& o, Index points, Index frames) {
         badOption("calibration slices must be in [2, " + std::to_string(frames) + "], got " +
                   std::to_string(o.calibrationSlices));
     }
+    if (o.calibrationRule != CalibrationRule::MaxRatio && o.calibrationRule != CalibrationRule::Conformal) {
+        badOption("unknown calibration rule " + std::to_string(static_cast<int>(o.calibrationRule)));
+    }
+    if (o.calibrationRule == CalibrationRule::Conformal &&
+        !(o.calibrationCoverage > 0 && o.calibrationCoverage < 1)) {
+        badOption("calibration coverage must be in (0, 1), got " + num(o.calibrationCoverage));
+    }
+    if (o.learnRank < 0) badOption("learn rank must be >= 0 (0 = off), got " + std::to_string(o.learnRank));
     if (o.powerIterations < 0) {
         badOption("power iterations must be >= 0, got " + std::to_string(o.powerIterations));
     }
@@ -139,7 +147,8 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
                                   std::to_string(cap) + " (min of max basis, frames, N*C)");
     }
     // The first key-selection block needs the top `block` vectors of Q even when M is smaller.
-    const Index svdRank = std::min(std::max(wanted, options.block), std::min(f, q.rows()));
+    const Index svdRank =
+        std::min(std::max({wanted, options.block, options.learnRank}), std::min(f, q.rows()));
     // U = Q V S^-1 costs a full product per column on the Gram route: form only what the M rule
     // needs now (the max-error rule scans all of U) and the rest once M is known.
     const bool needAllU = options.basis <= 0 && options.energy <= 0 && options.basisMaxError > 0;
@@ -267,7 +276,7 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
     if (options.tolerance > 0) {
         report.calibration =
             calibrate(q, channels, keys, m, options.tolerance, options.calibrationSlices, svdOptions,
-                      svd.gramRoute ? &svd.gram : nullptr);
+                      svd.gramRoute ? &svd.gram : nullptr, options.calibrationRule, options.calibrationCoverage);
         model.tolerance = options.tolerance;
     } else {
         report.calibration = thresholdsFromTraining(q, model.basis, channels, keys, model.projector);
@@ -276,6 +285,27 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
     model.epsMin = report.calibration.epsMin;
     model.epsMax = report.calibration.epsMax;
     progress("calibration", 1, 1);
+
+    if (options.learnRank > 0) {
+        // The learning state: the next left singular vectors after the basis, up to rank r.
+        LearningState learning;
+        learning.maxRank = std::max(options.learnRank, m);
+        if (options.learnRank < m) {
+            report.warnings.push_back("learn rank " + std::to_string(options.learnRank) + " raised to M = " +
+                                      std::to_string(m));
+        }
+        const Index stored = std::min<Index>(learning.maxRank, svd.sigma.size());
+        formLeftVectors(q, svd, stored);
+        learning.extraBasis = svd.u.middleCols(m, stored - m);
+        learning.extraSigma = svd.sigma.segment(m, stored - m);
+        learning.maxKeys = options.maxKeys;
+        learning.block = options.block;
+        learning.maxError = options.maxError;
+        learning.fiducials = options.fiducials;
+        learning.gridPoints = options.gridPoints;
+        model.learning = std::move(learning);
+        if (options.tolerance > 0) model.calibrationRecord = CalibrationRecord::from(report.calibration);
+    }
 
     model.validate();
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
