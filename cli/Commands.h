@@ -19,6 +19,7 @@ int runLearn(const std::vector<std::string>& args);         // cli/LearnCommand.
 int runRun(const std::vector<std::string>& args);           // cli/RunCommand.cpp (render farm)
 int runExportFrames(const std::vector<std::string>& args);  // cli/ExportFramesCommand.cpp
 int runDemoCornell(const std::vector<std::string>& args);   // cli/CornellDemoCommand.cpp (examples/cornell)
+int runDemoLearn(const std::vector<std::string>& args);     // cli/LearnDemoCommand.cpp (examples/face)
 int runDemoFace(const std::vector<std::string>& args);      // cli/FaceDemoCommand.cpp (examples/face)
 
 }  // namespace pmsc::cli

@@ -75,7 +75,7 @@ int runLearn(const std::vector<std::string>& args) {
     parser.option("--rank", "R", "rank the incremental state keeps (default: the model's)",
                   [&](const std::string& v) { options.maxRank = parseIndex("--rank", v, 1); });
     parser.option("--calibration", "RULE", "max or conformal (default: the rule the model was calibrated by)", rule);
-    parser.option("--coverage", "C", "coverage of the conformal rule, in (0, 1) (default: the model's, else 0.95)",
+    parser.option("--coverage", "C", "coverage of the conformal rule, in (0, 1) (default: the model's, else 0.9)",
                   [&](const std::string& v) {
                       const double c = parseDouble("--coverage", v, 0.0, 1.0);
                       if (!(c > 0 && c < 1)) throw UsageError("--coverage: must be in (0, 1), got " + v);

@@ -39,6 +39,7 @@ const Command kCommands[] = {
     {"demo synthetic", "train and replay on a generated shot, and print what the soft cache did", runDemoSynthetic},
     {"demo cornell", "section 8: Cornell box indirect light, OpenVDB lighting cache, moving cameras", runDemoCornell},
     {"demo face", "section 7: a nonlinear face rig on the ICT face, 170 key points, novel-control detection", runDemoFace},
+    {"demo learn", "section 5: the nightly loop on the ICT face, misses kept and learned, day 1 vs day 2", runDemoLearn},
     {"run", "render-farm task: a frame range through the soft cache, one resumable file per frame", runRun},
     {"export-frames", "write an evaluator's frames (e.g. an animated asset's poses) as training .npy", runExportFrames},
 };

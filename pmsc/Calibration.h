@@ -76,7 +76,7 @@ struct CalibrationStats {
 CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index channels,
                            const std::vector<Index>& keys, Index basisSize, double tolerance,
                            Index slices, const SvdOptions& svd = {}, const Eigen::MatrixXd* gram = nullptr,
-                           CalibrationRule rule = CalibrationRule::MaxRatio, double coverage = 0.95);
+                           CalibrationRule rule = CalibrationRule::MaxRatio, double coverage = 0.9);
 
 /// Sets s.ratio, s.epsMin, s.epsMax (and s.rule, s.coverage, s.tolerance, s.maxRatio,
 /// s.usableFrames, s.blindFrames, notes) from the held-out scores s.keyRms / s.maxPointError:

@@ -211,7 +211,7 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
     const CalibrationRule rule = options.rule.value_or(
         model.calibrationRecord ? model.calibrationRecord->rule : CalibrationRule::MaxRatio);
     const double coverage = options.coverage.value_or(
-        model.calibrationRecord && model.calibrationRecord->coverage > 0 ? model.calibrationRecord->coverage : 0.95);
+        model.calibrationRecord && model.calibrationRecord->coverage > 0 ? model.calibrationRecord->coverage : 0.9);
     CalibrationRecord record;
     if (model.calibrationRecord) record = *model.calibrationRecord;
     record.rule = rule;
@@ -228,7 +228,9 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
                 Eigen::MatrixXd others(fresh.rows(), m - (last - first));
                 others.leftCols(first) = fresh.leftCols(first);
                 others.rightCols(m - last) = fresh.rightCols(m - last);
-                updateSubspace(fold, others, svdOptions);
+                IncrementalSvdOptions foldOptions = svdOptions;
+                foldOptions.maxRank = basisSize;  // a fold needs only its M-basis: a smaller product for U'
+                updateSubspace(fold, others, foldOptions);
                 const Index foldM = std::min(basisSize, fold.rank());
                 const Eigen::MatrixXd foldBasis = fold.u.leftCols(foldM);
                 const Eigen::MatrixXd foldProjector = makeProjector(foldBasis, channels, keys);
