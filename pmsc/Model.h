@@ -2,9 +2,11 @@
 #pragma once
 
 #include "pmsc/FrameSet.h"
+#include "pmsc/Regions.h"
 
 #include <Eigen/Core>
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -39,6 +41,10 @@ struct Model {
     double epsMax = 0;     ///< soft cache: at or above, a miss
     double tolerance = 0;  ///< calibration target (largest point error of a hit); 0 = not calibrated
     double trainMaxPointResidual = 0;  ///< largest point error of PM on the training set
+
+    // --- optional parts: each one is a tagged section of a version-2 model file (ModelSections.h)
+    /// Local fail-through (issue 9): regions with their own keys, projection and thresholds.
+    std::optional<LocalRegions> regions;
 
     Index basisSize() const { return basis.cols(); }
     Index keyCount() const { return static_cast<Index>(keyPoints.size()); }
