@@ -14,7 +14,6 @@
 #include <chrono>
 #include <cmath>
 #include <iostream>
-#include <sstream>
 
 namespace pmsc::cli {
 
@@ -22,13 +21,15 @@ namespace {
 
 std::vector<std::string> splitPaths(const std::string& text) {
     std::vector<std::string> out;
-    std::stringstream in(text);
-    std::string item;
-    while (std::getline(in, item, ',')) {
+    std::size_t start = 0;
+    while (true) {
+        const std::size_t comma = text.find(',', start);
+        const std::string item = text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
         if (item.empty()) throw UsageError("--frames: empty file name in '" + text + "'");
         out.push_back(item);
+        if (comma == std::string::npos) break;
+        start = comma + 1;
     }
-    if (out.empty()) throw UsageError("--frames: no file given");
     return out;
 }
 

@@ -110,6 +110,10 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
     Clock::time_point t = Clock::now();
     const IncrementalSubspace before = subspaceOf(model);
     report.rankBefore = before.rank();
+    if (model.regions) {
+        report.warnings.push_back("the model's local fail-through regions are not updated by learn (the keys "
+                                  "change): the learned model has none; train again to get them");
+    }
     if (!model.learning) {
         report.warnings.push_back("the model has no learning state (train with --learn-rank): the old frames "
                                   "are represented by the model's " + std::to_string(model.basisSize()) +
