@@ -30,7 +30,9 @@ int runDemoLearn(const std::vector<std::string>& args) {
                   [&](const std::string& v) { threads = static_cast<int>(parseIndex("--threads", v, 1, 1024)); });
     parser.option("--tolerance", "PCT", "largest error of a hit, % of the head diagonal (default 1)",
                   [&](const std::string& v) { tolerance = parseDouble("--tolerance", v, 0.001, 100); });
-    parser.option("--coverage", "C", "coverage of the conformal calibration rule (default 0.9)", [&](const std::string& v) {
+    std::string rule;
+    parser.option("--calibration", "RULE", "rule of the loop's models: max (default) or conformal", rule);
+    parser.option("--coverage", "C", "coverage of --calibration conformal (default 0.9)", [&](const std::string& v) {
         coverage = parseDouble("--coverage", v, 0.0, 1.0);
         if (!(coverage > 0 && coverage < 1)) throw UsageError("--coverage: must be in (0, 1), got " + v);
     });
@@ -38,6 +40,8 @@ int runDemoLearn(const std::vector<std::string>& args) {
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
     if (quick) o = face::LearnDemoOptions::quickOptions();
+    if (!rule.empty() && rule != "max" && rule != "conformal") parser.fail("--calibration: '" + rule + "' is not max or conformal");
+    o.conformal = rule == "conformal";
     o.dataDir = data;
     o.outDir = out;
     o.threads = threads;
@@ -74,13 +78,15 @@ int runDemoLearn(const std::vector<std::string>& args) {
                 ls.at("learn_seconds").get<double>(), ls.at("scratch_train_seconds").get<double>(),
                 ls.at("scratch_train_seconds").get<double>() / ls.at("learn_seconds").get<double>(),
                 ls.at("largest_principal_angle_deg").get<double>());
-    for (const char* set : {"validation", "day2_shot"}) {
+    for (const char* set : {"validation", "day1_shot", "day2_shot"}) {
         const auto& c = r.at("calibration").at(set);
-        std::printf("  calibration on %-10s old rule %4ld hits (soft max %.3f%%), conformal %4ld (soft max %.3f%%), "
-                    "best single threshold %4ld: conformal gets %.0f%% of it\n",
-                    set, c.at("old_rule").at("hits").get<long>(), c.at("old_rule").at("soft_max_error_pct_bbox").get<double>(),
-                    c.at("new_rule").at("hits").get<long>(), c.at("new_rule").at("soft_max_error_pct_bbox").get<double>(),
-                    c.at("best_single_threshold").at("hits").get<long>(), 100 * c.at("new_rule_share_of_best").get<double>());
+        std::printf("  calibration, day-1 model, %-10s best single threshold %4ld hits; max rule %4ld (%ld over T)",
+                    set, c.at("best_single_threshold").at("hits").get<long>(), c.at("max_rule").at("hits").get<long>(),
+                    c.at("max_rule").at("frames_over_tolerance").get<long>());
+        for (const auto& k : c.at("conformal_rule"))
+            std::printf("; conformal %.2f %4ld (%ld over T)", k.at("coverage").get<double>(), k.at("hits").get<long>(),
+                        k.at("frames_over_tolerance").get<long>());
+        std::printf("\n");
     }
     std::printf("  wrote   %s/report.json, frames.csv, day1.pmsc, day2.pmsc, scratch.pmsc, day1-misses.npy  [%.0f s]\n",
                 out.c_str(), r.at("seconds").at("total").get<double>());

@@ -83,11 +83,12 @@ private:
 // (1 - w) E (a blend mixes w of the full pose in; a miss is the full pose).
 struct Outcome {
     Index hits = 0, blends = 0, misses = 0;
+    Index overTolerance = 0;  // frames whose soft-cached error exceeds T
     double softMax = 0;
     double hitMax = 0;  // largest PM error among hits
 };
 
-Outcome outcome(const std::vector<Score>& scores, double epsMin, double epsMax) {
+Outcome outcome(const std::vector<Score>& scores, double epsMin, double epsMax, double tolerance = 0) {
     const SoftCachePolicy policy(epsMin, epsMax);
     Outcome o;
     for (const Score& s : scores) {
@@ -96,6 +97,7 @@ Outcome outcome(const std::vector<Score>& scores, double epsMin, double epsMax) 
         o.blends += d.state == CacheState::Blend;
         o.misses += d.state == CacheState::Miss;
         o.softMax = std::max(o.softMax, (1 - d.weight) * s.pmMax);
+        o.overTolerance += tolerance > 0 && (1 - d.weight) * s.pmMax > tolerance;
         if (d.state == CacheState::Hit) o.hitMax = std::max(o.hitMax, s.pmMax);
     }
     return o;
@@ -228,7 +230,7 @@ nlohmann::json runLearnDemo(const LearnDemoOptions& options) {
     to.maxKeys = options.maxKeys;
     to.fiducials.assign(IctFace::multiPie68().begin(), IctFace::multiPie68().end());
     to.tolerance = tolerance;
-    to.calibrationRule = CalibrationRule::Conformal;
+    to.calibrationRule = options.conformal ? CalibrationRule::Conformal : CalibrationRule::MaxRatio;
     to.calibrationCoverage = options.coverage;
     to.learnRank = options.learnRank;
     t = Clock::now();
@@ -238,9 +240,14 @@ nlohmann::json runLearnDemo(const LearnDemoOptions& options) {
     seconds["train_day1"] = since(t);
     step("train", 1, 1);
     writeModel(out + "day1.pmsc", day1);
-    // The old rule's eps from the same held-out frames and the same model (only eps differ).
+    // Both rules' eps from the same held-out frames and the same model (only eps differ).
     CalibrationStats oldRule = day1Report.calibration;
     setThresholds(oldRule, tolerance, CalibrationRule::MaxRatio, 0);
+    std::vector<CalibrationStats> conformalRules;
+    for (double coverage : {0.9, 0.95, 0.99}) {
+        conformalRules.push_back(day1Report.calibration);
+        setThresholds(conformalRules.back(), tolerance, CalibrationRule::Conformal, coverage);
+    }
 
     // --- day 1: the shot through the soft cache, misses kept ------------------------------------
     t = Clock::now();
@@ -382,27 +389,37 @@ nlohmann::json runLearnDemo(const LearnDemoOptions& options) {
     // Calibration: the old rule and the new on the same model and held-out frames, against the
     // oracle threshold, on the validation set and on day 2's shot.
     auto compare = [&](const std::vector<Score>& scores) {
-        const Outcome oldO = outcome(scores, oldRule.epsMin, oldRule.epsMax);
-        const Outcome newO = outcome(scores, day1.epsMin, day1.epsMax);
         const auto [threshold, bestHits] = bestThreshold(scores, tolerance);
         const double count = static_cast<double>(scores.size());
-        return nlohmann::json{
-            {"frames", scores.size()},
-            {"old_rule", {{"eps_min", oldRule.epsMin}, {"ratio", oldRule.ratio}, {"hits", oldO.hits},
-                          {"hit_rate", static_cast<double>(oldO.hits) / count},
-                          {"soft_max_error_pct_bbox", oldO.softMax / percent}}},
-            {"new_rule", {{"eps_min", day1.epsMin}, {"ratio", day1Report.calibration.ratio},
-                          {"coverage", options.coverage}, {"hits", newO.hits},
-                          {"hit_rate", static_cast<double>(newO.hits) / count},
-                          {"soft_max_error_pct_bbox", newO.softMax / percent}}},
-            {"best_single_threshold", {{"threshold", threshold}, {"hits", bestHits},
-                                       {"hit_rate", static_cast<double>(bestHits) / count}}},
-            {"new_rule_share_of_best", bestHits > 0 ? static_cast<double>(newO.hits) / static_cast<double>(bestHits) : 0.0},
-            {"old_rule_share_of_best", bestHits > 0 ? static_cast<double>(oldO.hits) / static_cast<double>(bestHits) : 0.0}};
+        auto rule = [&](const CalibrationStats& c) {
+            const Outcome o = outcome(scores, c.epsMin, c.epsMax, tolerance);
+            nlohmann::json j = {{"eps_min", c.epsMin},
+                                {"ratio", c.ratio},
+                                {"hits", o.hits},
+                                {"hit_rate", static_cast<double>(o.hits) / count},
+                                {"share_of_best", bestHits > 0 ? static_cast<double>(o.hits) / static_cast<double>(bestHits) : 0.0},
+                                {"frames_over_tolerance", o.overTolerance},
+                                {"soft_max_error_pct_bbox", o.softMax / percent}};
+            if (c.rule == CalibrationRule::Conformal) j["coverage"] = c.coverage;
+            return j;
+        };
+        nlohmann::json conformal = nlohmann::json::array();
+        for (const auto& c : conformalRules) conformal.push_back(rule(c));
+        return nlohmann::json{{"frames", scores.size()},
+                              {"best_single_threshold", {{"threshold", threshold}, {"hits", bestHits},
+                                                         {"hit_rate", static_cast<double>(bestHits) / count}}},
+                              {"max_rule", rule(oldRule)},
+                              {"conformal_rule", conformal}};
     };
     report["calibration"] = {{"held_out_frames", day1Report.calibration.keyRms.size()},
                              {"validation", compare(validation.day1)},
+                             {"day1_shot", compare(day1Scores)},
                              {"day2_shot", compare(day2Scores.day1)}};
+    report["day1"]["frames_over_tolerance"] = outcome(day1Scores, day1.epsMin, day1.epsMax, tolerance).overTolerance;
+    report["day2"]["learned_model"]["frames_over_tolerance"] =
+        outcome(day2Scores.day2, day2.epsMin, day2.epsMax, tolerance).overTolerance;
+    report["validation"]["learned_model"]["frames_over_tolerance"] =
+        outcome(validation.day2, day2.epsMin, day2.epsMax, tolerance).overTolerance;
     seconds["total"] = since(start);
     report["seconds"] = seconds;
 

@@ -30,7 +30,11 @@ struct LearnDemoOptions {
     long maxKeys = 170;
     double tolerancePercent = 1.0;  ///< T in % of the head diagonal
     long learnRank = 96;            ///< TrainingOptions::learnRank (2M)
-    double coverage = 0.9;          ///< of the conformal calibration rule (the day-1 model's rule)
+    /// The rule the loop's models are calibrated by. Decision: the largest ratio (MaxRatio) by
+    /// default: day 1's shot moves controls training never saw, whose error ratios lie beyond any
+    /// quantile of the held-out training frames, and the loop must keep every frame under T.
+    bool conformal = false;
+    double coverage = 0.9;          ///< of the conformal rule, when chosen
     int threads = 0;
     bool quick = false;
 
@@ -52,7 +56,8 @@ struct LearnDemoOptions {
 /// 5. validation (the face demo's validation sequences) through the three models, and the
 ///    calibration comparison on it: hits and worst soft-cached error with eps from the largest
 ///    held-out ratio (the old rule) and from the conformal quantile (the new rule), and the best
-///    single threshold that keeps every frame under T (an oracle that sees the errors).
+///    single threshold that keeps every frame under T (an oracle that sees the errors), for the
+///    conformal rule at coverages 0.9, 0.95 and 0.99, with the frames each puts over T.
 /// @throws pmsc::InputError for a bad ICT folder or options, pmsc::IoError, pmsc::Cancelled.
 nlohmann::json runLearnDemo(const LearnDemoOptions& options);
 
