@@ -22,6 +22,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   nlohmann-json3-dev libpng-dev
   libassimp-dev assimp-testmodels slurm-wlm munge
+  libopenmpi-dev openmpi-bin  # issue 12: mpirun -n P pmsc train, srun --mpi=pmix
 )
 
 die() { echo "pmsc.sh: $*" >&2; exit 1; }

@@ -35,6 +35,10 @@ void ArgParser::positional(std::string name, std::string help, std::string& targ
     options_.push_back(std::move(o));
 }
 
+void ArgParser::repeatable(const std::string& name) {
+    if (Option* o = find(name)) o->repeatable = true;
+}
+
 ArgParser::Option* ArgParser::find(const std::string& name) {
     for (auto& o : options_)
         if (!o.positional && o.name == name) return &o;
@@ -84,7 +88,7 @@ bool ArgParser::parse(const std::vector<std::string>& args) {
             const std::string name = arg.substr(0, eq);
             Option* o = find(name);
             if (!o) fail("unknown option '" + name + "'");
-            if (given(name)) fail(name + " given twice");
+            if (given(name) && !o->repeatable) fail(name + " given twice");
             if (o->isFlag) {
                 if (eq != std::string::npos) fail(name + " takes no value");
                 apply(*o, "");

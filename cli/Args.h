@@ -37,6 +37,9 @@ public:
     /// A string option.
     void option(std::string name, std::string valueName, std::string help, std::string& target,
                 bool required = false);
+    /// Lets an option be given more than once (each value is applied in order), e.g. several
+    /// `--frames` files.
+    void repeatable(const std::string& name);
     /// A flag without value (--json).
     void flag(std::string name, std::string help, bool& target);
     /// A positional argument, in the order declared.
@@ -64,6 +67,7 @@ private:
         bool required = false;
         bool isFlag = false;
         bool positional = false;
+        bool repeatable = false;
     };
     Option* find(const std::string& name);
 

@@ -21,5 +21,6 @@ int runExportFrames(const std::vector<std::string>& args);  // cli/ExportFramesC
 int runDemoCornell(const std::vector<std::string>& args);   // cli/CornellDemoCommand.cpp (examples/cornell)
 int runDemoLearn(const std::vector<std::string>& args);     // cli/LearnDemoCommand.cpp (examples/face)
 int runDemoFace(const std::vector<std::string>& args);      // cli/FaceDemoCommand.cpp (examples/face)
+int runDemoVolume(const std::vector<std::string>& args);    // cli/VolumeDemoCommand.cpp (examples/volume)
 
 }  // namespace pmsc::cli

@@ -9,7 +9,7 @@
 #include "cli/Interrupt.h"
 #include "cli/Progress.h"
 #include "cli/Replay.h"
-#include "cli/ReplayEvaluator.h"
+#include "evaluators/ReplayEvaluator.h"
 #include "cli/ReplaySummary.h"
 #include "cli/TrainSummary.h"
 #include "examples/synthetic/SyntheticSurface.h"
@@ -177,7 +177,7 @@ int runDemoSynthetic(const std::vector<std::string>& args) {
     std::cout << "\n";
 
     // 3. Replay.
-    const ReplayEvaluator recorded(std::move(test), testPath);
+    const evaluators::ReplayEvaluator recorded(std::move(test), testPath);
     ReplayOptions replayOptions;
     replayOptions.cancel = &interruptFlag();
     AtomicFile reportFile(reportPath);

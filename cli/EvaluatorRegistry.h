@@ -1,31 +1,24 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-#include "pmsc/PointEvaluator.h"
+#include "evaluators/EvaluatorRegistry.h"
 
-#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
 
 namespace pmsc::cli {
 
-/// Makes an evaluator from the ARGS part of a NAME[:ARGS] spec.
-using EvaluatorFactory = std::function<std::unique_ptr<PointEvaluator>(const std::string& args)>;
+using evaluators::EvaluatorKind;
 
-/// One kind of evaluator the command line knows.
-struct EvaluatorKind {
-    std::string name;     ///< "replay", "cornell", "face", "skin"
-    std::string args;     ///< what ARGS means, for help ("FILE.npy"); empty if none
-    std::string summary;  ///< one line for help
-    EvaluatorFactory make;
-};
+/// The evaluators the `pmsc` program knows: the library's built-ins (replay, skin) and the
+/// paper's demos (cornell, face), in that order.
+const evaluators::EvaluatorRegistry& evaluatorRegistry();
 
-/// Every registered kind, in the order of the table in EvaluatorRegistry.cpp.
+/// evaluatorRegistry().kinds().
 const std::vector<EvaluatorKind>& evaluatorKinds();
 
-/// Makes the evaluator a spec names: "replay:FILE.npy", "cornell", "face:DIR", "skin:ASSET".
-/// The text after the first ':' goes to the factory unchanged (paths may contain ':').
+/// evaluatorRegistry().make(spec): "replay:FILE.npy", "cornell", "face:DIR", "skin:ASSET".
 /// @throws std::invalid_argument for an unknown name (the known ones are listed);
 ///         whatever the factory throws (InputError for a missing file, ...).
 std::unique_ptr<PointEvaluator> makeEvaluator(const std::string& spec);

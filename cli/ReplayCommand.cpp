@@ -5,7 +5,7 @@
 #include "cli/Interrupt.h"
 #include "cli/Progress.h"
 #include "cli/Replay.h"
-#include "cli/ReplayEvaluator.h"
+#include "evaluators/ReplayEvaluator.h"
 #include "cli/ReplaySummary.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
@@ -53,7 +53,7 @@ int runReplay(const std::vector<std::string>& args) {
     if (!parser.parse(args)) return kExitOk;
 
     const Model model = readModel(modelPath);
-    const ReplayEvaluator recorded(framesPath);
+    const evaluators::ReplayEvaluator recorded(framesPath);
     if (recorded.pointCount() != model.points || recorded.channelCount() != model.channels)
         throw InputError(framesPath + ": frames have " + std::to_string(recorded.pointCount()) +
                          " points x " + std::to_string(recorded.channelCount()) +

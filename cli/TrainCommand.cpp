@@ -2,30 +2,118 @@
 #include "cli/Args.h"
 #include "cli/Commands.h"
 #include "cli/ExitCodes.h"
+#include "cli/Format.h"
 #include "cli/Interrupt.h"
 #include "cli/Progress.h"
 #include "cli/TrainSummary.h"
 #include "pmsc/AtomicFile.h"
+#include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/NpyIO.h"
+#include "pmsc/RowBlocks.h"
 #include "pmsc/Training.h"
+#include "cli/mpi/MpiLaunch.h"
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
 #include <iostream>
+#include <ctime>
+#include <memory>
+
+#include <sys/resource.h>
+#include <unistd.h>
 
 namespace pmsc::cli {
 
+namespace {
+
+/// "512M", "8G", "1.5GiB", "100000" -> bytes (K/M/G/T are powers of 1024).
+std::uint64_t parseBytes(const std::string& option, const std::string& text) {
+    std::size_t used = 0;
+    double value = 0;
+    try {
+        value = std::stod(text, &used);
+    } catch (const std::exception&) {
+        throw UsageError(option + ": '" + text + "' is not a size (e.g. 512M, 8G)");
+    }
+    std::string unit = text.substr(used);
+    if (unit.size() > 1 && (unit.back() == 'B' || unit.back() == 'b')) unit.pop_back();
+    if (unit.size() > 1 && unit.back() == 'i') unit.pop_back();
+    double scale = 1;
+    if (unit.empty()) scale = 1;
+    else if (unit == "K" || unit == "k") scale = 1024.0;
+    else if (unit == "M" || unit == "m") scale = 1024.0 * 1024;
+    else if (unit == "G" || unit == "g") scale = 1024.0 * 1024 * 1024;
+    else if (unit == "T" || unit == "t") scale = 1024.0 * 1024 * 1024 * 1024;
+    else throw UsageError(option + ": unknown unit in '" + text + "' (use K, M, G or T)");
+    if (!(value > 0) || !std::isfinite(value * scale)) throw UsageError(option + ": must be a positive size, got '" + text + "'");
+    return static_cast<std::uint64_t>(value * scale);
+}
+
+std::string bytesText(double bytes) {
+    char buf[64];
+    if (bytes >= 1024.0 * 1024 * 1024) std::snprintf(buf, sizeof buf, "%.2f GiB", bytes / (1024.0 * 1024 * 1024));
+    else std::snprintf(buf, sizeof buf, "%.1f MiB", bytes / (1024.0 * 1024));
+    return buf;
+}
+
+/// Address space this process already uses (VmSize), 0 if unknown.
+std::uint64_t addressSpaceInUse() {
+    std::ifstream status("/proc/self/status");
+    std::string line;
+    while (std::getline(status, line)) {
+        if (line.rfind("VmSize:", 0) == 0) return std::stoull(line.substr(7)) * 1024;
+    }
+    return 0;
+}
+
+/// The whole training set in memory: the shots read one after the other into one FrameSet.
+FrameSet readShots(const std::vector<Shot>& shots) {
+    if (shots.size() == 1) return readFrames(shots.front().path).frames;
+    Index total = 0;
+    for (const Shot& s : shots) total += s.info.frames;
+    FrameSet all(total, shots.front().info.points, shots.front().info.channels);
+    Index at = 0;
+    for (const Shot& s : shots) {
+        const FrameFile f = readFrames(s.path);
+        std::copy(f.frames.values.begin(), f.frames.values.end(), all.frame(at));
+        at += f.frames.frames;
+    }
+    return all;
+}
+
+}  // namespace
+
 int runTrain(const std::vector<std::string>& args) {
-    std::string framesPath, outPath, selector = "teleconnection";
+    std::vector<std::string> framePaths;
+    std::string outPath, selector = "teleconnection";
+    std::uint64_t memoryLimit = 0;
+    Index blockPoints = 0;
+    bool outOfCore = false;
     TrainingOptions options;
     bool quiet = false;
-    ArgParser parser("train", "--frames TRAIN.npy --out MODEL.pmsc [options]",
+    ArgParser parser("train", "--frames TRAIN.npy [--frames SHOT2.npy ...] --out MODEL.pmsc [options]",
                      "Trains a point-multiplication model: mean removal, a truncated SVD basis (section 3),\n"
                      "key points by Varimax + teleconnection or Q-DEIM (section 4), the least-squares\n"
                      "projector, and the soft-cache thresholds eps (section 5). With --tolerance, eps is\n"
-                     "calibrated by leave-one-slice-out so that a hit's largest point error stays under it.");
-    parser.option("--frames", "FILE.npy", "training frames, shape (frames, points, channels), float32/64",
-                  framesPath, true);
+                     "calibrated by leave-one-slice-out so that a hit's largest point error stays under it.\n"
+                     "\n"
+                     "Larger than memory: several --frames files (shots, same points and channels) are one\n"
+                     "training set. When it does not fit (--memory-limit, the address-space limit, or half\n"
+                     "the machine's memory) or with --out-of-core, the frames are streamed from disk in\n"
+                     "blocks of points, and memory is bounded by, in doubles (F frames, r = min(max(max\n"
+                     "basis, block), F), B = --block, K = --max-keys, R = N*C/P rows per rank, b = block rows):\n"
+                     "  5 F^2 + 3 r F + 2 R r + 4 R B + K C (F + r) + 3 b F, plus 3 N C (r + 1) on rank 0,\n"
+                     "never N*C*F. --memory-limit fails at once when even one point per block cannot fit.\n"
+                     "Under MPI (mpirun -n P pmsc train ..., or srun --mpi=pmix) each of the P ranks reads\n"
+                     "only its share of the points; rank 0 writes the model. Started plainly, one process.");
+    parser.option("--frames", "FILE.npy",
+                  "training frames, shape (frames, points, channels), float32/64; repeat for several shots",
+                  [&](const std::string& v) { framePaths.push_back(v); }, true);
+    parser.repeatable("--frames");
     parser.option("--out", "MODEL.pmsc", "model file to write (atomically)", outPath, true);
     parser.option("--basis", "M", "basis size M",
                   [&](const std::string& v) { options.basis = parseIndex("--basis", v, 1); });
@@ -85,6 +173,14 @@ int runTrain(const std::vector<std::string>& args) {
                   [&](const std::string& v) {
                       options.powerIterations = static_cast<int>(parseIndex("--power-iterations", v, 0, 20));
                   });
+    parser.option("--memory-limit", "BYTES",
+                  "largest memory training may use (e.g. 2G): streams from disk when the data do not fit, "
+                  "fails before any work when even that cannot fit",
+                  [&](const std::string& v) { memoryLimit = parseBytes("--memory-limit", v); });
+    parser.flag("--out-of-core", "stream the frames from disk even when they would fit in memory", outOfCore);
+    parser.option("--block-points", "P", "points per block read when streaming (default: ~64 MiB blocks, "
+                  "fewer under --memory-limit)",
+                  [&](const std::string& v) { blockPoints = parseIndex("--block-points", v, 1); });
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
 
@@ -110,22 +206,120 @@ int runTrain(const std::vector<std::string>& args) {
     if ((parser.given("--calibration") || parser.given("--coverage")) && !(options.tolerance > 0))
         parser.fail("--calibration and --coverage need --tolerance");
 
-    // Fail on an unwritable destination now, not after a long training.
-    AtomicFile(outPath).abandon();
+    // MPI only when a launcher started us (cli/mpi/MpiLaunch.h); otherwise one process.
+    std::unique_ptr<MpiWorld> mpi = joinMpiIfLaunched();
+    SingleProcess one;
+    Communicator& comm = mpi ? static_cast<Communicator&>(*mpi) : one;
+    const bool root = comm.rank() == 0;
+    bool collective = false;  // true once the ranks may be waiting for each other
+    try {
+        // Fail on an unwritable destination now, not after a long training.
+        if (root) AtomicFile(outPath).abandon();
 
-    const auto start = std::chrono::steady_clock::now();
-    const FrameFile frames = readFrames(framesPath);
-    Progress progress("train", !quiet);
-    options.progress = [&](std::string_view stage, double done, double total) {
-        return progress.update(stage, done, total);
-    };
-    TrainingReport report;
-    const Model model = train(frames.frames, options, &report);
-    writeModel(outPath, model);
-    progress.finish();
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    printTrainSummary(std::cout, outPath, frames.frames, model, report, seconds);
-    return kExitOk;
+        const auto start = std::chrono::steady_clock::now();
+        const std::vector<Shot> shots = openShots(framePaths);
+        const Index n = shots.front().info.points;
+        const Index c = shots.front().info.channels;
+        Index f = 0;
+        for (const Shot& s : shots) f += s.info.frames;
+
+        // --- in memory or streamed, and how large a block (the bound is Training.h's).
+        std::uint64_t limit = memoryLimit;
+        std::string limitSource = "--memory-limit";
+        if (limit == 0) {
+            rlimit as{};
+            if (getrlimit(RLIMIT_AS, &as) == 0 && as.rlim_cur != RLIM_INFINITY) {
+                const std::uint64_t used = addressSpaceInUse();
+                limit = as.rlim_cur > used ? as.rlim_cur - used : 1;
+                limitSource = "the address-space limit (ulimit -v) less what the program already maps";
+            }
+        }
+        auto bound = [&](Index bp) {
+            return trainingMemoryBound(n, c, f, options.maxBasis, options.block, options.maxKeys, bp, comm.size(),
+                                       /*rootRank=*/true);
+        };
+        const double physical = static_cast<double>(sysconf(_SC_PHYS_PAGES)) * static_cast<double>(sysconf(_SC_PAGESIZE));
+        const std::uint64_t inMemoryBytes = bound(0);
+        const bool stream = comm.size() > 1 || outOfCore || (limit > 0 && inMemoryBytes > limit) ||
+                            (limit == 0 && static_cast<double>(inMemoryBytes) > physical / 2);
+        Index bp = 0;
+        if (stream) {
+            const Index defaultPoints = std::max<Index>(1, (Index{64} << 20) / (c * f * 8));
+            bp = blockPoints > 0 ? blockPoints : defaultPoints;
+            if (limit > 0) {
+                const double perPoint = static_cast<double>(bound(2)) - static_cast<double>(bound(1));
+                const double fixed = static_cast<double>(bound(1)) - perPoint;
+                if (fixed + perPoint > static_cast<double>(limit)) {
+                    throw InputError("train: " + limitSource + " " + bytesText(static_cast<double>(limit)) +
+                                     " cannot be met: streaming training of " + std::to_string(f) + " frames x " +
+                                     std::to_string(n) + " points x " + std::to_string(c) + " channels needs at least " +
+                                     bytesText(fixed + perPoint) + " (lower --max-basis/--max-keys, or use more MPI ranks)");
+                }
+                const Index fits = static_cast<Index>((static_cast<double>(limit) - fixed) / perPoint);
+                if (blockPoints > 0 && blockPoints > fits) {
+                    throw InputError("train: --block-points " + std::to_string(blockPoints) + " does not fit in " +
+                                     limitSource + " " + bytesText(static_cast<double>(limit)) + " (at most " +
+                                     std::to_string(fits) + ")");
+                }
+                bp = std::min(bp, fits);
+            }
+            bp = std::min(bp, std::max<Index>(1, n));
+        }
+
+        Progress progress("train", !quiet && root);
+        options.progress = [&](std::string_view stage, double done, double total) {
+            return progress.update(stage, done, total);
+        };
+        TrainingReport report;
+        Model model;
+        if (stream) {
+            NpyBlocks blocks(shots, pointShare(n, comm.rank(), comm.size()), bp);
+            collective = comm.size() > 1;
+            model = train(blocks, comm, options, &report);
+        } else {
+            const FrameSet frames = readShots(shots);
+            model = train(frames, options, &report);
+        }
+        // Each rank's CPU seconds, to rank 0: the busiest rank is the critical path when every rank
+        // has a core of its own (wall time says that only on an idle machine).
+        timespec cpu{};
+        clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &cpu);
+        const double mine = static_cast<double>(cpu.tv_sec) + 1e-9 * static_cast<double>(cpu.tv_nsec);
+        std::vector<double> cpuPerRank;
+        comm.gather(&mine, 1, cpuPerRank, 0);
+        if (!root) return kExitOk;
+        writeModel(outPath, model);
+        progress.finish();
+        const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        FrameSet sizes;
+        sizes.frames = f;
+        sizes.points = n;
+        sizes.channels = c;
+        printTrainSummary(std::cout, outPath, sizes, model, report, seconds);
+        std::cout << "  cpu         ";
+        for (std::size_t r = 0; r < cpuPerRank.size(); ++r) std::cout << (r ? ", " : "") << fmt("%.2f", cpuPerRank[r]);
+        std::cout << " s of CPU" << (cpuPerRank.size() > 1 ? " per rank" : "") << "\n";
+        if (shots.size() > 1) std::cout << "  shots       " << shots.size() << " --frames files, " << f << " frames in all\n";
+        if (stream) {
+            std::cout << "  memory      streamed from disk in blocks of " << bp << " points; bound "
+                      << bytesText(static_cast<double>(bound(bp))) << " (rank 0)"
+                      << (limit > 0 ? ", limit " + bytesText(static_cast<double>(limit)) : std::string()) << "\n";
+        } else {
+            std::cout << "  memory      in memory; bound " << bytesText(static_cast<double>(inMemoryBytes)) << "\n";
+        }
+        return kExitOk;
+    } catch (...) {
+        if (!mpi) throw;
+        const ExitReason reason = exitReason(std::current_exception());
+        if (collective) {
+            // Maybe this rank alone failed (its rows hold a NaN): the others wait in a collective.
+            std::fprintf(stderr, "pmsc: %s (MPI rank %d)\n", reason.message.c_str(), comm.rank());
+            mpi->abort(reason.code);
+        }
+        // Before the ranks depend on each other every rank fails the same way: rank 0 reports it.
+        if (root) throw;
+        return reason.code;
+    }
 }
 
 }  // namespace pmsc::cli

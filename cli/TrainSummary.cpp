@@ -10,6 +10,8 @@ void printTrainSummary(std::ostream& out, const std::string& modelPath, const Fr
     out << "trained " << modelPath << " from " << frames.frames << " frames x " << frames.points
         << " points x " << frames.channels << " channels in " << fmt("%.2f", seconds) << " s (training "
         << fmt("%.2f", report.seconds) << " s)\n";
+    out << "  ranks       " << report.ranks
+        << (report.ranks > 1 ? " MPI processes, each reading only its share of the points\n" : " (one process)\n");
     out << "  basis       M = " << model.basisSize() << ", captures "
         << fmt("%.4f", 100.0 * model.energyCaptured()) << "% of the training energy\n";
     out << "  key points  K = " << model.keyCount() << " ("

@@ -38,6 +38,7 @@ const Command kCommands[] = {
     {"demo", "the main demo (the Cornell box); with options, the generated shot of 'demo synthetic'", runDemo},
     {"demo synthetic", "train and replay on a generated shot, and print what the soft cache did", runDemoSynthetic},
     {"demo cornell", "section 8: Cornell box indirect light, OpenVDB lighting cache, moving cameras", runDemoCornell},
+    {"demo volume", "issue 11: light scattered in smoke, a sparse volumetric lighting cache in OpenVDB", runDemoVolume},
     {"demo face", "section 7: a nonlinear face rig on the ICT face, 170 key points, novel-control detection", runDemoFace},
     {"demo learn", "section 5: the nightly loop on the ICT face, misses kept and learned, day 1 vs day 2", runDemoLearn},
     {"run", "render-farm task: a frame range through the soft cache, one resumable file per frame", runRun},

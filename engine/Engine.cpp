@@ -5,9 +5,12 @@
 #include "nodes/FailThroughEvaluator.h"
 #include "nodes/FramePlan.h"
 #include "nodes/FrameSlot.h"
+#include "nodes/FrameSource.h"
 #include "nodes/KeyPointEvaluator.h"
+#include "nodes/OrderedSink.h"
 #include "nodes/Projector.h"
 #include "nodes/Reconstructor.h"
+#include "nodes/RunControl.h"
 #include "pmsc/Errors.h"
 #include "pmsc/PointMultiplier.h"
 

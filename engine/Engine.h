@@ -2,11 +2,11 @@
 #pragma once
 
 #include "engine/RunStats.h"
-#include "nodes/FrameSource.h"
-#include "nodes/OrderedSink.h"
+#include "engine/FrameRange.h"
+#include "engine/FrameSink.h"
 #include "pmsc/Model.h"
 #include "pmsc/PointEvaluator.h"
-#include "pmsc/Training.h"  // pmsc::Cancelled
+#include "pmsc/Errors.h"  // pmsc::Cancelled
 
 #include <atomic>
 #include <functional>
@@ -15,11 +15,6 @@
 #include <vector>
 
 namespace pmsc::engine {
-
-using nodes::FailurePolicy;
-using nodes::FrameRange;
-using nodes::FrameResult;
-using nodes::FrameSink;
 
 /// Live numbers for a progress line, passed to EngineOptions::progress after each delivered frame.
 struct Progress {

@@ -1,18 +1,12 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include "engine/FrameRange.h"
 #include "nodes/RunControl.h"
 
 namespace pmsc::nodes {
 
-/// A range of evaluator frames: first, first+step, ..., `count` frames in all.
-struct FrameRange {
-    Index first = 0;
-    Index count = 0;
-    Index step = 1;  ///< > 0
-    Index frame(Index sequence) const { return first + sequence * step; }
-    Index last() const { return frame(count - 1); }
-};
+using engine::FrameRange;
 
 /// The head of the graph (body of an input_node): stamps each frame with its
 /// sequence number 0, 1, 2, ..., which the sequencer uses to restore order.

@@ -1,6 +1,7 @@
 #include "pmsc/Calibration.h"
 
 #include "pmsc/Model.h"
+#include "pmsc/RowBlockOps.h"
 
 #include <algorithm>
 #include <cmath>
@@ -12,20 +13,30 @@ namespace pmsc {
 Eigen::VectorXd keyRmsPerFrame(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::MatrixXd& basis,
                                Index channels, const std::vector<Index>& keys,
                                const Eigen::MatrixXd& projector) {
-    const Eigen::MatrixXd qk = gatherKeyRows(q, channels, keys);
-    const Eigen::MatrixXd bk = gatherKeyRows(basis, channels, keys);
+    return keyRmsFromKeyRows(gatherKeyRows(q, channels, keys), gatherKeyRows(basis, channels, keys), channels,
+                             projector);
+}
+
+Eigen::VectorXd keyRmsFromKeyRows(const Eigen::MatrixXd& qk, const Eigen::MatrixXd& bk, Index channels,
+                                  const Eigen::MatrixXd& projector) {
     Eigen::MatrixXd coords = projector * qk;
     Eigen::MatrixXd r = qk;
     r.noalias() -= bk * coords;
-    const double k = static_cast<double>(keys.size());
+    const double k = static_cast<double>(qk.rows() / channels);
     return (r.colwise().squaredNorm().array() / k).sqrt().matrix().transpose();
 }
 
 CalibrationStats thresholdsFromTraining(const Eigen::Ref<const Eigen::MatrixXd>& q,
                                         const Eigen::MatrixXd& basis, Index channels,
                                         const std::vector<Index>& keys, const Eigen::MatrixXd& projector) {
+    return thresholdsFromKeyRows(gatherKeyRows(q, channels, keys), gatherKeyRows(basis, channels, keys), channels,
+                                 projector);
+}
+
+CalibrationStats thresholdsFromKeyRows(const Eigen::MatrixXd& qk, const Eigen::MatrixXd& bk, Index channels,
+                                       const Eigen::MatrixXd& projector) {
     CalibrationStats s;
-    const Eigen::VectorXd e = keyRmsPerFrame(q, basis, channels, keys, projector);
+    const Eigen::VectorXd e = keyRmsFromKeyRows(qk, bk, channels, projector);
     s.epsMin = e.size() > 0 ? e.maxCoeff() : 0.0;
     s.epsMax = 1.5 * s.epsMin;
     s.keyRms.assign(e.data(), e.data() + e.size());
@@ -34,9 +45,23 @@ CalibrationStats thresholdsFromTraining(const Eigen::Ref<const Eigen::MatrixXd>&
 
 CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index channels,
                            const std::vector<Index>& keys, Index basisSize, double tolerance,
-                           Index slices, const SvdOptions& svd, const Eigen::MatrixXd* gram,
+                           Index slices, const SvdOptions&, const Eigen::MatrixXd* gram,
                            CalibrationRule rule, double coverage) {
-    const Index f = q.cols();
+    if (gram && (gram->rows() != q.cols() || gram->cols() != q.cols())) {
+        throw std::invalid_argument("calibrate: Gram matrix is not F x F");
+    }
+    if (channels < 1 || q.rows() % channels != 0) throw std::invalid_argument("calibrate: rows are not whole points");
+    MatrixBlocks blocks(q, channels, /*centre=*/false);
+    SingleProcess one;
+    return calibrate(blocks, one, gatherKeyRows(q, channels, keys), keys, basisSize, tolerance, slices,
+                     gram ? *gram : gramMatrix(q), rule, coverage);
+}
+
+CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::MatrixXd& keyRows,
+                           const std::vector<Index>& keys, Index basisSize, double tolerance, Index slices,
+                           const Eigen::MatrixXd& gram, CalibrationRule rule, double coverage) {
+    const Index f = q.frames();
+    const Index channels = q.channels();
     if (!(tolerance > 0) || !std::isfinite(tolerance)) {
         throw std::invalid_argument("calibration tolerance must be a positive number, got " +
                                     std::to_string(tolerance));
@@ -49,17 +74,14 @@ CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index cha
     if (rule == CalibrationRule::Conformal && !(coverage > 0 && coverage < 1)) {
         throw std::invalid_argument("calibration coverage must be in (0, 1), got " + std::to_string(coverage));
     }
+    if (gram.rows() != f || gram.cols() != f) throw std::invalid_argument("calibrate: Gram matrix is not F x F");
     CalibrationStats s;
     s.tolerance = tolerance;
     s.slices = slices;
     s.frames.reserve(static_cast<size_t>(f));
     Index cappedFolds = 0;
     Index smallestM = basisSize;
-    if (gram && (gram->rows() != f || gram->cols() != f)) {
-        throw std::invalid_argument("calibrate: Gram matrix is not F x F");
-    }
-    Eigen::MatrixXd heldIn;
-    Eigen::MatrixXd heldOut;
+    Eigen::MatrixXd uBlock, residual;
     for (Index slice = 0; slice < slices; ++slice) {
         const Index first = slice * f / slices;
         const Index last = (slice + 1) * f / slices;  // exclusive
@@ -72,53 +94,57 @@ CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index cha
             ++cappedFolds;
             continue;
         }
-        SvdOptions o = svd;
-        o.seed = svd.seed + static_cast<unsigned>(slice) + 1000u;
-        TruncatedSvd fold;
-        Eigen::VectorXd mean;
-        if (gram) {
-            Eigen::MatrixXd g(in, in);
-            g.topLeftCorner(first, first) = gram->topLeftCorner(first, first);
-            g.topRightCorner(first, right) = gram->topRightCorner(first, right);
-            g.bottomLeftCorner(right, first) = gram->bottomLeftCorner(right, first);
-            g.bottomRightCorner(right, right) = gram->bottomRightCorner(right, right);
-            // J g J: subtract row and column means, add back the grand mean.
-            const Eigen::VectorXd rowMean = g.rowwise().mean();
-            const double grand = rowMean.mean();
-            g.colwise() -= rowMean;
-            g.rowwise() -= rowMean.transpose();
-            g.array() += grand;
-            fold = svdFromGram(Eigen::MatrixXd(0, in), g, m, 0);
-            // U = Q_I (J V) S^-1; J V removes each column's mean.
-            Eigen::MatrixXd jv = fold.v;
-            jv.rowwise() -= jv.colwise().mean();
-            for (Index i = 0; i < jv.cols(); ++i) jv.col(i) /= fold.sigma[i];
-            fold.u.resize(q.rows(), jv.cols());
-            fold.u.noalias() = q.leftCols(first) * jv.topRows(first);
-            fold.u.noalias() += q.rightCols(right) * jv.bottomRows(right);
-            mean = (q.leftCols(first).rowwise().sum() + q.rightCols(right).rowwise().sum()) / static_cast<double>(in);
-        } else {
-            heldIn.resize(q.rows(), in);
-            heldIn.leftCols(first) = q.leftCols(first);
-            heldIn.rightCols(right) = q.rightCols(right);
-            mean = heldIn.rowwise().mean();
-            heldIn.colwise() -= mean;
-            fold = truncatedSvd(heldIn, m, o);
-        }
+        Eigen::MatrixXd g(in, in);
+        g.topLeftCorner(first, first) = gram.topLeftCorner(first, first);
+        g.topRightCorner(first, right) = gram.topRightCorner(first, right);
+        g.bottomLeftCorner(right, first) = gram.bottomLeftCorner(right, first);
+        g.bottomRightCorner(right, right) = gram.bottomRightCorner(right, right);
+        // J g J: subtract row and column means, add back the grand mean.
+        const Eigen::VectorXd rowMean = g.rowwise().mean();
+        const double grand = rowMean.mean();
+        g.colwise() -= rowMean;
+        g.rowwise() -= rowMean.transpose();
+        g.array() += grand;
+        TruncatedSvd fold = svdFromGram(Eigen::MatrixXd(0, in), g, m, 0);
         if (fold.sigma.size() < basisSize) ++cappedFolds;
         m = fold.sigma.size();
         smallestM = std::min(smallestM, m);
         if (m < 1) continue;
-        const Eigen::MatrixXd projector = makeProjector(fold.u, channels, keys);
+        // U = Q_I (J V) S^-1; J V removes each column's mean. Only its key rows are formed whole
+        // (for the projector); the other rows are formed block by block below.
+        Eigen::MatrixXd jv = fold.v;
+        jv.rowwise() -= jv.colwise().mean();
+        for (Index i = 0; i < jv.cols(); ++i) jv.col(i) /= fold.sigma[i];
+        auto heldInTimes = [&](const Eigen::Ref<const Eigen::MatrixXd>& rows, Eigen::MatrixXd& u) {
+            u.resize(rows.rows(), m);
+            u.noalias() = rows.leftCols(first) * jv.topRows(first);
+            u.noalias() += rows.rightCols(right) * jv.bottomRows(right);
+        };
+        auto heldInMean = [&](const Eigen::Ref<const Eigen::MatrixXd>& rows) -> Eigen::VectorXd {
+            return (rows.leftCols(first).rowwise().sum() + rows.rightCols(right).rowwise().sum()) /
+                   static_cast<double>(in);
+        };
+        Eigen::MatrixXd uk;
+        heldInTimes(keyRows, uk);
+        const Eigen::MatrixXd projector = projectorFromKeyRows(uk, channels);
+        Eigen::MatrixXd heldOutK = keyRows.middleCols(first, out).colwise() - heldInMean(keyRows);
+        const Eigen::MatrixXd coords = projector * heldOutK;
+        heldOutK.noalias() -= uk * coords;  // the PM residual at the keys
 
-        heldOut = q.middleCols(first, out).colwise() - mean;
-        const Eigen::MatrixXd coords = projector * gatherKeyRows(heldOut, channels, keys);
-        heldOut.noalias() -= fold.u * coords;  // now the PM residual of the held-out frames
-        const Eigen::VectorXd pointErr = maxPointNormPerColumn(heldOut, channels);
-        const Eigen::MatrixXd keyResidual = gatherKeyRows(heldOut, channels, keys);
+        Eigen::VectorXd pointErr = Eigen::VectorXd::Zero(out);
+        for (Index b = 0; b < q.blockCount(); ++b) {
+            const Eigen::Ref<const Eigen::MatrixXd> rows = q.block(b);
+            heldInTimes(rows, uBlock);
+            residual = rows.middleCols(first, out).colwise() - heldInMean(rows);
+            residual.noalias() -= uBlock * coords;  // the PM residual of the held-out frames
+            const Eigen::VectorXd e = maxPointNormPerColumn(residual, channels);
+            for (Index j = 0; j < out; ++j)
+                if (!(e[j] <= pointErr[j])) pointErr[j] = e[j];  // NaN wins
+        }
+        maxOverRanks(comm, pointErr.data(), static_cast<std::size_t>(out));
         for (Index j = 0; j < out; ++j) {
             s.frames.push_back(first + j);
-            s.keyRms.push_back(std::sqrt(keyResidual.col(j).squaredNorm() / static_cast<double>(keys.size())));
+            s.keyRms.push_back(std::sqrt(heldOutK.col(j).squaredNorm() / static_cast<double>(keys.size())));
             s.maxPointError.push_back(pointErr[j]);
         }
     }

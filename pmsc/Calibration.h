@@ -1,7 +1,9 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include "pmsc/Communicator.h"
 #include "pmsc/FrameSet.h"
+#include "pmsc/RowBlocks.h"
 #include "pmsc/Subspace.h"
 
 #include <Eigen/Core>
@@ -93,6 +95,16 @@ std::vector<double> heldOutRatios(const CalibrationStats& s);
 /// largest when that rank exceeds n (and +0 for an empty sample).
 double conformalQuantile(std::vector<double> values, double coverage);
 
+/// The calibration above over the rows this process owns (issue 12; the one implementation: the
+/// overload above wraps q in MatrixBlocks, computing Q^T Q when `gram` is null, so every fold
+/// takes the frame-space route; `svd` is no longer used). One pass over q's blocks per fold; the
+/// per-frame largest point errors are reduced over ranks.
+/// @param keyRows Q's rows at the keys (K*C x F), the same q as `gram` (centred or not)
+CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::MatrixXd& keyRows,
+                           const std::vector<Index>& keys, Index basisSize, double tolerance, Index slices,
+                           const Eigen::MatrixXd& gram, CalibrationRule rule = CalibrationRule::MaxRatio,
+                           double coverage = 0.9);
+
 /// Key RMS error (PointMultiplier::keyRmsError) of every column of a mean-removed matrix `q`
 /// under the model's basis and key projector: e_t = sqrt((1/K) ||(I - B_K P) Q_K[:,t]||^2).
 Eigen::VectorXd keyRmsPerFrame(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::MatrixXd& basis,
@@ -104,5 +116,12 @@ Eigen::VectorXd keyRmsPerFrame(const Eigen::Ref<const Eigen::MatrixXd>& q, const
 CalibrationStats thresholdsFromTraining(const Eigen::Ref<const Eigen::MatrixXd>& q,
                                         const Eigen::MatrixXd& basis, Index channels,
                                         const std::vector<Index>& keys, const Eigen::MatrixXd& projector);
+
+/// The two above from the key rows alone (Q_K: K*C x F, B_K: K*C x M), which is all they read:
+/// the distributed training has them replicated on every rank.
+Eigen::VectorXd keyRmsFromKeyRows(const Eigen::MatrixXd& qk, const Eigen::MatrixXd& bk, Index channels,
+                                  const Eigen::MatrixXd& projector);
+CalibrationStats thresholdsFromKeyRows(const Eigen::MatrixXd& qk, const Eigen::MatrixXd& bk, Index channels,
+                                       const Eigen::MatrixXd& projector);
 
 }  // namespace pmsc

@@ -26,4 +26,10 @@ struct EvaluatorError : std::runtime_error {
     using std::runtime_error::runtime_error;
 };
 
+/// A long operation (training, a run, a replay) was asked to stop: a progress hook returned false
+/// or a cancel flag was set. The command line maps it to exit code 130.
+struct Cancelled : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
 }  // namespace pmsc

@@ -1,6 +1,7 @@
 #include "pmsc/KeyPointSelector.h"
 
 #include "pmsc/Model.h"
+#include "pmsc/RowBlockOps.h"
 
 #include <Eigen/SVD>
 
@@ -32,55 +33,61 @@ void seedKeys(KeySet& keys, const std::vector<Index>& fiducials, const std::vect
 
 Index addTeleconnectionPair(const Eigen::Ref<const Eigen::VectorXd>& v, Index channels, KeySet& keys,
                             Index budget) {
-    const Index n = keys.points();
+    SingleProcess one;
+    return addTeleconnectionPair(v, channels, keys, budget, one, 0);
+}
+
+Index addTeleconnectionPair(const Eigen::Ref<const Eigen::VectorXd>& v, Index channels, KeySet& keys,
+                            Index budget, Communicator& comm, Index firstPoint) {
     if (keys.size() >= budget) return 0;
+    const Index owned = v.size() / channels;
     const double* data = v.data();
-    auto loadingDot = [&](Index p, Index q) {
+    auto loadingDot = [&](const double* a, Index q) {
         double s = 0;
-        for (Index c = 0; c < channels; ++c) s += data[p * channels + c] * data[q * channels + c];
+        for (Index c = 0; c < channels; ++c) s += a[c] * data[q * channels + c];
         return s;
     };
-    // First: the non-key point with the largest loading (strict > keeps the lowest index on ties).
-    Index first = -1;
-    double firstNorm = -1;
-    for (Index p = 0; p < n; ++p) {
-        if (keys.contains(p)) continue;
-        const double s = loadingDot(p, p);
-        if (s > firstNorm) {
-            firstNorm = s;
-            first = p;
-        }
+    // First: the non-key point with the largest loading (strict > keeps the lowest index on ties;
+    // argMaxOverRanks keeps it across ranks).
+    ValueIndex first{-1.0, -1};
+    for (Index p = 0; p < owned; ++p) {
+        if (keys.contains(firstPoint + p)) continue;
+        const double s = loadingDot(data + p * channels, p);
+        if (s > first.value) first = {s, firstPoint + p};
     }
-    if (first < 0) return 0;
-    keys.add(first);
+    first = argMaxOverRanks(comm, first);
+    if (first.index < 0) return 0;
+    // The first point's loading, from the rank that owns it.
+    std::vector<double> loading(static_cast<std::size_t>(channels), 0.0);
+    if (first.index >= firstPoint && first.index < firstPoint + owned) {
+        for (Index c = 0; c < channels; ++c) loading[static_cast<std::size_t>(c)] = data[(first.index - firstPoint) * channels + c];
+    }
+    comm.sum(loading.data(), loading.size());
+    keys.add(first.index);
     Index added = 1;
     if (keys.size() >= budget) return added;
 
-    // Second: the most negative inner product of loadings with the first point.
-    Index second = -1;
-    double mostNegative = 0;
-    for (Index q = 0; q < n; ++q) {
-        if (keys.contains(q)) continue;
-        const double d = loadingDot(first, q);
-        if (d < mostNegative) {
-            mostNegative = d;
-            second = q;
-        }
+    // Second: the most negative inner product of loadings with the first point (as the largest
+    // negated one, so the same arg-max and tie rule apply).
+    ValueIndex second{0.0, -1};
+    for (Index q = 0; q < owned; ++q) {
+        if (keys.contains(firstPoint + q)) continue;
+        const double d = loadingDot(loading.data(), q);
+        if (d < 0 && (second.index < 0 || -d > second.value)) second = {-d, firstPoint + q};
     }
-    if (second < 0) {
+    second = argMaxOverRanks(comm, second);
+    if (second.index < 0) {
         // No anti-correlated point under this vector: take the next largest magnitude instead, so
         // every vector still yields two keys.
-        double best = -1;
-        for (Index q = 0; q < n; ++q) {
-            if (keys.contains(q)) continue;
-            const double s = loadingDot(q, q);
-            if (s > best) {
-                best = s;
-                second = q;
-            }
+        second = {-1.0, -1};
+        for (Index q = 0; q < owned; ++q) {
+            if (keys.contains(firstPoint + q)) continue;
+            const double s = loadingDot(data + q * channels, q);
+            if (s > second.value) second = {s, firstPoint + q};
         }
+        second = argMaxOverRanks(comm, second);
     }
-    if (second >= 0 && keys.add(second)) ++added;
+    if (second.index >= 0 && keys.add(second.index)) ++added;
     return added;
 }
 
@@ -119,7 +126,7 @@ Index determinedBasisSize(const Eigen::MatrixXd& basis, Index channels, const st
     return lo;
 }
 
-double maxPointResidual(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::MatrixXd& basis,
+double maxPointResidual(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::Ref<const Eigen::MatrixXd>& basis,
                         const Eigen::MatrixXd& coords, Index channels) {
     // 96 points per block: 288 x F doubles (~1.4 MB at F = 600) stays in L2 while the GEMM writes
     // it and the norms read it back.
@@ -143,13 +150,33 @@ KeySelection selectKeysTeleconnection(const Eigen::Ref<const Eigen::MatrixXd>& q
                                       const Eigen::Ref<const Eigen::MatrixXd>& firstBlock,
                                       const Eigen::VectorXd& firstSigma, Index channels,
                                       const TeleconnectionOptions& options, const Eigen::MatrixXd* gram) {
+    if (channels < 1 || q.rows() % channels != 0) {
+        throw std::invalid_argument("selectKeysTeleconnection: rows are not whole points");
+    }
+    MatrixBlocks blocks(q, channels, /*centre=*/false);
+    SingleProcess one;
+    if (gram && (gram->rows() != q.cols() || gram->cols() != q.cols())) {
+        throw std::invalid_argument("selectKeysTeleconnection: Gram matrix is not F x F");
+    }
+    const Eigen::MatrixXd g = gram ? *gram : gramMatrix(q);
+    return selectKeysTeleconnection(blocks, one, basis, firstBlock, firstSigma, options, g);
+}
+
+KeySelection selectKeysTeleconnection(RowBlocks& q, Communicator& comm, const Eigen::MatrixXd& basis,
+                                      const Eigen::Ref<const Eigen::MatrixXd>& firstBlock,
+                                      const Eigen::VectorXd& firstSigma, const TeleconnectionOptions& options,
+                                      const Eigen::MatrixXd& gram) {
     if (options.block < 1) {
         throw std::invalid_argument("block must be >= 1, got " + std::to_string(options.block));
     }
-    const Index n = q.rows() / channels;
+    const Index n = q.points();
+    const Index channels = q.channels();
     if (options.maxKeys < 1 || options.maxKeys > n) {
         throw std::invalid_argument("key budget " + std::to_string(options.maxKeys) +
                                     " must be in [1, " + std::to_string(n) + "]");
+    }
+    if (gram.rows() != q.frames() || gram.cols() != q.frames()) {
+        throw std::invalid_argument("selectKeysTeleconnection: Gram matrix is not F x F");
     }
     KeySet keys(n);
     seedKeys(keys, options.fiducials, options.gridPoints);
@@ -160,33 +187,18 @@ KeySelection selectKeysTeleconnection(const Eigen::Ref<const Eigen::MatrixXd>& q
     }
 
     KeySelection result;
-    Eigen::MatrixXd residual;
     Eigen::MatrixXd coords;
-    Eigen::MatrixXd projected;  // W = B^T Q, for the frame-space residual Gram
-    double sigmaQ = 0;
-    // The frame-space route costs an F x F eigensolver per round: worth it only while that is
-    // cheaper than the randomized SVD of the explicit residual (true for hundreds of frames, not
-    // for thousands).
-    {
-        const double f = static_cast<double>(q.cols());
-        const double frameSpace = 9 * f * f * f + 2 * static_cast<double>(q.rows()) * f * static_cast<double>(options.block);
-        const Index sketch = std::min({options.block + options.svd.oversampling, q.rows(), q.cols()});
-        if (frameSpace > randomizedRouteFlops(q.rows(), q.cols(), sketch, options.svd.powerIterations)) gram = nullptr;
-    }
-    if (gram) {
-        if (gram->rows() != q.cols() || gram->cols() != q.cols()) {
-            throw std::invalid_argument("selectKeysTeleconnection: Gram matrix is not F x F");
-        }
-        projected.noalias() = basis.transpose() * q;
-        // firstSigma are Q's leading singular values: the scale the cancellation is relative to.
-        sigmaQ = firstSigma.size() > 0 ? firstSigma[0] : 0.0;
-    }
+    // W = B^T Q, for the frame-space residual Gram. firstSigma are Q's leading singular values:
+    // the scale the cancellation is relative to.
+    const Eigen::MatrixXd projected = transposeTimes(q, comm, basis);
+    const double sigmaQ = firstSigma.size() > 0 ? firstSigma[0] : 0.0;
+    Eigen::MatrixXd qk(0, q.frames());  // Q's key rows, in key order, fetched as keys are added
     Eigen::MatrixXd blockU = firstBlock.leftCols(std::min(options.block, firstBlock.cols()));
     Eigen::VectorXd blockSigma = firstSigma.head(blockU.cols());
     for (Index round = 1;; ++round) {
         const Index before = keys.size();
         if (blockU.cols() > 0 && keys.size() < options.maxKeys) {
-            const VarimaxResult rotated = varimax(blockU, options.varimax);
+            const VarimaxResult rotated = varimax(blockU, options.varimax, comm);
             // Visit rotated vectors by the variance they carry: column j of the rotated block
             // carries ||diag(sigma) t_j||^2 of the block's energy.
             const Index b = blockU.cols();
@@ -199,11 +211,17 @@ KeySelection selectKeysTeleconnection(const Eigen::Ref<const Eigen::MatrixXd>& q
                              [&](Index a, Index c) { return variance[a] > variance[c]; });
             for (Index j : order) {
                 if (keys.size() >= options.maxKeys) break;
-                addTeleconnectionPair(rotated.rotated.col(j), channels, keys, options.maxKeys);
+                addTeleconnectionPair(rotated.rotated.col(j), channels, keys, options.maxKeys, comm, q.firstPoint());
             }
         }
-        coords = makeProjector(basis, channels, keys.keys()) * gatherKeyRows(q, channels, keys.keys());
-        const double worst = maxPointResidual(q, basis, coords, channels);
+        {
+            const std::vector<Index> added(keys.keys().begin() + qk.rows() / channels, keys.keys().end());
+            const Eigen::MatrixXd rows = keyRowsOfQ(q, comm, added);
+            qk.conservativeResize(qk.rows() + rows.rows(), Eigen::NoChange);
+            qk.bottomRows(rows.rows()) = rows;
+        }
+        coords = projectorFromKeyRows(keyRowsOf(q, comm, basis, keys.keys()), channels) * qk;
+        const double worst = maxPointResidualOf(q, comm, basis, coords);
         result.residualPerRound.push_back(worst);
         result.rounds = round;
         if (options.onRound) options.onRound(round, keys.size(), worst);
@@ -212,37 +230,55 @@ KeySelection selectKeysTeleconnection(const Eigen::Ref<const Eigen::MatrixXd>& q
         if (!progressed || keys.size() >= options.maxKeys || keys.size() >= n) break;
         if (options.maxError > 0 && worst <= options.maxError) break;
 
-        // Next block: the residual's leading vectors (cueing + projection error left over).
-        TruncatedSvd next;
-        if (gram) {
-            Eigen::MatrixXd rtr = *gram;
-            Eigen::MatrixXd cross = projected.transpose() * coords;  // W^T C
+        // Next block: the residual's leading vectors (cueing + projection error left over), from
+        // R^T R = G - W^T C - C^T W + C^T C: an F x F eigenproblem, no pass over Q.
+        Eigen::MatrixXd rtr = gram;
+        {
+            const Eigen::MatrixXd cross = projected.transpose() * coords;  // W^T C
             rtr -= cross;
             rtr -= cross.transpose();
             rtr.noalias() += coords.transpose() * coords;
-            next = svdFromGram(Eigen::MatrixXd(0, q.cols()), rtr, options.block, 0, 1e-6 * sigmaQ);
+        }
+        TruncatedSvd next = svdFromGram(Eigen::MatrixXd(0, q.frames()), rtr, options.block, 0, 1e-6 * sigmaQ);
+        Eigen::MatrixXd vs;
+        if (next.sigma.size() > 0) {
+            // U_R = R V_R S^-1 = Q (V_R S^-1) - B (C V_R S^-1): one pass, the residual never formed.
+            vs = next.v * next.sigma.cwiseInverse().asDiagonal();
+            blockU = timesRight(q, vs);
+            blockU.noalias() -= basis * (coords * vs);
+        } else {
+            // The residual is too small for the subtraction above (sigma_R <= 1e-6 sigma_1(Q):
+            // it cancels to rounding). Decision: form R = Q - B C block by block and take the Gram
+            // of R itself (one pass), then U_R = R V S^-1 (another). Replaces the randomized SVD
+            // of the explicit residual, which needs 2q + 2 passes and a distributed tall QR out of
+            // core. As that SVD did, it keeps every vector above 1e-7 of the residual's own largest
+            // (so rounding-level residuals still cue keys until the budget is met); only an
+            // exactly zero residual ends the selection.
+            Eigen::MatrixXd gr = Eigen::MatrixXd::Zero(q.frames(), q.frames());
+            Eigen::MatrixXd r;
+            for (Index bl = 0; bl < q.blockCount(); ++bl) {
+                r = q.block(bl);
+                r.noalias() -= basis.middleRows(q.blockFirstRow(bl), q.blockRows(bl)) * coords;
+                gr.selfadjointView<Eigen::Lower>().rankUpdate(r.transpose());
+            }
+            comm.sum(gr.data(), static_cast<std::size_t>(gr.size()));
+            gr.triangularView<Eigen::StrictlyUpper>() = gr.transpose();
+            next = svdFromGram(Eigen::MatrixXd(0, q.frames()), gr, options.block, 0, 0.0);
+            blockU.resize(q.ownedRows(), next.sigma.size());
             if (next.sigma.size() > 0) {
-                // U_R = R V_R S^-1 = Q (V_R S^-1) - B (C V_R S^-1): two skinny products, and the
-                // residual itself is never formed.
-                const Eigen::MatrixXd vs = next.v * next.sigma.cwiseInverse().asDiagonal();
-                next.u.resize(q.rows(), vs.cols());
-                next.u.noalias() = q * vs;
-                next.u.noalias() -= basis * (coords * vs);
+                vs = next.v * next.sigma.cwiseInverse().asDiagonal();
+                for (Index bl = 0; bl < q.blockCount(); ++bl) {
+                    r = q.block(bl);
+                    r.noalias() -= basis.middleRows(q.blockFirstRow(bl), q.blockRows(bl)) * coords;
+                    blockU.middleRows(q.blockFirstRow(bl), q.blockRows(bl)).noalias() = r * vs;
+                }
             }
         }
-        if (next.sigma.size() == 0) {
-            residual.resize(q.rows(), q.cols());
-            residual = q;
-            residual.noalias() -= basis * coords;
-            SvdOptions svdOptions = options.svd;
-            svdOptions.seed = options.svd.seed + static_cast<unsigned>(round);
-            next = truncatedSvd(residual, options.block, svdOptions);
-        }
-        blockU = std::move(next.u);
         blockSigma = std::move(next.sigma);
         if (blockU.cols() == 0) break;  // the residual is numerically zero: nothing left to cue
     }
     result.keys = keys.keys();
+    result.keyRows = std::move(qk);
     return result;
 }
 

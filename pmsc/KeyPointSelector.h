@@ -1,7 +1,9 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include "pmsc/Communicator.h"
 #include "pmsc/FrameSet.h"
+#include "pmsc/RowBlocks.h"
 #include "pmsc/Subspace.h"
 #include "pmsc/Varimax.h"
 
@@ -54,6 +56,13 @@ void seedKeys(KeySet& keys, const std::vector<Index>& fiducials, const std::vect
 Index addTeleconnectionPair(const Eigen::Ref<const Eigen::VectorXd>& v, Index channels, KeySet& keys,
                             Index budget);
 
+/// The same pair for a vector whose rows are split across ranks (issue 12): `v` holds the rows of
+/// the points [firstPoint, firstPoint + v.size() / C); `keys` is replicated. The arg-max and
+/// arg-min go through argMaxOverRanks (same tie rule: the lower index), and the first point's
+/// loading is sent from its owner, so every rank adds the same keys.
+Index addTeleconnectionPair(const Eigen::Ref<const Eigen::VectorXd>& v, Index channels, KeySet& keys,
+                            Index budget, Communicator& comm, Index firstPoint);
+
 /// The point-multiplication approximation of every column of q with the given keys and basis
 /// (coordinates pinv(B_K) Q_K: minimum norm while the key system is underdetermined) and its
 /// residual: residual = q - basis * coords. Returns the largest point residual (max over points
@@ -73,7 +82,7 @@ Index determinedBasisSize(const Eigen::MatrixXd& basis, Index channels, const st
 /// The largest point residual of q - basis * coords (max over points and frames of the Euclidean
 /// norm over channels) without materialising the residual: rows are processed in cache-sized
 /// blocks, so the training matrix is read once and nothing of its size is written.
-double maxPointResidual(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::MatrixXd& basis,
+double maxPointResidual(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::Ref<const Eigen::MatrixXd>& basis,
                         const Eigen::MatrixXd& coords, Index channels);
 
 /// Options of the teleconnection key selection (section 4).
@@ -95,6 +104,7 @@ struct KeySelection {
     std::vector<Index> keys;              ///< in selection order, no duplicates
     std::vector<double> residualPerRound; ///< largest point residual after each round
     Index rounds = 0;
+    Eigen::MatrixXd keyRows;              ///< Q's rows at the keys (K*C x F), key order
 };
 
 /// The paper's iterative key selection (section 4).
@@ -114,11 +124,9 @@ struct KeySelection {
 /// U_R = R V_R S_R^-1 = Q (V_R S_R^-1) - B (C V_R S_R^-1) is two skinny products: the residual
 /// is never formed (its largest point error comes from maxPointResidual, block by block). That replaces the six (N*C) x F x (B+10) products and
 /// three tall QRs of the randomized SVD per round (a third of the key-selection time at the face
-/// scale). It is used only while 9 F^3 + 2 (N*C) F B flops undercut the randomized SVD (hundreds
-/// of frames, not thousands), and not when the residual is too small for it to be accurate
-/// (sigma_R <= 1e-6 sigma_1(Q): the subtraction cancels, errors ~ eps sigma_1^2 would swamp
-/// sigma_R^2); then the randomized SVD of the explicit
-/// residual is used, as without `gram`.
+/// scale). Since issue 12 it is always used (see the RowBlocks overload below for why and for what
+/// replaces it when the residual is too small for the subtraction, sigma_R <= 1e-6 sigma_1(Q)).
+/// This overload wraps q in MatrixBlocks on one process and computes Q^T Q when `gram` is null.
 /// @param q the mean-removed training matrix, (N*C) x F
 /// @param basis the runtime basis (N*C) x M computed from q, orthonormal columns
 /// @param gram Q^T Q or null
@@ -128,5 +136,19 @@ KeySelection selectKeysTeleconnection(const Eigen::Ref<const Eigen::MatrixXd>& q
                                       const Eigen::VectorXd& firstSigma, Index channels,
                                       const TeleconnectionOptions& options,
                                       const Eigen::MatrixXd* gram = nullptr);
+
+/// The selection above over the rows of Q this process owns (issue 12; the one implementation:
+/// the in-memory overload wraps q in MatrixBlocks). `basis` and `firstBlock` hold the owned rows;
+/// `gram` = Q^T Q is required. Every product with Q is one pass over q's blocks, reduced over
+/// ranks; the residual's leading vectors always come from frame space (see above), because out of
+/// core every product is a read of the data and the randomized route needs 2q + 2 of them per
+/// round plus a distributed tall QR. Decision: when the frame-space subtraction cancels
+/// (sigma_R <= 1e-6 sigma_1(Q)), the Gram of the explicitly formed residual (block by block) is
+/// used instead (vectors down to 1e-7 of its own largest singular value, as the randomized SVD it
+/// replaces kept them); only an exactly zero residual ends the selection.
+KeySelection selectKeysTeleconnection(RowBlocks& q, Communicator& comm, const Eigen::MatrixXd& basis,
+                                      const Eigen::Ref<const Eigen::MatrixXd>& firstBlock,
+                                      const Eigen::VectorXd& firstSigma, const TeleconnectionOptions& options,
+                                      const Eigen::MatrixXd& gram);
 
 }  // namespace pmsc

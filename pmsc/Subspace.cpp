@@ -202,11 +202,11 @@ Index basisSizeForEnergy(const Eigen::VectorXd& sigma, double totalEnergy, doubl
     return sigma.size();
 }
 
-Index basisSizeForMaxError(const Eigen::Ref<const Eigen::MatrixXd>& q, const TruncatedSvd& svd,
-                           Index channels, double maxError, Index maxM, std::vector<double>* errors) {
-    maxM = std::min<Index>(maxM, svd.sigma.size());
-    const Index n = q.cols();
-    std::vector<double> worst(static_cast<size_t>(maxM), 0.0);
+void accumulateBasisErrors(const Eigen::Ref<const Eigen::MatrixXd>& qRows,
+                           const Eigen::Ref<const Eigen::MatrixXd>& uRows, const TruncatedSvd& svd,
+                           Index channels, std::vector<double>& worst) {
+    const Index maxM = static_cast<Index>(worst.size());
+    const Index n = qRows.cols();
     // Chunks of frames small enough that the residual chunk stays in cache while all maxM rank-one
     // downdates sweep over it; the coordinates of a frame are sigma_i v_i[t].
     const Index chunk = 4;
@@ -214,19 +214,31 @@ Index basisSizeForMaxError(const Eigen::Ref<const Eigen::MatrixXd>& q, const Tru
     Eigen::MatrixXd coords;
     for (Index t0 = 0; t0 < n; t0 += chunk) {
         const Index w = std::min(chunk, n - t0);
-        r = q.middleCols(t0, w);
+        r = qRows.middleCols(t0, w);
         coords = (svd.v.middleRows(t0, w).leftCols(maxM) * svd.sigma.head(maxM).asDiagonal()).transpose();
         for (Index i = 0; i < maxM; ++i) {
-            r.noalias() -= svd.u.col(i) * coords.row(i);
+            r.noalias() -= uRows.col(i) * coords.row(i);
             double e = maxPointNorm(r, channels);
             auto& slot = worst[static_cast<size_t>(i)];
             if (!(e <= slot)) slot = e;
         }
     }
-    if (errors) *errors = worst;
+}
+
+Index basisSizeFromErrors(const std::vector<double>& worst, double maxError) {
+    const Index maxM = static_cast<Index>(worst.size());
     for (Index i = 0; i < maxM; ++i)
         if (worst[static_cast<size_t>(i)] <= maxError) return i + 1;
     return maxM + 1;
+}
+
+Index basisSizeForMaxError(const Eigen::Ref<const Eigen::MatrixXd>& q, const TruncatedSvd& svd,
+                           Index channels, double maxError, Index maxM, std::vector<double>* errors) {
+    maxM = std::min<Index>(maxM, svd.sigma.size());
+    std::vector<double> worst(static_cast<size_t>(maxM), 0.0);
+    accumulateBasisErrors(q, svd.u, svd, channels, worst);
+    if (errors) *errors = worst;
+    return basisSizeFromErrors(worst, maxError);
 }
 
 }  // namespace pmsc

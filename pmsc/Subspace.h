@@ -103,4 +103,14 @@ Index basisSizeForMaxError(const Eigen::Ref<const Eigen::MatrixXd>& q, const Tru
                            Index channels, double maxError, Index maxM,
                            std::vector<double>* errors = nullptr);
 
+/// The scan of basisSizeForMaxError over some rows of Q (whole points) and the same rows of U
+/// (svd.u's rows there): worst[i] becomes the max of itself and these rows' largest point error
+/// with i + 1 basis vectors (worst.size() = maxM). Training runs it block by block, then takes the
+/// max over ranks.
+void accumulateBasisErrors(const Eigen::Ref<const Eigen::MatrixXd>& qRows,
+                           const Eigen::Ref<const Eigen::MatrixXd>& uRows, const TruncatedSvd& svd,
+                           Index channels, std::vector<double>& worst);
+/// Smallest M with worst[M - 1] <= maxError, or worst.size() + 1.
+Index basisSizeFromErrors(const std::vector<double>& worst, double maxError);
+
 }  // namespace pmsc

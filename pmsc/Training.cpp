@@ -4,6 +4,7 @@
 #include "pmsc/Errors.h"
 #include "pmsc/KeyPointSelector.h"
 #include "pmsc/QDeim.h"
+#include "pmsc/RowBlockOps.h"
 #include "pmsc/Subspace.h"
 
 #include <algorithm>
@@ -100,13 +101,36 @@ void validateFrames(const FrameSet& frames) {
     }
 }
 
+
+/// Makes sure svd.u (owned rows) has at least `count` left singular vectors: U = Q V S^-1 for
+/// the missing columns, one pass over q.
+void formLeftVectors(RowBlocks& q, TruncatedSvd& svd, Index count) {
+    count = std::min(count, svd.sigma.size());
+    const Index have = svd.u.cols();
+    if (have >= count) return;
+    const Eigen::MatrixXd vs = svd.v.middleCols(have, count - have) *
+                               svd.sigma.segment(have, count - have).cwiseInverse().asDiagonal();
+    const Eigen::MatrixXd more = timesRight(q, vs);
+    svd.u.conservativeResize(q.ownedRows(), count);
+    svd.u.rightCols(count - have) = more;
+}
+
 }  // namespace
 
 Model train(const FrameSet& frames, const TrainingOptions& options, TrainingReport* reportOut) {
+    validateFrames(frames);
+    MatrixBlocks q(frames);
+    SingleProcess one;
+    return train(q, one, options, reportOut);
+}
+
+Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, TrainingReport* reportOut) {
     const auto start = std::chrono::steady_clock::now();
     TrainingReport localReport;
     TrainingReport& report = reportOut ? *reportOut : localReport;
     report = TrainingReport{};
+    report.ranks = comm.size();
+    report.blockPoints = q.blockPoints();
 
     auto progress = [&](std::string_view stage, double done, double total) {
         if (options.progress && !options.progress(stage, done, total)) {
@@ -114,47 +138,51 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
         }
     };
 
-    validateFrames(frames);
-    const Index n = frames.points;
-    const Index channels = frames.channels;
-    const Index f = frames.frames;
+    const Index n = q.points();
+    const Index channels = q.channels();
+    const Index f = q.frames();
+    const Index rows = n * channels;
+    if (f < 2) throw InputError("train: need at least 2 training frames, got " + std::to_string(f));
     validateOptions(options, n, f);
+    {
+        // Every rank checks the designer points (a throw on one rank alone would leave the others
+        // waiting in a collective).
+        KeySet check(n);
+        seedKeys(check, options.fiducials, options.gridPoints);
+    }
 
-    // --- Q: mean-removed training matrix (paper footnote 1), rows x = p*C + c, columns frames.
+    // --- Q: mean-removed training matrix (paper footnote 1), rows x = p*C + c, columns frames;
+    // each block is centred as it is read (RowBlocks). Its Gram matrix Q^T Q is the one pass every
+    // later step reuses: the SVD (section 3), the residual blocks of key selection, calibration.
     progress("mean", 0, 1);
     Model model;
     model.points = n;
     model.channels = channels;
     model.trainFrames = f;
     model.selector = options.selector;
-    Eigen::MatrixXd q;
-    model.mean = removeRowMean(frames.matrix(), q);
-    model.totalEnergy = q.squaredNorm();
+    progress("mean", 1, 1);
+    progress("svd", 0, 1);
+    const Eigen::MatrixXd gram = gramOf(q, comm);
+    model.totalEnergy = gram.trace();
     if (!(model.totalEnergy > 0)) {
         throw InputError("train: the training frames are all identical; there is no motion to learn");
     }
-    progress("mean", 1, 1);
 
-    // --- Subspace (section 3).
-    progress("svd", 0, 1);
-    SvdOptions svdOptions;
-    svdOptions.seed = options.seed;
-    svdOptions.powerIterations = options.powerIterations;
-    const Index cap = std::min({options.maxBasis, f, q.rows()});
+    // --- Subspace (section 3): eig(Q^T Q) gives V and sigma; U = Q V S^-1 is formed (one pass)
+    // once it is known how many columns the M rule and key selection need. Decision: always this
+    // Gram route (Subspace.h weighs it against a randomized SVD in memory): out of core and under
+    // MPI it costs one pass over the data and one reduction of F x F, where the randomized route
+    // needs 2q + 2 passes and a distributed tall QR.
+    const Index cap = std::min({options.maxBasis, f, rows});
     Index wanted = options.basis > 0 ? std::min(options.basis, cap) : cap;
     if (options.basis > cap) {
         report.warnings.push_back("basis " + std::to_string(options.basis) + " capped to " +
                                   std::to_string(cap) + " (min of max basis, frames, N*C)");
     }
     // The first key-selection block needs the top `block` vectors of Q even when M is smaller.
-    const Index svdRank =
-        std::min(std::max({wanted, options.block, options.learnRank}), std::min(f, q.rows()));
-    // U = Q V S^-1 costs a full product per column on the Gram route: form only what the M rule
-    // needs now (the max-error rule scans all of U) and the rest once M is known.
-    const bool needAllU = options.basis <= 0 && options.energy <= 0 && options.basisMaxError > 0;
-    svdOptions.leftVectors = needAllU ? -1 : std::min(svdRank, options.block);
-    TruncatedSvd svd = truncatedSvd(q, svdRank, svdOptions);
-    svdOptions.leftVectors = -1;
+    const Index svdRank = std::min(std::max({wanted, options.block, options.learnRank}), std::min(f, rows));
+    TruncatedSvd svd = svdFromGram(Eigen::MatrixXd(0, f), gram, svdRank, 0);
+    svd.u.resize(q.ownedRows(), 0);
     const Index available = std::min<Index>(cap, svd.sigma.size());
     if (available < 1) throw InputError("train: the training frames have no usable variation");
     progress("svd", 1, 1);
@@ -178,8 +206,14 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
         }
     } else {
         progress("basis-error", 0, 1);
-        std::vector<double> errors;
-        m = basisSizeForMaxError(q, svd, channels, options.basisMaxError, available, &errors);
+        formLeftVectors(q, svd, available);
+        std::vector<double> errors(static_cast<std::size_t>(available), 0.0);
+        for (Index b = 0; b < q.blockCount(); ++b) {
+            accumulateBasisErrors(q.block(b), svd.u.middleRows(q.blockFirstRow(b), q.blockRows(b)), svd, channels,
+                                  errors);
+        }
+        maxOverRanks(comm, errors.data(), errors.size());
+        m = basisSizeFromErrors(errors, options.basisMaxError);
         if (m > available) {
             m = available;
             report.warnings.push_back("basis max error " + num(options.basisMaxError) + " not reached within " +
@@ -190,10 +224,11 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
     }
     report.requestedBasis = m;
     formLeftVectors(q, svd, std::max(m, options.block));
-    Eigen::MatrixXd basis = svd.u.leftCols(m);
+    Eigen::MatrixXd basis = svd.u.leftCols(m);  // owned rows
 
     // --- Key points (section 4).
     std::vector<Index> keys;
+    Eigen::MatrixXd keyRows;  // Q's rows at the keys, K*C x F, replicated
     if (options.selector == Selector::Teleconnection) {
         TeleconnectionOptions t;
         t.maxKeys = options.maxKeys;
@@ -203,25 +238,38 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
         t.gridPoints = options.gridPoints;
         t.varimax.tolerance = options.varimaxTolerance;
         t.varimax.maxIterations = options.varimaxMaxIterations;
-        t.svd = svdOptions;
+        t.svd.seed = options.seed;
+        t.svd.powerIterations = options.powerIterations;
         t.onRound = [&](Index, Index k, double) {
             progress("keys", static_cast<double>(k), static_cast<double>(options.maxKeys));
         };
         progress("keys", 0, static_cast<double>(options.maxKeys));
-        KeySelection sel = selectKeysTeleconnection(q, basis, svd.u, svd.sigma, channels, t,
-                                                    svd.gramRoute ? &svd.gram : nullptr);
+        KeySelection sel = selectKeysTeleconnection(q, comm, basis, svd.u, svd.sigma, t, gram);
         keys = std::move(sel.keys);
+        keyRows = std::move(sel.keyRows);
         report.iterations = sel.rounds;
         report.residualPerRound = std::move(sel.residualPerRound);
     } else {
         progress("keys", 0, static_cast<double>(options.maxKeys));
-        // Validate here so a bad grid point is named as a grid point, not as a fiducial.
-        KeySet check(n);
-        seedKeys(check, options.fiducials, options.gridPoints);
-        const std::vector<Index> seeds = check.keys();
-        QDeimSelection sel = selectKeysQDeim(basis, channels, options.maxKeys, seeds);
-        keys = std::move(sel.keys);
-        report.iterations = sel.passes;
+        // Q-DEIM pivots over every row at once: it runs on rank 0 on the gathered basis (which
+        // rank 0 holds anyway to write the model) and the keys are sent to the others.
+        const Eigen::MatrixXd full = gatherRowsTo(comm, basis, rows, 0);
+        std::vector<double> picked;
+        double passes = 0;
+        if (comm.rank() == 0) {
+            KeySet check(n);
+            seedKeys(check, options.fiducials, options.gridPoints);
+            QDeimSelection sel = selectKeysQDeim(full, channels, options.maxKeys, check.keys());
+            picked.assign(sel.keys.begin(), sel.keys.end());
+            passes = static_cast<double>(sel.passes);
+        }
+        double count[2] = {static_cast<double>(picked.size()), passes};
+        comm.broadcast(count, 2, 0);
+        picked.resize(static_cast<std::size_t>(count[0]));
+        comm.broadcast(picked.data(), picked.size(), 0);
+        for (double k : picked) keys.push_back(static_cast<Index>(k));
+        report.iterations = static_cast<Index>(count[1]);
+        keyRows = keyRowsOfQ(q, comm, keys);
         progress("keys", static_cast<double>(keys.size()), static_cast<double>(options.maxKeys));
     }
     if (static_cast<Index>(keys.size()) < options.maxKeys && options.maxError <= 0) {
@@ -232,7 +280,10 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
     // --- Determinacy: never leave the key system unable to determine the basis (issue 2).
     progress("projector", 0, 1);
     const Index kc = static_cast<Index>(keys.size()) * channels;
-    const Index determined = determinedBasisSize(basis, channels, keys);
+    Eigen::MatrixXd basisKeyRows = keyRowsOf(q, comm, basis, keys);
+    std::vector<Index> keyOrder(keys.size());
+    for (std::size_t i = 0; i < keys.size(); ++i) keyOrder[i] = static_cast<Index>(i);
+    const Index determined = determinedBasisSize(basisKeyRows, channels, keyOrder);
     if (determined < 1) {
         throw InputError("train: the " + std::to_string(keys.size()) +
                          " key points determine no basis vector (their basis rows are all zero)");
@@ -248,25 +299,23 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
                                   ": " + why);
         m = determined;
         basis.conservativeResize(Eigen::NoChange, m);
+        basisKeyRows.conservativeResize(Eigen::NoChange, m);
     }
     if (kc == m) {
         report.warnings.push_back("K*C == M (" + std::to_string(kc) +
                                   "): the key residual is identically zero, so the soft-cache error "
                                   "monitor is blind; add keys or reduce M");
     }
-    model.basis = std::move(basis);
     model.singularValues = svd.sigma.head(m);
     model.keyPoints = keys;
-    model.projector = makeProjector(model.basis, channels, keys);
+    model.projector = projectorFromKeyRows(basisKeyRows, channels);
     if (reportedResidualIsFinal) {
         // The last selection round already approximated the training set with exactly these keys
         // and this basis; recomputing would cost another (N*C) x M x F product.
         model.trainMaxPointResidual = report.residualPerRound.back();
     } else {
-        // The projector just made gives the coordinates; the residual is reduced block by block,
-        // never formed (at the ICT face's size it would be 80,157 x 600 doubles, 385 MB).
-        model.trainMaxPointResidual =
-            maxPointResidual(q, model.basis, model.projector * gatherKeyRows(q, channels, keys), channels);
+        // The residual is reduced block by block, never formed.
+        model.trainMaxPointResidual = maxPointResidualOf(q, comm, basis, model.projector * keyRows);
     }
     if (options.selector == Selector::QDeim) report.residualPerRound.push_back(model.trainMaxPointResidual);
     progress("projector", 1, 1);
@@ -275,11 +324,11 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
     progress("calibration", 0, 1);
     if (options.tolerance > 0) {
         report.calibration =
-            calibrate(q, channels, keys, m, options.tolerance, options.calibrationSlices, svdOptions,
-                      svd.gramRoute ? &svd.gram : nullptr, options.calibrationRule, options.calibrationCoverage);
+            calibrate(q, comm, keyRows, keys, m, options.tolerance, options.calibrationSlices, gram,
+                      options.calibrationRule, options.calibrationCoverage);
         model.tolerance = options.tolerance;
     } else {
-        report.calibration = thresholdsFromTraining(q, model.basis, channels, keys, model.projector);
+        report.calibration = thresholdsFromKeyRows(keyRows, basisKeyRows, channels, model.projector);
     }
     for (const auto& note : report.calibration.notes) report.warnings.push_back(note);
     model.epsMin = report.calibration.epsMin;
@@ -296,7 +345,8 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
         }
         const Index stored = std::min<Index>(learning.maxRank, svd.sigma.size());
         formLeftVectors(q, svd, stored);
-        learning.extraBasis = svd.u.middleCols(m, stored - m);
+        // Owned rows on each rank; rank 0, which writes the model, gathers them.
+        learning.extraBasis = gatherRowsTo(comm, Eigen::MatrixXd(svd.u.middleCols(m, stored - m)), rows, 0);
         learning.extraSigma = svd.sigma.segment(m, stored - m);
         learning.maxKeys = options.maxKeys;
         learning.block = options.block;
@@ -307,7 +357,10 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
         if (options.tolerance > 0) model.calibrationRecord = CalibrationRecord::from(report.calibration);
     }
 
-    model.validate();
+    // --- The (N*C)-row arrays go to rank 0, which writes the model.
+    model.basis = gatherRowsTo(comm, basis, rows, 0);
+    model.mean = gatherRowsTo(comm, q.mean(), rows, 0);
+    if (comm.rank() == 0) model.validate();
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return model;
 }

@@ -2,6 +2,9 @@
 #pragma once
 
 #include "pmsc/Calibration.h"
+#include "pmsc/Errors.h"  // Cancelled
+#include "pmsc/Communicator.h"
+#include "pmsc/RowBlocks.h"
 #include "pmsc/FrameSet.h"
 #include "pmsc/Model.h"
 
@@ -16,11 +19,6 @@ namespace pmsc {
 /// Progress hook for long operations: (stage, done, total). Return false to
 /// cancel (training then throws pmsc::Cancelled).
 using ProgressFn = std::function<bool(std::string_view stage, double done, double total)>;
-
-/// Thrown when a progress hook asks to stop.
-struct Cancelled : std::runtime_error {
-    using std::runtime_error::runtime_error;
-};
 
 /// Everything `pmsc train` can set. Zero means "not set" where noted.
 struct TrainingOptions {
@@ -75,6 +73,8 @@ struct TrainingReport {
     /// How eps was set: the calibration's ratio r and per-frame key RMS / largest point error on
     /// held-out frames (options.tolerance > 0), or the training frames' key RMS otherwise.
     CalibrationStats calibration;
+    int ranks = 1;           ///< processes the rows of Q were split across (MPI ranks)
+    Index blockPoints = 0;   ///< points per block of Q read at a time (this rank)
 };
 
 /// Trains a model from frames: mean removal, truncated SVD, key-point selection,
@@ -87,5 +87,25 @@ struct TrainingReport {
 ///         that cannot be used: a NaN or Inf (message names frame, point and channel), fewer than
 ///         2 frames, or frames that do not vary.
 Model train(const FrameSet& frames, const TrainingOptions& options, TrainingReport* report = nullptr);
+
+/// Training over the rows of Q this process owns (issue 12): the one implementation, which the
+/// overload above runs on one in-memory block. Out of core (NpyBlocks) every product with Q is a
+/// pass over its blocks; under MPI (a Communicator of P ranks) each rank owns a contiguous share
+/// of the points and every reduction (Gram matrix, Varimax sums, the key arg-max, residual and
+/// calibration maxima) goes through `comm`, so all ranks take the same decisions.
+///
+/// Memory bound (per rank; trainingMemoryBound() in RowBlocks.h computes it), in doubles, with
+/// F frames, r = min(max(max basis, block), F), B the Varimax block, K the key budget, R the owned
+/// rows (N*C/P) and b the rows of one block of Q:
+///   5 F^2 (Q^T Q, its eigensolver, a round's residual Gram)  + 3 r F  (V, B^T Q, coordinates)
+///   + 2 R r (U and the basis) + 4 R B (Varimax block, its rotation, the next block)
+///   + K C (F + r) (key rows of Q and of the basis) + 3 b F (the block read, a residual block)
+///   + on rank 0: 3 N C (r + 1) (the gathered basis and mean, the model written)
+/// plus N bytes of key flags. Nothing is of size N*C*F: a training set far larger than memory
+/// trains as long as this fits.
+///
+/// The returned model is complete on rank 0 only: the other ranks' model has no mean and basis
+/// (they are gathered to rank 0).
+Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, TrainingReport* report = nullptr);
 
 }  // namespace pmsc

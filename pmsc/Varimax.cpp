@@ -20,16 +20,37 @@ double varimaxCriterion(const Eigen::Ref<const Eigen::MatrixXd>& z) {
 }
 
 VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const VarimaxOptions& options) {
+    SingleProcess one;
+    return varimax(loadings, options, one);
+}
+
+VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const VarimaxOptions& options,
+                      Communicator& comm) {
     if (!(options.tolerance >= 0)) throw std::invalid_argument("varimax: tolerance must be >= 0");
     if (options.maxIterations < 0) throw std::invalid_argument("varimax: negative iteration cap");
-    const Index p = loadings.rows();
+    const Index localRows = loadings.rows();
+    double rowCount = static_cast<double>(localRows);
+    comm.sum(&rowCount, 1);
+    const Index p = static_cast<Index>(rowCount);
     const Index k = loadings.cols();
     VarimaxResult result;
     result.rotation = Eigen::MatrixXd::Identity(k, k);
     if (k < 2 || p == 0) {
         result.rotated = loadings;
         result.converged = true;
-        result.objective.push_back(varimaxCriterion(loadings));
+        // The criterion from the column moments summed over ranks (varimaxCriterion on one rank).
+        Eigen::VectorXd moments(2 * k);
+        for (Index j = 0; j < k; ++j) {
+            moments[j] = loadings.col(j).squaredNorm();
+            moments[k + j] = loadings.col(j).array().square().square().sum();
+        }
+        comm.sum(moments.data(), static_cast<std::size_t>(moments.size()));
+        double total = 0;
+        for (Index j = 0; j < k && p > 0; ++j) {
+            const double m2 = moments[j] / static_cast<double>(p);
+            total += moments[k + j] / static_cast<double>(p) - m2 * m2;
+        }
+        result.objective.push_back(total);
         return result;
     }
 
@@ -38,7 +59,7 @@ VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const V
     if (options.normalize) {
         scale = x.rowwise().norm();
         // A zero row has no direction to normalise; leave it (it contributes nothing either way).
-        for (Index i = 0; i < p; ++i)
+        for (Index i = 0; i < localRows; ++i)
             if (scale[i] > 0) x.row(i) /= scale[i];
     }
 
@@ -47,8 +68,9 @@ VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const V
     // iteration. Each iteration therefore streams X once, in row chunks small enough to stay in
     // cache: Z, Z.^3, the column moments (criterion) and X^T Z.^3 are all made from the chunk
     // while it is hot, and Z itself is never stored until the end.
-    const Eigen::MatrixXd xtx = x.transpose() * x;
-    const Index chunk = std::min<Index>(p, 512);
+    Eigen::MatrixXd xtx = x.transpose() * x;
+    comm.sum(xtx.data(), static_cast<std::size_t>(xtx.size()));
+    const Index chunk = std::max<Index>(1, std::min<Index>(localRows, 512));
     Eigen::MatrixXd zc(chunk, k);
     Eigen::MatrixXd cubes(chunk, k);
     Eigen::VectorXd colSquares(k);
@@ -60,8 +82,8 @@ VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const V
         g.setZero();
         colSquares.setZero();
         colQuartics.setZero();
-        for (Index r0 = 0; r0 < p; r0 += chunk) {
-            const Index h = std::min(chunk, p - r0);
+        for (Index r0 = 0; r0 < localRows; r0 += chunk) {
+            const Index h = std::min(chunk, localRows - r0);
             auto z = zc.topRows(h);
             auto c = cubes.topRows(h);
             z.noalias() = x.middleRows(r0, h) * result.rotation;
@@ -78,6 +100,17 @@ VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const V
                 colQuartics[j] += s4;
             }
             g.noalias() += x.middleRows(r0, h).transpose() * c;
+        }
+        if (comm.size() > 1) {
+            // One reduction per step: G's partial sums and both column moments.
+            Eigen::VectorXd sums(k * k + 2 * k);
+            sums.head(k * k) = Eigen::Map<const Eigen::VectorXd>(g.data(), k * k);
+            sums.segment(k * k, k) = colSquares;
+            sums.tail(k) = colQuartics;
+            comm.sum(sums.data(), static_cast<std::size_t>(sums.size()));
+            g = Eigen::Map<const Eigen::MatrixXd>(sums.data(), k, k);
+            colSquares = sums.segment(k * k, k);
+            colQuartics = sums.tail(k);
         }
         g.noalias() -= xtx * result.rotation * (colSquares * inverseRows).asDiagonal();
         const Eigen::ArrayXd m2 = colSquares.array() * inverseRows;
@@ -102,7 +135,7 @@ VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const V
     }
     Eigen::MatrixXd z = x * result.rotation;
     if (options.normalize) {
-        for (Index i = 0; i < p; ++i)
+        for (Index i = 0; i < localRows; ++i)
             if (scale[i] > 0) z.row(i) *= scale[i];
     }
     result.rotated = std::move(z);

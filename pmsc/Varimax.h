@@ -1,6 +1,7 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include "pmsc/Communicator.h"
 #include "pmsc/FrameSet.h"
 
 #include <Eigen/Core>
@@ -40,5 +41,12 @@ double varimaxCriterion(const Eigen::Ref<const Eigen::MatrixXd>& z);
 /// decreases. Stops when the relative gain of the criterion is below options.tolerance.
 /// A block of one column is returned unrotated.
 VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const VarimaxOptions& options = {});
+
+/// The same rotation of a block whose rows are split across ranks (issue 12): `loadings` holds
+/// this rank's rows, the criterion's column moments and the gradient G are summed over ranks (one
+/// B x B + 2B reduction per step), so every rank takes the same steps and gets the same rotation;
+/// `rotated` holds this rank's rows. The single-process varimax above is this with one rank.
+VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const VarimaxOptions& options,
+                      Communicator& comm);
 
 }  // namespace pmsc

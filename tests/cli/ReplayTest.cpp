@@ -1,6 +1,6 @@
 #include "cli/EvaluatorRegistry.h"
 #include "cli/Replay.h"
-#include "cli/ReplayEvaluator.h"
+#include "evaluators/ReplayEvaluator.h"
 #include "pmsc/Errors.h"
 #include "pmsc/Training.h"
 
@@ -51,10 +51,10 @@ pmsc::Model tinyModel(double epsMin, double epsMax) {
     return m;
 }
 
-pmsc::cli::ReplayEvaluator recording(std::vector<double> values, Index frames) {
+pmsc::evaluators::ReplayEvaluator recording(std::vector<double> values, Index frames) {
     pmsc::FrameFile file{pmsc::FrameSet(frames, 3, 1), pmsc::NpyDtype::Float64};
     file.frames.values = std::move(values);
-    return pmsc::cli::ReplayEvaluator(std::move(file), "test");
+    return pmsc::evaluators::ReplayEvaluator(std::move(file), "test");
 }
 
 TEST(ReplayFrame, HitBlendAndMissProduceTheSoftCachedFrame) {

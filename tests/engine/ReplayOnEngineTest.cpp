@@ -1,7 +1,7 @@
 // `pmsc replay` on the engine (cli/Replay.cpp): the same output, bit for bit, as the plain
 // per-frame replayFrame(), and the same at 1 and 2 threads, on a shot with hits, blends and misses.
 #include "cli/Replay.h"
-#include "cli/ReplayEvaluator.h"
+#include "evaluators/ReplayEvaluator.h"
 #include "pmsc/NpyIO.h"
 #include "tests/engine/Synthetic.h"
 #include "tests/io/TempDir.h"
@@ -24,7 +24,7 @@ TEST(ReplayOnEngine, SameBitsAsThePlainLoopAndAtAnyThreadCount) {
     FrameFile file;
     file.frames = evaluateFrames(synthetic, 0, 48);
     file.dtype = NpyDtype::Float64;
-    const cli::ReplayEvaluator recorded(file, "synthetic");
+    const evaluators::ReplayEvaluator recorded(file, "synthetic");
 
     // The reference: replayFrame() frame by frame, serially.
     const PointMultiplier pm(model);

@@ -3,8 +3,8 @@
 // The skin:ASSET evaluator: posing checked against hand-computed linear blend skinning and morph
 // targets on small glTF files written here, then subset == full bit for bit and thread safety on
 // real animated characters from Debian's assimp-testmodels.
-#include "examples/skin/ObjFrameWriter.h"
-#include "examples/skin/SkinEvaluator.h"
+#include "evaluators/ObjFrameWriter.h"
+#include "evaluators/SkinEvaluator.h"
 #include "pmsc/Errors.h"
 
 #include <gtest/gtest.h>
@@ -25,8 +25,8 @@
 
 namespace fs = std::filesystem;
 using pmsc::Index;
-using pmsc::skin::SkinEvaluator;
-using pmsc::skin::SkinOptions;
+using pmsc::evaluators::SkinEvaluator;
+using pmsc::evaluators::SkinOptions;
 
 namespace {
 
@@ -315,17 +315,17 @@ TEST(SkinEvaluator, UnreadableAssetsAreInputErrorsOnOneLine) {
 }
 
 TEST(SkinEvaluator, ParsesOptionsFromTheEndOfTheSpec) {
-    auto o = pmsc::skin::parseSkinArgs("/a/b.fbx:fps=30:animation=Walk");
+    auto o = pmsc::evaluators::parseSkinArgs("/a/b.fbx:fps=30:animation=Walk");
     EXPECT_EQ(o.path, "/a/b.fbx");
     EXPECT_EQ(o.fps, 30);
     EXPECT_EQ(o.animation, "Walk");
-    o = pmsc::skin::parseSkinArgs("C:/odd:path.gltf");
+    o = pmsc::evaluators::parseSkinArgs("C:/odd:path.gltf");
     EXPECT_EQ(o.path, "C:/odd:path.gltf");
     EXPECT_EQ(o.fps, 24);
-    EXPECT_THROW(pmsc::skin::parseSkinArgs("a.gltf:fps=0"), pmsc::InputError);
-    EXPECT_THROW(pmsc::skin::parseSkinArgs("a.gltf:fps=x"), pmsc::InputError);
-    EXPECT_THROW(pmsc::skin::parseSkinArgs("a.gltf:speed=2"), pmsc::InputError);
-    EXPECT_THROW(pmsc::skin::parseSkinArgs(""), pmsc::InputError);
+    EXPECT_THROW(pmsc::evaluators::parseSkinArgs("a.gltf:fps=0"), pmsc::InputError);
+    EXPECT_THROW(pmsc::evaluators::parseSkinArgs("a.gltf:fps=x"), pmsc::InputError);
+    EXPECT_THROW(pmsc::evaluators::parseSkinArgs("a.gltf:speed=2"), pmsc::InputError);
+    EXPECT_THROW(pmsc::evaluators::parseSkinArgs(""), pmsc::InputError);
 }
 
 // --- real characters --------------------------------------------------------------------------------
@@ -368,7 +368,7 @@ double largestMove(const SkinEvaluator& e) {
 
 TEST(SkinEvaluatorOnTestModels, WusonWalkSubsetEqualsFullBitForBit) {
     REQUIRE_MODEL(path, "X/Testwuson.X");
-    auto e = pmsc::skin::makeSkinEvaluator(path + ":animation=Wuson_Walk");
+    auto e = pmsc::evaluators::makeSkinEvaluator(path + ":animation=Wuson_Walk");
     EXPECT_EQ(e->animationName(), "Wuson_Walk");
     EXPECT_EQ(e->pointCount(), 11196);
     EXPECT_EQ(e->frameCount(), 87);  // 17280 ticks at 4800/s = 3.6 s at 24 fps, both ends
@@ -379,7 +379,7 @@ TEST(SkinEvaluatorOnTestModels, WusonWalkSubsetEqualsFullBitForBit) {
 
 TEST(SkinEvaluatorOnTestModels, ThreeMeshCharacterSubsetEqualsFullBitForBit) {
     REQUIRE_MODEL(path, "X/BCN_Epileptic.X");
-    auto e = pmsc::skin::makeSkinEvaluator(path);
+    auto e = pmsc::evaluators::makeSkinEvaluator(path);
     ASSERT_EQ(e->meshOffsets().size(), 4u);  // three meshes concatenated in scene order
     EXPECT_EQ(e->meshOffsets().back(), e->pointCount());
     EXPECT_GT(largestMove(*e), 0.1);
@@ -388,12 +388,12 @@ TEST(SkinEvaluatorOnTestModels, ThreeMeshCharacterSubsetEqualsFullBitForBit) {
 
 TEST(SkinEvaluatorOnTestModels, FbxAndMorphAssetsSubsetEqualsFullBitForBit) {
     REQUIRE_MODEL(fbx, "FBX/animation_with_skeleton.fbx");
-    auto skinned = pmsc::skin::makeSkinEvaluator(fbx);
+    auto skinned = pmsc::evaluators::makeSkinEvaluator(fbx);
     EXPECT_GT(largestMove(*skinned), 0.01);
     expectSubsetsMatchFullPose(*skinned);
 
     REQUIRE_MODEL(cube, "glTF2/glTF-Sample-Models/AnimatedMorphCube-glTF/AnimatedMorphCube.gltf");
-    auto morph = pmsc::skin::makeSkinEvaluator(cube);
+    auto morph = pmsc::evaluators::makeSkinEvaluator(cube);
     EXPECT_EQ(morph->morphTargetCount(), 2);
     EXPECT_GT(largestMove(*morph), 0.001) << "the morph weights must move the cube";
     expectSubsetsMatchFullPose(*morph);
@@ -401,7 +401,7 @@ TEST(SkinEvaluatorOnTestModels, FbxAndMorphAssetsSubsetEqualsFullBitForBit) {
 
 TEST(SkinEvaluatorOnTestModels, ConcurrentEvaluationEqualsSerial) {
     REQUIRE_MODEL(path, "X/Testwuson.X");
-    auto e = pmsc::skin::makeSkinEvaluator(path + ":animation=Wuson_Run");
+    auto e = pmsc::evaluators::makeSkinEvaluator(path + ":animation=Wuson_Run");
     const Index frames = e->frameCount();
     std::vector<std::vector<double>> serial;
     for (Index f = 0; f < frames; ++f) serial.push_back(evaluateAll(*e, f));
@@ -419,7 +419,7 @@ TEST(SkinEvaluatorOnTestModels, ConcurrentEvaluationEqualsSerial) {
 TEST(SkinEvaluatorOnTestModels, AssetWithoutAnimationIsRejected) {
     REQUIRE_MODEL(path, "IQM/mrfixit.iqm");
     try {
-        pmsc::skin::makeSkinEvaluator(path);
+        pmsc::evaluators::makeSkinEvaluator(path);
         FAIL() << "expected an InputError";
     } catch (const pmsc::InputError& e) {
         EXPECT_NE(std::string(e.what()).find("has no animation"), std::string::npos) << e.what();
@@ -432,7 +432,7 @@ TEST(ObjFrameWriter, RoundTripsValuesExactlyAndRejectsDamagedFiles) {
     const ScratchDir scratch;
     const fs::path& dir = scratch.path;
     const std::vector<std::int64_t> tris{0, 1, 2, 1, 3, 2};
-    pmsc::skin::ObjFrameWriter w(4, &tris);
+    pmsc::evaluators::ObjFrameWriter w(4, &tris);
     EXPECT_EQ(w.extension(), ".obj");
     const std::vector<double> v{0.1, -2.5e-17, 3, 1.0 / 3, 2, 1e300, -0.0, 5, 6, 7, 8, 9.000000000000002};
     const std::string path = (dir / "f.obj").string();
@@ -459,7 +459,7 @@ TEST(ObjFrameWriter, RoundTripsValuesExactlyAndRejectsDamagedFiles) {
     }
     std::ofstream(path, std::ios::trunc) << text.substr(0, text.size() / 2);
     EXPECT_FALSE(w.isValid(path));
-    pmsc::skin::ObjFrameWriter five(5, &tris);
+    pmsc::evaluators::ObjFrameWriter five(5, &tris);
     w.write(path, 7, v.data());
     EXPECT_FALSE(five.isValid(path));
     std::ofstream(path, std::ios::trunc) << "v 1 2 nan\n";

@@ -7,7 +7,7 @@
 #include <memory>
 #include <string>
 
-namespace pmsc::cli {
+namespace pmsc::evaluators {
 
 /// Recorded frames standing in for the expensive calculation (`pmsc replay`,
 /// evaluator spec "replay:FILE.npy"): evaluating a point of a frame reads its
@@ -45,4 +45,4 @@ private:
     NpyDtype dtype_ = NpyDtype::Float64;
 };
 
-}  // namespace pmsc::cli
+}  // namespace pmsc::evaluators

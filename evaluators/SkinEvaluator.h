@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-namespace pmsc::skin {
+namespace pmsc::evaluators {
 
 /// How to pose an asset: which file, which animation, how frames map to time.
 struct SkinOptions {
@@ -94,4 +94,4 @@ private:
 /// `skin:ARGS` of the command line -> an evaluator.
 std::unique_ptr<SkinEvaluator> makeSkinEvaluator(const std::string& args);
 
-}  // namespace pmsc::skin
+}  // namespace pmsc::evaluators

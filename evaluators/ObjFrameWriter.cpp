@@ -1,5 +1,5 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
-#include "examples/skin/ObjFrameWriter.h"
+#include "evaluators/ObjFrameWriter.h"
 
 #include "pmsc/Errors.h"
 
@@ -11,7 +11,7 @@
 #include <fstream>
 #include <string>
 
-namespace pmsc::skin {
+namespace pmsc::evaluators {
 
 ObjFrameWriter::ObjFrameWriter(Index points, const std::vector<std::int64_t>* triangles)
     : points_(points), triangles_(triangles) {}
@@ -87,4 +87,4 @@ bool ObjFrameWriter::isValid(const std::string& path) const {
     return !in.bad() && vertices == points_ && faces * 3 == triangles_->size();
 }
 
-}  // namespace pmsc::skin
+}  // namespace pmsc::evaluators

@@ -3,9 +3,9 @@
 // The only translation unit that includes Assimp: everything the evaluator needs is copied out of
 // the aiScene into plain arrays of doubles at load time, so posing never touches Assimp (whose
 // scene is not documented as safe to read from many threads) and the header stays light.
-#include "examples/skin/SkinEvaluator.h"
+#include "evaluators/SkinEvaluator.h"
 
-#include "examples/skin/ObjFrameWriter.h"
+#include "evaluators/ObjFrameWriter.h"
 #include "pmsc/Errors.h"
 
 #include <assimp/postprocess.h>
@@ -20,7 +20,7 @@
 #include <stdexcept>
 #include <unordered_map>
 
-namespace pmsc::skin {
+namespace pmsc::evaluators {
 
 namespace {
 
@@ -546,4 +546,4 @@ std::unique_ptr<SkinEvaluator> makeSkinEvaluator(const std::string& args) {
     return std::make_unique<SkinEvaluator>(parseSkinArgs(args));
 }
 
-}  // namespace pmsc::skin
+}  // namespace pmsc::evaluators

@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <vector>
 
-namespace pmsc::skin {
+namespace pmsc::evaluators {
 
 /// One posed frame of a triangle mesh as Wavefront .obj: a comment line
 /// naming the frame, N `v x y z` lines (shortest decimal that reads back to
@@ -32,4 +32,4 @@ private:
     const std::vector<std::int64_t>* triangles_;
 };
 
-}  // namespace pmsc::skin
+}  // namespace pmsc::evaluators

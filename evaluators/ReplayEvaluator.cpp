@@ -1,10 +1,10 @@
-#include "cli/ReplayEvaluator.h"
+#include "evaluators/ReplayEvaluator.h"
 
 #include <algorithm>
 #include <stdexcept>
 #include <utility>
 
-namespace pmsc::cli {
+namespace pmsc::evaluators {
 
 ReplayEvaluator::ReplayEvaluator(const std::string& path)
     : mapped_(std::make_unique<const MappedFrames>(path)),
@@ -54,4 +54,4 @@ void ReplayEvaluator::evaluateAll(Index frame, double* out) const {
     std::copy_n(memory_.frames.frame(frame), memory_.frames.rows(), out);
 }
 
-}  // namespace pmsc::cli
+}  // namespace pmsc::evaluators

@@ -1,0 +1,290 @@
+// Training past one machine (issue 12): out-of-core streaming, several shots as one training set,
+// MPI ranks, and training under an address-space limit smaller than the training matrix. Every
+// path must give the model of in-memory, single-process training: the same M and keys, bases
+// within 1e-9 principal angle, the same largest training residual.
+#include "../cli/CliRunner.h"
+#include "pmsc/Communicator.h"
+#include "pmsc/ModelIO.h"
+#include "pmsc/NpyIO.h"
+#include "pmsc/RowBlocks.h"
+#include "pmsc/Training.h"
+
+#include <Eigen/SVD>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace pmsc::test {
+namespace {
+
+/// Writes a synthetic shot (pmsc_scaleout_frames) and returns its path.
+std::string makeFrames(const TempDir& dir, const std::string& name, int grid, int frames, unsigned seed = 1,
+                       const std::string& dtype = "float64", const std::string& extra = "") {
+    const std::string path = dir.file(name);
+    const std::string command = shellQuote(PMSC_FRAMES_TOOL) + " " + shellQuote(path) + " " + std::to_string(grid) +
+                                " " + std::to_string(frames) + " " + std::to_string(seed) + " " + dtype + " " + extra;
+    if (std::system(command.c_str()) != 0) throw std::runtime_error("cannot make frames: " + command);
+    return path;
+}
+
+/// sin of the largest principal angle between the column spaces of two orthonormal bases:
+/// ||B - A (A^T B)||_2.
+double basisAngle(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
+    const Eigen::MatrixXd r = b - a * (a.transpose() * b);
+    return Eigen::JacobiSVD<Eigen::MatrixXd>(r).singularValues()(0);
+}
+
+/// The agreement the issue asks for. Returns a description of the first difference, or "".
+void expectSameModel(const Model& a, const Model& b, const std::string& what) {
+    SCOPED_TRACE(what);
+    ASSERT_EQ(a.basisSize(), b.basisSize()) << "M differs";
+    ASSERT_EQ(a.keyPoints, b.keyPoints) << "keys differ";
+    EXPECT_LT(basisAngle(a.basis, b.basis), 1e-9) << "bases differ";
+    EXPECT_NEAR(a.trainMaxPointResidual, b.trainMaxPointResidual, 1e-9 * a.trainMaxPointResidual + 1e-15);
+    EXPECT_LT((a.mean - b.mean).cwiseAbs().maxCoeff(), 1e-12);
+    EXPECT_NEAR(a.epsMin, b.epsMin, 1e-7 * a.epsMin + 1e-15);
+    EXPECT_NEAR(a.totalEnergy, b.totalEnergy, 1e-10 * a.totalEnergy);
+}
+
+TrainingOptions smallOptions() {
+    TrainingOptions o;
+    o.maxKeys = 30;
+    o.maxBasis = 40;
+    return o;
+}
+
+// --- in process: the shared algorithm on a streamed RowBlocks equals the in-memory one ----------
+
+struct Case {
+    const char* name;
+    void (*set)(TrainingOptions&);
+};
+
+TEST(OutOfCore, StreamedBlocksTrainTheInMemoryModel) {
+    TempDir dir;
+    const std::string path = makeFrames(dir, "train.npy", 24, 150);
+    const FrameSet frames = readFrames(path).frames;
+    const Case cases[] = {
+        {"energy rule, uncalibrated", [](TrainingOptions&) {}},
+        {"calibrated", [](TrainingOptions& o) { o.tolerance = 0.02; }},
+        {"max-error basis rule", [](TrainingOptions& o) { o.basisMaxError = 0.01; }},
+        {"Q-DEIM", [](TrainingOptions& o) { o.selector = Selector::QDeim; }},
+        {"fiducials, max error", [](TrainingOptions& o) {
+             o.fiducials = {3, 200};
+             o.maxError = 0.004;
+         }},
+    };
+    for (const Case& c : cases) {
+        TrainingOptions o = smallOptions();
+        c.set(o);
+        TrainingReport inMemoryReport, streamedReport;
+        const Model inMemory = train(frames, o, &inMemoryReport);
+        // Blocks of 37 points: blocks end mid-row of the 24-point grid and the last one is short.
+        NpyBlocks blocks(openShots({path}), {0, frames.points}, 37);
+        SingleProcess one;
+        const Model streamed = train(blocks, one, o, &streamedReport);
+        EXPECT_GT(blocks.blockCount(), 10);
+        expectSameModel(inMemory, streamed, c.name);
+        EXPECT_EQ(inMemoryReport.iterations, streamedReport.iterations) << c.name;
+    }
+}
+
+TEST(OutOfCore, Float32ShotsStreamLikeInMemory) {
+    TempDir dir;
+    const std::string path = makeFrames(dir, "train32.npy", 20, 90, 3, "float32");
+    const Model inMemory = train(readFrames(path).frames, smallOptions());
+    NpyBlocks blocks(openShots({path}), {0, 400}, 64);
+    SingleProcess one;
+    expectSameModel(inMemory, train(blocks, one, smallOptions()), "float32");
+}
+
+TEST(OutOfCore, BoundGrowsWithTheBlockNotWithTheFrameMatrix) {
+    // Ten times the points at the same F and block: only the per-row terms (basis, Varimax block)
+    // grow, never an N*C*F term.
+    const auto small = trainingMemoryBound(10000, 3, 1000, 16, 16, 40, 100, 1, false);
+    const auto large = trainingMemoryBound(100000, 3, 1000, 16, 16, 40, 100, 1, false);
+    EXPECT_LT(static_cast<double>(large - small), 0.1 * 90000.0 * 3 * 1000 * 8);
+    EXPECT_GT(trainingMemoryBound(10000, 3, 1000, 16, 16, 40, 0, 1, true), 2u * 10000 * 3 * 1000 * 8);
+}
+
+// --- the program: several shots, bad inputs ----------------------------------------------------
+
+TEST(TrainCli, TwoShotsAreOneTrainingSet) {
+    TempDir dir;
+    const std::string a = makeFrames(dir, "a.npy", 20, 70, 1);
+    const std::string b = makeFrames(dir, "b.npy", 20, 50, 2, "float32");
+    FrameSet both(120, 400, 3);
+    const FrameSet fa = readFrames(a).frames, fb = readFrames(b).frames;
+    std::copy(fa.values.begin(), fa.values.end(), both.frame(0));
+    std::copy(fb.values.begin(), fb.values.end(), both.frame(70));
+    const Model reference = train(both, smallOptions());
+    for (const bool stream : {true, false}) {
+        const std::string out = dir.file(stream ? "streamed.pmsc" : "in-memory.pmsc");
+        std::vector<std::string> args = {"train", "--frames", a, "--frames", b, "--out", out, "--max-keys", "30",
+                                         "--max-basis", "40", "--block-points", "33", "--quiet"};
+        if (stream) args.push_back("--out-of-core");
+        const RunResult r = runPmsc(dir, args);
+        ASSERT_EQ(r.exitCode, 0) << r.err;
+        EXPECT_NE(r.out.find("120 frames x 400 points"), std::string::npos) << r.out;
+        EXPECT_NE(r.out.find("2 --frames files"), std::string::npos) << r.out;
+        EXPECT_NE(r.out.find(stream ? "streamed from disk in blocks of 33 points" : "in memory"), std::string::npos)
+            << r.out;
+        expectSameModel(reference, readModel(out), stream ? "streamed" : "in memory");
+    }
+}
+
+TEST(TrainCli, BadInputsAreOneLineAndExitCode2) {
+    TempDir dir;
+    const std::string a = makeFrames(dir, "a.npy", 20, 40, 1);
+    const std::string other = makeFrames(dir, "other.npy", 21, 40, 1);
+    const std::string nan = makeFrames(dir, "nan.npy", 20, 40, 1, "float64", "nan=17:123");
+    const std::string out = dir.file("m.pmsc");
+    struct Bad {
+        std::vector<std::string> args;
+        std::string says;
+    };
+    const Bad bads[] = {
+        {{"--frames", a, "--frames", other}, "same N and C"},
+        {{"--frames", a, "--memory-limit", "1M"}, "cannot be met"},
+        {{"--frames", a, "--memory-limit", "lots"}, "is not a size"},
+        // In memory needs ~3.8 MB here, streaming ~3.1 MB plus 2.9 kB a point of block.
+        {{"--frames", a, "--memory-limit", "3.5M", "--block-points", "1000"}, "does not fit"},
+        {{"--frames", a, "--frames", nan, "--out-of-core"}, "frame 17, point 123, channel 1 is nan"},
+        {{"--frames", a, "--frames", dir.file("missing.npy")}, "no such file"},
+    };
+    for (const Bad& bad : bads) {
+        std::vector<std::string> args = {"train", "--out", out, "--quiet"};
+        args.insert(args.end(), bad.args.begin(), bad.args.end());
+        const RunResult r = runPmsc(dir, args);
+        EXPECT_EQ(r.exitCode, 2) << bad.says << ": " << r.err;
+        ASSERT_EQ(r.errLines().size(), 1u) << r.err;
+        EXPECT_EQ(r.err.rfind("pmsc: ", 0), 0u) << r.err;
+        EXPECT_NE(r.err.find(bad.says), std::string::npos) << r.err;
+        EXPECT_FALSE(std::filesystem::exists(out)) << bad.says;
+    }
+}
+
+// --- MPI: mpirun -n 2 on this machine ----------------------------------------------------------
+
+#ifdef PMSC_MPIEXEC
+std::string mpirun(int ranks) {
+    // Root is allowed (CI and containers run as root); --oversubscribe because a CI machine may
+    // have fewer cores than ranks.
+    return std::string("env OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 ") +
+           PMSC_MPIEXEC + " --oversubscribe -n " + std::to_string(ranks);
+}
+
+TEST(Mpi, TwoRanksTrainTheSingleProcessModel) {
+    TempDir dir;
+    const std::string a = makeFrames(dir, "a.npy", 30, 120, 5);
+    const std::string b = makeFrames(dir, "b.npy", 30, 60, 6, "float32");
+    const std::vector<std::vector<std::string>> variants = {
+        {"--max-keys", "40"},
+        {"--max-keys", "40", "--tolerance", "0.02", "--block-points", "57"},
+        {"--selector", "qdeim", "--max-keys", "24", "--basis", "12"},
+    };
+    for (const auto& variant : variants) {
+        std::vector<std::string> common = {"train", "--frames", a, "--frames", b, "--quiet"};
+        common.insert(common.end(), variant.begin(), variant.end());
+        auto single = common, two = common;
+        single.insert(single.end(), {"--out", dir.file("single.pmsc")});
+        two.insert(two.end(), {"--out", dir.file("two.pmsc")});
+        const RunResult one = runPmsc(dir, single);
+        ASSERT_EQ(one.exitCode, 0) << one.err;
+        EXPECT_NE(one.out.find("1 (one process)"), std::string::npos) << one.out;
+        const RunResult r = runPmsc(dir, two, mpirun(2));
+        ASSERT_EQ(r.exitCode, 0) << r.err;
+        EXPECT_NE(r.out.find("2 MPI processes"), std::string::npos) << r.out;
+        // Only rank 0 writes and reports.
+        EXPECT_EQ(r.out.find("trained"), r.out.rfind("trained")) << r.out;
+        expectSameModel(readModel(dir.file("single.pmsc")), readModel(dir.file("two.pmsc")), variant[1]);
+    }
+}
+
+TEST(Mpi, ABadValueInOneRanksRowsStopsEveryRank) {
+    TempDir dir;
+    // Point 390 of 400 is in rank 1's half: rank 0 never reads it.
+    const std::string nan = makeFrames(dir, "nan.npy", 20, 40, 1, "float64", "nan=30:390");
+    const RunResult r = runPmsc(dir, {"train", "--frames", nan, "--out", dir.file("m.pmsc"), "--quiet"},
+                                "timeout 60 " + mpirun(2));
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_NE(r.exitCode, 124) << "hung";
+    EXPECT_NE(r.err.find("frame 30, point 390, channel 1 is nan (MPI rank 1)"), std::string::npos) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(dir.file("m.pmsc")));
+}
+
+TEST(Mpi, BadOptionsFailOnceBeforeAnyWork) {
+    TempDir dir;
+    const std::string a = makeFrames(dir, "a.npy", 20, 40, 1);
+    const RunResult r = runPmsc(dir, {"train", "--frames", a, "--out", dir.file("m.pmsc"), "--memory-limit", "1M"},
+                                mpirun(2));
+    EXPECT_EQ(r.exitCode, 2) << r.err;
+    EXPECT_NE(r.err.find("pmsc: train: --memory-limit 1.0 MiB cannot be met"), std::string::npos) << r.err;
+}
+#endif
+
+// --- a training set larger than the address space the process may use -------------------------
+
+/// The address space the program needs before any work (its libraries, TBB's and glibc's
+/// reservations): the smallest RLIMIT_AS under which `pmsc train --help` still runs, to 4 MiB.
+std::uint64_t baselineAddressSpace(const TempDir& dir) {
+    std::uint64_t lo = 16u << 20, hi = 2048u << 20;
+    while (hi - lo > (4u << 20)) {
+        const std::uint64_t mid = (lo + hi) / 2;
+        const RunResult r = runPmsc(dir, {"train", "--help"}, "prlimit --as=" + std::to_string(mid));
+        if (r.exitCode == 0) hi = mid;
+        else lo = mid;
+    }
+    return hi;
+}
+
+TEST(AddressLimit, ATrainingSetTwiceTheLimitTrainsToTheInMemoryModel) {
+    if (std::system("command -v prlimit >/dev/null 2>&1") != 0) {
+        if (std::getenv("CI")) FAIL() << "prlimit (util-linux) is missing";
+        GTEST_SKIP() << "prlimit not installed";
+    }
+    TempDir dir;
+    const std::uint64_t baseline = baselineAddressSpace(dir);
+    const int grid = 230, frames = 600;  // 52,900 points x 3 channels x 600 frames: 762 MB of doubles
+    const std::string path = makeFrames(dir, "big.npy", grid, frames, 7);
+    const double matrixBytes = double(grid) * grid * 3 * frames * 8;
+    const std::vector<std::string> options = {"--max-basis", "16", "--block", "8", "--max-keys", "24", "--quiet"};
+    const std::uint64_t bound = trainingMemoryBound(Index(grid) * grid, 3, frames, 16, 8, 24, 1, 1, true);
+    // The limit: the program's own address space, the streaming bound, and 32 MiB for blocks and
+    // the allocator; the matrix must be at least twice that.
+    const std::uint64_t limit = baseline + bound + (32u << 20);
+    std::printf("baseline address space %.1f MiB, streaming bound %.1f MiB, limit %.1f MiB, matrix %.1f MiB (%.2fx)\n",
+                baseline / 1048576.0, bound / 1048576.0, limit / 1048576.0, matrixBytes / 1048576.0,
+                matrixBytes / double(limit));
+    ASSERT_GE(matrixBytes, 2.0 * double(limit)) << "the test data would not be twice the limit";
+
+    auto limited = options, free = options;
+    limited.insert(limited.begin(), {"train", "--frames", path, "--out", dir.file("limited.pmsc")});
+    // In memory whatever the machine's size (without a limit pmsc would stream above half of it).
+    free.insert(free.begin(), {"train", "--frames", path, "--out", dir.file("free.pmsc"), "--memory-limit", "64G"});
+    const RunResult r = runPmsc(dir, limited, "prlimit --as=" + std::to_string(limit));
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.out.find("streamed from disk"), std::string::npos) << r.out;
+    std::printf("%s", r.out.c_str());
+    const RunResult f = runPmsc(dir, free);
+    ASSERT_EQ(f.exitCode, 0) << f.err;
+    EXPECT_NE(f.out.find("in memory"), std::string::npos) << f.out;
+    const Model a = readModel(dir.file("free.pmsc")), b = readModel(dir.file("limited.pmsc"));
+    expectSameModel(a, b, "address limit");
+    std::printf("in memory: M = %lld, K = %lld, residual %.9g; limited: M = %lld, K = %lld, residual %.9g, "
+                "basis angle %.3g\n",
+                static_cast<long long>(a.basisSize()), static_cast<long long>(a.keyCount()), a.trainMaxPointResidual,
+                static_cast<long long>(b.basisSize()), static_cast<long long>(b.keyCount()), b.trainMaxPointResidual,
+                basisAngle(a.basis, b.basis));
+    // And in memory it would not have fitted: the same limit with the whole set read fails.
+    const RunResult whole = runPmsc(dir, {"export-frames", "replay:" + path, "--out", dir.file("copy.npy"), "--quiet"},
+                                    "prlimit --as=" + std::to_string(limit));
+    EXPECT_NE(whole.exitCode, 0) << "reading the whole set fitted in the limit";
+}
+
+}  // namespace
+}  // namespace pmsc::test

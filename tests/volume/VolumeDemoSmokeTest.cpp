@@ -1,0 +1,129 @@
+// `pmsc demo volume --quick` end to end (the real program, its report, OpenVDB's own vdb_print on
+// a cache file) and the volume evaluator's bad inputs through the command line: one line, exit 2.
+#include "VdbFixtures.h"
+#include "examples/volume/DensityVolume.h"
+
+#include <nlohmann/json.hpp>
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <string>
+
+namespace {
+
+#ifdef PMSC_BINARY
+std::string run(const std::string& command, int& status) {
+    std::string out;
+    std::unique_ptr<FILE, int (*)(FILE*)> pipe(popen((command + " 2>&1").c_str(), "r"), pclose);
+    if (!pipe) {
+        status = -1;
+        return out;
+    }
+    std::array<char, 4096> buf{};
+    while (std::fgets(buf.data(), static_cast<int>(buf.size()), pipe.get())) out += buf.data();
+    status = pclose(pipe.release());
+    return out;
+}
+
+TEST(VolumeDemoQuick, WritesAReportWithinBoundsImagesAndCachesThatVdbPrintLists) {
+    if (pmsc::volume::test::testMesh().empty()) GTEST_SKIP() << "assimp-testmodels not installed";
+    const std::string dir = pmsc::volume::test::tempDir("quick");
+    int status = -1;
+    const std::string output = run(std::string(PMSC_BINARY) + " demo volume --quick --quiet --out " + dir, status);
+    ASSERT_EQ(status, 0) << output;
+    EXPECT_NE(output.find("speedup"), std::string::npos) << output;
+    std::ifstream f(dir + "/report.json");
+    const nlohmann::json r = nlohmann::json::parse(f);
+    for (const char* key : {"points", "key_points", "basis", "train_frames", "test_frames", "full_seconds_per_frame",
+                            "pmsc_seconds_per_frame", "speedup", "rms_rel_error", "hit_rate", "reference_rms_rel_error_full",
+                            "reference_rms_rel_error_pm", "peak_rss_mb", "seconds"})
+        ASSERT_TRUE(r.contains(key)) << key;
+    EXPECT_NEAR(r["points"].get<double>(), 12000, 12000 * 0.06);
+    EXPECT_EQ(r["train_frames"].get<int>(), 24);
+    EXPECT_EQ(r["train_full_calculations"].get<int>(), 24);
+    EXPECT_EQ(r["test_frames"].get<int>(), 4 + 16);
+    EXPECT_GT(r["speedup"].get<double>(), 2);  // 12,000 voxels for 120 keys caps it at 100x
+    EXPECT_LT(r["rms_rel_error"].get<double>(), 0.10);
+    EXPECT_GE(r["hit_rate"].get<double>(), 0.5);
+    EXPECT_GT(r["reference_rms_rel_error_full"].get<double>(), 0);
+    EXPECT_LT(r["reference_rms_rel_error_pm"].get<double>(), 0.2);
+    EXPECT_EQ(r["images"].size(), 3u);
+    for (const auto& img : r["images"]) EXPECT_TRUE(std::filesystem::exists(dir + "/" + img["png"].get<std::string>()));
+    EXPECT_TRUE(std::filesystem::exists(dir + "/density.vdb"));
+#ifdef PMSC_VDB_PRINT
+    ASSERT_FALSE(r["vdb_files"].empty());
+    for (const auto& name : r["vdb_files"]) {
+        const std::string listing = run(std::string(PMSC_VDB_PRINT) + " -l " + dir + "/" + name.get<std::string>(), status);
+        ASSERT_EQ(status, 0) << listing;
+        EXPECT_NE(listing.find("Name: inscatter"), std::string::npos) << listing;
+        EXPECT_NE(listing.find("vec3s"), std::string::npos) << listing;
+        const auto at = listing.find("Number of active voxels:");
+        ASSERT_NE(at, std::string::npos) << listing;
+        std::string digits;
+        for (std::size_t i = at + 24; i < listing.size() && listing[i] != '\n'; ++i)
+            if (std::isdigit(static_cast<unsigned char>(listing[i]))) digits += listing[i];
+        EXPECT_EQ(digits, std::to_string(r["points"].get<long>())) << listing;
+        EXPECT_NE(listing.find("light_kelvin"), std::string::npos) << listing;
+    }
+#endif
+    std::filesystem::remove_all(dir);
+}
+
+TEST(VolumeEvaluatorCli, ExportTrainAndRunWriteCacheFilesWithTheDensityTopology) {
+    const std::string dir = pmsc::volume::test::tempDir("run");
+    pmsc::volume::test::writeDensityBox(dir + "/box.vdb", "density", 0.3, 0.05, 0.8f);  // 13^3 voxels
+    const std::string bin = PMSC_BINARY;
+    int status = -1;
+    std::string out = run(bin + " export-frames volume:" + dir + "/box.vdb:lights=training --quiet --out " + dir + "/t.npy", status);
+    ASSERT_EQ(status, 0) << out;
+    out = run(bin + " train --frames " + dir + "/t.npy --out " + dir + "/m.pmsc --basis 8 --max-keys 40", status);
+    ASSERT_EQ(status, 0) << out;
+    out = run(bin + " run --model " + dir + "/m.pmsc --evaluator volume:" + dir + "/box.vdb --frames 64-66 --out " + dir +
+                  "/frames --format vdb --quiet",
+              status);
+    ASSERT_EQ(status, 0) << out;
+    for (int f = 64; f <= 66; ++f) {
+        const auto cache = pmsc::volume::ScatterCache::read(dir + "/frames/frame.0000" + std::to_string(f) + ".vdb");
+        EXPECT_EQ(cache.activeVoxelCount(), 13 * 13 * 13);
+        EXPECT_EQ(cache.info().frame, f);
+        EXPECT_EQ(cache.info().state, "soft-cached");
+    }
+    std::filesystem::remove_all(dir);
+}
+
+TEST(VolumeEvaluatorCli, MissingFileNoFloatGridAndWrongGridNameAreOneLineAndExitCode2) {
+    const std::string dir = pmsc::volume::test::tempDir("cli");
+    pmsc::volume::test::writeVectorOnly(dir + "/vectors.vdb");
+    pmsc::volume::test::writeDensityBox(dir + "/box.vdb", "smoke", 0.2, 0.1, 1.0f);
+    const std::pair<std::string, std::string> cases[] = {
+        {"volume:" + dir + "/missing.vdb", "no such file"},
+        {"volume:" + dir + "/vectors.vdb", "has no float grid"},
+        {"volume:" + dir + "/box.vdb:grid=density", "no grid named 'density'"},
+        {"volume", "needs FILE.vdb"},
+    };
+    for (const auto& [spec, what] : cases) {
+        int status = -1;
+        const std::string out =
+            run(std::string(PMSC_BINARY) + " export-frames " + spec + " --quiet --out " + dir + "/f.npy", status);
+        EXPECT_EQ(WEXITSTATUS(status), 2) << spec << ": " << out;
+        EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << out;
+        EXPECT_EQ(out.rfind("pmsc: ", 0), 0u) << out;
+        EXPECT_NE(out.find(what), std::string::npos) << out;
+        EXPECT_FALSE(std::filesystem::exists(dir + "/f.npy"));
+    }
+    int status = -1;
+    const std::string out = run(std::string(PMSC_BINARY) + " demo volume --quick --out " + dir + "/d --voxels ten", status);
+    EXPECT_EQ(WEXITSTATUS(status), 2) << out;
+    EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << out;
+    std::filesystem::remove_all(dir);
+}
+#endif
+
+}  // namespace
