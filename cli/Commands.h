@@ -15,9 +15,11 @@ int runReplay(const std::vector<std::string>& args);        // cli/ReplayCommand
 int runInspect(const std::vector<std::string>& args);       // cli/InspectCommand.cpp
 int runDemo(const std::vector<std::string>& args);          // cli/DemoCommand.cpp
 int runDemoSynthetic(const std::vector<std::string>& args);  // cli/DemoCommand.cpp (examples/synthetic)
+int runLearn(const std::vector<std::string>& args);         // cli/LearnCommand.cpp
 int runRun(const std::vector<std::string>& args);           // cli/RunCommand.cpp (render farm)
 int runExportFrames(const std::vector<std::string>& args);  // cli/ExportFramesCommand.cpp
 int runDemoCornell(const std::vector<std::string>& args);   // cli/CornellDemoCommand.cpp (examples/cornell)
+int runDemoLearn(const std::vector<std::string>& args);     // cli/LearnDemoCommand.cpp (examples/face)
 int runDemoFace(const std::vector<std::string>& args);      // cli/FaceDemoCommand.cpp (examples/face)
 int runDemoVolume(const std::vector<std::string>& args);    // cli/VolumeDemoCommand.cpp (examples/volume)
 

@@ -56,6 +56,15 @@ int runInspect(const std::vector<std::string>& args) {
         j["tolerance"] = model.tolerance;
         j["train_max_point_residual"] = model.trainMaxPointResidual;
         j["key_indices"] = std::vector<long long>(model.keyPoints.begin(), model.keyPoints.end());
+        if (model.learning)
+            j["learning"] = {{"rank", model.learning->maxRank},
+                             {"stored_vectors", model.basisSize() + model.learning->extraBasis.cols()},
+                             {"updates", model.learning->updates},
+                             {"discarded_energy", model.learning->discardedEnergy}};
+        if (model.calibrationRecord)
+            j["calibration"] = {{"rule", toString(model.calibrationRecord->rule)},
+                                {"coverage", model.calibrationRecord->coverage},
+                                {"held_out_frames", model.calibrationRecord->keyRms.size()}};
         std::cout << j.dump(2) << "\n";
         return kExitOk;
     }
@@ -90,6 +99,16 @@ int runInspect(const std::vector<std::string>& args) {
               << "\n";
     std::cout << "  residual      largest point error of PM on the training frames: "
               << fmt("%.6g", model.trainMaxPointResidual) << "\n";
+    if (model.learning)
+        std::cout << "  learning      state of rank " << model.learning->maxRank << " ("
+                  << model.basisSize() + model.learning->extraBasis.cols() << " vectors stored), "
+                  << model.learning->updates << " updates by pmsc learn\n";
+    if (model.calibrationRecord)
+        std::cout << "  calibration   " << toString(model.calibrationRecord->rule) << " rule"
+                  << (model.calibrationRecord->rule == CalibrationRule::Conformal
+                          ? " at coverage " + fmt("%.3g", model.calibrationRecord->coverage)
+                          : std::string())
+                  << ", " << model.calibrationRecord->keyRms.size() << " held-out frames stored\n";
     return kExitOk;
 }
 

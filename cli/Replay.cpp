@@ -72,8 +72,9 @@ namespace {
 /// the recording (the errors of the report) and writes it to the output file.
 class ReplaySink : public engine::FrameSink {
 public:
-    ReplaySink(const Model& model, const PointEvaluator& recorded, ReplayResult& result, NpyFrameWriter* out)
-        : model_(model), recorded_(recorded), result_(result), out_(out),
+    ReplaySink(const Model& model, const PointEvaluator& recorded, ReplayResult& result, NpyFrameWriter* out,
+               KeptFrames* keep)
+        : model_(model), recorded_(recorded), result_(result), out_(out), keep_(keep),
           full_(static_cast<std::size_t>(model.points * model.channels)) {}
 
     void write(const engine::FrameResult& r) override {
@@ -96,6 +97,7 @@ public:
                                                  : maxPointError(r.pmValues.data(), full, n, c);
         row.softMaxPointError = maxPointError(r.values.data(), full, n, c);
         if (out_) out_->writeFrame(r.sequence, r.values.data());
+        if (keep_ && !r.failed && r.state != CacheState::Hit) keep_->add(r.frame, r.state, r.keyRmsError, full);
     }
 
 private:
@@ -103,6 +105,7 @@ private:
     const PointEvaluator& recorded_;
     ReplayResult& result_;
     NpyFrameWriter* out_;
+    KeptFrames* keep_;
     std::vector<double> full_;
 };
 
@@ -129,7 +132,7 @@ ReplayResult replay(const Model& model, const PointEvaluator& recorded, const Re
         engineOptions.progress = [&](const engine::Progress& p) { options.progress(p.framesDone, p.framesTotal); };
     }
     engine::Engine engine(model, recorded, std::move(engineOptions));
-    ReplaySink sink(model, recorded, result, out);
+    ReplaySink sink(model, recorded, result, out, options.keep);
     // pmsc::Cancelled (interrupt) and pmsc::EvaluatorError propagate unchanged.
     const engine::RunStats stats = engine.run({0, frames, 1}, sink);
     result.threads = stats.threads;

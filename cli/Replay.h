@@ -1,6 +1,7 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include "pmsc/KeptFrames.h"
 #include "pmsc/Model.h"
 #include "pmsc/NpyIO.h"
 #include "pmsc/PointEvaluator.h"
@@ -35,6 +36,9 @@ struct ReplayOptions {
     const std::atomic<bool>* cancel = nullptr;
     /// Called now and then with (frames done, frames total), from one thread at a time.
     std::function<void(Index, Index)> progress;
+    /// If set, every frame that blends or misses is kept (its recorded values) for `pmsc learn`
+    /// (`--keep-misses`); the caller commits it.
+    KeptFrames* keep = nullptr;
 };
 
 struct ReplayResult {

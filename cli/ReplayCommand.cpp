@@ -44,6 +44,11 @@ int runReplay(const std::vector<std::string>& args) {
                   [&](const std::string& v) {
                       options.threads = static_cast<int>(parseIndex("--threads", v, 1, 4096));
                   });
+    std::string keepPath;
+    parser.option("--keep-misses", "FILE.npy",
+                  "append the frames that blended or missed (their recorded values) to FILE.npy, frame numbers "
+                  "to FILE.npy.frames: training for `pmsc learn`",
+                  keepPath);
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
 
@@ -64,6 +69,12 @@ int runReplay(const std::vector<std::string>& args) {
         out.emplace(outPath, recorded.frameCount(), recorded.pointCount(), recorded.channelCount(),
                     recorded.dtype());
 
+    std::optional<KeptFrames> keep;
+    if (!keepPath.empty()) {
+        keep.emplace(keepPath, recorded.pointCount(), recorded.channelCount(), recorded.dtype(),
+                     "model=" + modelPath + " frames=" + framesPath);
+        options.keep = &*keep;
+    }
     Progress progress("replay", !quiet);
     options.cancel = &interruptFlag();
     options.progress = [&](Index done, Index total) {
@@ -75,8 +86,12 @@ int runReplay(const std::vector<std::string>& args) {
     const std::string text = replayReport(model, result).dump(2) + "\n";
     report.write(text.data(), text.size());
     if (out) out->commit();
+    if (keep) keep->commit();
     report.commit();
     printReplaySummary(std::cout, model, result, options.eps.has_value());
+    if (keep)
+        std::cout << "  kept        " << keep->count() << " blended or missed frames -> " << keepPath << " (now "
+                  << keep->countBefore() + keep->count() << " frames)\n";
     std::cout << "  report      " << reportPath << (outPath.empty() ? "" : "\n  output      " + outPath)
               << "\n";
     return kExitOk;

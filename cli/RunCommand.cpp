@@ -11,6 +11,7 @@
 #include "engine/Engine.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
+#include "pmsc/KeptFrames.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/Training.h"  // pmsc::Cancelled
 
@@ -22,6 +23,7 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <sstream>
 
 #include <unistd.h>
@@ -62,8 +64,9 @@ struct FrameRecord {
 /// The engine's consumer: writes each finished frame to its file, in order, and records it.
 class FileSink : public engine::FrameSink {
 public:
-    FileSink(const FrameOutput& output, std::vector<FrameRecord>& records, const FrameSpan& span)
-        : output_(output), records_(records), span_(span) {}
+    FileSink(const FrameOutput& output, std::vector<FrameRecord>& records, const FrameSpan& span,
+             const PointEvaluator& evaluator, KeptFrames* keep)
+        : output_(output), records_(records), span_(span), evaluator_(evaluator), keep_(keep) {}
 
     void write(const engine::FrameResult& r) override {
         const auto start = Clock::now();
@@ -76,6 +79,17 @@ public:
         rec.writeSeconds = since(start);
         writeSeconds += rec.writeSeconds;
         ++written;
+        if (keep_ && !r.failed && r.state != CacheState::Hit) {
+            if (r.state == CacheState::Miss) {
+                keep_->add(r.frame, r.state, r.keyRmsError, r.values.data());
+            } else {
+                // A blend's output mixes in PM; the full values it was blended with are not kept by
+                // the engine, so they are evaluated again (blends are the rare frames in the band).
+                full_.resize(r.values.size());
+                evaluator_.evaluateAll(r.frame, full_.data());
+                keep_->add(r.frame, r.state, r.keyRmsError, full_.data());
+            }
+        }
     }
 
     double writeSeconds = 0;
@@ -85,6 +99,9 @@ private:
     const FrameOutput& output_;
     std::vector<FrameRecord>& records_;
     const FrameSpan& span_;
+    const PointEvaluator& evaluator_;
+    KeptFrames* keep_;
+    std::vector<double> full_;
 };
 
 }  // namespace
@@ -111,6 +128,10 @@ RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const R
     FrameOutput output(options.outDir, options.format, offeredWriters(evaluator), model.points,
                        model.channels, options.dtype);
     ensureWritableFolder(options.outDir);
+    std::optional<KeptFrames> keep;
+    if (!options.keepMisses.empty())
+        keep.emplace(options.keepMisses, model.points, model.channels, options.dtype,
+                     "model=" + options.modelPath + " evaluator=" + options.evaluatorSpec);
 
     RunReport report;
     report.frames = span.count();
@@ -159,7 +180,7 @@ RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const R
         progress.update(stage, static_cast<double>(done), static_cast<double>(total));
     };
 
-    FileSink sink(output, records, span);
+    FileSink sink(output, records, span, evaluator, keep ? &*keep : nullptr);
     nlohmann::json engineRuns = nlohmann::json::array();
     std::string status = "ok", error;
     int exitCode = kExitOk;
@@ -192,6 +213,15 @@ RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const R
     }
     progress.finish();
     const double engineSeconds = since(engineStart);
+    // The frames kept before a failure are real frames: keep them too (learning needs no order).
+    if (keep) {
+        try {
+            keep->commit();
+            report.kept = keep->count();
+        } catch (const IoError&) {
+            if (!failure) throw;
+        }
+    }
     report.evaluated = sink.written;
     if (failure) {  // the counters of a failed group are in its record states
         report.hits = report.blends = report.misses = 0;
@@ -235,6 +265,7 @@ RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const R
     j["hits"] = report.hits;
     j["blends"] = report.blends;
     j["misses"] = report.misses;
+    if (!options.keepMisses.empty()) j["kept_misses"] = {{"path", options.keepMisses}, {"frames", report.kept}};
     j["hit_rate"] =
         report.evaluated > 0 ? static_cast<double>(report.hits) / static_cast<double>(report.evaluated) : 0.0;
     j["seconds"] = {{"wall", report.seconds},
@@ -302,6 +333,10 @@ int runRun(const std::vector<std::string>& args) {
     parser.option("--log-every", "SECONDS",
                   "progress line interval when stderr is not a terminal (default 10; 0 = every update)",
                   [&](const std::string& v) { o.logSeconds = parseDouble("--log-every", v, 0.0, 1e6); });
+    parser.option("--keep-misses", "FILE.npy",
+                  "append the frames that blended or missed (full values, --dtype) to FILE.npy, frame numbers to "
+                  "FILE.npy.frames: training for `pmsc learn`",
+                  o.keepMisses);
     parser.flag("--force", "redo frames whose output already exists", o.force);
     parser.flag("--quiet", "no progress display", o.quiet);
     if (!parser.parse(args)) return kExitOk;
@@ -330,6 +365,7 @@ int runRun(const std::vector<std::string>& args) {
     char seconds[32];
     std::snprintf(seconds, sizeof seconds, "%.2f", r.seconds);
     std::cout << ", " << seconds << " s\n  stats " << r.statsPath << "\n";
+    if (!o.keepMisses.empty()) std::cout << "  kept  " << r.kept << " blended or missed frames -> " << o.keepMisses << "\n";
     return kExitOk;
 }
 

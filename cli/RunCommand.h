@@ -26,6 +26,9 @@ struct RunOptions {
     double logSeconds = 10;              ///< plain progress lines this often when stderr is not a terminal
     std::string commandLine;             ///< as typed, for the stats
     const std::atomic<bool>* cancel = nullptr;  ///< set by another thread (SIGINT/SIGTERM) to stop
+    /// Non-empty: append the frames that blended or missed (full values) to this .npy
+    /// (`--keep-misses`, pmsc::KeptFrames), also when the run fails or is interrupted afterwards.
+    std::string keepMisses;
 };
 
 /// What a run did; also written, with per-frame states and timings, to the stats file.
@@ -36,6 +39,7 @@ struct RunReport {
     Index replaced = 0;          ///< frames whose existing output was invalid (redone)
     Index staleTemporaries = 0;  ///< temporary files of a killed run, removed
     Index hits = 0, blends = 0, misses = 0;
+    Index kept = 0;      ///< frames appended to options.keepMisses
     double seconds = 0;  ///< wall time of the whole run
     std::string statsPath;
 };

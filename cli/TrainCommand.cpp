@@ -147,6 +147,23 @@ int runTrain(const std::vector<std::string>& args) {
                   "leave-one-slice-out folds for --tolerance (default " +
                       std::to_string(options.calibrationSlices) + ")",
                   [&](const std::string& v) { options.calibrationSlices = parseIndex("--slices", v, 2); });
+    std::string rule = "max";
+    parser.option("--calibration", "RULE",
+                  "how --tolerance sets eps: max (largest held-out error ratio, default) or conformal "
+                  "(its quantile at --coverage: P(hit over tolerance) <= 1 - coverage)",
+                  rule);
+    parser.option("--coverage", "C",
+                  "coverage of --calibration conformal, in (0, 1) (default " +
+                      std::to_string(options.calibrationCoverage).substr(0, 4) + ")",
+                  [&](const std::string& v) {
+                      options.calibrationCoverage = parseDouble("--coverage", v, 0.0, 1.0);
+                      if (!(options.calibrationCoverage > 0 && options.calibrationCoverage < 1))
+                          throw UsageError("--coverage: must be in (0, 1), got " + v);
+                  });
+    parser.option("--learn-rank", "R",
+                  "store what `pmsc learn` needs: R singular vectors (>= M; 2M is a good start), the key "
+                  "selection settings and the calibration scores (the model file grows by (R - M)/M of its basis)",
+                  [&](const std::string& v) { options.learnRank = parseIndex("--learn-rank", v, 1); });
     parser.option("--seed", "S", "seed of the randomized SVD (training is deterministic for a seed)",
                   [&](const std::string& v) {
                       options.seed = static_cast<unsigned>(parseIndex("--seed", v, 0, 0xffffffffll));
@@ -176,6 +193,18 @@ int runTrain(const std::vector<std::string>& args) {
     } else {
         parser.fail("--selector: '" + selector + "' is not teleconnection or qdeim");
     }
+
+    if (rule == "max") {
+        options.calibrationRule = CalibrationRule::MaxRatio;
+    } else if (rule == "conformal") {
+        options.calibrationRule = CalibrationRule::Conformal;
+    } else {
+        parser.fail("--calibration: '" + rule + "' is not max or conformal");
+    }
+    if (parser.given("--coverage") && options.calibrationRule != CalibrationRule::Conformal)
+        parser.fail("--coverage needs --calibration conformal");
+    if ((parser.given("--calibration") || parser.given("--coverage")) && !(options.tolerance > 0))
+        parser.fail("--calibration and --coverage need --tolerance");
 
     // MPI only when a launcher started us (cli/mpi/MpiLaunch.h); otherwise one process.
     std::unique_ptr<MpiWorld> mpi = joinMpiIfLaunched();

@@ -25,6 +25,21 @@ void printTrainSummary(std::ostream& out, const std::string& modelPath, const Fr
             << report.calibration.slices
             << " held-out slices, point error <= " << fmt("%.4g", report.calibration.ratio)
             << " x key RMS)\n";
+        const CalibrationStats& c = report.calibration;
+        if (c.rule == CalibrationRule::Conformal) {
+            out << "  rule        conformal: ratio quantile at coverage " << fmt("%.4g", c.coverage) << " of "
+                << c.usableFrames << " held-out frames (largest ratio " << fmt("%.4g", c.maxRatio)
+                << ", eps_min would be " << fmt("%.6g", c.maxRatio > 0 ? model.tolerance / c.maxRatio : 0.0)
+                << " under --calibration max)\n";
+        } else {
+            out << "  rule        max: the largest ratio of " << c.usableFrames << " held-out frames";
+            if (c.usableFrames > 0) {
+                const double q = conformalQuantile(heldOutRatios(c), 0.95);
+                out << " (conformal 95% quantile " << fmt("%.4g", q) << ", eps_min would be "
+                    << fmt("%.6g", q > 0 ? model.tolerance / q : 0.0) << ")";
+            }
+            out << "\n";
+        }
     } else {
         out << "  eps         [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax)
             << "] key RMS, from the training frames (no --tolerance: not calibrated)\n";

@@ -45,7 +45,8 @@ CalibrationStats thresholdsFromKeyRows(const Eigen::MatrixXd& qk, const Eigen::M
 
 CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index channels,
                            const std::vector<Index>& keys, Index basisSize, double tolerance,
-                           Index slices, const SvdOptions&, const Eigen::MatrixXd* gram) {
+                           Index slices, const SvdOptions&, const Eigen::MatrixXd* gram,
+                           CalibrationRule rule, double coverage) {
     if (gram && (gram->rows() != q.cols() || gram->cols() != q.cols())) {
         throw std::invalid_argument("calibrate: Gram matrix is not F x F");
     }
@@ -53,12 +54,12 @@ CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index cha
     MatrixBlocks blocks(q, channels, /*centre=*/false);
     SingleProcess one;
     return calibrate(blocks, one, gatherKeyRows(q, channels, keys), keys, basisSize, tolerance, slices,
-                     gram ? *gram : gramMatrix(q));
+                     gram ? *gram : gramMatrix(q), rule, coverage);
 }
 
 CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::MatrixXd& keyRows,
                            const std::vector<Index>& keys, Index basisSize, double tolerance, Index slices,
-                           const Eigen::MatrixXd& gram) {
+                           const Eigen::MatrixXd& gram, CalibrationRule rule, double coverage) {
     const Index f = q.frames();
     const Index channels = q.channels();
     if (!(tolerance > 0) || !std::isfinite(tolerance)) {
@@ -70,6 +71,9 @@ CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::Matrix
                                     "] (the frame count), got " + std::to_string(slices));
     }
     if (basisSize < 1) throw std::invalid_argument("calibration: basis size must be >= 1");
+    if (rule == CalibrationRule::Conformal && !(coverage > 0 && coverage < 1)) {
+        throw std::invalid_argument("calibration coverage must be in (0, 1), got " + std::to_string(coverage));
+    }
     if (gram.rows() != f || gram.cols() != f) throw std::invalid_argument("calibrate: Gram matrix is not F x F");
     CalibrationStats s;
     s.tolerance = tolerance;
@@ -150,20 +154,80 @@ CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::Matrix
                           " usable basis vectors (down to " + std::to_string(smallestM) + ")");
     }
 
+    setThresholds(s, tolerance, rule, coverage);
+    return s;
+}
+
+const char* toString(CalibrationRule rule) {
+    return rule == CalibrationRule::Conformal ? "conformal" : "max";
+}
+
+namespace {
+
+// A key error at rounding level says nothing about the frame: it is left out of the ratios.
+double blindLevel(const CalibrationStats& s) {
     const double largestError =
         s.maxPointError.empty() ? 0.0 : *std::max_element(s.maxPointError.begin(), s.maxPointError.end());
-    // A key error at rounding level says nothing about the frame: exclude it from the ratio.
-    const double blindLevel = 1e-9 * largestError;
-    double ratio = 0;
+    return 1e-9 * largestError;
+}
+
+}  // namespace
+
+std::vector<double> heldOutRatios(const CalibrationStats& s) {
+    const double blind = blindLevel(s);
+    std::vector<double> ratios;
+    for (size_t i = 0; i < s.keyRms.size() && i < s.maxPointError.size(); ++i)
+        if (s.keyRms[i] > blind && s.keyRms[i] > 0) ratios.push_back(s.maxPointError[i] / s.keyRms[i]);
+    return ratios;
+}
+
+double conformalQuantile(std::vector<double> values, double coverage) {
+    if (values.empty()) return 0;
+    std::sort(values.begin(), values.end());
+    const double n = static_cast<double>(values.size());
+    // rank = ceil((n + 1) coverage), guarded against (n + 1) coverage landing a rounding error
+    // above an integer.
+    const double exact = (n + 1) * coverage;
+    double rank = std::ceil(exact - 1e-9 * exact);
+    if (rank < 1) rank = 1;
+    if (rank > n) return values.back();
+    return values[static_cast<std::size_t>(rank) - 1];
+}
+
+void setThresholds(CalibrationStats& s, double tolerance, CalibrationRule rule, double coverage) {
+    if (!(tolerance > 0) || !std::isfinite(tolerance)) {
+        throw std::invalid_argument("calibration tolerance must be a positive number, got " +
+                                    std::to_string(tolerance));
+    }
+    if (rule == CalibrationRule::Conformal && !(coverage > 0 && coverage < 1)) {
+        throw std::invalid_argument("calibration coverage must be in (0, 1), got " + std::to_string(coverage));
+    }
+    if (s.keyRms.size() != s.maxPointError.size()) {
+        throw std::invalid_argument("calibration: key errors and point errors differ in count");
+    }
+    s.tolerance = tolerance;
+    s.rule = rule;
+    s.coverage = rule == CalibrationRule::Conformal ? coverage : 0.0;
+    s.blindFrames = 0;
+    const double largestError =
+        s.maxPointError.empty() ? 0.0 : *std::max_element(s.maxPointError.begin(), s.maxPointError.end());
+    const double blind = blindLevel(s);
+    const std::vector<double> ratios = heldOutRatios(s);
     double largestKeyRms = 0;
-    bool anyUsable = false;
     for (size_t i = 0; i < s.keyRms.size(); ++i) {
         largestKeyRms = std::max(largestKeyRms, s.keyRms[i]);
-        if (s.keyRms[i] > blindLevel && s.keyRms[i] > 0) {
-            ratio = std::max(ratio, s.maxPointError[i] / s.keyRms[i]);
-            anyUsable = true;
-        } else if (s.maxPointError[i] > 0) {
-            ++s.blindFrames;
+        if (!(s.keyRms[i] > blind && s.keyRms[i] > 0) && s.maxPointError[i] > 0) ++s.blindFrames;
+    }
+    s.usableFrames = static_cast<Index>(ratios.size());
+    s.maxRatio = ratios.empty() ? 0.0 : *std::max_element(ratios.begin(), ratios.end());
+    double ratio = s.maxRatio;
+    if (rule == CalibrationRule::Conformal && !ratios.empty()) {
+        ratio = conformalQuantile(ratios, coverage);
+        const double n = static_cast<double>(ratios.size());
+        if ((n + 1) * coverage > n * (1 + 1e-9)) {
+            s.notes.push_back("calibration: " + std::to_string(ratios.size()) +
+                              " held-out frames are too few for a conformal quantile at coverage " +
+                              std::to_string(coverage) + "; used the largest ratio");
         }
     }
     s.ratio = ratio;
@@ -172,7 +236,7 @@ CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::Matrix
                           " held-out frames had point errors the key error cannot see (key RMS at "
                           "rounding level); add keys or reduce M");
     }
-    if (!anyUsable || !(ratio > 0)) {
+    if (ratios.empty() || !(ratio > 0)) {
         if (largestError == 0) {
             // Every held-out frame was reconstructed exactly: any key error seen is harmless.
             s.epsMin = largestKeyRms;
@@ -187,11 +251,10 @@ CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::Matrix
                               "threshold can bound the point error; every frame with any key error fails "
                               "through");
         }
-        return s;
+        return;
     }
     s.epsMin = tolerance / ratio;
     s.epsMax = 2 * s.epsMin;
-    return s;
 }
 
 }  // namespace pmsc

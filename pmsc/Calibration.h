@@ -13,6 +13,24 @@
 
 namespace pmsc {
 
+/// How calibration turns the held-out frames' scores (key error e_f, largest point error E_f) into
+/// the ratio r of the bound E <= r e, and so eps_min = T / r (issue 10).
+enum class CalibrationRule : int {
+    /// r = max_f E_f / e_f (issue 2's rule). Promise: every held-out frame under eps_min had
+    /// E <= T. One extreme pose sets r for every frame, so on real motion it throws hits away.
+    MaxRatio = 0,
+    /// r = the split-conformal quantile of E_f / e_f at `coverage` 1 - alpha: the
+    /// ceil((n + 1)(1 - alpha))-th smallest of the n held-out ratios (Vovk, Gammerman & Shafer
+    /// 2005; Lei et al. 2018). Promise: for a frame exchangeable with the held-out frames,
+    /// P(E > r e) <= alpha, so P(a frame is a hit or a blend AND its soft-cached error exceeds T)
+    /// <= alpha (a hit has e <= T / r; a blend's (1 - w) E stays under T when E <= r e, as for
+    /// MaxRatio). With n < 1/alpha - 1 the quantile does not exist and r = the largest ratio.
+    Conformal = 1,
+};
+
+/// "max" / "conformal"
+const char* toString(CalibrationRule rule);
+
 /// What calibration measured, so a user (and `pmsc train`) can see why eps came out as it did.
 struct CalibrationStats {
     double epsMin = 0;
@@ -21,6 +39,10 @@ struct CalibrationStats {
     /// r = max_f E_f / e_f over held-out frames with a usable key error: the linear bound E <= r e.
     double ratio = 0;
     Index slices = 0;
+    CalibrationRule rule = CalibrationRule::MaxRatio;
+    double coverage = 0;       ///< 1 - alpha of the conformal rule; 0 for MaxRatio
+    double maxRatio = 0;       ///< max_f E_f / e_f, whatever the rule (the MaxRatio answer)
+    Index usableFrames = 0;    ///< n: held-out frames whose ratio entered the rule
     std::vector<Index> frames;          ///< held-out frame indices, ascending
     std::vector<double> keyRms;         ///< e_f: key RMS error of each held-out frame
     std::vector<double> maxPointError;  ///< E_f: largest point error of PM on it
@@ -48,13 +70,30 @@ struct CalibrationStats {
 /// centred in frame space (J G_II J with J = I - 11^T/n: the held-in mean removed without
 /// touching the (N*C)-row data), and U = Q_I J V S^-1 is one product: no per-fold copy of Q and no
 /// per-fold (N*C) x F^2 Gram product.
+/// The ratio r comes from the held-out scores by `rule` (setThresholds); MaxRatio by default.
 /// @param q training matrix (N*C) x F, raw or mean-removed (means are recomputed per fold)
 /// @param basisSize M (capped per fold by the held-in rank, with a note)
 /// @param gram Q^T Q of exactly this q, or null
-/// @throws std::invalid_argument unless tolerance > 0 and 2 <= slices <= F.
+/// @throws std::invalid_argument unless tolerance > 0, 2 <= slices <= F and 0 < coverage < 1.
 CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index channels,
                            const std::vector<Index>& keys, Index basisSize, double tolerance,
-                           Index slices, const SvdOptions& svd = {}, const Eigen::MatrixXd* gram = nullptr);
+                           Index slices, const SvdOptions& svd = {}, const Eigen::MatrixXd* gram = nullptr,
+                           CalibrationRule rule = CalibrationRule::MaxRatio, double coverage = 0.9);
+
+/// Sets s.ratio, s.epsMin, s.epsMax (and s.rule, s.coverage, s.tolerance, s.maxRatio,
+/// s.usableFrames, s.blindFrames, notes) from the held-out scores s.keyRms / s.maxPointError:
+/// eps_min = T / r, eps_max = 2 eps_min, r by `rule` (CalibrationRule). Frames whose key error is
+/// at rounding level (e <= 1e-9 max E) say nothing and are left out (counted as blind when their
+/// E > 0). Used by calibrate() and by `pmsc learn`, which scores frames of its own.
+/// @throws std::invalid_argument unless tolerance > 0 and 0 < coverage < 1 (Conformal).
+void setThresholds(CalibrationStats& s, double tolerance, CalibrationRule rule, double coverage);
+
+/// The held-out ratios E_f / e_f that setThresholds() uses (frames with a usable key error).
+std::vector<double> heldOutRatios(const CalibrationStats& s);
+
+/// The conformal quantile of a sample: the ceil((n + 1) coverage)-th smallest value, or the
+/// largest when that rank exceeds n (and +0 for an empty sample).
+double conformalQuantile(std::vector<double> values, double coverage);
 
 /// The calibration above over the rows this process owns (issue 12; the one implementation: the
 /// overload above wraps q in MatrixBlocks, computing Q^T Q when `gram` is null, so every fold
@@ -63,7 +102,8 @@ CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index cha
 /// @param keyRows Q's rows at the keys (K*C x F), the same q as `gram` (centred or not)
 CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::MatrixXd& keyRows,
                            const std::vector<Index>& keys, Index basisSize, double tolerance, Index slices,
-                           const Eigen::MatrixXd& gram);
+                           const Eigen::MatrixXd& gram, CalibrationRule rule = CalibrationRule::MaxRatio,
+                           double coverage = 0.9);
 
 /// Key RMS error (PointMultiplier::keyRmsError) of every column of a mean-removed matrix `q`
 /// under the model's basis and key projector: e_t = sqrt((1/K) ||(I - B_K P) Q_K[:,t]||^2).

@@ -78,6 +78,9 @@ void Model::validate() const {
     if (!allFinite(basis)) invalid("basis contains NaN or Inf");
     if (!singularValues.allFinite()) invalid("singular values contain NaN or Inf");
     if (!allFinite(projector)) invalid("projector contains NaN or Inf");
+    if (regions) regions->validate(*this);
+    if (learning) learning->validate(rows, m, points);
+    if (calibrationRecord) calibrationRecord->validate();
 }
 
 Eigen::MatrixXd gatherKeyRows(const Eigen::Ref<const Eigen::MatrixXd>& m, Index channels,

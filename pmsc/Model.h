@@ -2,9 +2,12 @@
 #pragma once
 
 #include "pmsc/FrameSet.h"
+#include "pmsc/Regions.h"
+#include "pmsc/LearningState.h"
 
 #include <Eigen/Core>
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -39,6 +42,15 @@ struct Model {
     double epsMax = 0;     ///< soft cache: at or above, a miss
     double tolerance = 0;  ///< calibration target (largest point error of a hit); 0 = not calibrated
     double trainMaxPointResidual = 0;  ///< largest point error of PM on the training set
+
+    // --- optional parts: each one is a tagged section of a version-2 model file (ModelSections.h)
+    /// Local fail-through (issue 9): regions with their own keys, projection and thresholds.
+    std::optional<LocalRegions> regions;
+    /// `pmsc learn` (issue 10): the incremental-SVD state beyond the basis and the key-selection
+    /// settings (section LEARNSVD; written by `pmsc train --learn-rank` and `pmsc learn`).
+    std::optional<LearningState> learning;
+    /// The held-out scores eps were calibrated from, and the rule (section CALIBRAT; same).
+    std::optional<CalibrationRecord> calibrationRecord;
 
     Index basisSize() const { return basis.cols(); }
     Index keyCount() const { return static_cast<Index>(keyPoints.size()); }

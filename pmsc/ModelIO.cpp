@@ -1,13 +1,16 @@
 #include "pmsc/ModelIO.h"
 
 #include "pmsc/AtomicFile.h"
+#include "pmsc/ByteIO.h"
 #include "pmsc/Errors.h"
+#include "pmsc/ModelSections.h"
 
 #include <bit>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <set>
 #include <stdexcept>
 #include <string>
 
@@ -16,8 +19,6 @@
 #include <unistd.h>
 
 namespace pmsc {
-
-static_assert(std::endian::native == std::endian::little, "pmsc's model I/O assumes a little-endian host");
 
 namespace {
 
@@ -53,6 +54,41 @@ bool addOk(std::uint64_t a, std::uint64_t b, std::uint64_t& out) {
     return !__builtin_add_overflow(a, b, &out);
 }
 
+/// The sections of a version-2 file: `bytes` runs from the section count to the checksum.
+void decodeSections(std::string_view bytes, const std::string& name, Model& model) {
+    ByteReader table(bytes, name);
+    // Every section takes at least its 16-byte tag and length.
+    const std::uint64_t count = table.count("section count", 16);
+    std::set<std::string> seen;
+    for (std::uint64_t i = 0; i < count; ++i) {
+        const std::string where = "section #" + std::to_string(i);
+        char tag[8];
+        std::memcpy(tag, table.take(8, where + " tag").data(), 8);
+        const std::string text = tagText(tag);
+        const std::uint64_t payload = table.u64("section '" + text + "' length");
+        if (payload > table.remaining())
+            table.fail("section '" + text + "' has bad length " + std::to_string(payload) + ": only " +
+                       std::to_string(table.remaining()) + " bytes remain before the checksum");
+        const ModelSectionCodec* codec = nullptr;
+        for (const ModelSectionCodec& c : modelSectionCodecs())
+            if (std::memcmp(c.tag.data(), tag, 8) == 0) codec = &c;
+        if (!codec)
+            table.fail("unknown section '" + text + "' (written by a newer pmsc? this build knows " +
+                       [] {
+                           std::string known;
+                           for (const ModelSectionCodec& c : modelSectionCodecs())
+                               known += (known.empty() ? "'" : ", '") + tagText(c.tag.data()) + "'";
+                           return known;
+                       }() +
+                       ")");
+        if (!seen.insert(std::string(tag, 8)).second) table.fail("section '" + text + "' appears twice");
+        ByteReader reader(table.take(payload, "section '" + text + "' payload"), name + ": section '" + text + "'");
+        codec->decode(reader, model);
+        reader.expectEnd();
+    }
+    table.expectEnd();
+}
+
 }  // namespace
 
 std::uint64_t fnv1a64(const void* data, std::size_t bytes) {
@@ -71,10 +107,13 @@ std::string encodeModel(const Model& model) {
     const std::uint64_t c = static_cast<std::uint64_t>(model.channels);
     const std::uint64_t m = static_cast<std::uint64_t>(model.basisSize());
     const std::uint64_t k = static_cast<std::uint64_t>(model.keyCount());
+    std::vector<const ModelSectionCodec*> sections;
+    for (const ModelSectionCodec& codec : modelSectionCodecs())
+        if (codec.present(model)) sections.push_back(&codec);
     std::string out;
     out.reserve(kModelHeaderBytes + 8 * (n * c * (m + 1) + m + k + m * k * c + 1));
     out.append(kModelMagic, sizeof kModelMagic);
-    put<std::uint32_t>(out, kModelFormatVersion);
+    put<std::uint32_t>(out, sections.empty() ? kModelFormatVersionCore : kModelFormatVersion);
     put<std::uint32_t>(out, 0);
     put<std::uint64_t>(out, n);
     put<std::uint64_t>(out, c);
@@ -93,6 +132,18 @@ std::string encodeModel(const Model& model) {
     putDoubles(out, model.singularValues.data(), m);
     for (const Index key : model.keyPoints) put<std::uint64_t>(out, static_cast<std::uint64_t>(key));
     putDoubles(out, model.projector.data(), m * k * c);
+    if (!sections.empty()) {
+        put<std::uint64_t>(out, sections.size());
+        for (const ModelSectionCodec* codec : sections) {
+            out.append(codec->tag.data(), codec->tag.size());
+            const std::size_t lengthAt = out.size();
+            put<std::uint64_t>(out, 0);  // the payload's length, known once it is written
+            ByteWriter writer(out);
+            codec->encode(model, writer);
+            const std::uint64_t length = out.size() - lengthAt - 8;
+            std::memcpy(out.data() + lengthAt, &length, 8);
+        }
+    }
     put<std::uint64_t>(out, fnv1a64(out.data(), out.size()));
     return out;
 }
@@ -108,9 +159,10 @@ Model decodeModel(std::string_view bytes, const std::string& name) {
                       std::to_string(kModelHeaderBytes + 8) + ")");
     }
     const auto version = get<std::uint32_t>(bytes, 8);
-    if (version != kModelFormatVersion)
-        bad(name, "unsupported model format version " + std::to_string(version) +
-                      " (this build reads version " + std::to_string(kModelFormatVersion) + ")");
+    if (version != kModelFormatVersionCore && version != kModelFormatVersion)
+        bad(name, "unsupported model format version " + std::to_string(version) + " (this build reads versions " +
+                      std::to_string(kModelFormatVersionCore) + " to " + std::to_string(kModelFormatVersion) + ")");
+    const bool hasSections = version >= 2;
 
     const auto n = get<std::uint64_t>(bytes, 16);
     const auto c = get<std::uint64_t>(bytes, 24);
@@ -124,8 +176,9 @@ Model decodeModel(std::string_view bytes, const std::string& name) {
         bad(name, "inconsistent sizes in the header (" + sizes + "): all must be positive");
 
     // Expected length = header + 8*(N*C + N*C*M + M + K + M*K*C) + checksum, all
-    // computed without wrapping; only a file that is exactly that long is parsed,
-    // so every allocation below is bounded by the real file length.
+    // computed without wrapping; only a file that is exactly that long is parsed (version 2:
+    // at least that long plus the section count), so every allocation below is bounded by the
+    // real file length.
     std::uint64_t nc = 0, ncm = 0, kc = 0, mkc = 0, values = 0, expected = 0;
     const bool ok = mulOk(n, c, nc) && mulOk(nc, m, ncm) && mulOk(k, c, kc) && mulOk(m, kc, mkc) &&
                     addOk(nc, ncm, values) && addOk(values, m, values) && addOk(values, k, values) &&
@@ -133,7 +186,10 @@ Model decodeModel(std::string_view bytes, const std::string& name) {
                     addOk(expected, kModelHeaderBytes + 8, expected);
     if (!ok)
         bad(name, "inconsistent sizes in the header (" + sizes + "): the arrays would not fit in any file");
-    if (expected != length) {
+    const std::uint64_t coreEnd = expected - 8;  // where the sections (version 2) or the checksum begin
+    if (hasSections && !addOk(expected, 8, expected))
+        bad(name, "inconsistent sizes in the header (" + sizes + "): the arrays would not fit in any file");
+    if (hasSections ? length < expected : expected != length) {
         if (length < expected)
             bad(name, "truncated model file or corrupted header: the header (" + sizes + ") needs " +
                           std::to_string(expected) + " bytes, the file has " + std::to_string(length));
@@ -193,6 +249,7 @@ Model decodeModel(std::string_view bytes, const std::string& name) {
     } catch (const std::invalid_argument& e) {
         bad(name, std::string("inconsistent model: ") + e.what());
     }
+    if (hasSections) decodeSections(bytes.substr(coreEnd, length - 8 - coreEnd), name, model);
     return model;
 }
 

@@ -9,8 +9,11 @@
 
 namespace pmsc {
 
-/// Version of the model file layout this build writes and reads.
-inline constexpr std::uint32_t kModelFormatVersion = 1;
+/// Newest model file layout this build writes and reads (it reads every older one too).
+inline constexpr std::uint32_t kModelFormatVersion = 2;
+/// The layout without sections. A model with no optional part is still written as version 1,
+/// byte for byte as before version 2 existed, so older builds keep reading it.
+inline constexpr std::uint32_t kModelFormatVersionCore = 1;
 
 /// The .pmsc model file (issue 2, item 8). Little-endian, no padding:
 ///
@@ -39,6 +42,17 @@ inline constexpr std::uint32_t kModelFormatVersion = 1;
 ///
 /// The whole file size follows from the header, so a reader knows before it
 /// allocates anything whether the file can hold what the header claims.
+///
+/// Version 2 (issue 9) is version 1 with version 2 in the header and, between the projector and
+/// the checksum, optional tagged sections:
+///
+///           8  u64      S  section count
+///           S times:    char tag[8] (ASCII, '\0'-padded), u64 payload length L, L bytes payload
+///   end-8   8  u64      FNV-1a 64 checksum of every byte before it
+///
+/// Each section is one feature's data, encoded by that feature's own codec (ModelSections.h); a
+/// reader rejects a tag it does not know (a file written by a newer pmsc), a tag seen twice, a
+/// length past the end, and a payload its codec does not read exactly.
 inline constexpr std::size_t kModelHeaderBytes = 104;
 
 /// FNV-1a, 64 bit (offset basis 0xcbf29ce484222325, prime 0x100000001b3).
@@ -50,8 +64,9 @@ std::string encodeModel(const Model& model);
 /// Parses the bytes of a model file. `name` (the path) starts every message.
 /// @throws InputError for a truncated file, a wrong magic number, an
 ///         unsupported version (found vs supported), sizes inconsistent with the
-///         file length or with each other, a checksum mismatch, or a model that
-///         fails Model::validate().
+///         file length or with each other, a checksum mismatch, a bad section (unknown or
+///         repeated tag, bad length, a payload its codec rejects: the message names the
+///         section), or a model that fails Model::validate().
 Model decodeModel(std::string_view bytes, const std::string& name);
 
 /// Writes a model atomically (temporary file in the same folder, fsync, rename).

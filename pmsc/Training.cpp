@@ -60,6 +60,14 @@ void validateOptions(const TrainingOptions& o, Index points, Index frames) {
         badOption("calibration slices must be in [2, " + std::to_string(frames) + "], got " +
                   std::to_string(o.calibrationSlices));
     }
+    if (o.calibrationRule != CalibrationRule::MaxRatio && o.calibrationRule != CalibrationRule::Conformal) {
+        badOption("unknown calibration rule " + std::to_string(static_cast<int>(o.calibrationRule)));
+    }
+    if (o.calibrationRule == CalibrationRule::Conformal &&
+        !(o.calibrationCoverage > 0 && o.calibrationCoverage < 1)) {
+        badOption("calibration coverage must be in (0, 1), got " + num(o.calibrationCoverage));
+    }
+    if (o.learnRank < 0) badOption("learn rank must be >= 0 (0 = off), got " + std::to_string(o.learnRank));
     if (o.powerIterations < 0) {
         badOption("power iterations must be >= 0, got " + std::to_string(o.powerIterations));
     }
@@ -172,7 +180,7 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
                                   std::to_string(cap) + " (min of max basis, frames, N*C)");
     }
     // The first key-selection block needs the top `block` vectors of Q even when M is smaller.
-    const Index svdRank = std::min(std::max(wanted, options.block), std::min(f, rows));
+    const Index svdRank = std::min(std::max({wanted, options.block, options.learnRank}), std::min(f, rows));
     TruncatedSvd svd = svdFromGram(Eigen::MatrixXd(0, f), gram, svdRank, 0);
     svd.u.resize(q.ownedRows(), 0);
     const Index available = std::min<Index>(cap, svd.sigma.size());
@@ -316,7 +324,8 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
     progress("calibration", 0, 1);
     if (options.tolerance > 0) {
         report.calibration =
-            calibrate(q, comm, keyRows, keys, m, options.tolerance, options.calibrationSlices, gram);
+            calibrate(q, comm, keyRows, keys, m, options.tolerance, options.calibrationSlices, gram,
+                      options.calibrationRule, options.calibrationCoverage);
         model.tolerance = options.tolerance;
     } else {
         report.calibration = thresholdsFromKeyRows(keyRows, basisKeyRows, channels, model.projector);
@@ -325,6 +334,28 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
     model.epsMin = report.calibration.epsMin;
     model.epsMax = report.calibration.epsMax;
     progress("calibration", 1, 1);
+
+    if (options.learnRank > 0) {
+        // The learning state: the next left singular vectors after the basis, up to rank r.
+        LearningState learning;
+        learning.maxRank = std::max(options.learnRank, m);
+        if (options.learnRank < m) {
+            report.warnings.push_back("learn rank " + std::to_string(options.learnRank) + " raised to M = " +
+                                      std::to_string(m));
+        }
+        const Index stored = std::min<Index>(learning.maxRank, svd.sigma.size());
+        formLeftVectors(q, svd, stored);
+        // Owned rows on each rank; rank 0, which writes the model, gathers them.
+        learning.extraBasis = gatherRowsTo(comm, Eigen::MatrixXd(svd.u.middleCols(m, stored - m)), rows, 0);
+        learning.extraSigma = svd.sigma.segment(m, stored - m);
+        learning.maxKeys = options.maxKeys;
+        learning.block = options.block;
+        learning.maxError = options.maxError;
+        learning.fiducials = options.fiducials;
+        learning.gridPoints = options.gridPoints;
+        model.learning = std::move(learning);
+        if (options.tolerance > 0) model.calibrationRecord = CalibrationRecord::from(report.calibration);
+    }
 
     // --- The (N*C)-row arrays go to rank 0, which writes the model.
     model.basis = gatherRowsTo(comm, basis, rows, 0);

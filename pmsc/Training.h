@@ -44,6 +44,16 @@ struct TrainingOptions {
     // --- calibration of eps (beyond the paper) ---
     double tolerance = 0;       ///< largest point error a hit may have (data units); 0 = no calibration
     Index calibrationSlices = 5;  ///< leave-one-slice-out folds
+    /// How the held-out ratios E/e become eps (Calibration.h; issue 10 compares the two).
+    CalibrationRule calibrationRule = CalibrationRule::MaxRatio;
+    double calibrationCoverage = 0.9;  ///< 1 - alpha of CalibrationRule::Conformal (see README: 0.9 measured)
+
+    // --- learning (issue 10) ---
+    /// r > 0: store what `pmsc learn` needs in the model (Model::learning: the left singular
+    /// vectors M+1 .. r and the key-selection settings; Model::calibrationRecord: the held-out
+    /// scores), so updates lose only the energy beyond rank r. 0 = a plain model.
+    /// @pre 0 or >= the final M (it is raised to M with a warning otherwise).
+    Index learnRank = 0;
 
     // --- SVD ---
     unsigned seed = 20070101;   ///< randomized SVD test matrices; training is deterministic for a seed

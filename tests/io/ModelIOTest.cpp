@@ -1,6 +1,7 @@
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
 
+#include "SmallModel.h"
 #include "TempDir.h"
 
 #include <gtest/gtest.h>
@@ -15,29 +16,7 @@ using pmsc::InputError;
 using pmsc::Model;
 using pmsc::test::TempDir;
 using pmsc::test::writeBytes;
-
-/// A small but complete model: N=7 points, C=3, M=3, K=3 keys, made the way
-/// training makes one (orthonormal basis, projector = pinv of the key rows).
-Model smallModel() {
-    Model m;
-    m.points = 7;
-    m.channels = 3;
-    m.trainFrames = 11;
-    Eigen::MatrixXd random(21, 3);
-    for (Eigen::Index i = 0; i < random.size(); ++i) random.data()[i] = std::sin(0.7 * i + 0.3);
-    m.basis = Eigen::HouseholderQR<Eigen::MatrixXd>(random).householderQ() * Eigen::MatrixXd::Identity(21, 3);
-    m.mean = Eigen::VectorXd::LinSpaced(21, -1.0, 2.5);
-    m.singularValues = Eigen::Vector3d(9.5, 3.25, 0.125);
-    m.totalEnergy = m.singularValues.squaredNorm() + 0.5;
-    m.keyPoints = {4, 0, 6};
-    m.projector = pmsc::makeProjector(m.basis, m.channels, m.keyPoints);
-    m.selector = pmsc::Selector::QDeim;
-    m.epsMin = 0.01;
-    m.epsMax = 0.015;
-    m.tolerance = 0.05;
-    m.trainMaxPointResidual = 0.002;
-    return m;
-}
+using pmsc::test::smallModel;
 
 template <class T>
 void poke(std::string& bytes, std::size_t offset, T value) {
@@ -185,14 +164,14 @@ TEST(ModelFile, WrongVersionSaysFoundAndSupported) {
     TempDir dir;
     const auto path = dir.file("m.pmsc");
     std::string bytes = pmsc::encodeModel(smallModel());
-    poke<std::uint32_t>(bytes, 8, 2);
+    poke<std::uint32_t>(bytes, 8, 3);
     reseal(bytes);
     writeBytes(path, bytes);
-    expectRejected(path, {"unsupported model format version 2", "reads version 1"});
+    expectRejected(path, {"unsupported model format version 3", "reads versions 1 to 2"});
     poke<std::uint32_t>(bytes, 8, 0);
     reseal(bytes);
     writeBytes(path, bytes);
-    expectRejected(path, {"version 0", "reads version 1"});
+    expectRejected(path, {"version 0", "reads versions 1 to 2"});
 }
 
 TEST(ModelFile, AbsurdSizesAreRejectedBeforeAllocating) {

@@ -108,3 +108,83 @@ TEST(Calibration, RejectsBadArguments) {
     EXPECT_THROW(pmsc::calibrate(d.q, 3, d.keys, 4, 0.1, 1), std::invalid_argument);
     EXPECT_THROW(pmsc::calibrate(d.q, 3, d.keys, 4, 0.1, 101), std::invalid_argument);
 }
+
+TEST(Calibration, ConformalQuantileIsTheRankOfNPlusOneTimesCoverage) {
+    std::vector<double> v;
+    for (int i = 19; i >= 1; --i) v.push_back(i);  // 1..19, unsorted
+    EXPECT_EQ(pmsc::conformalQuantile(v, 0.9), 18.0);   // ceil(20 * 0.9) = 18
+    EXPECT_EQ(pmsc::conformalQuantile(v, 0.5), 10.0);   // ceil(20 * 0.5) = 10
+    EXPECT_EQ(pmsc::conformalQuantile(v, 0.951), 19.0); // ceil(19.02) = 20 > n: the largest
+    EXPECT_EQ(pmsc::conformalQuantile({}, 0.9), 0.0);
+}
+
+namespace {
+
+// Held-out scores whose ratio E/e is log-normal: most frames near 3, a tail up to ~4x that, as
+// held-out training frames show on the ICT face (issue 10).
+pmsc::CalibrationStats lognormalScores(size_t n, unsigned seed) {
+    const Eigen::MatrixXd z = pmsc::test::gaussian(static_cast<pmsc::Index>(n), 2, seed);
+    pmsc::CalibrationStats s;
+    for (size_t i = 0; i < n; ++i) {
+        const double e = 0.01 + 0.05 * std::abs(z(static_cast<pmsc::Index>(i), 0));
+        const double ratio = 3.0 * std::exp(0.35 * z(static_cast<pmsc::Index>(i), 1));
+        s.keyRms.push_back(e);
+        s.maxPointError.push_back(ratio * e);
+    }
+    return s;
+}
+
+}  // namespace
+
+TEST(Calibration, ConformalRuleKeepsItsCoverageOnFreshFramesAndWastesFewerHits) {
+    const double tolerance = 0.2, coverage = 0.9;
+    pmsc::CalibrationStats conformal = lognormalScores(400, 71);
+    pmsc::CalibrationStats max = conformal;
+    pmsc::setThresholds(conformal, tolerance, pmsc::CalibrationRule::Conformal, coverage);
+    pmsc::setThresholds(max, tolerance, pmsc::CalibrationRule::MaxRatio, 0);
+    EXPECT_EQ(conformal.usableFrames, 400);
+    EXPECT_EQ(conformal.maxRatio, max.ratio);
+    EXPECT_LT(conformal.ratio, max.ratio);
+    EXPECT_NEAR(conformal.epsMin, tolerance / conformal.ratio, 1e-15);
+    EXPECT_DOUBLE_EQ(conformal.epsMax, 2 * conformal.epsMin);
+    EXPECT_GT(conformal.epsMin, max.epsMin);
+
+    // Fresh frames from the same distribution: the bound E <= r e fails on about 1 - coverage of
+    // them (split-conformal: at most alpha in expectation, here one draw of 20,000 frames).
+    const pmsc::CalibrationStats fresh = lognormalScores(20000, 72);
+    size_t outside = 0, hits = 0, badHits = 0;
+    for (size_t i = 0; i < fresh.keyRms.size(); ++i) {
+        outside += fresh.maxPointError[i] > conformal.ratio * fresh.keyRms[i];
+        if (fresh.keyRms[i] <= conformal.epsMin) {
+            ++hits;
+            badHits += fresh.maxPointError[i] > tolerance;
+        }
+    }
+    const double rate = static_cast<double>(outside) / static_cast<double>(fresh.keyRms.size());
+    EXPECT_LT(rate, 1 - coverage + 0.03);
+    EXPECT_GT(rate, 1 - coverage - 0.05);  // and not so cautious that the quantile is the max
+    EXPECT_LE(static_cast<double>(badHits), (1 - coverage) * static_cast<double>(fresh.keyRms.size()));
+    EXPECT_GT(hits, 0u);
+}
+
+TEST(Calibration, ConformalRuleWithTooFewFramesFallsBackToTheLargestRatio) {
+    pmsc::CalibrationStats s = lognormalScores(10, 73);
+    pmsc::setThresholds(s, 0.2, pmsc::CalibrationRule::Conformal, 0.95);  // ceil(11 * 0.95) = 11 > 10
+    EXPECT_EQ(s.ratio, s.maxRatio);
+    EXPECT_FALSE(s.notes.empty());
+}
+
+TEST(Calibration, ConformalRuleThroughCalibrateAndBadCoverage) {
+    const KnownRatio d = knownRatioData();
+    // Every held-out ratio is the same constant: both rules agree.
+    const pmsc::CalibrationStats s =
+        pmsc::calibrate(d.q, 3, d.keys, 4, 0.002, 5, {}, nullptr, pmsc::CalibrationRule::Conformal, 0.9);
+    EXPECT_NEAR(s.ratio, d.ratio, 1e-3 * d.ratio);
+    EXPECT_EQ(s.rule, pmsc::CalibrationRule::Conformal);
+    EXPECT_EQ(s.coverage, 0.9);
+    EXPECT_THROW(pmsc::calibrate(d.q, 3, d.keys, 4, 0.002, 5, {}, nullptr, pmsc::CalibrationRule::Conformal, 1.0),
+                 std::invalid_argument);
+    pmsc::CalibrationStats t = lognormalScores(50, 74);
+    EXPECT_THROW(pmsc::setThresholds(t, 0.2, pmsc::CalibrationRule::Conformal, 0.0), std::invalid_argument);
+    EXPECT_THROW(pmsc::setThresholds(t, -1, pmsc::CalibrationRule::MaxRatio, 0.0), std::invalid_argument);
+}

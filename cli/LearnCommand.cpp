@@ -1,0 +1,148 @@
+// `pmsc learn`: a model + new frames (e.g. the misses `--keep-misses` kept) -> an updated model,
+// without the original training frames (paper section 5, "training could be done each night").
+#include "cli/Args.h"
+#include "cli/Commands.h"
+#include "cli/ExitCodes.h"
+#include "cli/Format.h"
+#include "cli/Progress.h"
+#include "pmsc/AtomicFile.h"
+#include "pmsc/Errors.h"
+#include "pmsc/Learning.h"
+#include "pmsc/ModelIO.h"
+#include "pmsc/NpyIO.h"
+
+#include <chrono>
+#include <cmath>
+#include <iostream>
+
+namespace pmsc::cli {
+
+namespace {
+
+std::vector<std::string> splitPaths(const std::string& text) {
+    std::vector<std::string> out;
+    std::size_t start = 0;
+    while (true) {
+        const std::size_t comma = text.find(',', start);
+        const std::string item = text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+        if (item.empty()) throw UsageError("--frames: empty file name in '" + text + "'");
+        out.push_back(item);
+        if (comma == std::string::npos) break;
+        start = comma + 1;
+    }
+    return out;
+}
+
+// The frames of every file, one after the other; all must agree in N and C.
+FrameSet readAll(const std::vector<std::string>& paths) {
+    std::vector<FrameFile> files;
+    Index frames = 0;
+    for (const auto& p : paths) {
+        files.push_back(readFrames(p));
+        const FrameSet& f = files.back().frames;
+        const FrameSet& first = files.front().frames;
+        if (f.points != first.points || f.channels != first.channels)
+            throw InputError(p + ": frames have " + std::to_string(f.points) + " points x " +
+                             std::to_string(f.channels) + " channels, " + paths.front() + " has " +
+                             std::to_string(first.points) + " x " + std::to_string(first.channels));
+        frames += f.frames;
+    }
+    if (files.size() == 1) return std::move(files.front().frames);
+    FrameSet all(frames, files.front().frames.points, files.front().frames.channels);
+    auto at = all.values.begin();
+    for (const auto& f : files) at = std::copy(f.frames.values.begin(), f.frames.values.end(), at);
+    return all;
+}
+
+}  // namespace
+
+int runLearn(const std::vector<std::string>& args) {
+    std::string modelPath, framesText, outPath, rule;
+    LearnOptions options;
+    bool quiet = false;
+    ArgParser parser("learn", "--model MODEL.pmsc --frames NEW.npy[,MORE.npy...] --out NEW_MODEL.pmsc [options]",
+                     "Updates a model with new frames (typically the misses `replay`/`run --keep-misses` kept)\n"
+                     "without its training frames (paper section 5): mean and basis by Brand's incremental SVD,\n"
+                     "keys selected again by the model's selector, the projector, and eps re-calibrated on the\n"
+                     "new frames by cross-fitting. Exact and approximate parts: README, 'Learning from misses'.\n"
+                     "A model trained with --learn-rank R keeps R singular vectors and its calibration scores,\n"
+                     "so updates lose less; any model can learn.");
+    parser.option("--model", "MODEL.pmsc", "model to update", modelPath, true);
+    parser.option("--frames", "NEW.npy[,MORE.npy]", "new frames, one or more .npy files (comma-separated)",
+                  framesText, true);
+    parser.option("--out", "NEW_MODEL.pmsc", "updated model to write (atomically)", outPath, true);
+    parser.option("--basis", "M", "basis size after the update (default: the model's M)",
+                  [&](const std::string& v) { options.basis = parseIndex("--basis", v, 1); });
+    parser.option("--rank", "R", "rank the incremental state keeps (default: the model's)",
+                  [&](const std::string& v) { options.maxRank = parseIndex("--rank", v, 1); });
+    parser.option("--calibration", "RULE", "max or conformal (default: the rule the model was calibrated by)", rule);
+    parser.option("--coverage", "C", "coverage of the conformal rule, in (0, 1) (default: the model's, else 0.9)",
+                  [&](const std::string& v) {
+                      const double c = parseDouble("--coverage", v, 0.0, 1.0);
+                      if (!(c > 0 && c < 1)) throw UsageError("--coverage: must be in (0, 1), got " + v);
+                      options.coverage = c;
+                  });
+    parser.option("--slices", "S", "cross-fitting folds over the new frames (default 5)",
+                  [&](const std::string& v) { options.slices = parseIndex("--slices", v, 2); });
+    parser.flag("--quiet", "no progress display", quiet);
+    if (!parser.parse(args)) return kExitOk;
+    if (!rule.empty()) {
+        if (rule == "max")
+            options.rule = CalibrationRule::MaxRatio;
+        else if (rule == "conformal")
+            options.rule = CalibrationRule::Conformal;
+        else
+            parser.fail("--calibration: '" + rule + "' is not max or conformal");
+    }
+    std::vector<std::string> paths;
+    try {
+        paths = splitPaths(framesText);
+    } catch (const UsageError& e) {
+        parser.fail(e.what());
+    }
+
+    AtomicFile(outPath).abandon();  // an unwritable destination fails now, not after the work
+    const auto start = std::chrono::steady_clock::now();
+    const Model model = readModel(modelPath);
+    const FrameSet frames = readAll(paths);
+    if (frames.points != model.points || frames.channels != model.channels)
+        throw InputError(paths.front() + ": frames have " + std::to_string(frames.points) + " points x " +
+                         std::to_string(frames.channels) + " channels, but the model " + modelPath + " has " +
+                         std::to_string(model.points) + " x " + std::to_string(model.channels));
+    Progress progress("learn", !quiet);
+    options.progress = [&](std::string_view stage, double done, double total) {
+        return progress.update(stage, done, total);
+    };
+    LearnReport report;
+    const Model learned = learn(model, frames, options, &report);
+    writeModel(outPath, learned);
+    progress.finish();
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+
+    std::cout << "learned " << outPath << " from " << modelPath << " + " << report.newFrames << " new frames in "
+              << fmt("%.2f", seconds) << " s (update " << fmt("%.2f", report.seconds) << " s: subspace "
+              << fmt("%.2f", report.secondsSubspace) << ", keys " << fmt("%.2f", report.secondsKeys)
+              << ", calibration " << fmt("%.2f", report.secondsCalibration) << ")\n";
+    std::cout << "  frames      " << model.trainFrames << " -> " << learned.trainFrames << " (update "
+              << learned.learning->updates << ")\n";
+    std::cout << "  basis       M = " << report.basisBefore << " -> " << report.basisAfter << ", state rank "
+              << report.rankBefore << " -> " << report.rankAfter << ", captures "
+              << fmt("%.4f", 100.0 * learned.energyCaptured()) << "% of all frames' energy; largest angle to "
+              << "the old basis " << fmt("%.3g", report.largestAngle * 180.0 / 3.141592653589793) << " deg\n";
+    std::cout << "  key points  K = " << learned.keyCount() << ", " << report.keysKept << " of them keys before\n";
+    std::cout << "  new frames  largest key RMS under the old model " << fmt("%.6g", report.oldModelNewFramesKeyRmsMax)
+              << ", largest point error of the new model " << fmt("%.6g", report.newFramesMaxPointError) << "\n";
+    std::cout << "  eps         [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax) << "] -> ["
+              << fmt("%.6g", learned.epsMin) << ", " << fmt("%.6g", learned.epsMax) << "]";
+    if (learned.tolerance > 0) {
+        std::cout << " for tolerance " << fmt("%.6g", learned.tolerance) << " ("
+                  << toString(learned.calibrationRecord ? learned.calibrationRecord->rule : CalibrationRule::MaxRatio)
+                  << " rule; ratio " << fmt("%.4g", report.calibrationRatioNew) << " on the new frames, "
+                  << fmt("%.4g", report.calibrationRatioOld) << " on the stored scores)";
+    }
+    std::cout << "\n";
+    for (const auto& w : report.warnings) std::cout << "  warning: " << w << "\n";
+    return kExitOk;
+}
+
+}  // namespace pmsc::cli

@@ -1,0 +1,66 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include "pmsc/Calibration.h"
+#include "pmsc/FrameSet.h"
+#include "pmsc/IncrementalSvd.h"
+#include "pmsc/Model.h"
+#include "pmsc/Training.h"  // ProgressFn
+
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace pmsc {
+
+/// The incremental state of a model: its mean, frame count, total energy and the first M
+/// singular triplets, followed by the LearningState's extra ones when the model has them.
+IncrementalSubspace subspaceOf(const Model& model);
+
+/// Options of learn(). Unset values keep what the model stored.
+struct LearnOptions {
+    Index basis = 0;       ///< M after the update; 0 = the model's M
+    Index maxRank = 0;     ///< rank r kept by the state; 0 = the model's (LearningState::maxRank, else M)
+    std::optional<CalibrationRule> rule;  ///< default: the model's CalibrationRecord's, else MaxRatio
+    std::optional<double> coverage;       ///< default: the model's, else 0.95
+    Index slices = 5;      ///< cross-fitting folds over the new frames for the calibration
+    ProgressFn progress;   ///< optional; returning false cancels (pmsc::Cancelled)
+};
+
+/// What learn() did.
+struct LearnReport {
+    Index newFrames = 0;
+    Index rankBefore = 0, rankAfter = 0;
+    Index basisBefore = 0, basisAfter = 0;
+    Index keysKept = 0;             ///< keys of the old model that are keys again
+    double largestAngle = 0;        ///< largest principal angle between the old and the new M-basis
+    double tailNorm = 0;            ///< IncrementalSubspace::tailNorm() after the update
+    double newFramesMaxPointError = 0;  ///< largest point error of the NEW model's PM on the new frames
+    double oldModelNewFramesKeyRmsMax = 0;  ///< largest key RMS of the new frames under the OLD model
+    CalibrationStats calibration;   ///< the new frames' cross-fitted scores and the thresholds
+    double calibrationRatioOld = 0; ///< the rule's ratio on the stored scores (0: none stored)
+    double calibrationRatioNew = 0; ///< the rule's ratio on the new frames' scores (0: too few)
+    std::vector<std::string> warnings;
+    double secondsSubspace = 0, secondsKeys = 0, secondsCalibration = 0, seconds = 0;
+};
+
+/// Updates a model with new frames without its training frames (paper section 5's nightly
+/// training; issue 10):
+/// 1. mean and basis by Brand's incremental SVD (updateSubspace) of the model's state;
+/// 2. keys selected again by the model's selector and settings on the rank-r surrogate of all
+///    frames seen, U_r diag(sigma) (its Gram matrix is diag(sigma^2): every key-selection step
+///    runs in the r-dimensional frame space), with the model's fiducials and grid points seeded;
+/// 3. the projector for the new keys and basis;
+/// 4. eps: without a tolerance, the larger of the old eps_min and the new frames' largest key
+///    RMS (eps_max = 1.5 eps_min, as training); with one, the new frames are scored by
+///    cross-fitting (each of `slices` contiguous slices held out: the OLD state updated with the
+///    other slices, the new keys) and r = the larger of the rule's ratio on those scores and on
+///    the stored training scores; eps_min = T / r, eps_max = 2 eps_min.
+/// What is exact and what is approximate compared with training from scratch on all frames is
+/// in the README ("Learning from misses") and IncrementalSvd.h.
+/// @throws InputError if the frames' N or C differ from the model's, there are none, or a value
+///         is NaN/Inf; std::invalid_argument for bad options; pmsc::Cancelled.
+Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& options = {},
+            LearnReport* report = nullptr);
+
+}  // namespace pmsc

@@ -1,0 +1,206 @@
+// Model file format version 2: tagged sections after the version-1 core (ModelIO.h, ModelSections.h).
+#include "pmsc/ByteIO.h"
+#include "pmsc/Errors.h"
+#include "pmsc/ModelIO.h"
+
+#include "SmallModel.h"
+#include "TempDir.h"
+
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <string>
+
+namespace {
+
+using pmsc::InputError;
+using pmsc::Model;
+using pmsc::test::smallModel;
+using pmsc::test::smallModelWithRegions;
+
+// smallModel(): N*C = 21, M = 3, K = 3: the core ends at 104 + 8 * (21 + 63 + 3 + 3 + 27).
+constexpr std::size_t kCoreEnd = 1040;
+constexpr std::size_t kTagAt = kCoreEnd + 8;
+constexpr std::size_t kLengthAt = kTagAt + 8;
+constexpr std::size_t kPayloadAt = kLengthAt + 8;
+
+template <class T>
+T peek(const std::string& bytes, std::size_t offset) {
+    T v;
+    std::memcpy(&v, bytes.data() + offset, sizeof(T));
+    return v;
+}
+template <class T>
+void poke(std::string& bytes, std::size_t offset, T value) {
+    std::memcpy(bytes.data() + offset, &value, sizeof(T));
+}
+/// Replaces the checksum (the last 8 bytes) so only the check under test can object.
+void reseal(std::string& bytes) {
+    poke<std::uint64_t>(bytes, bytes.size() - 8, pmsc::fnv1a64(bytes.data(), bytes.size() - 8));
+}
+std::string decodeMessage(const std::string& bytes) {
+    try {
+        pmsc::decodeModel(bytes, "m.pmsc");
+    } catch (const InputError& e) {
+        return e.what();
+    } catch (const std::exception& e) {
+        return std::string("WRONG EXCEPTION TYPE: ") + e.what();
+    }
+    return "NO ERROR";
+}
+void expectMessage(const std::string& bytes, std::initializer_list<std::string> fragments) {
+    const std::string what = decodeMessage(bytes);
+    EXPECT_EQ(what.rfind("m.pmsc: ", 0), 0u) << what;
+    for (const auto& f : fragments) EXPECT_NE(what.find(f), std::string::npos) << "missing '" << f << "' in: " << what;
+}
+
+TEST(ModelSections, AModelWithoutSectionsIsStillVersion1) {
+    const std::string bytes = pmsc::encodeModel(smallModel());
+    EXPECT_EQ(peek<std::uint32_t>(bytes, 8), 1u);
+    EXPECT_EQ(bytes.size(), kCoreEnd + 8);  // core + checksum: the version-1 layout exactly
+    EXPECT_FALSE(pmsc::decodeModel(bytes, "m.pmsc").regions.has_value());
+}
+
+TEST(ModelSections, RegionsRoundTripBitExact) {
+    pmsc::test::TempDir dir;
+    const auto path = dir.file("m.pmsc");
+    const Model m = smallModelWithRegions();
+    pmsc::writeModel(path, m);
+    const std::string bytes = pmsc::test::readBytes(path);
+    EXPECT_EQ(peek<std::uint32_t>(bytes, 8), 2u);
+    EXPECT_EQ(peek<std::uint64_t>(bytes, kCoreEnd), 1u);
+    EXPECT_EQ(std::string(bytes.data() + kTagAt, 8), std::string("REGIONS\0", 8));
+    EXPECT_EQ(peek<std::uint64_t>(bytes, kLengthAt), bytes.size() - 8 - kPayloadAt);
+    const Model r = pmsc::readModel(path);
+    ASSERT_TRUE(r.regions.has_value());
+    EXPECT_EQ(r.basis, m.basis);
+    EXPECT_EQ(r.keyPoints, m.keyPoints);
+    const auto& a = *m.regions;
+    const auto& b = *r.regions;
+    EXPECT_EQ(b.featherWidth, a.featherWidth);
+    EXPECT_EQ(b.maxLocalFraction, a.maxLocalFraction);
+    EXPECT_EQ(b.featherStart, a.featherStart);
+    EXPECT_EQ(b.featherRegion, a.featherRegion);
+    EXPECT_EQ(b.featherFactor, a.featherFactor);
+    ASSERT_EQ(b.regionCount(), 2);
+    for (int i = 0; i < 2; ++i) {
+        EXPECT_EQ(b.regions[i].points, a.regions[i].points);
+        EXPECT_EQ(b.regions[i].keys, a.regions[i].keys);
+        EXPECT_EQ(b.regions[i].basis, a.regions[i].basis);
+        EXPECT_EQ(b.regions[i].keyBasis, a.regions[i].keyBasis);
+        EXPECT_EQ(b.regions[i].projector, a.regions[i].projector);
+        EXPECT_EQ(b.regions[i].epsMin, a.regions[i].epsMin);
+        EXPECT_EQ(b.regions[i].epsMax, a.regions[i].epsMax);
+        EXPECT_EQ(b.regions[i].ratio, a.regions[i].ratio);
+    }
+    EXPECT_EQ(pmsc::encodeModel(r), bytes);
+    EXPECT_EQ(b.failSet(1), (std::vector<pmsc::Index>{4, 5, 6, 3}));
+}
+
+TEST(ModelSections, EveryTruncationInsideTheSectionNamesTheSection) {
+    const std::string full = pmsc::encodeModel(smallModelWithRegions());
+    const std::size_t payload = full.size() - 8 - kPayloadAt;
+    for (std::size_t cut = 0; cut < payload; ++cut) {
+        // A shorter payload whose length field agrees: only the codec's reader can notice.
+        std::string bytes = full.substr(0, kPayloadAt + cut) + std::string(8, '\0');
+        poke<std::uint64_t>(bytes, kLengthAt, cut);
+        reseal(bytes);
+        const std::string what = decodeMessage(bytes);
+        EXPECT_EQ(what.rfind("m.pmsc: section 'REGIONS': ", 0), 0u) << "cut " << cut << ": " << what;
+    }
+    // And a file cut anywhere after the core (the checksum gone with it) is rejected too.
+    for (std::size_t length = kCoreEnd; length < full.size(); ++length)
+        EXPECT_NE(decodeMessage(full.substr(0, length)), "NO ERROR") << length;
+}
+
+TEST(ModelSections, BadLengthIsRejected) {
+    std::string bytes = pmsc::encodeModel(smallModelWithRegions());
+    const auto length = peek<std::uint64_t>(bytes, kLengthAt);
+    poke<std::uint64_t>(bytes, kLengthAt, length + 1);
+    reseal(bytes);
+    expectMessage(bytes, {"section 'REGIONS' has bad length", "before the checksum"});
+    poke<std::uint64_t>(bytes, kLengthAt, ~std::uint64_t{0});
+    reseal(bytes);
+    expectMessage(bytes, {"section 'REGIONS' has bad length"});
+    // Shorter than the payload: the bytes after it are not a section.
+    poke<std::uint64_t>(bytes, kLengthAt, length - 8);
+    reseal(bytes);
+    expectMessage(bytes, {"section 'REGIONS'"});
+}
+
+TEST(ModelSections, UnknownTagSaysANewerPmscWroteIt) {
+    std::string bytes = pmsc::encodeModel(smallModelWithRegions());
+    std::memcpy(bytes.data() + kTagAt, "FUTURE\0\0", 8);
+    reseal(bytes);
+    expectMessage(bytes, {"unknown section 'FUTURE'", "newer pmsc", "'REGIONS'"});
+    std::memcpy(bytes.data() + kTagAt, "\x01\x02XY\0\0\0\0", 8);
+    reseal(bytes);
+    expectMessage(bytes, {"unknown section '\\x01\\x02XY'"});
+}
+
+TEST(ModelSections, DuplicateTagIsRejected) {
+    const std::string one = pmsc::encodeModel(smallModelWithRegions());
+    const std::string section = one.substr(kTagAt, one.size() - 8 - kTagAt);
+    std::string bytes = one.substr(0, one.size() - 8) + section + std::string(8, '\0');
+    poke<std::uint64_t>(bytes, kCoreEnd, 2);
+    reseal(bytes);
+    expectMessage(bytes, {"section 'REGIONS' appears twice"});
+}
+
+TEST(ModelSections, CountsThatCannotFitAreRejected) {
+    std::string bytes = pmsc::encodeModel(smallModelWithRegions());
+    poke<std::uint64_t>(bytes, kCoreEnd, 1u << 30);
+    reseal(bytes);
+    expectMessage(bytes, {"section count"});
+    bytes = pmsc::encodeModel(smallModelWithRegions());
+    poke<std::uint64_t>(bytes, kPayloadAt, ~std::uint64_t{0} / 2);  // region count
+    reseal(bytes);
+    expectMessage(bytes, {"section 'REGIONS'", "region count"});
+    bytes = pmsc::encodeModel(smallModelWithRegions());
+    poke<std::uint64_t>(bytes, kCoreEnd, 0);  // no sections, but bytes follow
+    reseal(bytes);
+    expectMessage(bytes, {"unexpected bytes"});
+}
+
+TEST(ModelSections, ChecksumCoversTheSections) {
+    std::string bytes = pmsc::encodeModel(smallModelWithRegions());
+    bytes[bytes.size() - 20] ^= 0x40;
+    expectMessage(bytes, {"checksum mismatch"});
+}
+
+TEST(ModelSections, InconsistentRegionsNameTheSectionAndTheProblem) {
+    const std::string good = pmsc::encodeModel(smallModelWithRegions());
+    // Region 0's first point (offset: count, width, fraction, then 6 fields of region 0) -> 5,
+    // which region 1 holds too.
+    std::string bytes = good;
+    const std::size_t firstPoint = kPayloadAt + 24 + 48;
+    ASSERT_EQ(peek<std::uint64_t>(bytes, firstPoint), 0u);
+    poke<std::uint64_t>(bytes, firstPoint, 5);
+    reseal(bytes);
+    expectMessage(bytes, {"section 'REGIONS'", "inconsistent", "point"});
+    bytes = good;
+    poke<std::uint64_t>(bytes, firstPoint, 99);
+    reseal(bytes);
+    expectMessage(bytes, {"section 'REGIONS'", "region 0 point 99 is outside [0, 7)"});
+    // eps_min of region 0 -> NaN
+    bytes = good;
+    poke<double>(bytes, kPayloadAt + 24 + 24, std::nan(""));
+    reseal(bytes);
+    expectMessage(bytes, {"section 'REGIONS'", "region 0 eps_min"});
+}
+
+TEST(ModelSections, ByteReaderNamesTheFieldAndNeverReadsPastTheEnd) {
+    std::string bytes(12, '\0');
+    pmsc::ByteReader in(bytes, "f: section 'X'");
+    EXPECT_EQ(in.u64("a"), 0u);
+    try {
+        in.u64("b");
+        FAIL() << "read past the end";
+    } catch (const InputError& e) {
+        EXPECT_EQ(std::string(e.what()).rfind("f: section 'X': truncated: b", 0), 0u) << e.what();
+    }
+    EXPECT_EQ(in.u32("c"), 0u);
+    EXPECT_NO_THROW(in.expectEnd());
+}
+
+}  // namespace

@@ -1,0 +1,159 @@
+#include "pmsc/Learning.h"
+
+#include "pmsc/Errors.h"
+#include "pmsc/PointMultiplier.h"
+#include "pmsc/Training.h"
+#include "Synthetic.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+
+namespace {
+
+using pmsc::Index;
+
+constexpr Index kPatches = 6, kPointsPerPatch = 20, kChannels = 3;
+
+// Frames [first, first + frames) of one shot of 6 independently moving patches (the same shapes
+// throughout) plus white noise; `still` last patches do not move (the motion a first training
+// never saw).
+pmsc::FrameSet patches(Index first, Index frames, unsigned seed, Index still) {
+    const pmsc::FrameSet shot = pmsc::test::patchFrames(kPatches, kPointsPerPatch, kChannels, 400, seed);
+    pmsc::FrameSet set(frames, shot.points, shot.channels);
+    set.matrix() = shot.matrix().middleCols(first, frames);
+    auto q = set.matrix();
+    q += 0.01 * pmsc::test::gaussian(set.rows(), frames, seed + 100 + static_cast<unsigned>(first));
+    const Index firstStill = (kPatches - still) * kPointsPerPatch * kChannels;
+    // Still at the shot's mean pose, so that stillness adds no offset direction of its own.
+    for (Index row = firstStill; row < set.rows(); ++row) q.row(row).setConstant(shot.matrix().row(row).mean());
+    return set;
+}
+
+pmsc::FrameSet join(const pmsc::FrameSet& a, const pmsc::FrameSet& b) {
+    pmsc::FrameSet all(a.frames + b.frames, a.points, a.channels);
+    std::copy(a.values.begin(), a.values.end(), all.values.begin());
+    std::copy(b.values.begin(), b.values.end(), all.values.begin() + static_cast<std::ptrdiff_t>(a.values.size()));
+    return all;
+}
+
+struct Errors {
+    double keyRmsMax = 0, keyRmsMean = 0, pointMax = 0;
+};
+
+Errors errorsOn(const pmsc::Model& model, const pmsc::FrameSet& frames) {
+    const pmsc::PointMultiplier pm(model);
+    Errors e;
+    std::vector<double> keys(static_cast<size_t>(model.keyCount() * kChannels)),
+        coords(static_cast<size_t>(model.basisSize())), out(static_cast<size_t>(frames.rows()));
+    for (Index f = 0; f < frames.frames; ++f) {
+        const double* full = frames.frame(f);
+        for (Index k = 0; k < model.keyCount(); ++k)
+            for (Index c = 0; c < kChannels; ++c) keys[static_cast<size_t>(k * kChannels + c)] = full[model.keyPoints[static_cast<size_t>(k)] * kChannels + c];
+        pm.project(keys.data(), coords.data());
+        const double rms = pm.keyRmsError(keys.data(), coords.data());
+        e.keyRmsMax = std::max(e.keyRmsMax, rms);
+        e.keyRmsMean += rms / static_cast<double>(frames.frames);
+        pm.reconstruct(coords.data(), out.data());
+        for (Index p = 0; p < frames.points; ++p) {
+            double d = 0;
+            for (Index c = 0; c < kChannels; ++c) d += std::pow(out[static_cast<size_t>(p * kChannels + c)] - full[p * kChannels + c], 2);
+            e.pointMax = std::max(e.pointMax, std::sqrt(d));
+        }
+    }
+    return e;
+}
+
+pmsc::TrainingOptions options(Index learnRank) {
+    pmsc::TrainingOptions o;
+    o.basis = 6;
+    o.maxKeys = 24;
+    o.block = 6;
+    o.tolerance = 0.2;
+    o.learnRank = learnRank;
+    o.calibrationRule = pmsc::CalibrationRule::Conformal;
+    o.calibrationCoverage = 0.9;
+    return o;
+}
+
+}  // namespace
+
+TEST(Learning, UpdateMatchesTrainingFromScratchOnTheUnion) {
+    const pmsc::FrameSet day1 = patches(0, 80, 1, 2);     // patches 4 and 5 never move
+    const pmsc::FrameSet misses = patches(80, 40, 1, 0);  // everything moves
+    const pmsc::FrameSet heldOut = patches(200, 60, 1, 0);
+    const pmsc::Model old = pmsc::train(day1, options(12));
+    ASSERT_TRUE(old.learning.has_value());
+    ASSERT_TRUE(old.calibrationRecord.has_value());
+    EXPECT_EQ(old.calibrationRecord->keyRms.size(), 80u);
+
+    pmsc::LearnReport report;
+    const pmsc::Model learned = pmsc::learn(old, misses, {}, &report);
+    const pmsc::Model scratch = pmsc::train(join(day1, misses), options(12));
+
+    EXPECT_EQ(learned.trainFrames, 120);
+    EXPECT_EQ(learned.basisSize(), scratch.basisSize());
+    EXPECT_LT((learned.mean - scratch.mean).norm(), 1e-12 * scratch.mean.norm());
+    EXPECT_NEAR(learned.totalEnergy, scratch.totalEnergy, 1e-10 * scratch.totalEnergy);
+    // The signal's 6 directions are found; the noise beyond rank 12 is what is approximate.
+    const double angle = pmsc::largestPrincipalAngle(scratch.basis, learned.basis);
+    EXPECT_LT(angle, 0.02);
+    EXPECT_GT(report.largestAngle, 0.5);  // the old basis lacked two patches' directions
+    EXPECT_EQ(report.newFrames, 40);
+    EXPECT_EQ(learned.learning->updates, 1);
+    EXPECT_EQ(learned.calibrationRecord->keyRms.size(), 120u);
+
+    const Errors before = errorsOn(old, heldOut), after = errorsOn(learned, heldOut),
+                 reference = errorsOn(scratch, heldOut);
+    EXPECT_GT(before.pointMax, 10 * reference.pointMax);  // the old model cannot pose patches 4, 5
+    EXPECT_LE(after.pointMax, 1.1 * reference.pointMax);
+    EXPECT_LE(after.keyRmsMean, 1.1 * reference.keyRmsMean);
+    // The new keys see the new patches: some lie in patches 4 and 5.
+    const auto inNewPatches = std::count_if(learned.keyPoints.begin(), learned.keyPoints.end(),
+                                            [](Index p) { return p >= 4 * kPointsPerPatch; });
+    EXPECT_GE(inNewPatches, 2);
+    EXPECT_GT(learned.epsMin, 0.0);
+    EXPECT_DOUBLE_EQ(learned.epsMax, 2 * learned.epsMin);
+    EXPECT_EQ(learned.tolerance, old.tolerance);
+}
+
+TEST(Learning, RepeatedUpdatesAgreeWithOneUpdateOfEverything) {
+    const pmsc::FrameSet day1 = patches(0, 60, 11, 2), a = patches(60, 30, 11, 0), b = patches(90, 30, 11, 0);
+    const pmsc::Model old = pmsc::train(day1, options(200));  // rank 200 keeps every direction seen
+    const pmsc::Model twice = pmsc::learn(pmsc::learn(old, a), b);
+    const pmsc::Model once = pmsc::learn(old, join(a, b));
+    EXPECT_EQ(twice.trainFrames, 120);
+    EXPECT_EQ(twice.learning->updates, 2);
+    EXPECT_LT(pmsc::largestPrincipalAngle(once.basis, twice.basis), 1e-8);
+    EXPECT_LT((once.mean - twice.mean).norm(), 1e-12 * once.mean.norm());
+    EXPECT_NEAR(once.singularValues[0], twice.singularValues[0], 1e-10 * once.singularValues[0]);
+}
+
+TEST(Learning, APlainModelCanLearnButSaysWhatItLacks) {
+    const pmsc::FrameSet day1 = patches(0, 60, 21, 2), misses = patches(60, 30, 21, 0),
+                         heldOut = patches(200, 30, 21, 0);
+    pmsc::TrainingOptions o = options(0);
+    o.calibrationRule = pmsc::CalibrationRule::MaxRatio;
+    const pmsc::Model old = pmsc::train(day1, o);
+    EXPECT_FALSE(old.learning.has_value());
+    EXPECT_FALSE(old.calibrationRecord.has_value());
+    pmsc::LearnReport report;
+    const pmsc::Model learned = pmsc::learn(old, misses, {}, &report);
+    EXPECT_EQ(report.rankBefore, old.basisSize());
+    EXPECT_GE(report.warnings.size(), 2u);  // no learning state, no stored scores
+    EXPECT_GT(learned.epsMin, 0.0);
+    EXPECT_LT(errorsOn(learned, heldOut).pointMax, 0.5 * errorsOn(old, heldOut).pointMax);
+}
+
+TEST(Learning, RejectsFramesThatDoNotFitTheModel) {
+    const pmsc::Model old = pmsc::train(patches(0, 40, 31, 0), options(8));
+    EXPECT_THROW(pmsc::learn(old, pmsc::FrameSet(3, old.points + 1, kChannels)), pmsc::InputError);
+    EXPECT_THROW(pmsc::learn(old, pmsc::FrameSet(3, old.points, 1)), pmsc::InputError);
+    pmsc::FrameSet bad = patches(40, 5, 31, 0);
+    bad.values[17] = std::nan("");
+    EXPECT_THROW(pmsc::learn(old, bad), pmsc::InputError);
+    pmsc::LearnOptions tooSmall;
+    tooSmall.maxRank = 3;
+    EXPECT_THROW(pmsc::learn(old, patches(50, 5, 31, 0), tooSmall), std::invalid_argument);
+}
