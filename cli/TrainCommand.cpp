@@ -68,6 +68,14 @@ int runTrain(const std::vector<std::string>& args) {
                   [&](const std::string& v) {
                       options.powerIterations = static_cast<int>(parseIndex("--power-iterations", v, 0, 20));
                   });
+    parser.option("--regions", "R",
+                  "learn R regions for local fail-through (issue 9; a version-2 model): only the regions\n"
+                  "that blend or miss go to the full calculation. Needs 3-channel (position) data",
+                  [&](const std::string& v) { options.regions.count = parseIndex("--regions", v, 1); });
+    parser.option("--feather", "F",
+                  "feather width of region borders, fraction of the bounding-box diagonal (default " +
+                      std::to_string(options.regions.featherFraction) + ")",
+                  [&](const std::string& v) { options.regions.featherFraction = parseDouble("--feather", v, 0.0, 0.5); });
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
 

@@ -277,6 +277,14 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
     model.epsMax = report.calibration.epsMax;
     progress("calibration", 1, 1);
 
+    // --- regions of local fail-through (paper section 9; issue 9), on the final core.
+    if (options.regions.count > 0) {
+        progress("regions", 0, 1);
+        model.regions = learnRegions(q, model, options.regions, options.tolerance, options.calibrationSlices,
+                                     svdOptions, &report.warnings);
+        progress("regions", 1, 1);
+    }
+
     model.validate();
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return model;

@@ -4,6 +4,7 @@
 #include "pmsc/Calibration.h"
 #include "pmsc/FrameSet.h"
 #include "pmsc/Model.h"
+#include "pmsc/RegionLearning.h"
 
 #include <functional>
 #include <stdexcept>
@@ -46,6 +47,9 @@ struct TrainingOptions {
     // --- calibration of eps (beyond the paper) ---
     double tolerance = 0;       ///< largest point error a hit may have (data units); 0 = no calibration
     Index calibrationSlices = 5;  ///< leave-one-slice-out folds
+
+    // --- local fail-through (issue 9): regions.count = 0 keeps the model a version-1 model ---
+    RegionOptions regions;
 
     // --- SVD ---
     unsigned seed = 20070101;   ///< randomized SVD test matrices; training is deterministic for a seed
