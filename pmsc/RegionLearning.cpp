@@ -263,7 +263,12 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
         // and a motion training never saw (the reason a region fails) can exceed the calibrated
         // ratio, so a region that sees any of it should reach the full result sooner.
         g.epsMin = cal.epsMin;
-        g.epsMax = 1.5 * cal.epsMin;
+        // A region PM reconstructed exactly on every held-out frame (a part that never moved in
+        // training: the back of a head) gets its largest held-out key error as eps_min, which is
+        // rounding noise: the same noise on a new frame would fail it through. Any key error under
+        // 1e-6 of the tolerance is noise for such a region, so it is the floor.
+        if (tolerance > 0 && cal.ratio == 0) g.epsMin = std::max(g.epsMin, 1e-6 * tolerance);
+        g.epsMax = 1.5 * g.epsMin;
     }
     if (notes && smallBases > 0)
         notes->push_back("regions: " + std::to_string(smallBases) + " of " + std::to_string(r) +
