@@ -71,7 +71,7 @@ constexpr double kTolerance = 0.004;
 
 const Model& trainedModel() {
     static const Model model = [] {
-        const LocalSurface training(300, false, 0.0);
+        const LocalSurface training(150, false, 0.0);
         const pmsc::FrameSet frames = pmsc::evaluateFrames(training, 0, training.frameCount());
         pmsc::TrainingOptions o;
         o.energy = 0.999999;
