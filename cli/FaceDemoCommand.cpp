@@ -15,7 +15,7 @@
 namespace pmsc::cli {
 
 int runDemoFace(const std::vector<std::string>& args) {
-    std::string data, out, threads, tolerance, basis;
+    std::string data, out, threads, tolerance, basis, regions;
     bool quick = false, quiet = false;
     ArgParser parser(
         "demo face", "--data DIR --out DIR2 [--quick] [--threads T] [--tolerance PCT] [--basis M] [--quiet]",
@@ -34,6 +34,7 @@ int runDemoFace(const std::vector<std::string>& args) {
     parser.option("--tolerance", "PCT", "largest error of a hit, % of the head diagonal (default 1)",
                   tolerance);
     parser.option("--basis", "M", "basis vectors (default 48)", basis);
+    parser.option("--regions", "R", "regions of local fail-through (default 16, quick 8; 0 = none)", regions);
     parser.flag("--quick", "9 + 2 short sequences: a smoke test of the whole pipeline (about 20 s)", quick);
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
@@ -58,6 +59,7 @@ int runDemoFace(const std::vector<std::string>& args) {
     if (!threads.empty()) options.threads = static_cast<int>(number("--threads", threads, 0, 1024));
     if (!tolerance.empty()) options.tolerancePercent = number("--tolerance", tolerance, 0.001, 100);
     if (!basis.empty()) options.basis = static_cast<long>(number("--basis", basis, 1, 500));
+    if (!regions.empty()) options.regions = static_cast<long>(number("--regions", regions, 0, 1000));
 
     Progress progress("demo face", !quiet);
     options.progress = [&](std::string_view stage, double done, double total) {

@@ -34,12 +34,14 @@ int runInspect(const std::vector<std::string>& args) {
     if (!parser.parse(args)) return kExitOk;
 
     const Model model = readModel(modelPath);
+    // The version the file holds (a model without sections is written as version 1).
+    const unsigned version = model.regions ? kModelFormatVersion : kModelFormatVersionCore;
     const auto bytes = std::filesystem::file_size(modelPath);
     const char* selector = model.selector == Selector::QDeim ? "qdeim" : "teleconnection";
     if (json) {
         nlohmann::ordered_json j;
         j["file"] = modelPath;
-        j["format_version"] = kModelFormatVersion;
+        j["format_version"] = version;
         j["bytes"] = bytes;
         j["points"] = model.points;
         j["channels"] = model.channels;
@@ -56,6 +58,19 @@ int runInspect(const std::vector<std::string>& args) {
         j["tolerance"] = model.tolerance;
         j["train_max_point_residual"] = model.trainMaxPointResidual;
         j["key_indices"] = std::vector<long long>(model.keyPoints.begin(), model.keyPoints.end());
+        if (model.regions) {
+            nlohmann::ordered_json regions = nlohmann::ordered_json::array();
+            for (const Region& g : model.regions->regions)
+                regions.push_back({{"points", g.points.size()},
+                                   {"keys", g.keys.size()},
+                                   {"basis", g.basisSize()},
+                                   {"eps_min", g.epsMin},
+                                   {"eps_max", g.epsMax},
+                                   {"ratio", g.ratio}});
+            j["feather_width"] = model.regions->featherWidth;
+            j["max_local_fraction"] = model.regions->maxLocalFraction;
+            j["regions"] = std::move(regions);
+        }
         if (model.learning)
             j["learning"] = {{"rank", model.learning->maxRank},
                              {"stored_vectors", model.basisSize() + model.learning->extraBasis.cols()},
@@ -68,7 +83,7 @@ int runInspect(const std::vector<std::string>& args) {
         std::cout << j.dump(2) << "\n";
         return kExitOk;
     }
-    std::cout << modelPath << ": pmsc model, format version " << kModelFormatVersion << ", " << bytes
+    std::cout << modelPath << ": pmsc model, format version " << version << ", " << bytes
               << " bytes\n";
     std::cout << "  points        N = " << model.points << ", channels C = " << model.channels
               << ", trained on " << model.trainFrames << " frames\n";
@@ -99,6 +114,21 @@ int runInspect(const std::vector<std::string>& args) {
               << "\n";
     std::cout << "  residual      largest point error of PM on the training frames: "
               << fmt("%.6g", model.trainMaxPointResidual) << "\n";
+    if (model.regions) {
+        const LocalRegions& lr = *model.regions;
+        std::cout << "  regions       R = " << lr.regionCount() << " (local fail-through), feather width "
+                  << fmt("%.6g", lr.featherWidth) << ", whole frame above " << fmt("%.3g", 100 * lr.maxLocalFraction)
+                  << "% of the points\n";
+        std::cout << "    region   points  keys  basis     eps_min     eps_max\n";
+        for (Index r = 0; r < lr.regionCount(); ++r) {
+            const Region& g = lr.regions[size_t(r)];
+            std::cout << "    " << fmt("%6.0f", double(r)) << " "
+                      << fmt("%8.0f", double(g.points.size())) << " "
+                      << fmt("%5.0f", double(g.keys.size())) << " "
+                      << fmt("%6.0f", double(g.basisSize())) << " " << fmt("%11.5g", g.epsMin)
+                      << " " << fmt("%11.5g", g.epsMax) << "\n";
+        }
+    }
     if (model.learning)
         std::cout << "  learning      state of rank " << model.learning->maxRank << " ("
                   << model.basisSize() + model.learning->extraBasis.cols() << " vectors stored), "

@@ -4,6 +4,7 @@
 #include "pmsc/Training.h"  // pmsc::Cancelled
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -75,7 +76,8 @@ public:
     ReplaySink(const Model& model, const PointEvaluator& recorded, ReplayResult& result, NpyFrameWriter* out,
                KeptFrames* keep)
         : model_(model), recorded_(recorded), result_(result), out_(out), keep_(keep),
-          full_(static_cast<std::size_t>(model.points * model.channels)) {}
+          full_(static_cast<std::size_t>(model.points * model.channels)), multiplier_(model),
+          pm_(full_.size()), coords_(static_cast<std::size_t>(model.basisSize())) {}
 
     void write(const engine::FrameResult& r) override {
         ReplayFrame& row = result_.frames[static_cast<std::size_t>(r.sequence)];
@@ -85,7 +87,7 @@ public:
         // The recorded frame is the reference for both errors, whatever the decision. A miss
         // already holds it: the fail-through read exactly the recorded values.
         const double* full = full_.data();
-        if (r.state == CacheState::Miss && !r.failed) {
+        if (r.state == CacheState::Miss && !r.failed && !r.local) {
             full = r.values.data();
         } else {
             recorded_.evaluateAll(r.frame, full_.data());
@@ -93,8 +95,19 @@ public:
         const Index n = model_.points, c = model_.channels;
         // Recorded frames are finite (the reader rejects NaN/Inf), so the keys are too and the
         // engine always hands over the PM result (keepPointMultiplication).
-        row.pmMaxPointError = r.pmValues.empty() ? std::numeric_limits<double>::quiet_NaN()
-                                                 : maxPointError(r.pmValues.data(), full, n, c);
+        // A local frame (issue 9) carries no whole-frame PM result: it is computed here, the same
+        // projection of the same key values, so the report's PM column means the same thing.
+        const double* pm = r.pmValues.data();
+        if (r.pmValues.empty() && r.local) {
+            multiplier_.project(r.keyValues.data(), coords_.data());
+            multiplier_.reconstruct(coords_.data(), pm_.data());
+            pm = pm_.data();
+        }
+        row.pmMaxPointError = pm == nullptr ? std::numeric_limits<double>::quiet_NaN()
+                                            : maxPointError(pm, full, n, c);
+        row.local = r.local;
+        row.pointsEvaluatedFraction = double(r.pointsEvaluated) / double(n);
+        row.regionStates.assign(r.regionStates.begin(), r.regionStates.end());
         row.softMaxPointError = maxPointError(r.values.data(), full, n, c);
         if (out_) out_->writeFrame(r.sequence, r.values.data());
         if (keep_ && !r.failed && r.state != CacheState::Hit) keep_->add(r.frame, r.state, r.keyRmsError, full);
@@ -107,6 +120,8 @@ private:
     NpyFrameWriter* out_;
     KeptFrames* keep_;
     std::vector<double> full_;
+    PointMultiplier multiplier_;
+    std::vector<double> pm_, coords_;
 };
 
 }  // namespace
@@ -128,6 +143,7 @@ ReplayResult replay(const Model& model, const PointEvaluator& recorded, const Re
     engineOptions.policy = SoftCachePolicy(result.epsMin, result.epsMax);
     engineOptions.keepPointMultiplication = true;  // the report needs PM's error on every frame
     engineOptions.cancel = options.cancel;
+    engineOptions.localFailThrough = options.localFailThrough;
     if (options.progress) {
         engineOptions.progress = [&](const engine::Progress& p) { options.progress(p.framesDone, p.framesTotal); };
     }
@@ -136,6 +152,7 @@ ReplayResult replay(const Model& model, const PointEvaluator& recorded, const Re
     // pmsc::Cancelled (interrupt) and pmsc::EvaluatorError propagate unchanged.
     const engine::RunStats stats = engine.run({0, frames, 1}, sink);
     result.threads = stats.threads;
+    result.localFailThrough = engine.localFailThrough();
     result.seconds = stats.wallSeconds;
     return result;
 }
@@ -179,6 +196,18 @@ nlohmann::ordered_json replayReport(const Model& model, const ReplayResult& resu
                           {"soft_max_point_error", r.softMaxPointError}});
     }
     const double count = std::max<double>(1.0, static_cast<double>(result.frames.size()));
+    // Models with regions only (a version-1 model's report is unchanged, byte for byte).
+    const Index regionCount = model.regions ? model.regions->regionCount() : 0;
+    if (regionCount > 0) {
+        for (std::size_t i = 0; i < result.frames.size(); ++i) {
+            const auto& r = result.frames[i];
+            std::string states;
+            for (const CacheState st : r.regionStates) states += st == CacheState::Hit ? 'h' : st == CacheState::Blend ? 'b' : 'm';
+            frames[i]["local"] = r.local;
+            frames[i]["points_evaluated_fraction"] = r.pointsEvaluatedFraction;
+            frames[i]["regions"] = states;
+        }
+    }
     json summary = {{"frames", result.frames.size()},
                     {"points", model.points},
                     {"channels", model.channels},
@@ -192,6 +221,24 @@ nlohmann::ordered_json replayReport(const Model& model, const ReplayResult& resu
                     {"pm_max_point_error", pct(percentiles(pm))},
                     {"soft_max_point_error", pct(percentiles(soft))},
                     {"seconds", result.seconds}};
+    if (regionCount > 0) {
+        double evaluated = 0;
+        Index local = 0;
+        std::vector<std::array<Index, 3>> perRegion(static_cast<std::size_t>(regionCount), {0, 0, 0});
+        for (const auto& r : result.frames) {
+            evaluated += r.pointsEvaluatedFraction;
+            local += r.local;
+            for (std::size_t g = 0; g < r.regionStates.size() && g < perRegion.size(); ++g)
+                ++perRegion[g][static_cast<std::size_t>(r.regionStates[g])];
+        }
+        json regions = json::array();
+        for (const auto& g : perRegion) regions.push_back({{"hits", g[0]}, {"blends", g[1]}, {"misses", g[2]}});
+        summary["regions"] = regionCount;
+        summary["local_fail_through"] = result.localFailThrough;
+        summary["local_frames"] = local;
+        summary["points_evaluated_fraction"] = evaluated / count;
+        summary["region_states"] = std::move(regions);
+    }
     return json{{"summary", std::move(summary)}, {"frames", std::move(frames)}};
 }
 

@@ -25,6 +25,10 @@ struct ReplayFrame {
     CacheDecision decision;        ///< section 5: hit, blend (with the weight of the full result) or miss
     double pmMaxPointError = 0;    ///< largest point error of the PM reconstruction alone
     double softMaxPointError = 0;  ///< largest point error of the soft-cached output
+    // Models with regions (issue 9):
+    bool local = false;                    ///< routed region by region
+    double pointsEvaluatedFraction = 0;    ///< fraction of the points evaluated fully (read from the recording)
+    std::vector<CacheState> regionStates;  ///< per region
 };
 
 struct ReplayOptions {
@@ -32,6 +36,8 @@ struct ReplayOptions {
     std::optional<std::pair<double, double>> eps;
     /// Worker threads (the engine's task arena); 0 = every core. Results do not depend on it.
     int threads = 0;
+    /// Local fail-through for models with regions (`--whole-frame-fail-through` turns it off).
+    bool localFailThrough = true;
     /// Set by another thread (SIGINT) to stop; replay() then throws pmsc::Cancelled.
     const std::atomic<bool>* cancel = nullptr;
     /// Called now and then with (frames done, frames total), from one thread at a time.
@@ -46,6 +52,7 @@ struct ReplayResult {
     std::vector<ReplayFrame> frames;  ///< in frame order
     double seconds = 0;               ///< wall time of the per-frame loop (input already read)
     int threads = 0;                  ///< worker threads allowed
+    bool localFailThrough = false;    ///< frames were routed region by region when they did not hit
 };
 
 /// Per-worker buffers, sized for one frame of a model.

@@ -44,6 +44,11 @@ int runReplay(const std::vector<std::string>& args) {
                   [&](const std::string& v) {
                       options.threads = static_cast<int>(parseIndex("--threads", v, 1, 4096));
                   });
+    bool wholeFrame = false;
+    parser.flag("--whole-frame-fail-through",
+                "models with regions: a frame that does not hit fails through whole (as version-1 models do)\n"
+                "instead of only its regions that blend or miss",
+                wholeFrame);
     std::string keepPath;
     parser.option("--keep-misses", "FILE.npy",
                   "append the frames that blended or missed (their recorded values) to FILE.npy, frame numbers "
@@ -51,6 +56,7 @@ int runReplay(const std::vector<std::string>& args) {
                   keepPath);
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
+    options.localFailThrough = !wholeFrame;
 
     const Model model = readModel(modelPath);
     const evaluators::ReplayEvaluator recorded(framesPath);

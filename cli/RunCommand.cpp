@@ -160,6 +160,7 @@ RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const R
     engine::EngineOptions engineOptions;
     engineOptions.threads = options.threads;
     engineOptions.cancel = options.cancel;
+    engineOptions.localFailThrough = !options.wholeFrameFailThrough;
     Progress progress("run", !options.quiet, options.logSeconds);
     Index doneBefore = 0;
     auto lastShown = Clock::now() - std::chrono::seconds(1);
@@ -339,6 +340,10 @@ int runRun(const std::vector<std::string>& args) {
                   o.keepMisses);
     parser.flag("--force", "redo frames whose output already exists", o.force);
     parser.flag("--quiet", "no progress display", o.quiet);
+    parser.flag("--whole-frame-fail-through",
+                "models with regions: a frame that does not hit fails through whole (as version-1 models do)\n"
+                "instead of only its regions that blend or miss",
+                o.wholeFrameFailThrough);
     if (!parser.parse(args)) return kExitOk;
     try {
         o.frames = parseFrameSpan("--frames", framesText);

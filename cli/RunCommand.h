@@ -23,6 +23,7 @@ struct RunOptions {
     int threads = 0;                     ///< 0: every core
     bool force = false;                  ///< redo frames whose output is already valid
     bool quiet = false;                  ///< no progress display
+    bool wholeFrameFailThrough = false;  ///< models with regions: no local fail-through (issue 9)
     double logSeconds = 10;              ///< plain progress lines this often when stderr is not a terminal
     std::string commandLine;             ///< as typed, for the stats
     const std::atomic<bool>* cancel = nullptr;  ///< set by another thread (SIGINT/SIGTERM) to stop

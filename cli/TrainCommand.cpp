@@ -181,6 +181,14 @@ int runTrain(const std::vector<std::string>& args) {
     parser.option("--block-points", "P", "points per block read when streaming (default: ~64 MiB blocks, "
                   "fewer under --memory-limit)",
                   [&](const std::string& v) { blockPoints = parseIndex("--block-points", v, 1); });
+    parser.option("--regions", "R",
+                  "learn R regions for local fail-through (issue 9; a version-2 model): only the regions\n"
+                  "that blend or miss go to the full calculation. Needs 3-channel (position) data",
+                  [&](const std::string& v) { options.regions.count = parseIndex("--regions", v, 1); });
+    parser.option("--feather", "F",
+                  "feather width of region borders, fraction of the bounding-box diagonal (default " +
+                      std::to_string(options.regions.featherFraction) + ")",
+                  [&](const std::string& v) { options.regions.featherFraction = parseDouble("--feather", v, 0.0, 0.5); });
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
 

@@ -7,12 +7,14 @@
 #include "nodes/FrameSlot.h"
 #include "nodes/FrameSource.h"
 #include "nodes/KeyPointEvaluator.h"
+#include "nodes/LocalBranch.h"
 #include "nodes/OrderedSink.h"
 #include "nodes/Projector.h"
 #include "nodes/Reconstructor.h"
 #include "nodes/RunControl.h"
 #include "pmsc/Errors.h"
 #include "pmsc/PointMultiplier.h"
+#include "pmsc/RegionMultiplier.h"
 
 #include <oneapi/tbb/flow_graph.h>
 #include <oneapi/tbb/info.h>
@@ -38,13 +40,15 @@ using Clock = std::chrono::steady_clock;
 namespace {
 
 /// Node kinds whose body time the stats report, in graph order.
-enum NodeId : int { kKeys, kProject, kMonitor, kReconstruct, kFailThrough, kBlend, kSink, kNodeCount };
+enum NodeId : int { kKeys, kProject, kMonitor, kReconstruct, kFailThrough, kBlend, kLocal, kFeather, kSink, kNodeCount };
 constexpr std::array<const char*, kNodeCount> kNodeNames = {nodes::KeyPointEvaluator::kName,
                                                             nodes::Projector::kName,
                                                             nodes::ErrorMonitor::kName,
                                                             nodes::Reconstructor::kName,
                                                             nodes::FailThroughEvaluator::kName,
                                                             nodes::Blender::kName,
+                                                            nodes::LocalBranch::kName,
+                                                            nodes::LocalCombiner::kName,
                                                             "sink"};
 
 // ThreadSanitizer and the uninstrumented libtbb (Debian's build). TSan cannot see libtbb's
@@ -194,9 +198,11 @@ struct Engine::Impl {
     const Model& model;
     const PointEvaluator& evaluator;
     EngineOptions options;
+    PointEvaluator::FailThroughShape shape;
     PointMultiplier pm;
     SoftCachePolicy policy;
     FramePlan plan;
+    std::optional<RegionMultiplier> regions;  ///< set when frames are routed region by region
     int threads;
     Index maxInFlight;
     tbb::task_arena arena;
@@ -210,18 +216,22 @@ struct Engine::Impl {
         : model(m),
           evaluator(e),
           options(std::move(o)),
+          shape(e.failThroughShape()),
           pm(checked(m, e, options)),
           policy(options.policy ? *options.policy : SoftCachePolicy(m.epsMin, m.epsMax)),
           plan(FramePlan::make(
               m, options.pointsWanted,
-              options.chunkPoints > 0
-                  ? options.chunkPoints
-                  : automaticChunkPoints(options.pointsWanted.empty() ? m.points
-                                                                      : Index(options.pointsWanted.size())),
-              options.wholeFrameFailThrough)),
+              options.chunkPoints > 0  ? options.chunkPoints
+              : shape.chunkPoints > 0 ? shape.chunkPoints
+                                      : automaticChunkPoints(options.pointsWanted.empty()
+                                                                 ? m.points
+                                                                 : Index(options.pointsWanted.size())),
+              options.wholeFrameFailThrough || shape.wholeFrame)),
           threads(options.threads > 0 ? options.threads : tbb::info::default_concurrency()),
           maxInFlight(options.maxFramesInFlight > 0 ? options.maxFramesInFlight : 2 * Index(threads)),
-          arena(threads) {}
+          arena(threads) {
+        if (m.regions && options.localFailThrough && plan.allPoints && shape.cheapSubsets) regions.emplace(m);
+    }
 
     /// Validates what the members' constructors do not, before any of them runs.
     static const Model& checked(const Model& m, const PointEvaluator& e, const EngineOptions& o) {
@@ -241,7 +251,18 @@ struct Engine::Impl {
         return m;
     }
 
+    using Clocks = std::array<NodeClock, kNodeCount>;
+
+    // run() in named steps (issue 13): check, take slots, run the graph, collect, report.
     RunStats run(FrameRange range, FrameSink& sink);
+    void checkRange(FrameRange range) const;
+    /// The frame slots of a run of `frames` frames: the pool grown to what the run can use.
+    std::span<const std::unique_ptr<FrameSlot>> takeSlots(Index frames);
+    /// Builds the flow graph in the arena, streams `range` through it, and waits.
+    void runGraph(FrameRange range, FrameSink& sink, nodes::RunControl& control, Clocks& clocks,
+                  std::span<const std::unique_ptr<FrameSlot>> slots, Clock::time_point start);
+    /// `last` from the run's counters and clocks.
+    void collectStats(const nodes::RunControl& control, const Clocks& clocks, Clock::time_point start);
 };
 
 Engine::Engine(const Model& model, const PointEvaluator& evaluator, EngineOptions options)
@@ -252,10 +273,11 @@ Engine::~Engine() = default;
 const RunStats& Engine::lastStats() const { return impl_->last; }
 const EngineOptions& Engine::options() const { return impl_->options; }
 const std::vector<Index>& Engine::outputPoints() const { return impl_->plan.outputPoints; }
+bool Engine::localFailThrough() const { return impl_->regions.has_value(); }
 
 RunStats Engine::run(FrameRange range, FrameSink& sink) { return impl_->run(range, sink); }
 
-RunStats Engine::Impl::run(FrameRange range, FrameSink& sink) {
+void Engine::Impl::checkRange(FrameRange range) const {
     if (range.count < 0 || range.step <= 0 || range.first < 0 ||
         (range.count > 0 && range.last() >= evaluator.frameCount())) {
         throw InputError("engine: frames " + std::to_string(range.first) + " + " +
@@ -263,6 +285,51 @@ RunStats Engine::Impl::run(FrameRange range, FrameSink& sink) {
                          " outside the " + std::to_string(evaluator.frameCount()) + " frames of evaluator '" +
                          evaluator.name() + "'");
     }
+}
+
+std::span<const std::unique_ptr<FrameSlot>> Engine::Impl::takeSlots(Index frames) {
+    // The frame buffers are the tokens: at most maxInFlight of them, allocated on the first run
+    // that needs them and kept by the engine, so repeated runs (a render farm's chunks) neither
+    // allocate nor page-fault frame buffers again.
+    const Index slotCount = std::min(maxInFlight, frames);
+    while (Index(pool.size()) < slotCount) {
+        pool.push_back(std::make_unique<FrameSlot>(plan, model.keyCount(), model.basisSize(),
+                                                   options.keepPointMultiplication));
+        if (regions) pool.back()->enableRegions(*regions, model.points, model.channels);
+    }
+    return {pool.data(), size_t(slotCount)};
+}
+
+void Engine::Impl::collectStats(const nodes::RunControl& control, const Clocks& clocks, Clock::time_point start) {
+    last.wallSeconds = std::chrono::duration<double>(Clock::now() - start).count();
+    last.framesDelivered = control.delivered.load();
+    last.hits = control.hits.load();
+    last.blends = control.blends.load();
+    last.misses = control.misses.load();
+    last.failed = control.failed.load();
+    last.forcedMisses = control.forcedMisses.load();
+    last.peakFramesInFlight = control.peakInFlight();
+    last.framesPerSecond = last.wallSeconds > 0 ? double(last.framesDelivered) / last.wallSeconds : 0;
+    last.cancelled = control.externallyCancelled();
+    last.nodes.clear();
+    for (int i = 0; i < kNodeCount; ++i) {
+        last.nodes.push_back({kNodeNames[size_t(i)], double(clocks[size_t(i)].nanoseconds.load()) * 1e-9,
+                              clocks[size_t(i)].calls.load()});
+    }
+    last.regions.clear();
+    if (model.regions) last.regions.resize(size_t(model.regions->regionCount()));
+    for (size_t r = 0; r < control.regionStates.size() && r < last.regions.size(); ++r) {
+        last.regions[r].hits = control.regionStates[r][0];
+        last.regions[r].blends = control.regionStates[r][1];
+        last.regions[r].misses = control.regionStates[r][2];
+    }
+    last.localFrames = control.localFrames;
+    const Index counted = last.framesDelivered - last.failed;
+    last.pointsEvaluatedFraction = counted > 0 ? control.pointsEvaluatedFractionSum / double(counted) : 0;
+}
+
+RunStats Engine::Impl::run(FrameRange range, FrameSink& sink) {
+    checkRange(range);
     last = RunStats{};
     last.framesRequested = range.count;
     last.threads = threads;
@@ -270,251 +337,20 @@ RunStats Engine::Impl::run(FrameRange range, FrameSink& sink) {
     last.chunks = Index(plan.chunks.size());
 
     nodes::RunControl control(options.cancel);
-    std::array<NodeClock, kNodeCount> clocks;
+    Clocks clocks;
     const auto start = Clock::now();
-    const auto seconds = [](Clock::duration d) { return std::chrono::duration<double>(d).count(); };
-
-    const auto finish = [&] {
-        last.wallSeconds = seconds(Clock::now() - start);
-        last.framesDelivered = control.delivered.load();
-        last.hits = control.hits.load();
-        last.blends = control.blends.load();
-        last.misses = control.misses.load();
-        last.failed = control.failed.load();
-        last.forcedMisses = control.forcedMisses.load();
-        last.peakFramesInFlight = control.peakInFlight();
-        last.framesPerSecond = last.wallSeconds > 0 ? double(last.framesDelivered) / last.wallSeconds : 0;
-        last.cancelled = control.externallyCancelled();
-        last.nodes.clear();
-        for (int i = 0; i < kNodeCount; ++i) {
-            last.nodes.push_back({kNodeNames[size_t(i)], double(clocks[size_t(i)].nanoseconds.load()) * 1e-9,
-                                  clocks[size_t(i)].calls.load()});
-        }
-    };
     if (range.count == 0) {
-        finish();
+        collectStats(control, clocks, start);
         return last;
     }
-
-    // The frame buffers are the tokens: at most maxInFlight of them, allocated on the first run
-    // that needs them and kept by the engine, so repeated runs (a render farm's chunks) neither
-    // allocate nor page-fault frame buffers again.
-    const Index slotCount = std::min(maxInFlight, range.count);
-    while (Index(pool.size()) < slotCount) {
-        pool.push_back(std::make_unique<FrameSlot>(plan, model.keyCount(), model.basisSize(),
-                                                   options.keepPointMultiplication));
-    }
-    const std::span<const std::unique_ptr<FrameSlot>> slots(pool.data(), size_t(slotCount));
-
-    const nodes::KeyPointEvaluator keysBody(model, evaluator);
-    const nodes::Projector projectBody(pm);
-    const nodes::ErrorMonitor monitorBody(pm, policy, options.keepPointMultiplication);
-    const nodes::Reconstructor reconstructBody(pm, plan);
-    const nodes::FailThroughEvaluator failThroughBody(evaluator, plan);
-    const nodes::Blender blendBody(pm, plan);
-    nodes::OrderedSink sinkBody(plan, sink, options.failurePolicy, control);
-    const bool stopOnFailure = options.failurePolicy == FailurePolicy::StopRun;
-    const Index chunkCount = Index(plan.chunks.size());
-
-    const auto runGraph = [&] {
-        // The graph is built inside the arena so that its tasks run on the arena's threads.
-        //
-        //  source ──seq──┐
-        //                ├─ bind (reserving join) ─> keys ─> project ─> monitor ──hit──> reconstruct ─┐
-        //  tokens ─slot──┘                                              │  │  (keepPm: │ then chunks)  │
-        //    ^                                                    failed│  └─blend/miss: one message   │
-        //    │                                                          │     per chunk ─┐            │
-        //    │                                                          │                v            │
-        //    │                                                          │   fail-through (unlimited)   │
-        //    │                                                          │                v            │
-        //    │                                                          │     blend (same task)        │
-        //    │                                                          │                v            │
-        //    │                                                          │  gather (the last branch     │
-        //    │                                                          │   sends the frame on)        │
-        //    │                                                          v                v            v
-        //    └──────────────── slot ── sink (serial) <── sequencer (restores order) <──────────────────┘
-        //
-        // tokens holds the free frame slots: a frame starts only when bind pairs a sequence
-        // number with a free slot, and the slot comes back only after the sink, so at most
-        // maxInFlight frames are anywhere in the graph.
-        using Token = FrameSlot*;
-        using MonitorNode =
-            flow::multifunction_node<Token, std::tuple<Token, ChunkMsg, Token>, flow::queueing_lightweight>;
-        using ReconstructNode = flow::multifunction_node<Token, std::tuple<Token, ChunkMsg>>;
-        using GatherNode = flow::multifunction_node<ChunkMsg, std::tuple<Token>, flow::queueing_lightweight>;
-
-#if defined(__SANITIZE_THREAD__)
-        // Declared first, so it runs last: this thread leaves with checks back on.
-        struct ChecksBackOn {
-            ~ChecksBackOn() { setIgnoring(false); }
-        } checksBackOn;
-        setIgnoring(true);  // from here this thread runs TBB's code too (building, waiting, destroying)
-#endif
-        flow::graph g;
-        const char runDone = 0;  // sync object only (TSan): every body's end -> after wait_for_all
-        control.setCancelHook([&g] {
-            PMSC_UNCHECKED_SCOPE;  // TBB's code, called from inside a node body
-            g.cancel();
-        });
-
-        nodes::FrameSource source(range, control);
-        flow::input_node<Index> sourceNode(g, [&](tbb::flow_control& fc) -> Index {
-            PMSC_NODE_BODY(&runDone);
-            takeOver(&source);
-            Index seq = 0;
-            if (!source.next(seq)) fc.stop();
-            handOver(&source);
-            return seq;
-        });
-        flow::buffer_node<Token> tokens(g);
-        flow::join_node<std::tuple<Index, Token>, flow::reserving> bind(g);
-
-        flow::function_node<std::tuple<Index, Token>, Token> keys(
-            g, flow::unlimited, [&](const std::tuple<Index, Token>& in) -> Token {
-                PMSC_NODE_BODY(&runDone);
-                Token slot = std::get<1>(in);
-                takeOver(slot);
-                const Index seq = std::get<0>(in);
-                slot->reset(seq, range.frame(seq));
-                control.frameStarted();
-                if (!control.cancelled()) timed(clocks[kKeys], [&] { keysBody(*slot); });
-                if (slot->failed() && stopOnFailure) control.stopAfter(seq);
-                handOver(slot);
-                return slot;
-            });
-        // Cheap bodies run as lightweight nodes: in the task of the node before them.
-        flow::function_node<Token, Token, flow::queueing_lightweight> project(
-            g, flow::unlimited, [&](Token slot) -> Token {
-                PMSC_NODE_BODY(&runDone);
-                takeOver(slot);
-                if (!control.cancelled()) timed(clocks[kProject], [&] { projectBody(*slot); });
-                handOver(slot);
-                return slot;
-            });
-        // A multifunction body's output: the slot's happens-before edge first (TSan builds), then
-        // TBB's try_put, unchecked. A frame for the fail-through branches goes out as one message per chunk.
-        const auto send = [](Token slot, auto& port, const auto& message) {
-            handOver(slot);
-            PMSC_UNCHECKED_SCOPE;
-            port.try_put(message);
-        };
-        const auto sendChunks = [&](Token slot, auto& port) {
-            slot->chunksLeft.store(chunkCount, std::memory_order_relaxed);
-            for (Index c = 0; c < chunkCount; ++c) send(slot, port, ChunkMsg{slot, c});
-        };
-        MonitorNode monitor(g, flow::unlimited, [&](Token slot, MonitorNode::output_ports_type& out) {
-            PMSC_NODE_BODY(&runDone);
-            takeOver(slot);
-            if (control.cancelled()) {
-                send(slot, std::get<2>(out), slot);
-                return;
-            }
-            const Route route = timed(clocks[kMonitor], [&] { return monitorBody(*slot); });
-            if (route == Route::Reconstruct) {
-                send(slot, std::get<0>(out), slot);
-            } else if (route == Route::FailThrough) {
-                sendChunks(slot, std::get<1>(out));
-            } else {
-                send(slot, std::get<2>(out), slot);
-            }
-        });
-        ReconstructNode reconstruct(
-            g, flow::unlimited, [&](Token slot, ReconstructNode::output_ports_type& out) {
-                PMSC_NODE_BODY(&runDone);
-                takeOver(slot);
-                if (control.cancelled()) {
-                    send(slot, std::get<0>(out), slot);
-                    return;
-                }
-                const bool done = timed(clocks[kReconstruct], [&] { return reconstructBody(*slot); });
-                if (done) {
-                    send(slot, std::get<0>(out), slot);
-                } else {
-                    sendChunks(slot, std::get<1>(out));
-                }
-            });
-        flow::function_node<ChunkMsg, ChunkMsg> failThrough(g, flow::unlimited, [&](ChunkMsg m) {
-            PMSC_NODE_BODY(&runDone);
-            takeOver(m.slot);
-            if (!control.cancelled()) timed(clocks[kFailThrough], [&] { failThroughBody(*m.slot, m.chunk); });
-            return m;
-        });
-        flow::function_node<ChunkMsg, ChunkMsg, flow::queueing_lightweight> blend(
-            g, flow::unlimited, [&](ChunkMsg m) {
-                PMSC_NODE_BODY(&runDone);
-                if (m.slot->decision.state == CacheState::Blend && !control.cancelled()) {
-                    timed(clocks[kBlend], [&] { blendBody(*m.slot, m.chunk); });
-                }
-                return m;
-            });
-        GatherNode gather(g, flow::unlimited, [&](ChunkMsg m, GatherNode::output_ports_type& out) {
-            PMSC_NODE_BODY(&runDone);
-            // acq_rel: the last branch sees every other branch's writes before the frame moves on.
-            if (m.slot->chunksLeft.fetch_sub(1, std::memory_order_acq_rel) == 1) {
-                if (m.slot->failed() && stopOnFailure) control.stopAfter(m.slot->sequence);
-                send(m.slot, std::get<0>(out), m.slot);
-            }
-        });
-        flow::sequencer_node<Token> sequencer(g, [](const Token& slot) { return size_t(slot->sequence); });
-        flow::function_node<Token, Token> sinkNode(g, flow::serial, [&](Token slot) -> Token {
-            PMSC_NODE_BODY(&runDone);
-            takeOver(slot);
-            takeOver(&sinkBody);  // the serial sink's calls follow one another
-            timed(clocks[kSink], [&] { sinkBody(*slot); });
-            control.frameFinished();
-            if (options.progress && !control.cancelled()) {
-                Progress p;
-                p.framesDone = control.delivered.load(std::memory_order_relaxed);
-                p.framesTotal = range.count;
-                p.hits = control.hits.load(std::memory_order_relaxed);
-                p.blends = control.blends.load(std::memory_order_relaxed);
-                p.misses = control.misses.load(std::memory_order_relaxed);
-                p.failed = control.failed.load(std::memory_order_relaxed);
-                p.elapsedSeconds = seconds(Clock::now() - start);
-                options.progress(p);
-            }
-            handOver(&sinkBody);
-            handOver(slot);
-            return slot;
-        });
-
-        flow::make_edge(sourceNode, flow::input_port<0>(bind));
-        flow::make_edge(tokens, flow::input_port<1>(bind));
-        flow::make_edge(bind, keys);
-        flow::make_edge(keys, project);
-        flow::make_edge(project, monitor);
-        flow::make_edge(flow::output_port<0>(monitor), reconstruct);
-        flow::make_edge(flow::output_port<1>(monitor), failThrough);
-        flow::make_edge(flow::output_port<2>(monitor), sequencer);
-        flow::make_edge(flow::output_port<0>(reconstruct), sequencer);
-        flow::make_edge(flow::output_port<1>(reconstruct), failThrough);
-        flow::make_edge(failThrough, blend);
-        flow::make_edge(blend, gather);
-        flow::make_edge(flow::output_port<0>(gather), sequencer);
-        flow::make_edge(sequencer, sinkNode);
-        flow::make_edge(sinkNode, tokens);
-
-        for (auto& slot : slots) {
-            handOver(slot.get());
-            tokens.try_put(slot.get());
-        }
-        handOver(&source);
-        sourceNode.activate();
-        g.wait_for_all();
-        // Everything the graph's threads wrote is visible after wait_for_all().
-        for (auto& slot : slots) takeOver(slot.get());
-        takeOver(&sinkBody);
-        takeOver(&source);
-        takeOver(&runDone);
-    };
+    const auto slots = takeSlots(range.count);
     try {
-        arena.execute(runGraph);
+        arena.execute([&] { runGraph(range, sink, control, clocks, slots, start); });
     } catch (...) {
-        finish();
+        collectStats(control, clocks, start);
         throw;
     }
-
-    finish();
+    collectStats(control, clocks, start);
     if (auto error = control.abortError()) std::rethrow_exception(error);
     if (control.externallyCancelled()) {
         throw Cancelled("engine: run cancelled after " + std::to_string(last.framesDelivered) + " of " +
@@ -522,6 +358,243 @@ RunStats Engine::Impl::run(FrameRange range, FrameSink& sink) {
     }
     if (control.hasRunError()) throw EvaluatorError(control.runError());
     return last;
+}
+
+void Engine::Impl::runGraph(FrameRange range, FrameSink& sink, nodes::RunControl& control, Clocks& clocks,
+                            std::span<const std::unique_ptr<FrameSlot>> slots, Clock::time_point start) {
+    const auto seconds = [](Clock::duration d) { return std::chrono::duration<double>(d).count(); };
+    const nodes::KeyPointEvaluator keysBody(model, evaluator);
+    const nodes::Projector projectBody(pm);
+    const nodes::ErrorMonitor monitorBody(pm, policy, options.keepPointMultiplication, regions ? &*regions : nullptr);
+    const nodes::Reconstructor reconstructBody(pm, plan);
+    const nodes::FailThroughEvaluator failThroughBody(evaluator, plan);
+    const nodes::Blender blendBody(pm, plan);
+    std::optional<nodes::LocalBranch> localBody;
+    std::optional<nodes::LocalCombiner> featherBody;
+    if (regions) {
+        localBody.emplace(evaluator, *regions, model.channels);
+        featherBody.emplace(*regions, model.channels);
+    }
+    const Index regionCount = regions ? regions->regionCount() : 0;
+    nodes::OrderedSink sinkBody(plan, sink, options.failurePolicy, control);
+    const bool stopOnFailure = options.failurePolicy == FailurePolicy::StopRun;
+    const Index chunkCount = Index(plan.chunks.size());
+
+    // The graph is built inside the arena so that its tasks run on the arena's threads.
+    //
+    //  source ──seq──┐
+    //                ├─ bind (reserving join) ─> keys ─> project ─> monitor ──hit──> reconstruct ─┐
+    //  tokens ─slot──┘                                              │  │  (keepPm: │ then chunks)  │
+    //    ^                                                    failed│  └─blend/miss: one message   │
+    //    │                                                          │     per chunk ─┐            │
+    //    │                                                          │                v            │
+    //    │                                                          │   fail-through (unlimited)   │
+    //    │                                                          │                v            │
+    //    │                                                          │     blend (same task)        │
+    //    │                                                          │                v            │
+    //    │                                                          │  gather (the last branch     │
+    //    │                                                          │   sends the frame on)        │
+    //    │               monitor ──local (issue 9): one message per region──> local (unlimited:    │
+    //    │                                            region PM and/or the failing region's fail  │
+    //    │                                            set) ─> local gather (the last branch runs   │
+    //    │                                            the feathered blend, sends the frame on) ──┐ │
+    //    │                                                          v                v          v v
+    //    └──────────────── slot ── sink (serial) <── sequencer (restores order) <──────────────────┘
+    //
+    // tokens holds the free frame slots: a frame starts only when bind pairs a sequence
+    // number with a free slot, and the slot comes back only after the sink, so at most
+    // maxInFlight frames are anywhere in the graph.
+    using Token = FrameSlot*;
+    using MonitorNode =
+        flow::multifunction_node<Token, std::tuple<Token, ChunkMsg, Token, ChunkMsg>, flow::queueing_lightweight>;
+    using ReconstructNode = flow::multifunction_node<Token, std::tuple<Token, ChunkMsg>>;
+    using GatherNode = flow::multifunction_node<ChunkMsg, std::tuple<Token>, flow::queueing_lightweight>;
+
+#if defined(__SANITIZE_THREAD__)
+    // Declared first, so it runs last: this thread leaves with checks back on.
+    struct ChecksBackOn {
+        ~ChecksBackOn() { setIgnoring(false); }
+    } checksBackOn;
+    setIgnoring(true);  // from here this thread runs TBB's code too (building, waiting, destroying)
+#endif
+    flow::graph g;
+    const char runDone = 0;  // sync object only (TSan): every body's end -> after wait_for_all
+    control.setCancelHook([&g] {
+        PMSC_UNCHECKED_SCOPE;  // TBB's code, called from inside a node body
+        g.cancel();
+    });
+
+    nodes::FrameSource source(range, control);
+    flow::input_node<Index> sourceNode(g, [&](tbb::flow_control& fc) -> Index {
+        PMSC_NODE_BODY(&runDone);
+        takeOver(&source);
+        Index seq = 0;
+        if (!source.next(seq)) fc.stop();
+        handOver(&source);
+        return seq;
+    });
+    flow::buffer_node<Token> tokens(g);
+    flow::join_node<std::tuple<Index, Token>, flow::reserving> bind(g);
+
+    flow::function_node<std::tuple<Index, Token>, Token> keys(
+        g, flow::unlimited, [&](const std::tuple<Index, Token>& in) -> Token {
+            PMSC_NODE_BODY(&runDone);
+            Token slot = std::get<1>(in);
+            takeOver(slot);
+            const Index seq = std::get<0>(in);
+            slot->reset(seq, range.frame(seq));
+            control.frameStarted();
+            if (!control.cancelled()) timed(clocks[kKeys], [&] { keysBody(*slot); });
+            if (slot->failed() && stopOnFailure) control.stopAfter(seq);
+            handOver(slot);
+            return slot;
+        });
+    // Cheap bodies run as lightweight nodes: in the task of the node before them.
+    flow::function_node<Token, Token, flow::queueing_lightweight> project(
+        g, flow::unlimited, [&](Token slot) -> Token {
+            PMSC_NODE_BODY(&runDone);
+            takeOver(slot);
+            if (!control.cancelled()) timed(clocks[kProject], [&] { projectBody(*slot); });
+            handOver(slot);
+            return slot;
+        });
+    // A multifunction body's output: the slot's happens-before edge first (TSan builds), then
+    // TBB's try_put, unchecked. A frame for the fail-through branches goes out as one message per chunk.
+    const auto send = [](Token slot, auto& port, const auto& message) {
+        handOver(slot);
+        PMSC_UNCHECKED_SCOPE;
+        port.try_put(message);
+    };
+    const auto sendChunks = [&](Token slot, auto& port) {
+        slot->chunksLeft.store(chunkCount, std::memory_order_relaxed);
+        for (Index c = 0; c < chunkCount; ++c) send(slot, port, ChunkMsg{slot, c});
+    };
+    MonitorNode monitor(g, flow::unlimited, [&](Token slot, MonitorNode::output_ports_type& out) {
+        PMSC_NODE_BODY(&runDone);
+        takeOver(slot);
+        if (control.cancelled()) {
+            send(slot, std::get<2>(out), slot);
+            return;
+        }
+        const Route route = timed(clocks[kMonitor], [&] { return monitorBody(*slot); });
+        if (route == Route::Reconstruct) {
+            send(slot, std::get<0>(out), slot);
+        } else if (route == Route::FailThrough) {
+            sendChunks(slot, std::get<1>(out));
+        } else if (route == Route::Local) {
+            slot->chunksLeft.store(regionCount, std::memory_order_relaxed);
+            for (Index r = 0; r < regionCount; ++r) send(slot, std::get<3>(out), ChunkMsg{slot, r});
+        } else {
+            send(slot, std::get<2>(out), slot);
+        }
+    });
+    ReconstructNode reconstruct(
+        g, flow::unlimited, [&](Token slot, ReconstructNode::output_ports_type& out) {
+            PMSC_NODE_BODY(&runDone);
+            takeOver(slot);
+            if (control.cancelled()) {
+                send(slot, std::get<0>(out), slot);
+                return;
+            }
+            const bool done = timed(clocks[kReconstruct], [&] { return reconstructBody(*slot); });
+            if (done) {
+                send(slot, std::get<0>(out), slot);
+            } else {
+                sendChunks(slot, std::get<1>(out));
+            }
+        });
+    flow::function_node<ChunkMsg, ChunkMsg> failThrough(g, flow::unlimited, [&](ChunkMsg m) {
+        PMSC_NODE_BODY(&runDone);
+        takeOver(m.slot);
+        if (!control.cancelled()) timed(clocks[kFailThrough], [&] { failThroughBody(*m.slot, m.chunk); });
+        return m;
+    });
+    flow::function_node<ChunkMsg, ChunkMsg, flow::queueing_lightweight> blend(
+        g, flow::unlimited, [&](ChunkMsg m) {
+            PMSC_NODE_BODY(&runDone);
+            if (m.slot->decision.state == CacheState::Blend && !control.cancelled()) {
+                timed(clocks[kBlend], [&] { blendBody(*m.slot, m.chunk); });
+            }
+            return m;
+        });
+    GatherNode gather(g, flow::unlimited, [&](ChunkMsg m, GatherNode::output_ports_type& out) {
+        PMSC_NODE_BODY(&runDone);
+        // acq_rel: the last branch sees every other branch's writes before the frame moves on.
+        if (m.slot->chunksLeft.fetch_sub(1, std::memory_order_acq_rel) == 1) {
+            if (m.slot->failed() && stopOnFailure) control.stopAfter(m.slot->sequence);
+            send(m.slot, std::get<0>(out), m.slot);
+        }
+    });
+    // Local fail-through: one branch per region, the feathered blend in the last one's task.
+    flow::function_node<ChunkMsg, ChunkMsg> localBranch(g, flow::unlimited, [&](ChunkMsg m) {
+        PMSC_NODE_BODY(&runDone);
+        takeOver(m.slot);
+        if (!control.cancelled()) timed(clocks[kLocal], [&] { (*localBody)(*m.slot, m.chunk); });
+        return m;
+    });
+    GatherNode localGather(g, flow::unlimited, [&](ChunkMsg m, GatherNode::output_ports_type& out) {
+        PMSC_NODE_BODY(&runDone);
+        // acq_rel: the last branch sees every other branch's writes before it blends.
+        if (m.slot->chunksLeft.fetch_sub(1, std::memory_order_acq_rel) == 1) {
+            if (!control.cancelled()) timed(clocks[kFeather], [&] { (*featherBody)(*m.slot); });
+            if (m.slot->failed() && stopOnFailure) control.stopAfter(m.slot->sequence);
+            send(m.slot, std::get<0>(out), m.slot);
+        }
+    });
+    flow::sequencer_node<Token> sequencer(g, [](const Token& slot) { return size_t(slot->sequence); });
+    flow::function_node<Token, Token> sinkNode(g, flow::serial, [&](Token slot) -> Token {
+        PMSC_NODE_BODY(&runDone);
+        takeOver(slot);
+        takeOver(&sinkBody);  // the serial sink's calls follow one another
+        timed(clocks[kSink], [&] { sinkBody(*slot); });
+        control.frameFinished();
+        if (options.progress && !control.cancelled()) {
+            Progress p;
+            p.framesDone = control.delivered.load(std::memory_order_relaxed);
+            p.framesTotal = range.count;
+            p.hits = control.hits.load(std::memory_order_relaxed);
+            p.blends = control.blends.load(std::memory_order_relaxed);
+            p.misses = control.misses.load(std::memory_order_relaxed);
+            p.failed = control.failed.load(std::memory_order_relaxed);
+            p.elapsedSeconds = seconds(Clock::now() - start);
+            options.progress(p);
+        }
+        handOver(&sinkBody);
+        handOver(slot);
+        return slot;
+    });
+
+    flow::make_edge(sourceNode, flow::input_port<0>(bind));
+    flow::make_edge(tokens, flow::input_port<1>(bind));
+    flow::make_edge(bind, keys);
+    flow::make_edge(keys, project);
+    flow::make_edge(project, monitor);
+    flow::make_edge(flow::output_port<0>(monitor), reconstruct);
+    flow::make_edge(flow::output_port<1>(monitor), failThrough);
+    flow::make_edge(flow::output_port<2>(monitor), sequencer);
+    flow::make_edge(flow::output_port<0>(reconstruct), sequencer);
+    flow::make_edge(flow::output_port<1>(reconstruct), failThrough);
+    flow::make_edge(failThrough, blend);
+    flow::make_edge(blend, gather);
+    flow::make_edge(flow::output_port<0>(gather), sequencer);
+    flow::make_edge(flow::output_port<3>(monitor), localBranch);
+    flow::make_edge(localBranch, localGather);
+    flow::make_edge(flow::output_port<0>(localGather), sequencer);
+    flow::make_edge(sequencer, sinkNode);
+    flow::make_edge(sinkNode, tokens);
+
+    for (auto& slot : slots) {
+        handOver(slot.get());
+        tokens.try_put(slot.get());
+    }
+    handOver(&source);
+    sourceNode.activate();
+    g.wait_for_all();
+    // Everything the graph's threads wrote is visible after wait_for_all().
+    for (auto& slot : slots) takeOver(slot.get());
+    takeOver(&sinkBody);
+    takeOver(&source);
+    takeOver(&runDone);
 }
 
 }  // namespace pmsc::engine

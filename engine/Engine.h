@@ -38,8 +38,15 @@ struct EngineOptions {
     /// thread count, so the output is bit-identical at any `threads`.
     Index chunkPoints = 0;
     /// Fail through with one PointEvaluator::evaluateAll() call per frame instead of
-    /// chunks (for evaluators whose full evaluation shares work between points).
+    /// chunks (for evaluators whose full evaluation shares work between points). Also on when
+    /// the evaluator declares it (PointEvaluator::failThroughShape()).
     bool wholeFrameFailThrough = false;
+    /// Local fail-through (issue 9) for models with regions: a frame that does not hit as a whole
+    /// sends only the points of its regions that blend or miss (and their feather bands) to the
+    /// full calculation. Off: every frame that does not hit fails through whole, as for a
+    /// version-1 model (`--whole-frame-fail-through`). Needs all output points (pointsWanted
+    /// empty) and an evaluator whose subsets are cheap (PointEvaluator::FailThroughShape).
+    bool localFailThrough = true;
     /// The points the consumer needs, in the order wanted (empty = all N). A hit then
     /// reconstructs only these; a fail-through evaluates only these.
     std::vector<Index> pointsWanted;
@@ -86,6 +93,9 @@ public:
     const EngineOptions& options() const;
     /// Points of each output frame (all N, or EngineOptions::pointsWanted).
     const std::vector<Index>& outputPoints() const;
+    /// Whether runs route frames region by region (a model with regions, and the options and the
+    /// evaluator allow it).
+    bool localFailThrough() const;
 
 private:
     struct Impl;

@@ -33,6 +33,20 @@ struct FrameResult {
     /// empty for a frame whose key values were not finite).
     std::span<const double> pmValues;
     std::span<const double> keyValues;  ///< K*C evaluated key values, model key order
+
+    // --- local fail-through (issue 9) ---
+    /// The frame was routed region by region: only the points with pointWeights > 0 were
+    /// evaluated fully; `state` and `weight` are the whole frame's (not hit) decision.
+    bool local = false;
+    /// Points whose full value the frame's fail-through computed (0 for a hit, all output points
+    /// for a whole-frame fail-through).
+    Index pointsEvaluated = 0;
+    /// Per region (models with regions, empty otherwise): its decision and key RMS error. On a
+    /// whole-frame hit the regions are not tested: all Hit, errors 0.
+    std::span<const CacheState> regionStates;
+    std::span<const double> regionKeyErrors;
+    /// Local frames only: each point's feathered weight of the full result (N).
+    std::span<const double> pointWeights;
 };
 
 /// The consumer of a run, implemented by the user: a file writer, a renderer's

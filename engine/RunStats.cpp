@@ -20,6 +20,13 @@ std::string RunStats::toJson(int indent) const {
     j["peak_frames_in_flight"] = peakFramesInFlight;
     j["fail_through_chunks"] = chunks;
     j["cancelled"] = cancelled;
+    if (!regions.empty()) {
+        j["local_frames"] = localFrames;
+        j["points_evaluated_fraction"] = pointsEvaluatedFraction;
+        nlohmann::json r = nlohmann::json::array();
+        for (const RegionCounts& c : regions) r.push_back({{"hits", c.hits}, {"blends", c.blends}, {"misses", c.misses}});
+        j["regions"] = std::move(r);
+    }
     nlohmann::json list = nlohmann::json::array();
     for (const NodeTiming& n : nodes)
         list.push_back({{"node", n.node}, {"seconds", n.seconds}, {"calls", n.calls}});

@@ -32,6 +32,17 @@ struct RunStats {
     bool cancelled = false;
     std::vector<NodeTiming> nodes;
 
+    // --- local fail-through (issue 9) ---
+    /// Per region: how many delivered frames it hit, blended, missed in (a whole-frame hit
+    /// counts as a hit of every region). Empty without regions.
+    struct RegionCounts {
+        Index hits = 0, blends = 0, misses = 0;
+    };
+    std::vector<RegionCounts> regions;
+    Index localFrames = 0;  ///< frames routed region by region
+    /// Mean over delivered frames of the fraction of output points evaluated fully.
+    double pointsEvaluatedFraction = 0;
+
     /// One JSON object: {"frames_requested":..., "hits":..., "nodes":[{"node","seconds","calls"}], ...}.
     std::string toJson(int indent = 2) const;
 };

@@ -9,11 +9,36 @@ Route ErrorMonitor::operator()(FrameSlot& slot) const {
     if (!slot.keysFinite) {
         slot.keyRmsError = std::numeric_limits<double>::quiet_NaN();
         slot.decision = CacheDecision{CacheState::Miss, 1.0};
+        slot.pointsEvaluated = Index(slot.values.size()) / pm_.model().channels;
         return Route::FailThrough;
     }
     slot.keyRmsError = pm_.keyRmsError(slot.keyValues.data(), slot.coords.data());
     slot.decision = policy_.decide(slot.keyRmsError);
-    if (slot.decision.state == CacheState::Hit || keepPm_) return Route::Reconstruct;
+    if (slot.decision.state == CacheState::Hit) {
+        slot.pointsEvaluated = 0;
+        return Route::Reconstruct;
+    }
+    if (regions_) {
+        const Index r = regions_->regionCount();
+        for (Index i = 0; i < r; ++i) {
+            const double e = regions_->project(i, slot.keyValues.data(), slot.regionCoords.data() + regions_->coordsOffset(i));
+            const CacheDecision d = regions_->decide(i, e);
+            slot.regionKeyErrors[size_t(i)] = e;
+            slot.regionStates[size_t(i)] = d.state;
+            slot.regionWeights[size_t(i)] = d.weight;
+        }
+        slot.regionsEvaluated = true;
+        regions_->pointWeights(slot.regionWeights, slot.pointWeights.data());
+        Index full = 0;
+        for (const double w : slot.pointWeights) full += w > 0;
+        if (double(full) <= regions_->regions().maxLocalFraction * double(slot.pointWeights.size())) {
+            slot.local = true;
+            slot.pointsEvaluated = full;
+            return Route::Local;
+        }
+    }
+    slot.pointsEvaluated = Index(slot.values.size()) / pm_.model().channels;
+    if (keepPm_) return Route::Reconstruct;
     return Route::FailThrough;
 }
 

@@ -19,6 +19,16 @@ FrameSlot::FrameSlot(const FramePlan& plan, Index keyCount, Index basisSize, boo
 
 FrameSlot::~FrameSlot() { gLiveSlots.fetch_sub(1, std::memory_order_relaxed); }
 
+void FrameSlot::enableRegions(const RegionMultiplier& regions, Index points, Index c) {
+    const Index r = regions.regionCount();
+    regionCoords.assign(size_t(regions.coordsSize()), 0.0);
+    regionKeyErrors.assign(size_t(r), 0.0);
+    regionStates.assign(size_t(r), CacheState::Hit);
+    regionWeights.assign(size_t(r), 0.0);
+    pointWeights.assign(size_t(points), 0.0);
+    localFull.assign(size_t(regions.failPoints() * c), 0.0);
+}
+
 Index FrameSlot::liveCount() { return gLiveSlots.load(std::memory_order_relaxed); }
 
 void FrameSlot::reset(Index sequenceNumber, Index frameNumber) {
@@ -28,6 +38,9 @@ void FrameSlot::reset(Index sequenceNumber, Index frameNumber) {
     keyRmsError = 0;
     decision = CacheDecision{};
     pmValid = false;
+    local = false;
+    regionsEvaluated = false;
+    pointsEvaluated = 0;
     chunksLeft.store(0, std::memory_order_relaxed);
     std::lock_guard lock(errorMutex_);
     failed_.store(false, std::memory_order_relaxed);

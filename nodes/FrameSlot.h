@@ -2,6 +2,7 @@
 #pragma once
 
 #include "nodes/FramePlan.h"
+#include "pmsc/RegionMultiplier.h"
 #include "pmsc/SoftCache.h"
 
 #include <atomic>
@@ -55,6 +56,21 @@ struct FrameSlot {
     bool pmValid = false;          ///< pmValues holds this frame's PM result
 
     std::atomic<Index> chunksLeft{0};  ///< fail-through branches still running
+
+    // --- local fail-through (issue 9); sized by enableRegions(), empty otherwise ---
+    /// Sizes the local buffers for `regions` (once, before the slot's first run).
+    void enableRegions(const RegionMultiplier& regions, Index points, Index channels);
+    bool local = false;                       ///< this frame is routed region by region
+    std::vector<double> regionCoords;         ///< every region's coordinates (RegionMultiplier::coordsOffset)
+    std::vector<double> regionKeyErrors;      ///< R key RMS errors (empty entries 0 on a global hit)
+    std::vector<CacheState> regionStates;     ///< R decisions (all Hit on a global hit)
+    std::vector<double> regionWeights;        ///< R weights of the full result
+    std::vector<double> pointWeights;         ///< N feathered weights w_p (local frames)
+    std::vector<double> localFull;            ///< full values of the failing regions' fail sets
+    bool regionsEvaluated = false;            ///< the region decisions above belong to this frame
+    /// Points whose full value this frame computed in its fail-through (0 for a hit, N for a
+    /// whole-frame fail-through, the points with w_p > 0 for a local frame).
+    Index pointsEvaluated = 0;
 
     /// Live slots in the process (instrument for the bounded-memory test).
     static Index liveCount();

@@ -1,5 +1,7 @@
 #include "nodes/OrderedSink.h"
 
+#include <algorithm>
+
 #include <cassert>
 
 namespace pmsc::nodes {
@@ -34,6 +36,17 @@ void OrderedSink::operator()(FrameSlot& slot) {
         result.keysFinite = slot.keysFinite;
         result.points = plan_.outputPoints;
         result.values = slot.values;
+        result.local = slot.local;
+        result.pointsEvaluated = slot.pointsEvaluated;
+        if (!slot.regionStates.empty()) {
+            if (!slot.regionsEvaluated) {
+                std::fill(slot.regionStates.begin(), slot.regionStates.end(), CacheState::Hit);
+                std::fill(slot.regionKeyErrors.begin(), slot.regionKeyErrors.end(), 0.0);
+            }
+            result.regionStates = slot.regionStates;
+            result.regionKeyErrors = slot.regionKeyErrors;
+        }
+        if (slot.local) result.pointWeights = slot.pointWeights;
         if (slot.pmValid) {
             result.pmValues = slot.pmValues;
         } else if (slot.decision.state == CacheState::Hit && !slot.pmValues.empty()) {
@@ -60,6 +73,13 @@ void OrderedSink::operator()(FrameSlot& slot) {
             break;
     }
     if (!slot.keysFinite) control_.forcedMisses.fetch_add(1, std::memory_order_relaxed);
+    if (slot.local) ++control_.localFrames;
+    if (plan_.outputCount() > 0)
+        control_.pointsEvaluatedFractionSum += double(slot.pointsEvaluated) / double(plan_.outputCount());
+    if (!result.regionStates.empty()) {
+        control_.regionStates.resize(result.regionStates.size(), {0, 0, 0});
+        for (size_t r = 0; r < result.regionStates.size(); ++r) ++control_.regionStates[r][size_t(result.regionStates[r])];
+    }
 }
 
 }  // namespace pmsc::nodes

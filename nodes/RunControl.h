@@ -3,7 +3,9 @@
 
 #include "pmsc/FrameSet.h"
 
+#include <array>
 #include <atomic>
+#include <vector>
 #include <exception>
 #include <functional>
 #include <limits>
@@ -50,6 +52,11 @@ public:
 
     /// Counters written by the sink (one thread), read by anyone.
     std::atomic<Index> delivered{0}, hits{0}, blends{0}, misses{0}, failed{0}, forcedMisses{0};
+    /// Written by the sink only, read after the run: per-region states (hit, blend, miss counts),
+    /// local frames, and the sum over delivered frames of the fraction of points evaluated fully.
+    std::vector<std::array<Index, 3>> regionStates;
+    Index localFrames = 0;
+    double pointsEvaluatedFractionSum = 0;
 
 private:
     const std::atomic<bool>* cancelFlag_;

@@ -22,7 +22,23 @@ namespace pmsc {
 /// on which other points are evaluated with it, nor on the thread count.
 class PointEvaluator {
 public:
+    /// How this evaluator is best failed through (issue 9): a property of the calculation, not
+    /// an engine option, because only the evaluator knows whether its full evaluation shares work
+    /// between points and whether a subset costs in proportion to its size.
+    struct FailThroughShape {
+        /// A whole-frame fail-through is one evaluateAll() call (its full pose shares work
+        /// between points), not parallel chunks.
+        bool wholeFrame = false;
+        /// Points per chunk of a chunked fail-through; 0 = the engine's automatic size.
+        Index chunkPoints = 0;
+        /// evaluate() on a subset costs about in proportion to the subset (plus its dependencies),
+        /// so local fail-through (only the points of regions that miss) pays off.
+        bool cheapSubsets = true;
+    };
+
     virtual ~PointEvaluator() = default;
+
+    virtual FailThroughShape failThroughShape() const { return {}; }
 
     /// Short name for logs and error messages ("replay", "cornell", "face").
     virtual std::string name() const = 0;

@@ -131,6 +131,10 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
     report = TrainingReport{};
     report.ranks = comm.size();
     report.blockPoints = q.blockPoints();
+    if (options.regions.count > 0 && (comm.size() != 1 || dynamic_cast<const MatrixBlocks*>(&q) == nullptr))
+        throw std::invalid_argument(
+            "regions (local fail-through) are learned from the training matrix in memory on one process; "
+            "drop --regions, or train in memory without MPI");
 
     auto progress = [&](std::string_view stage, double done, double total) {
         if (options.progress && !options.progress(stage, done, total)) {
@@ -360,6 +364,20 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
     // --- The (N*C)-row arrays go to rank 0, which writes the model.
     model.basis = gatherRowsTo(comm, basis, rows, 0);
     model.mean = gatherRowsTo(comm, q.mean(), rows, 0);
+
+    // --- regions of local fail-through (paper section 9; issue 9), on the final core. They are
+    //     learned from the whole mean-removed matrix, so only in-memory, one-process training
+    //     learns them (checked before any work, at the top).
+    if (options.regions.count > 0) {
+        progress("regions", 0, 1);
+        const auto& inMemory = dynamic_cast<const MatrixBlocks&>(q);
+        SvdOptions svdOptions;
+        svdOptions.seed = options.seed;
+        svdOptions.powerIterations = options.powerIterations;
+        model.regions = learnRegions(inMemory.matrix(), model, options.regions, options.tolerance,
+                                     options.calibrationSlices, svdOptions, &report.warnings);
+        progress("regions", 1, 1);
+    }
     if (comm.rank() == 0) model.validate();
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return model;

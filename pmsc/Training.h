@@ -7,6 +7,7 @@
 #include "pmsc/RowBlocks.h"
 #include "pmsc/FrameSet.h"
 #include "pmsc/Model.h"
+#include "pmsc/RegionLearning.h"
 
 #include <functional>
 #include <stdexcept>
@@ -54,6 +55,9 @@ struct TrainingOptions {
     /// scores), so updates lose only the energy beyond rank r. 0 = a plain model.
     /// @pre 0 or >= the final M (it is raised to M with a warning otherwise).
     Index learnRank = 0;
+
+    // --- local fail-through (issue 9): regions.count = 0 keeps the model a version-1 model ---
+    RegionOptions regions;
 
     // --- SVD ---
     unsigned seed = 20070101;   ///< randomized SVD test matrices; training is deterministic for a seed

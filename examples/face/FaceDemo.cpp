@@ -1,4 +1,5 @@
 #include "examples/face/FaceDemo.h"
+#include "examples/face/FaceLocalReport.h"
 
 #include "engine/Engine.h"
 #include "examples/face/FaceEvaluator.h"
@@ -38,6 +39,7 @@ FaceDemoOptions FaceDemoOptions::quickOptions() {
     o.minFrames = 26;
     o.maxFrames = 36;
     o.timingFrames = 8;
+    o.regions = 8;
     return o;
 }
 
@@ -211,6 +213,7 @@ nlohmann::json runFaceDemo(const FaceDemoOptions& options) {
         to.maxKeys = options.maxKeys;
         to.fiducials.assign(IctFace::multiPie68().begin(), IctFace::multiPie68().end());
         to.tolerance = options.tolerancePercent * percent;
+        to.regions.count = options.regions;
         to.progress = [&](std::string_view stage, double done, double total) {
             return !options.progress ||
                    options.progress(std::string("train: ") + std::string(stage), done, total);
@@ -292,6 +295,9 @@ nlohmann::json runFaceDemo(const FaceDemoOptions& options) {
     eo.threads = options.threads;
     // The rig shares work between points (relax rings, contact inputs): a miss is posed whole.
     eo.wholeFrameFailThrough = true;
+    // The decisions checked below are the whole frame's: today's soft cache (local fail-through
+    // is measured on its own afterwards).
+    eo.localFailThrough = false;
     engine::Engine engine(model, evaluator, eo);
     nlohmann::json engineRuns = nlohmann::json::array();
     Index engineHits[2] = {0, 0}, engineBlends[2] = {0, 0}, engineMisses[2] = {0, 0},
@@ -324,6 +330,26 @@ nlohmann::json runFaceDemo(const FaceDemoOptions& options) {
             ++unseen;
         else if (!r.engineAgrees)
             ++disagreements;
+    }
+
+    // --- local fail-through (issue 9): the validation sample and the novel set, both ways -------------
+    if (model.regions) {
+        t = Clock::now();
+        std::vector<Index> validationSample, novelFrames;
+        for (size_t i = 0; i < validationSeqs.size() && i < 4; ++i) {
+            const FaceSequence& seq = animation->sequences()[validationSeqs[i]];
+            for (Index f = 0; f < seq.frameCount; ++f) validationSample.push_back(seq.firstFrame + f);
+        }
+        novelFrames = animation->framesOf(novelSeqs);
+        nlohmann::json local;
+        local["regions"] = model.regions->regionCount();
+        local["feather_width_pct_bbox"] = model.regions->featherWidth / percent;
+        local["validation"] = localFailThroughReport(model, evaluator, validationSample, percent, options.threads,
+                                                     [&](double d) { step("local validation", d, 1); });
+        local["novel"] = localFailThroughReport(model, evaluator, novelFrames, percent, options.threads,
+                                                [&](double d) { step("local novel", d, 1); });
+        report["local_fail_through"] = local;
+        timings["local_fail_through"] = seconds(t);
     }
 
     // --- timing: full pose vs PMSC, one frame at a time, one thread, interleaved ----------------------

@@ -31,6 +31,11 @@ struct FaceDemoOptions {
     /// doubles). The paper used 85 for its 2,986 points.
     long basis = 48;
     long maxKeys = 170;  ///< K (paper: 170), Multi-PIE 68 fiducials included
+    /// Regions of local fail-through (issue 9; 0 = none). Training learns them after the model's
+    /// core, so every figure of the whole-frame soft cache is unchanged; report.json then gains
+    /// "local_fail_through" with the validation (first 4 sequences) and novel sets measured both
+    /// ways (FaceLocalReport.h).
+    long regions = 16;
     /// Calibration target T (TrainingOptions::tolerance) in % of the head's bounding-box
     /// diagonal: the largest point error a hit may have. 1%: the paper's own accuracy criterion
     /// ("less than 1% of the diagonal of the head bounding box"), so a hit is by construction

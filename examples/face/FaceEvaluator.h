@@ -27,6 +27,10 @@ public:
     Index frameCount() const override { return animation_->frameCount(); }
     void evaluate(Index frame, std::span<const Index> points, double* out) const override;
     void evaluateAll(Index frame, double* out) const override;
+    /// A whole-frame fail-through is one full pose (the rig shares relax rings and contact inputs
+    /// between points; 64 chunks through a 32-plan cache cost more than a pose), and a subset
+    /// poses only its dependency closure, so local fail-through pays off.
+    FailThroughShape failThroughShape() const override { return {true, 0, true}; }
 
     std::vector<std::shared_ptr<const FrameWriter>> frameWriters() const override;
 

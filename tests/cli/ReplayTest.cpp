@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/QR>
+
 #include <cmath>
 
 namespace {
@@ -106,6 +108,77 @@ TEST(Replay, ReportCountsStatesAndUsesTheOverride) {
     EXPECT_EQ(report["frames"][1]["state"], "miss");
     EXPECT_EQ(report["frames"][2]["state"], "miss");
     EXPECT_EQ(report["summary"]["eps_max"], 0.0);
+}
+
+/// 40 points x 3 channels, M = 2, four regions of 10 points with two keys each, whose local bases
+/// are the rows of the global basis (a frame in the subspace hits everywhere), no feather bands.
+pmsc::Model regionModel() {
+    pmsc::Model m;
+    m.points = 40;
+    m.channels = 3;
+    m.trainFrames = 2;
+    Eigen::MatrixXd g(120, 2);
+    for (Index i = 0; i < g.size(); ++i) g.data()[i] = std::sin(0.7 * double(i) + 0.2);
+    m.basis = Eigen::HouseholderQR<Eigen::MatrixXd>(g).householderQ() * Eigen::MatrixXd::Identity(120, 2);
+    m.mean = Eigen::VectorXd::Zero(120);
+    m.singularValues = Eigen::Vector2d(2, 1);
+    m.totalEnergy = 5;
+    for (Index r = 0; r < 4; ++r) m.keyPoints.insert(m.keyPoints.end(), {10 * r + 2, 10 * r + 7});
+    m.projector = pmsc::makeProjector(m.basis, 3, m.keyPoints);
+    m.epsMin = 1e-9;
+    m.epsMax = 2e-9;
+    pmsc::LocalRegions lr;
+    for (Index r = 0; r < 4; ++r) {
+        pmsc::Region reg;
+        for (Index p = 10 * r; p < 10 * r + 10; ++p) reg.points.push_back(p);
+        reg.keys = {2 * r, 2 * r + 1};
+        reg.basis = m.basis.middleRows(30 * r, 30);
+        reg.keyBasis = pmsc::gatherKeyRows(m.basis, 3, {10 * r + 2, 10 * r + 7});
+        reg.projector = Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd>(reg.keyBasis).pseudoInverse();
+        reg.epsMin = 1e-9;
+        reg.epsMax = 2e-9;
+        lr.regions.push_back(std::move(reg));
+    }
+    lr.featherStart.assign(41, 0);
+    m.regions = std::move(lr);
+    m.validate();
+    return m;
+}
+
+TEST(Replay, ModelWithRegionsReportsLocalFramesAndWholeFrameFlagRestoresTheOldRoute) {
+    const pmsc::Model model = regionModel();
+    // Frame 0 in the subspace (a hit); frame 1 the same plus a displacement of region 0's points.
+    std::vector<double> values(240);
+    for (Index x = 0; x < 120; ++x) {
+        values[x] = 0.5 * model.basis(x, 0) - 0.25 * model.basis(x, 1);
+        values[120 + x] = values[x] + (x < 30 ? 0.1 * std::cos(double(x)) : 0.0);
+    }
+    pmsc::FrameFile file{pmsc::FrameSet(2, 40, 3), pmsc::NpyDtype::Float64};
+    file.frames.values = values;
+    const pmsc::cli::ReplayEvaluator rec(std::move(file), "test");
+    pmsc::cli::ReplayOptions options;
+    options.threads = 2;
+    auto report = pmsc::cli::replayReport(model, pmsc::cli::replay(model, rec, options));
+    EXPECT_EQ(report["summary"]["regions"], 4);
+    EXPECT_EQ(report["summary"]["local_frames"], 1);
+    EXPECT_EQ(report["frames"][0]["regions"], "hhhh");
+    EXPECT_EQ(report["frames"][1]["regions"], "mhhh");
+    EXPECT_EQ(report["frames"][1]["local"], true);
+    EXPECT_DOUBLE_EQ(report["frames"][1]["points_evaluated_fraction"].get<double>(), 0.25);
+    EXPECT_LT(report["frames"][1]["soft_max_point_error"].get<double>(), 1e-12);  // region 0 read, the rest exact
+    EXPECT_GT(report["frames"][1]["pm_max_point_error"].get<double>(), 0.01);
+    EXPECT_EQ(report["summary"]["region_states"][0]["misses"], 1);
+    options.localFailThrough = false;  // --whole-frame-fail-through
+    report = pmsc::cli::replayReport(model, pmsc::cli::replay(model, rec, options));
+    EXPECT_EQ(report["summary"]["local_frames"], 0);
+    EXPECT_EQ(report["frames"][1]["local"], false);
+    EXPECT_DOUBLE_EQ(report["frames"][1]["points_evaluated_fraction"].get<double>(), 1.0);
+    // A version-1 model's report has none of it.
+    pmsc::Model v1 = model;
+    v1.regions.reset();
+    report = pmsc::cli::replayReport(v1, pmsc::cli::replay(v1, rec, options));
+    EXPECT_FALSE(report["summary"].contains("regions"));
+    EXPECT_FALSE(report["frames"][1].contains("local"));
 }
 
 TEST(Replay, CancelFlagStopsWithCancelled) {

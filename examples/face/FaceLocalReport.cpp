@@ -1,0 +1,129 @@
+#include "examples/face/FaceLocalReport.h"
+
+#include "engine/Engine.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+namespace pmsc::face {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+/// Records each frame's state, locality, evaluated points and largest error against a full pose.
+class ErrorSink : public engine::FrameSink {
+public:
+    ErrorSink(const PointEvaluator& evaluator, const std::vector<Index>& frames, Index n)
+        : evaluator_(evaluator), frames_(frames), full_(size_t(3 * n)), n_(n) {}
+    void write(const engine::FrameResult& r) override {
+        evaluator_.evaluateAll(r.frame, full_.data());
+        double worst = 0;
+        for (Index p = 0; p < n_; ++p)
+            worst = std::max(worst, std::hypot(r.values[3 * p] - full_[3 * p], r.values[3 * p + 1] - full_[3 * p + 1],
+                                               r.values[3 * p + 2] - full_[3 * p + 2]));
+        maxError.push_back(worst);
+        states.push_back(r.state);
+        local.push_back(r.local);
+        fraction.push_back(double(r.pointsEvaluated) / double(n_));
+    }
+    std::vector<double> maxError, fraction;
+    std::vector<CacheState> states;
+    std::vector<bool> local;
+
+private:
+    const PointEvaluator& evaluator_;
+    const std::vector<Index>& frames_;
+    std::vector<double> full_;
+    Index n_;
+};
+
+class NullSink : public engine::FrameSink {
+public:
+    void write(const engine::FrameResult&) override {}
+};
+
+/// Runs `frames` (contiguous runs become one engine run each) through `engine`.
+template <class Sink>
+double runFrames(engine::Engine& engine, const std::vector<Index>& frames, Sink& sink) {
+    const auto t = Clock::now();
+    for (size_t i = 0; i < frames.size();) {
+        size_t j = i + 1;
+        while (j < frames.size() && frames[j] == frames[j - 1] + 1) ++j;
+        engine.run({frames[i], Index(j - i), 1}, sink);
+        i = j;
+    }
+    return since(t);
+}
+
+}  // namespace
+
+nlohmann::json localFailThroughReport(const Model& model, const PointEvaluator& evaluator,
+                                      const std::vector<Index>& frames, double percent, int threads,
+                                      const std::function<void(double)>& progress) {
+    nlohmann::json j;
+    const Index n = model.points;
+    const double count = std::max<double>(1, double(frames.size()));
+    // Errors, every core.
+    {
+        engine::EngineOptions o;
+        o.threads = threads;
+        engine::Engine engine(model, evaluator, o);
+        ErrorSink sink(evaluator, frames, n);
+        runFrames(engine, frames, sink);
+        double worst = 0, fractionAll = 0, fractionNonHit = 0;
+        Index nonHit = 0, local = 0, hits = 0;
+        for (size_t i = 0; i < sink.maxError.size(); ++i) {
+            worst = std::max(worst, sink.maxError[i]);
+            fractionAll += sink.fraction[i];
+            if (sink.states[i] != CacheState::Hit) {
+                ++nonHit;
+                fractionNonHit += sink.fraction[i];
+            } else {
+                ++hits;
+            }
+            local += sink.local[i];
+        }
+        j["frames"] = frames.size();
+        j["hit_rate"] = double(hits) / count;
+        j["local_frames"] = local;
+        j["soft_max_error_pct_bbox_max"] = worst / percent;
+        j["points_evaluated_fraction_mean"] = fractionAll / count;
+        j["points_evaluated_fraction_non_hit_mean"] = nonHit > 0 ? fractionNonHit / double(nonHit) : 0.0;
+        j["local_fail_through"] = engine.localFailThrough();
+        const engine::RunStats& s = engine.lastStats();
+        nlohmann::json regions = nlohmann::json::array();
+        for (const auto& r : s.regions) regions.push_back({r.hits, r.blends, r.misses});
+        j["region_states_last_run"] = regions;
+    }
+    if (progress) progress(0.4);
+    // Speed, one thread, the three ways in one run.
+    {
+        engine::EngineOptions o;
+        o.threads = 1;
+        NullSink sink;
+        engine::Engine local(model, evaluator, o);
+        const double localSeconds = runFrames(local, frames, sink);
+        if (progress) progress(0.6);
+        o.localFailThrough = false;
+        engine::Engine whole(model, evaluator, o);
+        const double wholeSeconds = runFrames(whole, frames, sink);
+        if (progress) progress(0.8);
+        std::vector<double> full(size_t(3 * n));
+        const auto t = Clock::now();
+        for (const Index f : frames) evaluator.evaluateAll(f, full.data());
+        const double fullSeconds = since(t);
+        j["one_thread_seconds_per_frame"] = {{"full_pose", fullSeconds / count},
+                                             {"local_fail_through", localSeconds / count},
+                                             {"whole_frame_fail_through", wholeSeconds / count}};
+        j["speedup_local"] = localSeconds > 0 ? fullSeconds / localSeconds : 0.0;
+        j["speedup_whole_frame"] = wholeSeconds > 0 ? fullSeconds / wholeSeconds : 0.0;
+    }
+    if (progress) progress(1.0);
+    return j;
+}
+
+}  // namespace pmsc::face

@@ -1,0 +1,283 @@
+#include "pmsc/RegionLearning.h"
+
+#include "pmsc/Calibration.h"
+#include "pmsc/Varimax.h"
+
+#include <Eigen/QR>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <numeric>
+#include <stdexcept>
+#include <string>
+
+namespace pmsc {
+
+namespace {
+
+[[noreturn]] void badOption(const std::string& what) { throw std::invalid_argument("train: regions: " + what); }
+
+/// Step 1: each point's loading pattern on the Varimax-rotated leading factors (N x J).
+Eigen::MatrixXd loadingPatterns(const Model& model) {
+    const Index n = model.points;
+    const Index c = model.channels;
+    const Index j = std::min<Index>(24, model.basisSize());
+    Eigen::MatrixXd loadings = model.basis.leftCols(j) * model.singularValues.head(j).asDiagonal();
+    VarimaxOptions vo;
+    vo.maxIterations = 100;
+    vo.tolerance = 1e-7;
+    const Eigen::MatrixXd rotated = j > 1 ? varimax(loadings, vo).rotated : loadings;
+    Eigen::MatrixXd pattern(n, j);
+    Eigen::VectorXd norms(n);
+    for (Index p = 0; p < n; ++p) {
+        for (Index f = 0; f < j; ++f) pattern(p, f) = rotated.block(p * c, f, c, 1).norm();
+        norms[p] = pattern.row(p).norm();
+    }
+    // Nearly still points: their pattern is noise, so it counts less (down to nothing).
+    std::vector<double> sorted(norms.data(), norms.data() + n);
+    std::nth_element(sorted.begin(), sorted.begin() + n / 2, sorted.end());
+    const double median = sorted[size_t(n / 2)];
+    for (Index p = 0; p < n; ++p) {
+        const double s = norms[p];
+        if (s > 0) pattern.row(p) *= std::min(1.0, median > 0 ? s / median : 1.0) / s;
+    }
+    return pattern;
+}
+
+/// Step 2: k-means on feature rows; returns the cluster of every row (clusters renumbered 0..R'-1
+/// in order of their first point, empty ones dropped).
+std::vector<Index> kmeans(const Eigen::MatrixXd& x, Index k, int iterations) {
+    const Index n = x.rows();
+    k = std::min(k, n);
+    // Farthest-point seeding from the point nearest the centroid: deterministic, spread out.
+    const Eigen::RowVectorXd centroid = x.colwise().mean();
+    Index first = 0;
+    (x.rowwise() - centroid).rowwise().squaredNorm().minCoeff(&first);
+    Eigen::MatrixXd centres(k, x.cols());
+    centres.row(0) = x.row(first);
+    Eigen::VectorXd nearest = (x.rowwise() - centres.row(0)).rowwise().squaredNorm();
+    for (Index i = 1; i < k; ++i) {
+        Index far = 0;
+        nearest.maxCoeff(&far);
+        centres.row(i) = x.row(far);
+        nearest = nearest.cwiseMin((x.rowwise() - centres.row(i)).rowwise().squaredNorm());
+    }
+    std::vector<Index> label(size_t(n), 0);
+    for (int it = 0; it < iterations; ++it) {
+        bool changed = false;
+        for (Index p = 0; p < n; ++p) {
+            Index best = 0;
+            (centres.rowwise() - x.row(p)).rowwise().squaredNorm().minCoeff(&best);
+            if (best != label[size_t(p)] || it == 0) changed = changed || best != label[size_t(p)];
+            label[size_t(p)] = best;
+        }
+        Eigen::MatrixXd sum = Eigen::MatrixXd::Zero(k, x.cols());
+        Eigen::VectorXd count = Eigen::VectorXd::Zero(k);
+        for (Index p = 0; p < n; ++p) {
+            sum.row(label[size_t(p)]) += x.row(p);
+            count[label[size_t(p)]] += 1;
+        }
+        for (Index i = 0; i < k; ++i)
+            if (count[i] > 0) centres.row(i) = sum.row(i) / count[i];
+        if (!changed && it > 0) break;
+    }
+    std::vector<Index> renumber(size_t(k), -1);
+    Index next = 0;
+    for (Index p = 0; p < n; ++p) {
+        Index& r = renumber[size_t(label[size_t(p)])];
+        if (r < 0) r = next++;
+        label[size_t(p)] = r;
+    }
+    return label;
+}
+
+/// Step 5: for every point, its distance to each other region within `width` (a uniform grid of
+/// cell `width`, so only the 27 cells around a point are searched).
+void featherEntries(const Eigen::MatrixXd& pos, const std::vector<Index>& regionOf, double width,
+                    LocalRegions& out) {
+    const Index n = pos.rows();
+    out.featherStart.assign(size_t(n) + 1, 0);
+    out.featherRegion.clear();
+    out.featherFactor.clear();
+    if (!(width > 0)) return;
+    const Eigen::RowVector3d lo = pos.colwise().minCoeff();
+    auto cellOf = [&](Index p, int axis) { return static_cast<std::int64_t>(std::floor((pos(p, axis) - lo[axis]) / width)); };
+    auto key = [](std::int64_t x, std::int64_t y, std::int64_t z) { return (x * 1048576 + y) * 1048576 + z; };
+    std::vector<std::pair<std::int64_t, Index>> cells(static_cast<size_t>(n));
+    for (Index p = 0; p < n; ++p) cells[size_t(p)] = {key(cellOf(p, 0), cellOf(p, 1), cellOf(p, 2)), p};
+    std::sort(cells.begin(), cells.end());
+    std::vector<double> best;
+    std::vector<Index> touched;
+    best.assign(out.regions.size(), std::numeric_limits<double>::infinity());
+    for (Index p = 0; p < n; ++p) {
+        const std::int64_t cx = cellOf(p, 0), cy = cellOf(p, 1), cz = cellOf(p, 2);
+        for (int dx = -1; dx <= 1; ++dx)
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dz = -1; dz <= 1; ++dz) {
+                    const std::int64_t kk = key(cx + dx, cy + dy, cz + dz);
+                    auto it = std::lower_bound(cells.begin(), cells.end(), std::make_pair(kk, Index{-1}));
+                    for (; it != cells.end() && it->first == kk; ++it) {
+                        const Index r = regionOf[size_t(it->second)];
+                        if (r == regionOf[size_t(p)]) continue;
+                        const double d = (pos.row(p) - pos.row(it->second)).norm();
+                        if (d < width) {
+                            if (best[size_t(r)] == std::numeric_limits<double>::infinity()) touched.push_back(r);
+                            best[size_t(r)] = std::min(best[size_t(r)], d);
+                        }
+                    }
+                }
+        std::sort(touched.begin(), touched.end());
+        for (const Index r : touched) {
+            out.featherRegion.push_back(r);
+            out.featherFactor.push_back(1.0 - best[size_t(r)] / width);
+            best[size_t(r)] = std::numeric_limits<double>::infinity();
+        }
+        touched.clear();
+        out.featherStart[size_t(p) + 1] = static_cast<Index>(out.featherRegion.size());
+    }
+}
+
+}  // namespace
+
+LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Model& model,
+                          const RegionOptions& options, double tolerance, Index slices, const SvdOptions& svd,
+                          std::vector<std::string>* notes) {
+    const Index n = model.points;
+    const Index c = model.channels;
+    const Index f = q.cols();
+    if (options.count < 1 || options.count > n)
+        badOption("count must be in [1, " + std::to_string(n) + "], got " + std::to_string(options.count));
+    if (!(options.featherFraction >= 0 && options.featherFraction < 1))
+        badOption("feather fraction must be in [0, 1), got " + std::to_string(options.featherFraction));
+    if (!(options.maxLocalFraction > 0 && options.maxLocalFraction <= 1))
+        badOption("largest local fraction must be in (0, 1], got " + std::to_string(options.maxLocalFraction));
+    if (!(options.energy > 0 && options.energy <= 1)) badOption("energy must be in (0, 1]");
+    if (options.minKeys < 1) badOption("min keys must be >= 1");
+    if (q.rows() != n * c) throw std::invalid_argument("learnRegions: q has the wrong row count");
+
+    Eigen::MatrixXd pos;
+    if (options.positions.size() > 0) {
+        if (options.positions.rows() != n || options.positions.cols() != 3 || !options.positions.allFinite())
+            badOption("positions must be N x 3 finite values (N = " + std::to_string(n) + ")");
+        pos = options.positions;
+    } else if (c == 3) {
+        pos = Eigen::Map<const Eigen::MatrixXd>(model.mean.data(), 3, n).transpose();
+    } else {
+        badOption("point positions are needed for " + std::to_string(c) + "-channel data (none given)");
+    }
+    const double diagonal = (pos.colwise().maxCoeff() - pos.colwise().minCoeff()).norm();
+    const double scale = diagonal > 0 ? std::sqrt(double(options.count)) / diagonal : 1.0;
+
+    // Steps 1-2: loading patterns and k-means.
+    const Eigen::MatrixXd pattern = loadingPatterns(model);
+    Eigen::MatrixXd features(n, 3 + pattern.cols());
+    features.leftCols(3) = pos * scale;
+    features.rightCols(pattern.cols()) = pattern;
+    const std::vector<Index> regionOf = kmeans(features, options.count, options.kmeansIterations);
+    const Index r = *std::max_element(regionOf.begin(), regionOf.end()) + 1;
+    if (notes && r < options.count)
+        notes->push_back("regions: " + std::to_string(options.count) + " wanted, " + std::to_string(r) +
+                         " non-empty clusters");
+
+    LocalRegions out;
+    out.maxLocalFraction = options.maxLocalFraction;
+    out.featherWidth = options.featherFraction * diagonal;
+    out.regions.resize(size_t(r));
+    for (Index p = 0; p < n; ++p) out.regions[size_t(regionOf[size_t(p)])].points.push_back(p);
+
+    // Steps 3-4: keys, local basis, projector, thresholds.
+    const Index k = model.keyCount();
+    Index smallBases = 0;
+    for (Index ri = 0; ri < r; ++ri) {
+        Region& g = out.regions[size_t(ri)];
+        std::vector<std::pair<double, Index>> outside;  // (distance to the region's centroid, key number)
+        Eigen::RowVector3d centroid = Eigen::RowVector3d::Zero();
+        for (const Index p : g.points) centroid += pos.row(p);
+        centroid /= double(g.points.size());
+        for (Index key = 0; key < k; ++key) {
+            const Index p = model.keyPoints[size_t(key)];
+            if (regionOf[size_t(p)] == ri) {
+                g.keys.push_back(key);
+            } else {
+                outside.push_back({(pos.row(p) - centroid).norm(), key});
+            }
+        }
+        std::sort(outside.begin(), outside.end());
+        for (size_t i = 0; i < outside.size() && Index(g.keys.size()) < options.minKeys; ++i)
+            g.keys.push_back(outside[i].second);
+        std::sort(g.keys.begin(), g.keys.end());
+
+        // The region's rows of q: its points, then its keys that lie outside it.
+        std::vector<Index> local = g.points;
+        std::vector<Index> keyLocal;  // position of each key in `local`
+        for (const Index key : g.keys) {
+            const Index p = model.keyPoints[size_t(key)];
+            const auto at = std::lower_bound(g.points.begin(), g.points.end(), p);
+            if (at != g.points.end() && *at == p) {
+                keyLocal.push_back(at - g.points.begin());
+            } else {
+                keyLocal.push_back(static_cast<Index>(local.size()));
+                local.push_back(p);
+            }
+        }
+        Eigen::MatrixXd qr(Index(local.size()) * c, f);
+        for (size_t i = 0; i < local.size(); ++i) qr.middleRows(Index(i) * c, c) = q.middleRows(local[i] * c, c);
+
+        const Index kc = Index(g.keys.size()) * c;
+        const Index cap = std::max<Index>(1, std::min({model.basisSize(), (2 * kc) / 3, f - 1}));
+        SvdOptions o = svd;
+        o.seed = svd.seed + 7919u * static_cast<unsigned>(ri + 1);
+        const TruncatedSvd local_svd = truncatedSvd(qr, cap, o);
+        const double energy = qr.squaredNorm();
+        Index m = local_svd.sigma.size() > 0
+                      ? basisSizeForEnergy(local_svd.sigma, energy > 0 ? energy : 1.0, options.energy)
+                      : 0;
+        m = std::clamp<Index>(m, 1, std::max<Index>(1, local_svd.sigma.size()));
+        if (local_svd.sigma.size() == 0) {
+            // A region that never moved in training: a zero basis vector reconstructs the mean.
+            g.basis = Eigen::MatrixXd::Zero(Index(g.points.size()) * c, 1);
+            g.keyBasis = Eigen::MatrixXd::Zero(kc, 1);
+        } else {
+            const Eigen::MatrixXd u = local_svd.u.leftCols(m);
+            g.basis = u.topRows(Index(g.points.size()) * c);
+            g.keyBasis = gatherKeyRows(u, c, keyLocal);
+        }
+        if (m == cap && cap < model.basisSize()) ++smallBases;
+        {
+            Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(g.keyBasis);
+            g.projector = cod.pseudoInverse();
+        }
+        CalibrationStats cal;
+        if (tolerance > 0 && local_svd.sigma.size() > 0) {
+            cal = calibrate(qr, c, keyLocal, m, tolerance, slices, o);
+            g.ratio = cal.ratio;
+        } else {
+            Eigen::MatrixXd u = Eigen::MatrixXd::Zero(qr.rows(), 1);
+            if (local_svd.sigma.size() > 0) u = local_svd.u.leftCols(m);
+            cal = thresholdsFromTraining(qr, u, c, keyLocal, g.projector);
+        }
+        // Decision: a region's blend zone is [eps_min, 1.5 eps_min] (the paper's hand-picked ratio,
+        // section 7), narrower than the frame's [eps_min, 2 eps_min]: its bound rests on a few keys
+        // and a motion training never saw (the reason a region fails) can exceed the calibrated
+        // ratio, so a region that sees any of it should reach the full result sooner.
+        g.epsMin = cal.epsMin;
+        // A region PM reconstructed exactly on every held-out frame (a part that never moved in
+        // training: the back of a head) gets its largest held-out key error as eps_min, which is
+        // rounding noise: the same noise on a new frame would fail it through. Any key error under
+        // 1e-6 of the tolerance is noise for such a region, so it is the floor.
+        if (tolerance > 0 && cal.ratio == 0) g.epsMin = std::max(g.epsMin, 1e-6 * tolerance);
+        g.epsMax = 1.5 * g.epsMin;
+    }
+    if (notes && smallBases > 0)
+        notes->push_back("regions: " + std::to_string(smallBases) + " of " + std::to_string(r) +
+                         " regions' local bases were capped by 2/3 of their key values");
+
+    // Step 5.
+    featherEntries(pos, regionOf, out.featherWidth, out);
+    out.validate(model);
+    return out;
+}
+
+}  // namespace pmsc

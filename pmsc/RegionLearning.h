@@ -1,0 +1,57 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include "pmsc/Model.h"
+#include "pmsc/Subspace.h"
+
+#include <Eigen/Core>
+
+#include <string>
+#include <vector>
+
+namespace pmsc {
+
+/// How training learns the regions of local fail-through (issue 9). count = 0: no regions (the
+/// model is then a version-1 model, as before).
+struct RegionOptions {
+    Index count = 0;  ///< R, the number of regions wanted (fewer if clustering leaves some empty)
+    /// Feather width as a fraction of the positions' bounding-box diagonal (Regions.h).
+    double featherFraction = 0.03;
+    /// Fraction of N above which a frame fails through whole (LocalRegions::maxLocalFraction).
+    double maxLocalFraction = 0.6;
+    /// Each region's local basis: the smallest M_r capturing this fraction of the region's
+    /// training energy, capped by M and by 2/3 of its key values (K_r*C) so its key error stays a
+    /// real test.
+    double energy = 0.9999;
+    /// Fewest keys a region projects from; the nearest keys outside it are added when it holds fewer.
+    Index minKeys = 6;
+    /// Point positions (N x 3, one row per point) for spatial clustering and feathering. Empty:
+    /// the training mean when C == 3 (a face's rest shape); otherwise regions cannot be learned.
+    Eigen::MatrixXd positions;
+    int kmeansIterations = 30;
+};
+
+/// Learns the regions of a trained model: the model's core (mean, basis, keys) must be final.
+///
+/// Method (the paper's section 9 suggests basis rotation and clustering; this is one such choice):
+///  1. Varimax-rotate the leading (at most 24) basis vectors scaled by their singular values, as
+///     key selection does (section 4): rotated factors are local, so a point's loading pattern on
+///     them says which motions move it. Each point gets the unit vector of its loadings (scaled
+///     down for nearly still points, whose pattern is noise).
+///  2. k-means (farthest-point seeding from the centroid, Lloyd iterations; deterministic) on
+///     [position * sqrt(R) / diagonal, loading pattern]: positions keep regions compact (cheap
+///     subsets, short borders), loading patterns split points that sit close but move apart
+///     (upper and lower lip), so the points of a region share their motions and so their errors.
+///  3. Keys: the model's keys inside the region, plus the nearest outside it up to minKeys.
+///  4. A local basis from the SVD of the region's rows of `q` (its points and its keys), and its
+///     projector; thresholds calibrated like the frame's (Calibration.h, leave-one-slice-out) for
+///     `tolerance`, or from the training frames' key RMS when tolerance == 0.
+///  5. Feather entries (Regions.h) from the distance to the nearest point of each other region.
+/// @param q mean-removed training matrix (N*C) x F of this model
+/// @param notes decisions worth a warning are appended
+/// @throws std::invalid_argument for bad options or when positions are needed and unknown.
+LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Model& model,
+                          const RegionOptions& options, double tolerance, Index slices,
+                          const SvdOptions& svd, std::vector<std::string>* notes = nullptr);
+
+}  // namespace pmsc

@@ -1,0 +1,72 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include "pmsc/Model.h"
+#include "pmsc/SoftCache.h"
+
+#include <span>
+#include <vector>
+
+namespace pmsc {
+
+/// The runtime of local fail-through (issue 9; paper section 9): each region's block projection
+/// from its own keys, its key error and soft-cache decision, the feathered per-point weights of
+/// the full result, and each region's reconstruction.
+///
+/// Thread safety: all methods are const and may run concurrently.
+/// Buffers: key values are the model's K*C key values (all keys, model key order); a frame's
+/// region coordinates are coordsSize() doubles, region r's at coordsOffset(r).
+class RegionMultiplier {
+public:
+    /// Keeps a reference to `model` (which must have regions and outlive this object).
+    /// @throws std::invalid_argument if the model has no regions.
+    explicit RegionMultiplier(const Model& model);
+
+    const LocalRegions& regions() const { return regions_; }
+    Index regionCount() const { return regions_.regionCount(); }
+    Index coordsSize() const { return coordsSize_; }
+    Index coordsOffset(Index r) const { return coordsOffset_[size_t(r)]; }
+
+    /// Region r's coordinates b_r = P_r (k_r - mean_{K_r}) and returns its key RMS error (the
+    /// frame's measure, PointMultiplier::keyRmsError, over the region's keys). NaN if a key value
+    /// of the region is not finite.
+    double project(Index r, const double* keyValues, double* coords) const;
+    /// The region's soft-cache decision for its key error (its own calibrated thresholds).
+    CacheDecision decide(Index r, double keyRmsError) const;
+
+    /// w_p for every point (N doubles) from the regions' full-result weights (Regions.h).
+    void pointWeights(std::span<const double> regionWeights, double* weights) const;
+
+    /// Region r's points: out[p*C + c] = mean + U_r b_r for each point p of r (a full-frame buffer:
+    /// only r's points are written).
+    void reconstruct(Index r, const double* coords, double* frame) const;
+
+    /// Region r's fail set (its points, then its feather band): the points evaluated fully when
+    /// it blends or misses.
+    const std::vector<Index>& failSet(Index r) const { return failSets_[size_t(r)]; }
+    /// Offset (in points) of region r's fail set in a frame's full-values scratch buffer, and
+    /// the buffer's size in points.
+    Index failOffset(Index r) const { return failOffset_[size_t(r)]; }
+    Index failPoints() const { return failPoints_; }
+    /// Where point p's full value is in the scratch buffer when `regionWeights` sends it to the
+    /// full calculation (its own region's fail set if that region fails, else the first failing
+    /// region whose band holds it); -1 if no failing region evaluates it.
+    Index fullValueAt(Index p, std::span<const double> regionWeights) const;
+
+private:
+    const Model& model_;
+    const LocalRegions& regions_;
+    std::vector<Index> regionOf_;
+    std::vector<Index> ownPosition_;        ///< p's position in its region's points
+    std::vector<Index> featherPosition_;    ///< per feather entry: p's position in that region's fail set
+    std::vector<Eigen::VectorXd> keyMean_;  ///< per region, K_r*C
+    std::vector<Eigen::VectorXd> projectedKeyMean_;
+    std::vector<Index> coordsOffset_;
+    Index coordsSize_ = 0;
+    std::vector<std::vector<Index>> failSets_;
+    std::vector<Index> failOffset_;
+    Index failPoints_ = 0;
+    std::vector<SoftCachePolicy> policies_;
+};
+
+}  // namespace pmsc
