@@ -155,7 +155,7 @@ TEST(Replay, ModelWithRegionsReportsLocalFramesAndWholeFrameFlagRestoresTheOldRo
     }
     pmsc::FrameFile file{pmsc::FrameSet(2, 40, 3), pmsc::NpyDtype::Float64};
     file.frames.values = values;
-    const pmsc::cli::ReplayEvaluator rec(std::move(file), "test");
+    const pmsc::evaluators::ReplayEvaluator rec(std::move(file), "test");
     pmsc::cli::ReplayOptions options;
     options.threads = 2;
     auto report = pmsc::cli::replayReport(model, pmsc::cli::replay(model, rec, options));
