@@ -74,8 +74,8 @@ namespace {
 class ReplaySink : public engine::FrameSink {
 public:
     ReplaySink(const Model& model, const PointEvaluator& recorded, ReplayResult& result, NpyFrameWriter* out,
-               KeptFrames* keep)
-        : model_(model), recorded_(recorded), result_(result), out_(out), keep_(keep),
+               KeptFrames* keep, std::function<void(Index, const double*)> frameOut)
+        : model_(model), recorded_(recorded), result_(result), out_(out), keep_(keep), frameOut_(std::move(frameOut)),
           full_(static_cast<std::size_t>(model.points * model.channels)), multiplier_(model),
           pm_(full_.size()), coords_(static_cast<std::size_t>(model.basisSize())) {}
 
@@ -110,6 +110,7 @@ public:
         row.regionStates.assign(r.regionStates.begin(), r.regionStates.end());
         row.softMaxPointError = maxPointError(r.values.data(), full, n, c);
         if (out_) out_->writeFrame(r.sequence, r.values.data());
+        if (frameOut_) frameOut_(r.sequence, r.values.data());
         if (keep_ && !r.failed && r.state != CacheState::Hit) keep_->add(r.frame, r.state, r.keyRmsError, full);
     }
 
@@ -119,6 +120,7 @@ private:
     ReplayResult& result_;
     NpyFrameWriter* out_;
     KeptFrames* keep_;
+    std::function<void(Index, const double*)> frameOut_;
     std::vector<double> full_;
     PointMultiplier multiplier_;
     std::vector<double> pm_, coords_;
@@ -148,7 +150,7 @@ ReplayResult replay(const Model& model, const PointEvaluator& recorded, const Re
         engineOptions.progress = [&](const engine::Progress& p) { options.progress(p.framesDone, p.framesTotal); };
     }
     engine::Engine engine(model, recorded, std::move(engineOptions));
-    ReplaySink sink(model, recorded, result, out, options.keep);
+    ReplaySink sink(model, recorded, result, out, options.keep, options.frameOut);
     // pmsc::Cancelled (interrupt) and pmsc::EvaluatorError propagate unchanged.
     const engine::RunStats stats = engine.run({0, frames, 1}, sink);
     result.threads = stats.threads;

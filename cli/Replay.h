@@ -45,6 +45,9 @@ struct ReplayOptions {
     /// If set, every frame that blends or misses is kept (its recorded values) for `pmsc learn`
     /// (`--keep-misses`); the caller commits it.
     KeptFrames* keep = nullptr;
+    /// If set, also called with each soft-cached frame (N*C doubles), in frame order, from one
+    /// thread at a time: an in-memory output (the Python module's array) instead of or besides `out`.
+    std::function<void(Index sequence, const double* values)> frameOut;
 };
 
 struct ReplayResult {
