@@ -23,6 +23,7 @@ PACKAGES=(
   nlohmann-json3-dev libpng-dev
   libassimp-dev assimp-testmodels slurm-wlm munge
   libopenmpi-dev openmpi-bin  # issue 12: mpirun -n P pmsc train, srun --mpi=pmix
+  python3 python3-dev python3-numpy pybind11-dev  # issue 13: the Python module (build/python) and its tests
 )
 
 die() { echo "pmsc.sh: $*" >&2; exit 1; }

@@ -1,0 +1,92 @@
+"""pmsc.train and pmsc.Model: sizes, the runtime against NumPy's own arithmetic, files, and the
+same model bytes as `pmsc train`."""
+import pickle
+import unittest
+
+import numpy as np
+
+import pmsc
+from pmsc_testing import TempDirTest, run_cli, synthetic_frames
+
+
+class ModelTest(TempDirTest):
+    @classmethod
+    def setUpClass(cls):
+        cls.frames = synthetic_frames(dtype=np.float64)
+        cls.model = pmsc.train(cls.frames, max_keys=30, tolerance=0.05, seed=3)
+
+    def test_sizes_and_views(self):
+        m = self.model
+        self.assertEqual((m.points, m.channels, m.train_frames), (300, 3, 80))
+        self.assertEqual(m.key_count, 30)
+        self.assertEqual(m.mean.shape, (300, 3))
+        self.assertEqual(m.basis.shape, (300, 3, m.basis_size))
+        self.assertEqual(m.projector.shape, (m.basis_size, 30 * 3))
+        self.assertEqual(len(set(m.key_points.tolist())), 30)
+        self.assertFalse(m.mean.flags.writeable)           # views of the model, not copies
+        self.assertFalse(m.basis.flags.owndata)
+        np.testing.assert_allclose(m.mean, self.frames.mean(axis=0), atol=1e-12)
+        self.assertGreater(m.eps[1], m.eps[0])
+        self.assertEqual(m.info["key_points"], 30)
+        self.assertEqual(m.training_report["warnings"], [])
+
+    def test_runtime_is_the_papers_arithmetic(self):
+        # b = P (k - mean_K); x = mean + B b; key error = RMS over keys of the Euclidean key residual.
+        m, f = self.model, self.frames
+        keys = f[:, m.key_points]                                       # (F, K, C)
+        coords = m.project(keys)
+        expect = (keys - m.mean[m.key_points]).reshape(len(f), -1) @ m.projector.T
+        np.testing.assert_allclose(coords, expect, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(m.project(keys[7]), coords[7], rtol=0, atol=0)
+        full = m.reconstruct(coords)
+        np.testing.assert_allclose(full, m.mean + np.einsum("ncm,fm->fnc", m.basis, coords), atol=1e-9)
+        some = np.array([5, 0, 299, 17])
+        np.testing.assert_allclose(m.reconstruct(coords[3], points=some), full[3][some], rtol=0, atol=1e-12)
+        residual = keys - full[:, m.key_points]
+        rms = np.sqrt((np.linalg.norm(residual, axis=2) ** 2).mean(axis=1))
+        np.testing.assert_allclose(m.key_error(keys), rms, rtol=1e-9)
+        self.assertIsInstance(m.key_error(keys[0]), float)
+        self.assertAlmostEqual(m.key_error(keys[0], coords[0]), rms[0], places=12)
+
+    def test_float32_array_and_shots(self):
+        a = pmsc.train(self.frames.astype(np.float32), max_keys=30, seed=3)
+        self.assertEqual(a.key_count, 30)
+        halves = pmsc.train([self.frames[:40], self.frames[40:]], max_keys=30, tolerance=0.05, seed=3)
+        self.assertEqual(halves.to_bytes(), self.model.to_bytes())   # shots concatenate in order
+
+    def test_save_load_bytes_pickle(self):
+        path = self.path("m.pmsc")
+        self.model.save(path)
+        loaded = pmsc.Model.load(path)
+        with open(path, "rb") as f:
+            self.assertEqual(f.read(), self.model.to_bytes())
+        self.assertEqual(loaded.to_bytes(), self.model.to_bytes())
+        self.assertEqual(pickle.loads(pickle.dumps(self.model)).to_bytes(), self.model.to_bytes())
+        self.assertEqual(pmsc.Model.from_bytes(self.model.to_bytes()).key_count, 30)
+
+    def test_same_model_bytes_as_the_command_line(self):
+        # A float64 array is trained from in place (no FrameSet copy): same bytes as `pmsc train`.
+        self.require_cli()
+        npy = self.path("train.npy")
+        np.save(npy, self.frames)
+        run_cli("train", "--frames", npy, "--out", self.path("cli.pmsc"), "--max-keys", 30, "--tolerance", 0.05,
+                "--seed", 3, "--quiet")
+        with open(self.path("cli.pmsc"), "rb") as f:
+            cli = f.read()
+        self.assertEqual(self.model.to_bytes(), cli)
+        self.assertEqual(pmsc.train(npy, max_keys=30, tolerance=0.05, seed=3).to_bytes(), cli)
+
+    def test_progress_can_cancel(self):
+        stages = []
+        m = pmsc.train(self.frames, max_keys=10, progress=lambda s, d, t: stages.append(s))
+        self.assertTrue(stages)
+        self.assertEqual(m.key_count, 10)
+        with self.assertRaises(pmsc.Cancelled) as e:
+            pmsc.train(self.frames, max_keys=10, progress=lambda s, d, t: False)
+        self.assertIn("training cancelled", str(e.exception))
+        with self.assertRaises(ZeroDivisionError):                     # the hook's own error, unchanged
+            pmsc.train(self.frames, max_keys=10, progress=lambda s, d, t: 1 / 0)
+
+
+if __name__ == "__main__":
+    unittest.main()

@@ -1,0 +1,85 @@
+"""pmsc.run: the engine with a Python callable or a C++ evaluator spec."""
+import threading
+import unittest
+
+import numpy as np
+
+import pmsc
+from pmsc_testing import TempDirTest, synthetic_frames
+
+
+class RunTest(TempDirTest):
+    @classmethod
+    def setUpClass(cls):
+        cls.train = synthetic_frames(frames=80, seed=1)
+        cls.test = synthetic_frames(frames=80, seed=1, novel=30).astype(np.float64)
+        cls.model = pmsc.train(cls.train, max_keys=30, tolerance=0.3)
+
+    def recorded(self, frame, points):
+        return self.test[frame, points]
+
+    def test_python_evaluator_equals_the_cpp_replay_evaluator(self):
+        npy = self.path("test.npy")
+        np.save(npy, self.test)
+        cpp, cpp_report = pmsc.run(self.model, "replay:" + npy, threads=2)
+        self.assertEqual(cpp.shape, self.test.shape)
+        for threads in (1, 2):
+            out, report = pmsc.run(self.model, self.recorded, range(80), threads=threads)
+            self.assertEqual(out.tobytes(), cpp.tobytes())
+            self.assertEqual(report["frames"], cpp_report["frames"])
+            self.assertEqual(report["summary"]["frames_delivered"], 80)
+        replayed, _ = pmsc.replay(self.model, self.test)
+        self.assertEqual(cpp.tobytes(), replayed.tobytes())    # the engine's output is replay's
+
+    def test_a_hit_evaluates_only_the_key_points(self):
+        sizes, threads_seen = [], set()
+        def evaluator(frame, points):
+            sizes.append(len(points))
+            threads_seen.add(threading.get_ident())
+            return self.test[frame, points]
+        out, report = pmsc.run(self.model, evaluator, 20, eps=(1e9, 1e9), threads=2, dtype=np.float32)
+        self.assertEqual(out.dtype, np.float32)
+        self.assertEqual(sizes, [self.model.key_count] * 20)
+        self.assertEqual({r["state"] for r in report["frames"]}, {"hit"})
+
+    def test_range_points_and_step(self):
+        wanted = np.array([3, 1, 200])
+        out, report = pmsc.run(self.model, self.recorded, range(10, 40, 3), points=wanted, threads=2)
+        self.assertEqual(out.shape, (10, 3, 3))
+        self.assertEqual([r["frame"] for r in report["frames"]], list(range(10, 40, 3)))
+        full, _ = pmsc.run(self.model, self.recorded, range(10, 40, 3), threads=1)
+        # A hit reconstructs only the wanted points (its own kernel: equal to the last bits or so).
+        np.testing.assert_allclose(out, full[:, wanted], rtol=0, atol=1e-12)
+
+    def test_evaluator_errors(self):
+        def failing(frame, points):
+            if frame == 5:
+                raise ValueError("no pose for frame 5")
+            return self.test[frame, points]
+        with self.assertRaises(pmsc.EvaluatorError) as e:
+            pmsc.run(self.model, failing, range(20), threads=2)
+        message = str(e.exception)
+        self.assertTrue(message.startswith("evaluator failed: frame 5: node '"), message)
+        self.assertIn("evaluator 'python': ValueError: no pose for frame 5", message)
+        self.assertIsInstance(e.exception.__cause__, ValueError)
+        self.assertEqual(e.exception.exit_code, 3)
+
+        out, report = pmsc.run(self.model, failing, range(20), threads=2, failure="continue")
+        self.assertEqual([r["failed"] for r in report["frames"]], [f == 5 for f in range(20)])
+        self.assertIn("ValueError: no pose for frame 5", report["frames"][5]["error"])
+        self.assertEqual(report["summary"]["failed"], 1)
+
+        with self.assertRaisesRegex(pmsc.EvaluatorError, r"returned shape \(2,\) for 30 points x 3 channels"):
+            pmsc.run(self.model, lambda f, p: np.zeros(2), 3)
+
+    def test_bad_arguments(self):
+        with self.assertRaisesRegex(pmsc.InputError, "needs frames=range"):
+            pmsc.run(self.model, self.recorded)
+        with self.assertRaisesRegex(pmsc.InputError, "unknown|known"):
+            pmsc.run(self.model, "nosuch:thing", 3)
+        with self.assertRaisesRegex(pmsc.InputError, "step must be > 0"):
+            pmsc.run(self.model, self.recorded, range(10, 0, -1))
+
+
+if __name__ == "__main__":
+    unittest.main()
