@@ -21,7 +21,13 @@ void CallableEvaluator::evaluate(Index frame, std::span<const Index> points, dou
     const std::size_t count = points.size() * static_cast<std::size_t>(channels_);
     std::string error;
     {
+        // The engine's TBB workers are not Python threads: the first call on each creates its Python
+        // thread state, which is then kept for the (pooled) thread's life instead of being created
+        // and destroyed around every call. Threads Python knows keep theirs as they are.
+        const bool foreign = PyGILState_GetThisThreadState() == nullptr &&
+                             PYBIND11_TLS_GET_VALUE(py::detail::get_internals().tstate) == nullptr;
         py::gil_scoped_acquire gil;
+        if (foreign) gil.inc_ref();
         try {
             // The indices are copied: the span is the engine's buffer, valid only during this call,
             // and a callable may keep what it is given.

@@ -114,6 +114,10 @@ void runReleased(std::atomic<bool>& cancel, Fn&& fn) {
         py::gil_scoped_release nogil;
         std::thread worker([&] {
             try {
+                // A Python thread state for this thread while it works (released at once): the
+                // evaluator's calls on it reuse it, and it is deleted when the run ends.
+                py::gil_scoped_acquire state;
+                py::gil_scoped_release released;
                 fn();
             } catch (...) {
                 error = std::current_exception();

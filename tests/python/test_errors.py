@@ -34,7 +34,8 @@ class ErrorTest(TempDirTest):
         corrupt = self.path("corrupt.pmsc")
         data = bytearray(self.model.to_bytes())
         data[200] ^= 0x40
-        open(corrupt, "wb").write(bytes(data))
+        with open(corrupt, "wb") as f:
+            f.write(bytes(data))
         self.assert_same_as_cli(lambda: pmsc.Model.load(corrupt), pmsc.InputError, "inspect", corrupt)
         self.assertIsInstance(pmsc.InputError("x"), ValueError)
 

@@ -68,7 +68,8 @@ class ReplayTest(TempDirTest):
                     self.assertEqual(report["frames"], cli_report["frames"])
                     del report["summary"]["seconds"], cli_report["summary"]["seconds"]
                     self.assertEqual(report["summary"], cli_report["summary"])
-                    cli_report = json.load(open(self.path("report.json")))
+                    with open(self.path("report.json")) as f:
+                        cli_report = json.load(f)
 
     def test_array_layouts_read_in_place_or_converted(self):
         out, _ = pmsc.replay(self.model, self.test)
