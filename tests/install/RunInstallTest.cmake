@@ -1,4 +1,5 @@
-# cmake -DBUILD_DIR=... -DCONSUMER_DIR=... -DWORK_DIR=... -DGENERATOR=... -DCXX=... -P RunInstallTest.cmake
+# cmake -DBUILD_DIR=... -DCONSUMER_DIR=... -DWORK_DIR=... -DGENERATOR=... -DCXX=... [-DPYTHON=... -DPYTHON_DIR=...]
+#       -P RunInstallTest.cmake
 file(REMOVE_RECURSE "${WORK_DIR}")
 set(prefix "${WORK_DIR}/prefix")
 
@@ -21,4 +22,11 @@ run("${WORK_DIR}/consumer/pmsc_consumer" "${WORK_DIR}/model.pmsc")
 message(STATUS "${last_output}")
 if(NOT last_output MATCHES "pmsc consumer: ok")
   message(FATAL_ERROR "consumer did not report ok: ${last_output}")
+endif()
+
+# The Python module, when built: installed under the prefix and importable from there alone.
+if(PYTHON)
+  run(${CMAKE_COMMAND} -E env "PYTHONPATH=${prefix}/${PYTHON_DIR}" ${PYTHON} -c
+      "import pmsc, numpy; assert pmsc.__file__.startswith('${prefix}'), pmsc.__file__; m = pmsc.Model.load('${WORK_DIR}/model.pmsc'); print('python module: ok', m)")
+  message(STATUS "${last_output}")
 endif()

@@ -1,5 +1,11 @@
 """pmsc.run: the engine with a Python callable or a C++ evaluator spec."""
+import os
+import signal
+import subprocess
+import sys
+import textwrap
 import threading
+import time
 import unittest
 
 import numpy as np
@@ -79,6 +85,38 @@ class RunTest(TempDirTest):
             pmsc.run(self.model, "nosuch:thing", 3)
         with self.assertRaisesRegex(pmsc.InputError, "step must be > 0"):
             pmsc.run(self.model, self.recorded, range(10, 0, -1))
+
+    def test_ctrl_c_stops_a_run(self):
+        # The run waits with the GIL released but still notices SIGINT: the engine is cancelled and
+        # KeyboardInterrupt raised, instead of running 100,000 frames.
+        script = textwrap.dedent("""
+            import signal, sys, time
+            import numpy as np
+            import pmsc
+            from pmsc_testing import synthetic_frames
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+            model = pmsc.train(synthetic_frames(frames=40, points=100), max_keys=10)
+            def slow(frame, points):
+                time.sleep(0.01)
+                return np.zeros((len(points), 3))
+            print("ready", flush=True)
+            try:
+                pmsc.run(model, slow, range(100000), threads=2, eps=(0, 0))
+            except KeyboardInterrupt:
+                print("interrupted", flush=True)
+                sys.exit(0)
+            sys.exit(1)
+        """)
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join([os.environ.get("PYTHONPATH", ""), os.path.dirname(__file__)]))
+        child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True, env=env)
+        self.assertEqual(child.stdout.readline().strip(), "ready")
+        time.sleep(0.5)
+        child.send_signal(signal.SIGINT)
+        try:
+            out, _ = child.communicate(timeout=30)
+        finally:
+            child.kill()
+        self.assertEqual((child.returncode, out.strip()), (0, "interrupted"))
 
 
 if __name__ == "__main__":
