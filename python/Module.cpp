@@ -330,7 +330,8 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
                                     double maxError, Index maxKeys, Index block, std::vector<Index> fiducials,
                                     std::vector<Index> gridPoints, const std::string& selector, double tolerance,
                                     Index slices, const std::string& calibration, double coverage, Index learnRank,
-                                    unsigned seed, int powerIterations, py::object progress) {
+                                    unsigned seed, int powerIterations, Index regions, double feather,
+                                    py::object progress) {
     TrainingOptions o;
     o.basis = basis;
     o.energy = energy;
@@ -349,6 +350,10 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     o.learnRank = learnRank;
     o.seed = seed;
     o.powerIterations = powerIterations;
+    o.regions.count = regions;
+    o.regions.featherFraction = feather;
+    if (regions < 0) throw InputError("regions: must be >= 0 (0 = none), got " + std::to_string(regions));
+    if (!(feather >= 0 && feather <= 0.5)) throw InputError("feather: must be in [0, 0.5], got " + std::to_string(feather));
     if (calibration != "max" && !(tolerance > 0)) throw InputError("calibration and coverage need a tolerance");
 
     TrainingFrames t = trainingFrames(frames);
@@ -693,7 +698,7 @@ PYBIND11_MODULE(pmsc, m) {
           "fiducials"_a = std::vector<Index>{}, "grid_points"_a = std::vector<Index>{},
           "selector"_a = "teleconnection", "tolerance"_a = 0.0, "slices"_a = 5, "calibration"_a = "max",
           "coverage"_a = 0.9, "learn_rank"_a = 0, "seed"_a = 20070101u, "power_iterations"_a = 2,
-          "progress"_a = py::none(),
+          "regions"_a = 0, "feather"_a = 0.03, "progress"_a = py::none(),
           "Trains a model as `pmsc train` does (same options, same model bytes). frames: an array (F, N, C), a "
           ".npy path, or a list of them (shots). progress(stage, done, total) may return False to cancel.");
     m.def("replay", &replayFrames, "model"_a, "frames"_a, py::kw_only(), "eps"_a = py::none(), "threads"_a = 0,

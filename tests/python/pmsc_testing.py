@@ -53,6 +53,9 @@ class TempDirTest(unittest.TestCase):
     def path(self, name):
         return os.path.join(self.dir, name)
 
+    def cli_available(self):
+        return pmsc_binary() is not None
+
     def require_cli(self):
         if pmsc_binary() is None:
             self.skipTest("build/bin/pmsc not built (PMSC_BINARY)")

@@ -71,6 +71,23 @@ class ReplayTest(TempDirTest):
                     with open(self.path("report.json")) as f:
                         cli_report = json.load(f)
 
+    def test_regions_local_fail_through(self):
+        # A version-2 model with regions (issue 9): frames that do not hit are routed region by region.
+        model = pmsc.train(self.train, max_keys=30, tolerance=0.3, regions=3)
+        self.assertGreater(model.info["regions"], 0)
+        out, report = pmsc.replay(model, self.test, threads=2)
+        self.assertEqual(report["summary"]["regions"], model.info["regions"])
+        self.assertIn("regions", report["frames"][0])
+        whole, whole_report = pmsc.replay(model, self.test, whole_frame_fail_through=True)
+        self.assertFalse(whole_report["summary"]["local_fail_through"])
+        if self.cli_available():
+            model.save(self.path("regions.pmsc"))
+            np.save(self.path("test.npy"), self.test)
+            run_cli("replay", "--model", self.path("regions.pmsc"), "--frames", self.path("test.npy"),
+                    "--out", self.path("out.npy"), "--report", self.path("report.json"), "--quiet")
+            with open(self.path("out.npy"), "rb") as f:
+                self.assertEqual(npy_bytes(out), f.read())
+
     def test_array_layouts_read_in_place_or_converted(self):
         out, _ = pmsc.replay(self.model, self.test)
         # Fortran order and a big-endian copy hold the same values: converted once, same decisions.
