@@ -26,6 +26,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <condition_variable>
 #include <exception>
 #include <memory>
@@ -308,7 +309,10 @@ TrainingFrames trainingFrames(py::handle frames) {
             return t;
         }
         FrameSet s(a.frames(), a.points(), a.channels());
-        for (Index f = 0; f < a.frames(); ++f) a.readFrame(f, s.frame(f));
+        {
+            py::gil_scoped_release nogil;
+            for (Index f = 0; f < a.frames(); ++f) a.readFrame(f, s.frame(f));
+        }
         appendShot(t.copy, s, name, firstName);
     }
     return t;
@@ -513,7 +517,14 @@ public:
     void write(const engine::FrameResult& r) override {
         Row& row = rows_[static_cast<std::size_t>(r.sequence)];
         row = {r.frame, r.state, r.weight, r.keyRmsError, r.failed, r.local, r.pointsEvaluated, r.error};
-        if (!r.failed) storeValues(data_, dtype_, static_cast<std::size_t>(r.sequence) * values_, r.values.data(), values_);
+        const std::size_t at = static_cast<std::size_t>(r.sequence) * values_;
+        if (!r.failed) {
+            storeValues(data_, dtype_, at, r.values.data(), values_);
+        } else {
+            // A failed frame (failure="continue") has no values: NaN, never stale memory.
+            const std::vector<double> nan(values_, std::numeric_limits<double>::quiet_NaN());
+            storeValues(data_, dtype_, at, nan.data(), values_);
+        }
     }
     const std::vector<Row>& rows() const { return rows_; }
 

@@ -74,6 +74,8 @@ class RunTest(TempDirTest):
         self.assertEqual([r["failed"] for r in report["frames"]], [f == 5 for f in range(20)])
         self.assertIn("ValueError: no pose for frame 5", report["frames"][5]["error"])
         self.assertEqual(report["summary"]["failed"], 1)
+        self.assertTrue(np.isnan(out[5]).all())                        # a failed frame is NaN
+        self.assertFalse(np.isnan(np.delete(out, 5, axis=0)).any())
 
         with self.assertRaisesRegex(pmsc.EvaluatorError, r"returned shape \(2,\) for 30 points x 3 channels"):
             pmsc.run(self.model, lambda f, p: np.zeros(2), 3)
