@@ -13,13 +13,16 @@ time and could not speed up; the engine still stays correct, one call at a time.
 Two workloads: "misses" (eps = 0: every frame fails through as ~64 parallel chunks, each a Python
 call) and "soft cache" (the model's own eps on a take with novel motion in its second half: hits cost
 K key points, the rest fail through). Interleaved repetitions, medians; the load average is printed
-before and after because wall-time ratios need a quiet machine.
+before and after because wall-time ratios need a quiet machine (under load, the kernel's fair share
+goes to the process group, not the thread, so no thread count gets more CPU). "evaluator_gil_fraction"
+does not depend on the load: the share of a call spent in the interpreter (see gil_fraction()).
 """
 import argparse
 import json
 import os
 import statistics
 import sys
+import threading
 import time
 
 import numpy as np
@@ -49,6 +52,42 @@ class MuscleRig:
         return out
 
 
+def gil_fraction(rig, points):
+    """An estimate of the share of a Python evaluator call that holds the GIL: the CPU time of a call
+    on one point (interpreter and NumPy dispatch only, all under the GIL) over that of a call on a
+    default fail-through chunk (N/8 points). Ratios of one thread's CPU times, so the machine's load
+    does not enter. Amdahl then bounds 2 threads on an idle machine by 1 / (p + (1 - p) / 2)."""
+    def cost(indices):
+        samples = []
+        for frame in range(min(21, len(rig.weights))):
+            start = time.thread_time()
+            rig(frame, indices)
+            samples.append(time.thread_time() - start)
+        return statistics.median(samples)
+    p = cost(np.arange(1)) / cost(np.arange((points + 7) // 8))
+    return p, 1.0 / (p + (1.0 - p) / 2.0)
+
+
+def machine_parallelism(repeats):
+    """Control without pmsc: the same NumPy work (np.exp on 2M values, GIL released) split over 1 or
+    2 plain Python threads. What 2 threads can gain on this machine right now; 1.0 under heavy load."""
+    a = np.random.default_rng(1).random(2_000_000)
+    def work(n):
+        for _ in range(n):
+            np.exp(a)
+    times = {1: [], 2: []}
+    for _ in range(repeats):
+        for threads in (1, 2):
+            workers = [threading.Thread(target=work, args=(80 // threads,)) for _ in range(threads)]
+            start = time.perf_counter()
+            for w in workers:
+                w.start()
+            for w in workers:
+                w.join()
+            times[threads].append(time.perf_counter() - start)
+    return statistics.median(times[1]) / statistics.median(times[2])
+
+
 def loadavg():
     return os.getloadavg()[0]
 
@@ -70,6 +109,7 @@ def main():
     cases = {"misses": dict(eps=(0.0, 0.0)), "soft cache": dict()}
 
     before = loadavg()
+    control_before = machine_parallelism(args.repeats)
     times = {(name, threads): [] for name in cases for threads in (1, 2)}
     cpu = {(name, threads): [] for name in cases for threads in (1, 2)}
     outputs = {}
@@ -83,6 +123,7 @@ def main():
                 outputs.setdefault(name, out)
                 assert out.tobytes() == outputs[name].tobytes(), "output depends on the thread count"
     after = loadavg()
+    control_after = machine_parallelism(args.repeats)
 
     result = {"points": args.points, "frames": total, "model": {"M": model.basis_size, "K": model.key_count},
               "load_average_before": before, "load_average_after": after, "cpus": os.cpu_count()}
@@ -97,6 +138,10 @@ def main():
                         "cpu_seconds_1_thread": round(statistics.median(cpu[(name, 1)]), 3),
                         "cpu_seconds_2_threads": round(statistics.median(cpu[(name, 2)]), 3),
                         "hits_blends_misses": [s["hits"], s["blends"], s["misses"]]}
+    result["control_numpy_threads_2_over_1"] = [round(control_before, 3), round(control_after, 3)]
+    p, bound = gil_fraction(rig, args.points)
+    result["evaluator_gil_fraction"] = round(p, 3)
+    result["idle_machine_bound_2_over_1"] = round(bound, 2)
     print(json.dumps(result, indent=2))
     return 0 if all(result[name]["speedup_2_over_1"] >= 1.0 for name in cases) else 1
 
