@@ -47,8 +47,7 @@ void CallableEvaluator::evaluate(Index frame, std::span<const Index> points, dou
             return;
         } catch (py::error_already_set& e) {
             error = py::str(e.type().attr("__name__")).cast<std::string>() + ": " + py::str(e.value()).cast<std::string>();
-            std::lock_guard lock(errorMutex_);
-            if (!firstError_) firstError_ = e.value();
+            if (!firstError_) firstError_ = e.value();  // the GIL orders the engine's threads here
         }
     }
     throw std::runtime_error(error);

@@ -8,7 +8,6 @@
 
 #include <pybind11/pybind11.h>
 
-#include <mutex>
 #include <string>
 
 namespace pmsc::python {
@@ -37,7 +36,7 @@ private:
 
 /// A Python callable `f(frame, point_indices) -> values` as the expensive calculation: `point_indices`
 /// is an int64 array of P point indices (its own copy), `values` anything NumPy reads as P x C numbers
-/// (shape (P, C) or (P*C,), float32 or float64 read without a copy). The engine calls it from its
+/// (shape (P, C) or (P*C,); a C-order float64 array is read in place, anything else converted). The engine calls it from its
 /// worker threads; each call takes the GIL for the call only, so the engine's own work (projection,
 /// reconstruction, blending, other frames' bookkeeping) and any NumPy work that releases the GIL run
 /// in parallel with it.
@@ -65,7 +64,6 @@ private:
     py::object function_;
     Index points_, channels_, frames_;
     FailThroughShape shape_;
-    mutable std::mutex errorMutex_;
     mutable py::object firstError_;  ///< set and read under the GIL
 };
 
