@@ -1,0 +1,186 @@
+// pmsc.train: `pmsc train` on NumPy arrays or .npy paths, with the same options and the same model bytes.
+#include "python/Arrays.h"
+#include "python/Errors.h"
+#include "python/PyModel.h"
+
+#include "pmsc/Communicator.h"
+#include "pmsc/Errors.h"
+#include "pmsc/RowBlocks.h"
+#include "pmsc/Training.h"
+
+#include <pybind11/numpy.h>
+#include <pybind11/stl.h>
+
+#include <optional>
+#include <vector>
+
+namespace pmsc::python {
+
+using namespace pybind11::literals;
+
+namespace {
+
+/// One training set from what Python hands over: an array (F, N, C), a .npy path, or a list of either
+/// (shots, concatenated in order as `pmsc train --frames A --frames B` does).
+struct TrainingFrames {
+    std::optional<FrameArray> view;  ///< a single float64 C-order array: trained from in place
+    FrameSet copy;                   ///< otherwise the frames as doubles
+};
+
+
+void appendShot(FrameSet& all, const FrameSet& shot, const std::string& name, const std::string& firstName) {
+    if (all.frames == 0) {
+        all = shot;
+        return;
+    }
+    if (shot.points != all.points || shot.channels != all.channels)
+        throw InputError(name + ": " + std::to_string(shot.points) + " points x " + std::to_string(shot.channels) +
+                         " channels, but " + firstName + " has " + std::to_string(all.points) + " x " +
+                         std::to_string(all.channels));
+    all.values.insert(all.values.end(), shot.values.begin(), shot.values.end());
+    all.frames += shot.frames;
+}
+
+TrainingFrames trainingFrames(py::handle frames) {
+    TrainingFrames t;
+    std::vector<py::handle> shots;
+    if (py::isinstance<py::list>(frames) || py::isinstance<py::tuple>(frames)) {
+        for (py::handle h : frames) shots.push_back(h);
+        if (shots.empty()) throw InputError("train: no frames given");
+    } else {
+        shots.push_back(frames);
+    }
+    std::string firstName;
+    for (std::size_t i = 0; i < shots.size(); ++i) {
+        const std::string name = isPath(shots[i]) ? pathOf(shots[i]) : shots.size() == 1 ? "frames" : "frames[" + std::to_string(i) + "]";
+        if (i == 0) firstName = name;
+        if (isPath(shots[i])) {
+            FrameFile f;
+            {
+                py::gil_scoped_release nogil;
+                f = readFrames(name);
+            }
+            appendShot(t.copy, f.frames, name, firstName);
+            continue;
+        }
+        FrameArray a(shots[i], name);
+        if (shots.size() == 1 && a.doubles()) {
+            t.view.emplace(std::move(a));
+            return t;
+        }
+        FrameSet s(a.frames(), a.points(), a.channels());
+        {
+            py::gil_scoped_release nogil;
+            for (Index f = 0; f < a.frames(); ++f) a.readFrame(f, s.frame(f));
+        }
+        appendShot(t.copy, s, name, firstName);
+    }
+    return t;
+}
+
+Selector selectorOf(const std::string& s) {
+    if (s == "teleconnection") return Selector::Teleconnection;
+    if (s == "qdeim") return Selector::QDeim;
+    throw InputError("selector: '" + s + "' is not teleconnection or qdeim");
+}
+
+CalibrationRule ruleOf(const std::string& s) {
+    if (s == "max") return CalibrationRule::MaxRatio;
+    if (s == "conformal") return CalibrationRule::Conformal;
+    throw InputError("calibration: '" + s + "' is not max or conformal");
+}
+
+std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energy, double basisError, Index maxBasis,
+                                    double maxError, Index maxKeys, Index block, std::vector<Index> fiducials,
+                                    std::vector<Index> gridPoints, const std::string& selector, double tolerance,
+                                    Index slices, const std::string& calibration, double coverage, Index learnRank,
+                                    unsigned seed, int powerIterations, Index regions, double feather,
+                                    py::object progress) {
+    TrainingOptions o;
+    o.basis = basis;
+    o.energy = energy;
+    o.basisMaxError = basisError;
+    o.maxBasis = maxBasis;
+    o.maxError = maxError;
+    o.maxKeys = maxKeys;
+    o.block = block;
+    o.fiducials = std::move(fiducials);
+    o.gridPoints = std::move(gridPoints);
+    o.selector = selectorOf(selector);
+    o.tolerance = tolerance;
+    o.calibrationSlices = slices;
+    o.calibrationRule = ruleOf(calibration);
+    o.calibrationCoverage = coverage;
+    o.learnRank = learnRank;
+    o.seed = seed;
+    o.powerIterations = powerIterations;
+    o.regions.count = regions;
+    o.regions.featherFraction = feather;
+    if (regions < 0) throw InputError("regions: must be >= 0 (0 = none), got " + std::to_string(regions));
+    if (!(feather >= 0 && feather <= 0.5)) throw InputError("feather: must be in [0, 0.5], got " + std::to_string(feather));
+    if (calibration != "max" && !(tolerance > 0)) throw InputError("calibration and coverage need a tolerance");
+
+    TrainingFrames t = trainingFrames(frames);
+    // Training runs on this thread (its progress hook is where Ctrl-C is noticed); the hook takes the
+    // GIL only to call `progress` and to check signals, a few hundred times per training at most.
+    std::optional<py::error_already_set> pythonError;
+    o.progress = [&](std::string_view stage, double done, double total) {
+        py::gil_scoped_acquire gil;
+        try {
+            if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+            if (!progress.is_none()) {
+                py::object r = progress(std::string(stage), done, total);
+                if (!r.is_none() && !r.cast<bool>()) return false;
+            }
+            return true;
+        } catch (py::error_already_set& e) {
+            pythonError.emplace(std::move(e));
+            return false;
+        }
+    };
+    TrainingReport report;
+    Model model;
+    try {
+        py::gil_scoped_release nogil;
+        if (t.view) {
+            // A float64 C-order array is the training matrix Q as it lies ((N*C) x F, column-major):
+            // centred straight from it, the one copy training makes anyway.
+            const FrameArray& a = *t.view;
+            if (a.frames() < 2) throw InputError("train: need at least 2 training frames, got " + std::to_string(a.frames()));
+            const Eigen::Map<const Eigen::MatrixXd> q(a.doubles(), a.points() * a.channels(), a.frames());
+            MatrixBlocks blocks(q, a.channels(), /*centre=*/true);
+            SingleProcess one;
+            model = train(blocks, one, o, &report);
+        } else {
+            model = train(t.copy, o, &report);
+        }
+    } catch (const Cancelled&) {
+        if (pythonError) throw std::move(*pythonError);  // KeyboardInterrupt, or what `progress` raised
+        throw;
+    }
+    auto result = std::make_shared<PyModel>(std::move(model));
+    py::dict r;
+    r["warnings"] = report.warnings;
+    r["requested_basis"] = report.requestedBasis;
+    r["iterations"] = report.iterations;
+    r["seconds"] = report.seconds;
+    r["residual_per_round"] = report.residualPerRound;
+    r["calibration_ratio"] = report.calibration.ratio;
+    result->trainingReport = r;
+    return result;
+}
+
+}  // namespace
+
+void bindTraining(py::module_& m) {
+    m.def("train", &trainModel, "frames"_a, py::kw_only(), "basis"_a = 0, "energy"_a = 0.0, "basis_error"_a = 0.0,
+          "max_basis"_a = 256, "max_error"_a = 0.0, "max_keys"_a = 200, "block"_a = 16,
+          "fiducials"_a = std::vector<Index>{}, "grid_points"_a = std::vector<Index>{},
+          "selector"_a = "teleconnection", "tolerance"_a = 0.0, "slices"_a = 5, "calibration"_a = "max",
+          "coverage"_a = 0.9, "learn_rank"_a = 0, "seed"_a = 20070101u, "power_iterations"_a = 2,
+          "regions"_a = 0, "feather"_a = 0.03, "progress"_a = py::none(),
+          "Trains a model as `pmsc train` does (same options, same model bytes). frames: an array (F, N, C), a "
+          ".npy path, or a list of them (shots). progress(stage, done, total) may return False to cancel.");
+}
+
+}  // namespace pmsc::python
