@@ -150,41 +150,73 @@ private:
     std::vector<Row> rows_;
 };
 
+/// The evaluator of a run and the frames it covers.
+struct RunEvaluator {
+    std::unique_ptr<PointEvaluator> evaluator;
+    CallableEvaluator* callable = nullptr;  ///< when it is a Python callable
+    engine::FrameRange range;
+};
+
+/// A spec ("replay:FILE.npy", from the registry's built-ins) or a Python callable.
+RunEvaluator makeRunEvaluator(const Model& m, py::object evaluator, py::object frames, py::object points,
+                              bool wholeFrame, Index frameCount) {
+    RunEvaluator r;
+    if (py::isinstance<py::str>(evaluator)) {
+        const std::string spec = evaluator.cast<std::string>();
+        {
+            py::gil_scoped_release nogil;
+            r.evaluator = evaluators::EvaluatorRegistry::withBuiltins().make(spec);
+        }
+        r.range = frameRange(frames, r.evaluator->frameCount());
+        return r;
+    }
+    if (!PyCallable_Check(evaluator.ptr()))
+        throw InputError("evaluator: expected a callable f(frame, point_indices) -> values or a spec 'NAME:ARGS' "
+                         "(replay:FILE.npy, skin:ASSET)");
+    r.range = frameRange(frames, 0);
+    const Index needed = r.range.last() + 1;
+    if (frameCount > 0 && frameCount < needed)
+        throw InputError("frame_count: " + std::to_string(frameCount) + " but the range reaches frame " +
+                         std::to_string(r.range.last()));
+    PointEvaluator::FailThroughShape shape;
+    shape.wholeFrame = wholeFrame;
+    // A Python call costs tens of microseconds of interpreter time under the GIL, so a Python
+    // evaluator fails through in 8 chunks per frame rather than the engine's ~64 (C++ evaluators):
+    // fewer, larger calls, and still work for every thread with 2 x threads frames in flight.
+    const Index outputPoints = points.is_none() ? m.points : static_cast<Index>(py::len(points));
+    shape.chunkPoints = std::max<Index>(256, (outputPoints + 7) / 8);
+    auto c = std::make_unique<CallableEvaluator>(evaluator, m.points, m.channels, std::max(frameCount, needed), shape);
+    r.callable = c.get();
+    r.evaluator = std::move(c);
+    return r;
+}
+
+NpyDtype outputDtype(py::object dtype) {
+    if (dtype.is_none()) return NpyDtype::Float64;
+    const py::dtype dt = py::dtype::from_args(dtype);
+    if (dt.kind() == 'f' && dt.itemsize() == 4) return NpyDtype::Float32;
+    if (dt.kind() == 'f' && dt.itemsize() == 8) return NpyDtype::Float64;
+    throw InputError("dtype: pmsc writes float32 or float64");
+}
+
+py::list reportRows(const ArraySink& sink) {
+    py::list rows;
+    for (const auto& r : sink.rows()) {
+        py::dict d("frame"_a = r.frame, "state"_a = std::string(toString(r.state)), "weight"_a = r.weight,
+                   "key_rms"_a = r.keyRms, "failed"_a = r.failed);
+        if (r.failed) d["error"] = r.error;
+        if (r.local) d["points_evaluated"] = r.pointsEvaluated;
+        rows.append(d);
+    }
+    return rows;
+}
+
 py::tuple runEngine(const PyModel& self, py::object evaluator, py::object frames, int threads, py::object points,
                     py::object eps, const std::string& failure, bool wholeFrame, Index chunkPoints, py::object dtypeArg,
                     Index maxFramesInFlight, Index frameCount) {
     const Model& m = self.get();
     if (threads < 0) throw InputError("threads: must be >= 0 (0 = every core), got " + std::to_string(threads));
-    std::unique_ptr<PointEvaluator> owned;
-    CallableEvaluator* callable = nullptr;
-    engine::FrameRange range;
-    if (py::isinstance<py::str>(evaluator)) {
-        const std::string spec = evaluator.cast<std::string>();
-        {
-            py::gil_scoped_release nogil;
-            owned = evaluators::EvaluatorRegistry::withBuiltins().make(spec);
-        }
-        range = frameRange(frames, owned->frameCount());
-    } else if (PyCallable_Check(evaluator.ptr())) {
-        range = frameRange(frames, 0);
-        const Index needed = range.last() + 1;
-        if (frameCount > 0 && frameCount < needed)
-            throw InputError("frame_count: " + std::to_string(frameCount) + " but the range reaches frame " +
-                             std::to_string(range.last()));
-        PointEvaluator::FailThroughShape shape;
-        shape.wholeFrame = wholeFrame;
-        // A Python call costs tens of microseconds of interpreter time under the GIL, so a Python
-        // evaluator fails through in 8 chunks per frame rather than the engine's ~64 (C++ evaluators):
-        // fewer, larger calls, and still work for every thread with 2 x threads frames in flight.
-        const Index outputPoints = points.is_none() ? m.points : static_cast<Index>(py::len(points));
-        shape.chunkPoints = std::max<Index>(256, (outputPoints + 7) / 8);
-        auto c = std::make_unique<CallableEvaluator>(evaluator, m.points, m.channels, std::max(frameCount, needed), shape);
-        callable = c.get();
-        owned = std::move(c);
-    } else {
-        throw InputError("evaluator: expected a callable f(frame, point_indices) -> values or a spec 'NAME:ARGS' "
-                         "(replay:FILE.npy, skin:ASSET)");
-    }
+    RunEvaluator run = makeRunEvaluator(m, evaluator, frames, points, wholeFrame, frameCount);
 
     engine::EngineOptions o;
     o.threads = threads;
@@ -200,43 +232,30 @@ py::tuple runEngine(const PyModel& self, py::object evaluator, py::object frames
     }
     std::atomic<bool> cancel{false};
     o.cancel = &cancel;
-    NpyDtype dtype = NpyDtype::Float64;
-    if (!dtypeArg.is_none()) {
-        const py::dtype dt = py::dtype::from_args(dtypeArg);
-        if (dt.kind() == 'f' && dt.itemsize() == 4) dtype = NpyDtype::Float32;
-        else if (!(dt.kind() == 'f' && dt.itemsize() == 8)) throw InputError("dtype: pmsc writes float32 or float64");
-    }
+    const NpyDtype dtype = outputDtype(dtypeArg);
 
     std::unique_ptr<engine::Engine> engine;
     {
         py::gil_scoped_release nogil;
-        engine = std::make_unique<engine::Engine>(m, *owned, std::move(o));
+        engine = std::make_unique<engine::Engine>(m, *run.evaluator, std::move(o));
     }
     const Index outPoints = static_cast<Index>(engine->outputPoints().size());
-    py::array out = newArray(dtype, {range.count, outPoints, m.channels});
-    ArraySink sink(out.mutable_data(), dtype, static_cast<std::size_t>(outPoints * m.channels), range.count);
+    py::array out = newArray(dtype, {run.range.count, outPoints, m.channels});
+    ArraySink sink(out.mutable_data(), dtype, static_cast<std::size_t>(outPoints * m.channels), run.range.count);
     engine::RunStats stats;
     try {
-        runReleased(cancel, [&] { stats = engine->run(range, sink); });
+        runReleased(cancel, [&] { stats = engine->run(run.range, sink); });
     } catch (const EvaluatorError&) {
         // A Python evaluator's own exception is the cause of the one-line EvaluatorError.
-        if (callable && !callable->firstError().is_none()) {
-            setPythonError(std::current_exception(), callable->firstError());
+        if (run.callable && !run.callable->firstError().is_none()) {
+            setPythonError(std::current_exception(), run.callable->firstError());
             throw py::error_already_set();
         }
         throw;
     }
-    py::list rows;
-    for (const auto& r : sink.rows()) {
-        py::dict d("frame"_a = r.frame, "state"_a = std::string(toString(r.state)), "weight"_a = r.weight,
-                   "key_rms"_a = r.keyRms, "failed"_a = r.failed);
-        if (r.failed) d["error"] = r.error;
-        if (r.local) d["points_evaluated"] = r.pointsEvaluated;
-        rows.append(d);
-    }
     py::dict report;
     report["summary"] = jsonToPython(stats.toJson());
-    report["frames"] = rows;
+    report["frames"] = reportRows(sink);
     return py::make_tuple(out, report);
 }
 
