@@ -74,6 +74,15 @@ struct VolumeRig {
     /// false: the two colours alternate over the positions like a chessboard (64 frames); true:
     /// every position in both colours (128 frames, the second by recolour()).
     bool colourPairs = false;
+    /// > 0: instead of the azimuth x elevation grid, this many training positions on a spiral
+    /// (golden-angle azimuths, even in area) over the band of elevations [elevations.front(),
+    /// elevations.back()]: the same spacing everywhere, where the grid crowds its positions
+    /// together near the top. Colours then cycle through `colours` temperatures from kelvinLow to
+    /// kelvinHigh along the spiral (neighbours on the sphere get different ones).
+    int spiral = 0;
+    /// Training colour temperatures of the spiral, evenly from kelvinLow to kelvinHigh: 2 spans the
+    /// plane of two black-body RGBs; 3 also holds the locus's curvature between them.
+    int colours = 2;
     double distance = 2.0;                          ///< x world.radius
     double lightRadius = 0.45;                      ///< x world.radius (a soft light: 13 degrees across from the rig)
 
@@ -81,9 +90,13 @@ struct VolumeRig {
     /// azimuths x elevations frames (x 2 with colourPairs: kelvinLow then kelvinHigh at each
     /// position), elevation-major.
     std::vector<VolumeLight> training(const VolumeWorld& world) const;
-    /// `count` settings between the training ones: half a step off in azimuth and in elevation,
-    /// colour temperatures between the two training ones (fixed seed).
+    /// `count` settings between the training ones, colour temperatures between kelvinLow and
+    /// kelvinHigh (fixed seed). Grid: half a step off in azimuth and in elevation. Spiral: the
+    /// holes of the training set: among 4,096 random candidates in the band, repeatedly the one
+    /// farthest from every training position and every hole already taken.
     std::vector<VolumeLight> between(const VolumeWorld& world, int count) const;
+    /// The training positions' directions from the medium's centre (unit vectors), as training().
+    std::vector<Vec3> trainingDirections() const;
     /// An animation: one turn around the medium while rising and sinking between the lowest and
     /// highest training elevation, the colour temperature swinging between the training ones.
     std::vector<VolumeLight> path(const VolumeWorld& world, int frames) const;
