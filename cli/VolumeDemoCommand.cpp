@@ -23,7 +23,7 @@ int runDemoVolume(const std::vector<std::string>& args) {
                      "Issue 11: smoke made from a mesh with OpenVDB (meshToLevelSet, fog volume, noise), lit\n"
                      "by a spherical light moving around and over it with a changing colour temperature.\n"
                      "The light scattered at every active voxel (soft shadows through the heterogeneous\n"
-                     "density, multiple scattering) is the expensive calculation; 64 training frames, a\n"
+                     "density, multiple scattering) is the expensive calculation; 96 training frames, a\n"
                      "basis and key voxels, validation between the training lights and on a path through\n"
                      "the soft-cache engine, renders from three moving cameras (one inside the smoke).\n"
                      "Writes DIR/report.json, DIR/density.vdb, DIR/cache_*.vdb (grid 'inscatter'), DIR/*.png.");
