@@ -16,12 +16,14 @@ int runDemoVolume(const std::vector<std::string>& args) {
     std::string out, mesh, density, grid;
     bool quick = false, quiet = false, noVdbRender = false;
     volume::VolumeDemoOptions defaults;
+    long spiral = -1, colours = -1, gridKeys = -1;
     long voxels = -1, samples = -1, threads = -1, basis = -1, keys = -1, azimuths = -1;
+    std::vector<double> elevations;
     ArgParser parser("demo volume", "--out DIR [--mesh FILE | --density FILE.vdb [--grid NAME]] [options]",
                      "Issue 11: smoke made from a mesh with OpenVDB (meshToLevelSet, fog volume, noise), lit\n"
                      "by a spherical light moving around and over it with a changing colour temperature.\n"
                      "The light scattered at every active voxel (soft shadows through the heterogeneous\n"
-                     "density, multiple scattering) is the expensive calculation; 64 training frames, a\n"
+                     "density, multiple scattering) is the expensive calculation; 96 training frames, a\n"
                      "basis and key voxels, validation between the training lights and on a path through\n"
                      "the soft-cache engine, renders from three moving cameras (one inside the smoke).\n"
                      "Writes DIR/report.json, DIR/density.vdb, DIR/cache_*.vdb (grid 'inscatter'), DIR/*.png.");
@@ -39,6 +41,20 @@ int runDemoVolume(const std::vector<std::string>& args) {
                   [&](const std::string& v) { keys = parseIndex("--keys", v, 1, 100000); });
     parser.option("--azimuths", "A", "training light azimuths per elevation (default " + std::to_string(defaults.rig.azimuths) + ")",
                   [&](const std::string& v) { azimuths = parseIndex("--azimuths", v, 2, 360); });
+    parser.option("--elevations", "E1,E2,..", "training light elevations in degrees, each in [0, 89]",
+                  [&](const std::string& v) {
+                      elevations.clear();
+                      for (Index e : parseIndexList("--elevations", v)) {
+                          if (e > 89) throw UsageError("--elevations: " + std::to_string(e) + " is out of range (must be in [0, 89])");
+                          elevations.push_back(static_cast<double>(e));
+                      }
+                  });
+    parser.option("--spiral", "P", "training light positions on a spiral over the band of elevations (0 = the azimuth x elevation grid)",
+                  [&](const std::string& v) { spiral = parseIndex("--spiral", v, 0, 4096); });
+    parser.option("--colours", "C", "training colour temperatures along the spiral (2 or 3)",
+                  [&](const std::string& v) { colours = parseIndex("--colours", v, 1, 8); });
+    parser.option("--grid-keys", "G", "key voxels seeded from a sparse spatial grid (at most K)",
+                  [&](const std::string& v) { gridKeys = parseIndex("--grid-keys", v, 0, 100000); });
     parser.option("--threads", "T", "worker threads (default: every core)",
                   [&](const std::string& v) { threads = parseIndex("--threads", v, 0, 1024); });
     parser.flag("--no-vdb-render", "skip OpenVDB's vdb_render view of the density", noVdbRender);
@@ -58,6 +74,10 @@ int runDemoVolume(const std::vector<std::string>& args) {
     if (basis > 0) options.basis = static_cast<int>(basis);
     if (keys > 0) options.keys = static_cast<int>(keys);
     if (azimuths > 0) options.rig.azimuths = static_cast<int>(azimuths);
+    if (!elevations.empty()) options.rig.elevations = elevations;
+    if (spiral >= 0) options.rig.spiral = static_cast<int>(spiral);
+    if (colours > 0) options.rig.colours = static_cast<int>(colours);
+    if (gridKeys >= 0) options.gridKeys = static_cast<int>(gridKeys);
     if (options.gridKeys > options.keys) options.gridKeys = options.keys;
     if (threads >= 0) options.threads = static_cast<int>(threads);
     if (noVdbRender) options.vdbRender = false;
@@ -80,8 +100,12 @@ int runDemoVolume(const std::vector<std::string>& args) {
     std::printf("  error     PM vs full calculation: %.2f%% RMS (between %.2f%%, path %.2f%%; soft-cached output %.2f%%)\n",
                 100.0 * num("rms_rel_error"), 100.0 * num("rms_rel_error_between"), 100.0 * num("rms_rel_error_path"),
                 100.0 * num("soft_rms_rel_error"));
-    std::printf("  converged reference (%ld shadow rays, step %.2g voxel, %ld voxels): full %.2f%%, PMSC %.2f%% (ratio %.2f)\n",
+    std::printf("  basis     distance of frames from the basis (best possible with every voxel known): training %.2f%%, validation %.2f%%\n",
+                100.0 * num("train_projection_rel_error"), 100.0 * num("projection_rel_error"));
+    std::printf("  converged reference (%ld shadow rays, step %.2g voxel, %ld voxels; %.2f%% from one with 2x the rays and half the step):\n"
+                "            full %.2f%%, PMSC %.2f%% (ratio %.2f)\n",
                 r.at("reference_light_samples").get<long>(), num("reference_step_voxels"), r.at("reference_points").get<long>(),
+                100.0 * num("reference_self_rel_error"),
                 100.0 * num("reference_rms_rel_error_full"), 100.0 * num("reference_rms_rel_error_pm"),
                 num("reference_ratio_pm_to_full"));
     std::printf("  wrote     %s/report.json, density.vdb, %zu caches, %zu images (full | PMSC | |diff| x 10)  [%.0f s, peak %.0f MB]\n",

@@ -81,6 +81,17 @@ float mediumExposure(const Image& img) {
     return sum > 0 ? static_cast<float>(0.3 * static_cast<double>(count) / sum) : 1.0f;
 }
 
+/// Adds to `err` the distance of a frame from its orthogonal projection onto the model's affine
+/// subspace (mean + span of the basis): the best any reconstruction from this basis can do, with
+/// every voxel known. PM's error above it is the price of knowing only the key voxels.
+void addProjectionError(const Model& model, const double* x, RelError& err) {
+    const Eigen::Map<const Eigen::VectorXd> v(x, model.mean.size());
+    const Eigen::VectorXd r = v - model.mean;
+    const Eigen::VectorXd c = model.basis.transpose() * r;
+    const Eigen::VectorXd proj = model.mean + model.basis * c;
+    err.add(proj.data(), x, static_cast<std::size_t>(proj.size()));
+}
+
 }  // namespace
 
 VolumeDemoOptions VolumeDemoOptions::quickOptions() {
@@ -188,6 +199,9 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
     TrainingReport trep;
     Model model;
     arena.execute([&] { model = train(q, topt, &trep); });
+    // The training frames' own distance from the basis (truncation to M vectors).
+    RelError trainProjection;
+    for (Index f = 0; f < trainFrames; ++f) addProjectionError(model, q.frame(f), trainProjection);
     q = FrameSet();
     timings["train"] = secondsSince(t);
 
@@ -242,6 +256,9 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
     const engine::RunStats stats = eng.run(engine::FrameRange{0, testFrames, 1}, sink);
     const double pmscSecondsPerFrame = stats.wallSeconds / static_cast<double>(testFrames);
     timings["engine"] = stats.wallSeconds;
+    // The validation frames' distance from the basis: what M and the training lights allow.
+    RelError valProjection;
+    for (const auto& [f, v] : full) addProjectionError(model, v.data(), valProjection);
 
     // 6. Converged reference on the subset: referenceMultiplier x the light samples, 1/4 the step.
     MediumSettings refMedium = world->medium;
@@ -249,7 +266,7 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
     refMedium.stepVoxels /= 4;
     const VolumeEvaluator refEval(VolumeWorld::create(world->density, refMedium, world->source),
                                   o.rig.between(*world, o.betweenLights), "volume-reference");
-    RelError refFull, refPm;
+    RelError refFull, refPm, refSelf;
     t = Clock::now();
     for (Index f = 0; f < referenceFrames; ++f) {
         progress("converged reference", static_cast<double>(f), static_cast<double>(referenceFrames));
@@ -264,6 +281,23 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
             for (int c = 0; c < 3; ++c) fullAt[3 * i + c] = full[f][static_cast<std::size_t>(3 * subset[i] + c)];
         refFull.add(fullAt.data(), ref.data(), ref.size());
         refPm.add(sink.pmAtSubset[f].data(), ref.data(), ref.size());
+        if (f == 0) {
+            // How converged the reference is: its distance from one with twice its shadow rays
+            // and half its step, on the first frame's subset.
+            progress("converged reference (check)", 0, 1);
+            MediumSettings fineMedium = refMedium;
+            fineMedium.lightSamples *= 2;
+            fineMedium.stepVoxels /= 2;
+            const VolumeEvaluator fineEval(VolumeWorld::create(world->density, fineMedium, world->source),
+                                           {refEval.lights()[0]}, "volume-reference-check");
+            std::vector<double> fine(3 * subset.size());
+            arena.execute([&] {
+                tbb::parallel_for(tbb::blocked_range<std::size_t>(0, subset.size(), 16), [&](const auto& r) {
+                    fineEval.evaluate(0, std::span<const Index>(subset.data() + r.begin(), r.size()), fine.data() + 3 * r.begin());
+                });
+            });
+            refSelf.add(ref.data(), fine.data(), fine.size());
+        }
     }
     timings["reference"] = secondsSince(t);
 
@@ -366,6 +400,29 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
     report["rms_rel_error_between"] = sink.pmScattered.value();
     report["rms_rel_error_path"] = sink.pmPath.value();
     report["error_frames"] = fullFrames.size();
+    report["train_projection_rel_error"] = trainProjection.value();
+    report["projection_rel_error"] = valProjection.value();
+    {
+        // How far the validation lights are from the training ones (angles seen from the centre).
+        const std::vector<Vec3> dirs = o.rig.trainingDirections();
+        auto dirOf = [&](const VolumeLight& l) { return cornell::normalize(l.position - world->centre); };
+        auto nearestDeg = [&](const Vec3& d, const Vec3* skip) {
+            double best = 1e9;
+            for (const Vec3& t : dirs) {
+                if (skip && t.x == skip->x && t.y == skip->y && t.z == skip->z) continue;
+                best = std::min(best, std::acos(std::clamp(d.x * t.x + d.y * t.y + d.z * t.z, -1.0, 1.0)) * 180 / M_PI);
+            }
+            return best;
+        };
+        std::vector<double> spacing;
+        for (const Vec3& d : dirs) spacing.push_back(nearestDeg(d, &d));
+        std::sort(spacing.begin(), spacing.end());
+        report["training_spacing_deg_median"] = spacing[spacing.size() / 2];
+        report["training_spacing_deg_max"] = spacing.back();
+        nlohmann::json gaps = nlohmann::json::array();
+        for (Index f = 0; f < between; ++f) gaps.push_back(nearestDeg(dirOf(lights[static_cast<std::size_t>(f)]), nullptr));
+        report["between_nearest_training_deg"] = gaps;
+    }
     report["hit_rate"] = static_cast<double>(stats.hits) / static_cast<double>(testFrames);
     report["hits"] = stats.hits;
     report["blends"] = stats.blends;
@@ -374,6 +431,7 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
     report["reference_rms_rel_error_pm"] = refPm.value();
     report["reference_ratio_pm_to_full"] = refFull.value() > 0 ? refPm.value() / refFull.value() : 0.0;
     report["reference_points"] = subset.size();
+    report["reference_self_rel_error"] = refSelf.value();
     report["reference_light_samples"] = refMedium.lightSamples;
     report["reference_step_voxels"] = refMedium.stepVoxels;
     report["reference_frames"] = referenceFrames;

@@ -6,6 +6,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <random>
@@ -53,8 +54,55 @@ VolumeLight VolumeRig::light(const VolumeWorld& world, double azimuthDeg, double
     return l;
 }
 
+namespace {
+
+constexpr double kDeg = M_PI / 180;
+
+Vec3 direction(double azimuthDeg, double elevationDeg) {
+    const double a = azimuthDeg * kDeg, e = elevationDeg * kDeg;
+    return {std::cos(e) * std::cos(a), std::sin(e), std::cos(e) * std::sin(a)};
+}
+
+/// Azimuth and elevation (degrees) of the i-th of n spiral positions, even in area over the band.
+std::pair<double, double> spiralPosition(int i, int n, double eLo, double eHi) {
+    const double zLo = std::sin(eLo * kDeg), zHi = std::sin(eHi * kDeg);
+    const double z = zLo + (zHi - zLo) * (i + 0.5) / n;
+    const double golden = 180.0 * (3.0 - std::sqrt(5.0));  // degrees
+    return {std::fmod(golden * i, 360.0), std::asin(z) / kDeg};
+}
+
+double angleBetween(const Vec3& a, const Vec3& b) {
+    return std::acos(std::clamp(a.x * b.x + a.y * b.y + a.z * b.z, -1.0, 1.0));
+}
+
+}  // namespace
+
+std::vector<Vec3> VolumeRig::trainingDirections() const {
+    std::vector<Vec3> out;
+    if (spiral > 0) {
+        for (int i = 0; i < spiral; ++i) {
+            const auto [a, e] = spiralPosition(i, spiral, elevations.front(), elevations.back());
+            out.push_back(direction(a, e));
+        }
+        return out;
+    }
+    for (std::size_t e = 0; e < elevations.size(); ++e)
+        for (int a = 0; a < azimuths; ++a)
+            for (int c = 0; c < (colourPairs ? 2 : 1); ++c) out.push_back(direction(360.0 * a / azimuths, elevations[e]));
+    return out;
+}
+
 std::vector<VolumeLight> VolumeRig::training(const VolumeWorld& world) const {
     std::vector<VolumeLight> out;
+    if (spiral > 0) {
+        const int k = std::max(1, colours);
+        for (int i = 0; i < spiral; ++i) {
+            const auto [a, e] = spiralPosition(i, spiral, elevations.front(), elevations.back());
+            const double kelvin = k == 1 ? kelvinLow : kelvinLow + (kelvinHigh - kelvinLow) * (i % k) / (k - 1);
+            out.push_back(light(world, a, e, kelvin));
+        }
+        return out;
+    }
     for (std::size_t e = 0; e < elevations.size(); ++e)
         for (int a = 0; a < azimuths; ++a)
             if (colourPairs) {
@@ -67,10 +115,36 @@ std::vector<VolumeLight> VolumeRig::training(const VolumeWorld& world) const {
 
 std::vector<VolumeLight> VolumeRig::between(const VolumeWorld& world, int count) const {
     std::mt19937 rng(20130711);
+    std::vector<VolumeLight> out;
+    if (spiral > 0) {
+        // The holes: among random candidates even in area over the band, repeatedly the one
+        // farthest from every training position and every hole already taken.
+        std::vector<Vec3> taken = trainingDirections();
+        std::uniform_real_distribution<double> u(0, 1);
+        const double zLo = std::sin(elevations.front() * kDeg), zHi = std::sin(elevations.back() * kDeg);
+        std::vector<std::pair<double, double>> candidates(4096);
+        for (auto& [a, e] : candidates) {
+            a = 360.0 * u(rng);
+            e = std::asin(zLo + (zHi - zLo) * u(rng)) / kDeg;
+        }
+        std::vector<double> nearest(candidates.size(), 1e9);
+        auto update = [&](const Vec3& d) {
+            for (std::size_t c = 0; c < candidates.size(); ++c)
+                nearest[c] = std::min(nearest[c], angleBetween(d, direction(candidates[c].first, candidates[c].second)));
+        };
+        for (const Vec3& d : taken) update(d);
+        std::uniform_real_distribution<double> k(0.25, 0.75);
+        for (int i = 0; i < count; ++i) {
+            const auto best = static_cast<std::size_t>(std::max_element(nearest.begin(), nearest.end()) - nearest.begin());
+            const auto [a, e] = candidates[best];
+            out.push_back(light(world, a, e, kelvinLow + k(rng) * (kelvinHigh - kelvinLow)));
+            update(direction(a, e));
+        }
+        return out;
+    }
     std::uniform_int_distribution<int> az(0, azimuths - 1);
     std::uniform_int_distribution<int> el(0, std::max(0, static_cast<int>(elevations.size()) - 2));
     std::uniform_real_distribution<double> u(0.25, 0.75);
-    std::vector<VolumeLight> out;
     for (int i = 0; i < count; ++i) {
         const double a = 360.0 * (az(rng) + 0.5) / azimuths;
         const std::size_t e = static_cast<std::size_t>(el(rng));

@@ -54,6 +54,14 @@ TEST(VolumeDemoQuick, WritesAReportWithinBoundsImagesAndCachesThatVdbPrintLists)
     EXPECT_GE(r["hit_rate"].get<double>(), 0.5);
     EXPECT_GT(r["reference_rms_rel_error_full"].get<double>(), 0);
     EXPECT_LT(r["reference_rms_rel_error_pm"].get<double>(), 0.2);
+    // The orthogonal projection onto the basis is the best any reconstruction from it can do
+    // (PM's lies in the same subspace), and the reference is closer to a finer one than the full
+    // calculation is to it (else it would not be a converged reference).
+    EXPECT_GT(r["projection_rel_error"].get<double>(), 0);
+    EXPECT_LE(r["projection_rel_error"].get<double>(), r["rms_rel_error"].get<double>() * (1 + 1e-9));
+    EXPECT_GE(r["train_projection_rel_error"].get<double>(), 0);
+    EXPECT_LT(r["reference_self_rel_error"].get<double>(), 0.5 * r["reference_rms_rel_error_full"].get<double>());
+    EXPECT_EQ(r["between_nearest_training_deg"].size(), 4u);
     EXPECT_EQ(r["images"].size(), 3u);
     for (const auto& img : r["images"]) EXPECT_TRUE(std::filesystem::exists(dir + "/" + img["png"].get<std::string>()));
     EXPECT_TRUE(std::filesystem::exists(dir + "/density.vdb"));
@@ -118,10 +126,13 @@ TEST(VolumeEvaluatorCli, MissingFileNoFloatGridAndWrongGridNameAreOneLineAndExit
         EXPECT_NE(out.find(what), std::string::npos) << out;
         EXPECT_FALSE(std::filesystem::exists(dir + "/f.npy"));
     }
-    int status = -1;
-    const std::string out = run(std::string(PMSC_BINARY) + " demo volume --quick --out " + dir + "/d --voxels ten", status);
-    EXPECT_EQ(WEXITSTATUS(status), 2) << out;
-    EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << out;
+    for (const char* bad : {"--voxels ten", "--elevations 30,95", "--elevations 30,x", "--spiral -1", "--colours 0"}) {
+        int status = -1;
+        const std::string out = run(std::string(PMSC_BINARY) + " demo volume --quick --out " + dir + "/d " + bad, status);
+        EXPECT_EQ(WEXITSTATUS(status), 2) << bad << ": " << out;
+        EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << bad << ": " << out;
+        EXPECT_FALSE(std::filesystem::exists(dir + "/d/report.json")) << bad;
+    }
     std::filesystem::remove_all(dir);
 }
 #endif

@@ -8,7 +8,9 @@
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <cmath>
+#include <map>
 #include <filesystem>
 #include <numeric>
 
@@ -168,13 +170,68 @@ TEST(VolumeLightColour, KelvinGivesWarmAndColdLightOfEqualLuminance) {
     EXPECT_THROW(kelvinToRgb(100), std::invalid_argument);
 }
 
+double angleDeg(const Vec3& a, const Vec3& b) {
+    return std::acos(std::clamp(cornell::dot(a, b) / (cornell::length(a) * cornell::length(b)), -1.0, 1.0)) * 180 / M_PI;
+}
+
+TEST(VolumeRig, SpiralCoversTheBandEvenlyCyclesColoursAndBetweenFindsItsHoles) {
+    const std::string dir = test::tempDir("spiral");
+    const auto world = boxWorld(dir, 1.0f, {});
+    VolumeRig rig;
+    rig.spiral = 60;
+    rig.colours = 3;
+    rig.elevations = {10, 70};
+    const auto lights = rig.training(*world);
+    const auto dirs = rig.trainingDirections();
+    ASSERT_EQ(lights.size(), 60u);
+    ASSERT_EQ(dirs.size(), 60u);
+    std::map<double, int> perKelvin;
+    std::vector<double> spacing;
+    for (std::size_t i = 0; i < lights.size(); ++i) {
+        const Vec3 d = lights[i].position - world->centre;
+        EXPECT_LT(angleDeg(d, dirs[i]), 1e-6) << i;
+        const double elevation = std::asin(d.y / cornell::length(d)) * 180 / M_PI;
+        EXPECT_GE(elevation, 10.0) << i;
+        EXPECT_LE(elevation, 70.0) << i;
+        ++perKelvin[lights[i].kelvin];
+        double nearest = 1e9;
+        for (std::size_t j = 0; j < dirs.size(); ++j)
+            if (j != i) nearest = std::min(nearest, angleDeg(dirs[i], dirs[j]));
+        spacing.push_back(nearest);
+    }
+    EXPECT_EQ(perKelvin.size(), 3u);
+    for (const auto& [k, count] : perKelvin) EXPECT_EQ(count, 20) << k;
+    EXPECT_TRUE(perKelvin.count(0.5 * (rig.kelvinLow + rig.kelvinHigh)));
+    std::sort(spacing.begin(), spacing.end());
+    // Even in area: no position much closer to its neighbour than the median spacing.
+    EXPECT_GT(spacing.front(), 0.5 * spacing[spacing.size() / 2]);
+    // The holes: every validation light at least 0.6 x the median spacing from every training
+    // position (a random direction in the band is closer than that about half the time).
+    for (const VolumeLight& l : rig.between(*world, 8)) {
+        double nearest = 1e9;
+        for (const Vec3& d : dirs) nearest = std::min(nearest, angleDeg(l.position - world->centre, d));
+        EXPECT_GT(nearest, 0.6 * spacing[spacing.size() / 2]);
+        EXPECT_GT(l.kelvin, rig.kelvinLow);
+        EXPECT_LT(l.kelvin, rig.kelvinHigh);
+    }
+    // The grid's directions follow training() (one per frame, twice with colour pairs).
+    VolumeRig grid;
+    grid.colourPairs = true;
+    EXPECT_EQ(grid.trainingDirections().size(), grid.training(*world).size());
+    std::filesystem::remove_all(dir);
+}
+
 TEST(VolumeSpec, GridOptionAndBadOptionsAreOneLineInputErrors) {
     const std::string dir = test::tempDir("spec");
     test::writeDensityBox(dir + "/box.vdb", "smoke", 0.2, 0.1, 1.0f);
     const auto ev = makeVolumeEvaluator(dir + "/box.vdb:grid=smoke:lights=path");
     EXPECT_EQ(ev->frameCount(), 48);
     EXPECT_EQ(ev->pointCount(), 125);
-    EXPECT_EQ(makeVolumeEvaluator(dir + "/box.vdb")->frameCount(), 64 + 16 + 48);
+    {
+        const auto world = VolumeWorld::create(DensityVolume::read(dir + "/box.vdb"), {}, "box");
+        EXPECT_EQ(makeVolumeEvaluator(dir + "/box.vdb")->frameCount(),
+                  static_cast<Index>(VolumeRig{}.training(*world).size()) + 16 + 48);
+    }
     auto message = [&](const std::string& spec) {
         try {
             makeVolumeEvaluator(spec);
