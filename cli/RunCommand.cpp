@@ -360,6 +360,9 @@ int runRun(const std::vector<std::string>& args) {
     o.cancel = &interruptFlag();
 
     const Model model = readModel(o.modelPath);
+    if (model.cross)
+        throw InputError(o.modelPath + " is a cross model (train --targets): pmsc run takes plain models; use "
+                         "pmsc replay --model M --frames CONTROL.npy --out TARGET.npy for cross point multiplication");
     const std::unique_ptr<PointEvaluator> evaluator = makeEvaluator(o.evaluatorSpec);
     const RunReport r = runFrames(model, *evaluator, o);
 
