@@ -26,7 +26,7 @@ int runDemoCross(const std::vector<std::string>& args) {
                      "the learned bound's coverage and the speedup. Writes DIR2/report.json, frames.csv, cross.pmsc.");
     parser.option("--data", "DIR", "the ICT-FaceKit FaceXModel folder", data, true);
     parser.option("--out", "DIR2", "output folder (created if missing)", out, true);
-    parser.option("--basis", "M", "joint basis size (default 48; 24 with --quick)",
+    parser.option("--basis", "M", "joint basis size (default 48; 12 with --quick)",
                   [&](const std::string& v) { basis = static_cast<long>(parseIndex("--basis", v, 1, 512)); });
     parser.option("--coverage", "C", "coverage of the error bound (default 0.9)", [&](const std::string& v) {
         coverage = parseDouble("--coverage", v, 0.0, 1.0);

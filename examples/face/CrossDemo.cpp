@@ -25,9 +25,9 @@ CrossDemoOptions CrossDemoOptions::quickOptions() {
     o.quick = true;
     o.sequences = 6;
     o.novelSequences = 1;
-    o.minFrames = 20;
-    o.maxFrames = 28;
-    o.basis = 24;
+    o.minFrames = 16;
+    o.maxFrames = 22;
+    o.basis = 12;  // ~35 training pairs: a larger joint basis is not determined by the control keys
     o.maxKeys = 120;
     o.timingFrames = 8;
     return o;

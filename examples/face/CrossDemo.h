@@ -36,7 +36,7 @@ struct CrossDemoOptions {
 
     std::function<bool(std::string_view, double, double)> progress;
 
-    /// `--quick`: 6 + 1 short sequences (2 train), M = 24, K = 120, 8 timed frames (a smoke test).
+    /// `--quick`: 6 + 1 short sequences (2 train), M = 12, K = 120, 8 timed frames (a smoke test).
     static CrossDemoOptions quickOptions();
 };
 
