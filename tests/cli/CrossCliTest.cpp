@@ -13,6 +13,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <cstdio>
 #include <random>
 
 namespace {
@@ -104,6 +105,33 @@ TEST_F(CrossCli, ReplayWritesTargetsThatFollowAnExactMapToRounding) {
     const RunResult i = runPmsc(work, {"inspect", dir_->file("cross.pmsc")});
     ASSERT_EQ(i.exitCode, 0) << i.err;
     EXPECT_NE(i.out.find("cross"), std::string::npos) << i.out;
+}
+
+TEST_F(CrossCli, RunTakesAnEvaluatorOfTheControlAndWritesTargetFrames) {
+    TempDir work;
+    const RunResult r = runPmsc(work, {"run", "--model", dir_->file("cross.pmsc"), "--evaluator",
+                                       "replay:" + dir_->file("test-control.npy"), "--frames", "0-24:3", "--out",
+                                       work.file("frames"), "--quiet"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const pmsc::FrameFile truth = pmsc::readFrames(dir_->file("test-target.npy"));
+    const double scale = truth.frames.matrix().cwiseAbs().maxCoeff();
+    for (pmsc::Index f = 0; f <= 24; f += 3) {
+        char name[64];
+        std::snprintf(name, sizeof name, "frame.%06ld.npy", static_cast<long>(f));
+        const pmsc::FrameFile out = pmsc::readFrames(work.file("frames/" + std::string(name)));
+        ASSERT_EQ(out.frames.points, 30);
+        EXPECT_LT((out.frames.matrix().col(0) - truth.frames.matrix().col(f)).cwiseAbs().maxCoeff(), 1e-9 * scale);
+    }
+    std::ifstream in(work.file("frames/pmsc-run.0-24_by3.json"));
+    ASSERT_TRUE(in.good());
+    const nlohmann::json stats = nlohmann::json::parse(in);
+    EXPECT_NE(stats.at("fail_through").get<std::string>().find("impossible"), std::string::npos);
+    EXPECT_EQ(stats.at("per_frame").size(), 9u);
+    // The plain face of another size is not a control of this model.
+    expectFailure(runPmsc(work, {"run", "--model", dir_->file("cross.pmsc"), "--evaluator",
+                                 "replay:" + dir_->file("test-target.npy"), "--frames", "0-3", "--out",
+                                 work.file("bad"), "--quiet"}),
+                  2, {"control of 50 points"});
 }
 
 TEST_F(CrossCli, BadInputsFailWithOneLineAndNoFile) {
