@@ -20,6 +20,7 @@ int runRun(const std::vector<std::string>& args);           // cli/RunCommand.cp
 int runExportFrames(const std::vector<std::string>& args);  // cli/ExportFramesCommand.cpp
 int runDemoCornell(const std::vector<std::string>& args);   // cli/CornellDemoCommand.cpp (examples/cornell)
 int runDemoLearn(const std::vector<std::string>& args);     // cli/LearnDemoCommand.cpp (examples/face)
+int runDemoCross(const std::vector<std::string>& args);     // cli/CrossDemoCommand.cpp (issue 10)
 int runDemoFace(const std::vector<std::string>& args);      // cli/FaceDemoCommand.cpp (examples/face)
 int runDemoVolume(const std::vector<std::string>& args);    // cli/VolumeDemoCommand.cpp (examples/volume)
 

@@ -2,6 +2,7 @@
 
 #include "examples/cornell/CornellEvaluator.h"
 #include "examples/face/FaceEvaluator.h"
+#include "examples/face/CrossDemo.h"
 #include "examples/volume/VolumeEvaluator.h"
 
 namespace pmsc::cli {
@@ -14,6 +15,7 @@ const evaluators::EvaluatorRegistry& evaluatorRegistry() {
         // clang-format off
         r.add({"cornell", "[points=N,samples=S,lights=all|training|scattered|path]", "section 8: indirect light in the Cornell box at the voxels of an OpenVDB lighting cache (writes .vdb)", [](const std::string& a) -> std::unique_ptr<PointEvaluator> { return cornell::makeCornellEvaluator(a); }});
         r.add({"face", "DIR", "section 7: the ICT face rig (DIR = ICT-FaceKit FaceXModel folder) posing its 44-sequence animation (writes .obj)", [](const std::string& a) -> std::unique_ptr<PointEvaluator> { return face::makeFaceEvaluator(requireArgs("face", "DIR", a)); }});
+        r.add({"face-control", "DIR", "issue 10: the ICT face's control rig (blendshapes, jaw, eyelids, eyes; no relax, flesh, contact) over face:DIR's animation, for cross models", [](const std::string& a) -> std::unique_ptr<PointEvaluator> { return face::makeFaceControlEvaluator(requireArgs("face-control", "DIR", a)); }});
         r.add({"volume", "FILE.vdb[:grid=NAME][:samples=S][:lights=all|training|between|path]", "issue 11: light scattered at the active voxels of a density grid (writes .vdb)", [](const std::string& a) -> std::unique_ptr<PointEvaluator> { return volume::makeVolumeEvaluator(requireArgs("volume", "FILE.vdb", a)); }});
         // clang-format on
         return r;

@@ -35,7 +35,9 @@ int runInspect(const std::vector<std::string>& args) {
 
     const Model model = readModel(modelPath);
     // The version the file holds (a model without sections is written as version 1).
-    const unsigned version = model.regions ? kModelFormatVersion : kModelFormatVersionCore;
+    const unsigned version = model.regions || model.learning || model.calibrationRecord || model.cross
+                                 ? kModelFormatVersion
+                                 : kModelFormatVersionCore;
     const auto bytes = std::filesystem::file_size(modelPath);
     const char* selector = model.selector == Selector::QDeim ? "qdeim" : "teleconnection";
     if (json) {
@@ -80,6 +82,13 @@ int runInspect(const std::vector<std::string>& args) {
             j["calibration"] = {{"rule", toString(model.calibrationRecord->rule)},
                                 {"coverage", model.calibrationRecord->coverage},
                                 {"held_out_frames", model.calibrationRecord->keyRms.size()}};
+        if (model.cross)
+            j["cross"] = {{"control_points", model.cross->controlPoints},
+                          {"target_points", model.points - model.cross->controlPoints},
+                          {"coverage", model.cross->coverage},
+                          {"quantile", model.cross->quantile},
+                          {"scale", model.cross->scale},
+                          {"held_out_pairs", model.cross->keyRms.size()}};
         std::cout << j.dump(2) << "\n";
         return kExitOk;
     }
@@ -139,6 +148,12 @@ int runInspect(const std::vector<std::string>& args) {
                           ? " at coverage " + fmt("%.3g", model.calibrationRecord->coverage)
                           : std::string())
                   << ", " << model.calibrationRecord->keyRms.size() << " held-out frames stored\n";
+    if (model.cross)
+        std::cout << "  cross         points 0.." << model.cross->controlPoints - 1 << " are the control, "
+                  << model.points - model.cross->controlPoints << " target points follow; no fail-through; bound "
+                  << fmt("%.6g", model.cross->quantile) << " x (key RMS + " << fmt("%.6g", model.cross->scale)
+                  << ") at coverage " << fmt("%.3g", model.cross->coverage) << " ("
+                  << model.cross->keyRms.size() << " held-out pairs)\n";
     return kExitOk;
 }
 

@@ -104,6 +104,9 @@ int runLearn(const std::vector<std::string>& args) {
     AtomicFile(outPath).abandon();  // an unwritable destination fails now, not after the work
     const auto start = std::chrono::steady_clock::now();
     const Model model = readModel(modelPath);
+    if (model.cross)
+        throw InputError(modelPath + " is a cross model (train --targets): pmsc learn updates plain models; retrain "
+                         "on all (control, target) pairs");
     const FrameSet frames = readAll(paths);
     if (frames.points != model.points || frames.channels != model.channels)
         throw InputError(paths.front() + ": frames have " + std::to_string(frames.points) + " points x " +

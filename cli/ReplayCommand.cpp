@@ -7,6 +7,7 @@
 #include "cli/Replay.h"
 #include "evaluators/ReplayEvaluator.h"
 #include "cli/ReplaySummary.h"
+#include "cli/CrossReplay.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
@@ -54,11 +55,60 @@ int runReplay(const std::vector<std::string>& args) {
                   "append the frames that blended or missed (their recorded values) to FILE.npy, frame numbers "
                   "to FILE.npy.frames: training for `pmsc learn`",
                   keepPath);
+    std::string targetsPath;
+    parser.option("--targets", "TRUE.npy",
+                  "cross models (train --targets): the true target frames, to measure each frame's error and the "
+                  "bound's coverage",
+                  targetsPath);
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
     options.localFailThrough = !wholeFrame;
 
     const Model model = readModel(modelPath);
+    if (model.cross) {
+        // Cross point multiplication (issue 10): control frames in, target frames out, no fail-through.
+        if (options.eps) parser.fail("--eps: " + modelPath + " is a cross model, which has no fail-through to threshold");
+        if (!keepPath.empty()) parser.fail("--keep-misses: " + modelPath + " is a cross model, which has no misses");
+        if (wholeFrame) parser.fail("--whole-frame-fail-through: " + modelPath + " is a cross model, which cannot fail through");
+        const Index nc = model.cross->controlPoints, nt = model.points - nc;
+        const evaluators::ReplayEvaluator control(framesPath);
+        if (control.pointCount() != nc || control.channelCount() != model.channels)
+            throw InputError(framesPath + ": control frames have " + std::to_string(control.pointCount()) + " points x " +
+                             std::to_string(control.channelCount()) + " channels, but the cross model " + modelPath +
+                             " takes " + std::to_string(nc) + " control points x " + std::to_string(model.channels) +
+                             " channels");
+        std::optional<evaluators::ReplayEvaluator> truth;
+        if (!targetsPath.empty()) {
+            truth.emplace(targetsPath);
+            if (truth->pointCount() != nt || truth->channelCount() != model.channels ||
+                truth->frameCount() != control.frameCount())
+                throw InputError(targetsPath + ": targets have " + std::to_string(truth->frameCount()) + " frames x " +
+                                 std::to_string(truth->pointCount()) + " points x " +
+                                 std::to_string(truth->channelCount()) + " channels, expected " +
+                                 std::to_string(control.frameCount()) + " x " + std::to_string(nt) + " x " +
+                                 std::to_string(model.channels) + " (the control frames' count, the model's target)");
+        }
+        AtomicFile report(reportPath);
+        std::optional<NpyFrameWriter> out;
+        if (!outPath.empty()) out.emplace(outPath, control.frameCount(), nt, model.channels, control.dtype());
+        Progress progress("replay", !quiet);
+        CrossReplayOptions co;
+        co.threads = options.threads;
+        co.cancel = &interruptFlag();
+        co.progress = [&](Index done, Index total) {
+            progress.update("frames", static_cast<double>(done), static_cast<double>(total));
+        };
+        const CrossReplayResult result = crossReplay(model, control, truth ? &*truth : nullptr, co, out ? &*out : nullptr);
+        progress.finish();
+        const std::string text = crossReplayReport(model, result).dump(2) + "\n";
+        report.write(text.data(), text.size());
+        if (out) out->commit();
+        report.commit();
+        printCrossReplaySummary(std::cout, model, result);
+        std::cout << "  report      " << reportPath << (outPath.empty() ? "" : "\n  output      " + outPath) << "\n";
+        return kExitOk;
+    }
+    if (!targetsPath.empty()) parser.fail("--targets: " + modelPath + " is not a cross model (pmsc train --targets)");
     const evaluators::ReplayEvaluator recorded(framesPath);
     if (recorded.pointCount() != model.points || recorded.channelCount() != model.channels)
         throw InputError(framesPath + ": frames have " + std::to_string(recorded.pointCount()) +

@@ -11,6 +11,7 @@
 #include "engine/Engine.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
+#include "cli/CrossRun.h"
 #include "pmsc/KeptFrames.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/Training.h"  // pmsc::Cancelled
@@ -361,6 +362,14 @@ int runRun(const std::vector<std::string>& args) {
 
     const Model model = readModel(o.modelPath);
     const std::unique_ptr<PointEvaluator> evaluator = makeEvaluator(o.evaluatorSpec);
+    if (model.cross) {
+        // Cross point multiplication (issue 10): the evaluator is the control's; targets are written.
+        const RunReport r = runCrossFrames(model, *evaluator, o);
+        std::cout << "pmsc run (cross model, no fail-through): frames " << o.frames.text() << " -> " << o.outDir << ": "
+                  << r.evaluated << " target frames written, " << r.skipped << " skipped as done\n  stats "
+                  << r.statsPath << "\n";
+        return kExitOk;
+    }
     const RunReport r = runFrames(model, *evaluator, o);
 
     std::cout << "pmsc run: frames " << o.frames.text() << " -> " << o.outDir << ": " << r.evaluated

@@ -6,6 +6,7 @@
 #include "cli/Interrupt.h"
 #include "cli/Progress.h"
 #include "cli/TrainSummary.h"
+#include "cli/CrossTrain.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
@@ -189,8 +190,26 @@ int runTrain(const std::vector<std::string>& args) {
                   "feather width of region borders, fraction of the bounding-box diagonal (default " +
                       std::to_string(options.regions.featherFraction) + ")",
                   [&](const std::string& v) { options.regions.featherFraction = parseDouble("--feather", v, 0.0, 0.5); });
+    std::string targetsPath;
+    parser.option("--targets", "TARGET.npy",
+                  "cross point multiplication (paper section 7): frame f of --frames (the control) and frame f of\n"
+                  "TARGET.npy are a pair; learns their joint subspace with keys among the control's points, and an\n"
+                  "error bound on the target from held-out pairs (--coverage, default 0.9; --slices folds)",
+                  targetsPath);
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
+    if (!targetsPath.empty()) {
+        if (framePaths.size() != 1) parser.fail("--targets takes exactly one --frames file (the control)");
+        for (const char* o : {"--regions", "--feather", "--learn-rank", "--calibration", "--memory-limit",
+                              "--out-of-core", "--block-points"})
+            if (parser.given(o))
+                parser.fail(std::string(o) + " does not apply to a cross model (--targets): it has no fail-through, "
+                            "and is trained in memory on one process");
+        if (selector == "qdeim") options.selector = Selector::QDeim;
+        else if (selector != "teleconnection") parser.fail("--selector: '" + selector + "' is not teleconnection or qdeim");
+        return runTrainCross(framePaths.front(), targetsPath, outPath, options, options.calibrationCoverage,
+                             options.calibrationSlices, quiet);
+    }
 
     const int sizeRules = parser.given("--basis") + parser.given("--energy") + parser.given("--basis-error");
     if (sizeRules > 1) parser.fail("give at most one of --basis, --energy, --basis-error");

@@ -40,6 +40,7 @@ const Command kCommands[] = {
     {"demo cornell", "section 8: Cornell box indirect light, OpenVDB lighting cache, moving cameras", runDemoCornell},
     {"demo volume", "issue 11: light scattered in smoke, a sparse volumetric lighting cache in OpenVDB", runDemoVolume},
     {"demo face", "section 7: a nonlinear face rig on the ICT face, 170 key points, novel-control detection", runDemoFace},
+    {"demo cross", "section 7: cross point multiplication on the ICT face, cheap control face -> full rig", runDemoCross},
     {"demo learn", "section 5: the nightly loop on the ICT face, misses kept and learned, day 1 vs day 2", runDemoLearn},
     {"run", "render-farm task: a frame range through the soft cache, one resumable file per frame", runRun},
     {"export-frames", "write an evaluator's frames (e.g. an animated asset's poses) as training .npy", runExportFrames},

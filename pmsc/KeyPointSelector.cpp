@@ -178,7 +178,7 @@ KeySelection selectKeysTeleconnection(RowBlocks& q, Communicator& comm, const Ei
     if (gram.rows() != q.frames() || gram.cols() != q.frames()) {
         throw std::invalid_argument("selectKeysTeleconnection: Gram matrix is not F x F");
     }
-    KeySet keys(n);
+    KeySet keys(n, options.candidates);
     seedKeys(keys, options.fiducials, options.gridPoints);
     if (keys.size() > options.maxKeys) {
         throw std::invalid_argument(std::to_string(keys.size()) +

@@ -19,6 +19,13 @@ namespace pmsc {
 class KeySet {
 public:
     explicit KeySet(Index points) : isKey_(static_cast<size_t>(points), 0) {}
+    /// Only points [0, candidates) may become keys (cross point multiplication, issue 10: the keys
+    /// of a joint (control, target) model are control points); 0 or >= points: all of them.
+    KeySet(Index points, Index candidates) : KeySet(points) {
+        if (candidates > 0)
+            for (Index p = candidates; p < points; ++p) isKey_[static_cast<size_t>(p)] = 2;
+    }
+    /// Whether p is a key or may not become one (so it is never a candidate).
     bool contains(Index p) const { return isKey_[static_cast<size_t>(p)] != 0; }
     /// Adds p unless it is already a key; returns whether it was added.
     bool add(Index p) {
@@ -92,6 +99,8 @@ struct TeleconnectionOptions {
     Index block = 16;      ///< basis vectors per Varimax block
     std::vector<Index> fiducials;
     std::vector<Index> gridPoints;
+    /// Only points [0, candidates) may be keys (cross point multiplication); 0 = every point.
+    Index candidates = 0;
     VarimaxOptions varimax;
     SvdOptions svd;        ///< for the residual's leading vectors in rounds 2, 3, ...
     /// Called after each round with (round, keys so far, largest point residual); may throw to

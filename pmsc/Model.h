@@ -4,6 +4,7 @@
 #include "pmsc/FrameSet.h"
 #include "pmsc/Regions.h"
 #include "pmsc/LearningState.h"
+#include "pmsc/CrossState.h"
 
 #include <Eigen/Core>
 
@@ -51,6 +52,9 @@ struct Model {
     std::optional<LearningState> learning;
     /// The held-out scores eps were calibrated from, and the rule (section CALIBRAT; same).
     std::optional<CalibrationRecord> calibrationRecord;
+    /// Cross point multiplication (issue 10, paper section 7): the points are (control, target)
+    /// and the keys the control's; no fail-through, an error bound instead (section CROSSPM).
+    std::optional<CrossState> cross;
 
     Index basisSize() const { return basis.cols(); }
     Index keyCount() const { return static_cast<Index>(keyPoints.size()); }

@@ -1,5 +1,6 @@
 #include "pmsc/ModelSections.h"
 
+#include "pmsc/Cross.h"
 #include "pmsc/LearningSections.h"
 #include "pmsc/Regions.h"
 
@@ -13,6 +14,7 @@ std::span<const ModelSectionCodec> modelSectionCodecs() {
         regionsSectionCodec(),
         learningSectionCodec(),     // LEARNSVD (issue 10)
         calibrationSectionCodec(),  // CALIBRAT (issue 10)
+        crossSectionCodec(),        // CROSSPM (issue 10: cross point multiplication)
     };
     return codecs;
 }

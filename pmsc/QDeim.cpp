@@ -10,7 +10,7 @@
 namespace pmsc {
 
 QDeimSelection selectKeysQDeim(const Eigen::MatrixXd& basis, Index channels, Index maxKeys,
-                               const std::vector<Index>& seeds) {
+                               const std::vector<Index>& seeds, Index candidates) {
     const Index rows = basis.rows();
     const Index n = rows / channels;
     const Index m = basis.cols();
@@ -18,7 +18,7 @@ QDeimSelection selectKeysQDeim(const Eigen::MatrixXd& basis, Index channels, Ind
         throw std::invalid_argument("key budget " + std::to_string(maxKeys) + " must be in [1, " +
                                     std::to_string(n) + "]");
     }
-    KeySet keys(n);
+    KeySet keys(n, candidates);
     seedKeys(keys, seeds, {});
     if (keys.size() > maxKeys) {
         throw std::invalid_argument(std::to_string(keys.size()) + " seed points exceed the key budget " +

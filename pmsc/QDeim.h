@@ -37,7 +37,8 @@ struct QDeimSelection {
 /// @param basis (N*C) x M with orthonormal columns
 /// @param seeds validated key points to force first (see seedKeys)
 /// @param maxKeys the budget K (>= seeds.size())
+/// @param candidates only points [0, candidates) may be keys (cross point multiplication); 0 = all
 QDeimSelection selectKeysQDeim(const Eigen::MatrixXd& basis, Index channels, Index maxKeys,
-                               const std::vector<Index>& seeds);
+                               const std::vector<Index>& seeds, Index candidates = 0);
 
 }  // namespace pmsc

@@ -71,6 +71,21 @@ void validateOptions(const TrainingOptions& o, Index points, Index frames) {
     if (o.powerIterations < 0) {
         badOption("power iterations must be >= 0, got " + std::to_string(o.powerIterations));
     }
+    if (o.keyCandidates < 0 || o.keyCandidates > points) {
+        badOption("key candidates must be in [0, " + std::to_string(points) + "] (0 = every point), got " +
+                  std::to_string(o.keyCandidates));
+    }
+    if (o.keyCandidates > 0 && o.maxKeys > o.keyCandidates) {
+        badOption("max keys " + std::to_string(o.maxKeys) + " exceed the " + std::to_string(o.keyCandidates) +
+                  " points keys may come from");
+    }
+    if (o.keyCandidates > 0) {
+        for (const auto* list : {&o.fiducials, &o.gridPoints})
+            for (Index p : *list)
+                if (p >= o.keyCandidates)
+                    badOption("designer key point " + std::to_string(p) + " is not among the " +
+                              std::to_string(o.keyCandidates) + " points keys may come from");
+    }
     const size_t seeds = o.fiducials.size() + o.gridPoints.size();
     if (static_cast<Index>(seeds) > o.maxKeys) {
         badOption(std::to_string(seeds) + " fiducial and grid points exceed the key budget " +
@@ -240,6 +255,7 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
         t.block = options.block;
         t.fiducials = options.fiducials;
         t.gridPoints = options.gridPoints;
+        t.candidates = options.keyCandidates;
         t.varimax.tolerance = options.varimaxTolerance;
         t.varimax.maxIterations = options.varimaxMaxIterations;
         t.svd.seed = options.seed;
@@ -263,7 +279,7 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
         if (comm.rank() == 0) {
             KeySet check(n);
             seedKeys(check, options.fiducials, options.gridPoints);
-            QDeimSelection sel = selectKeysQDeim(full, channels, options.maxKeys, check.keys());
+            QDeimSelection sel = selectKeysQDeim(full, channels, options.maxKeys, check.keys(), options.keyCandidates);
             picked.assign(sel.keys.begin(), sel.keys.end());
             passes = static_cast<double>(sel.passes);
         }

@@ -37,6 +37,9 @@ struct TrainingOptions {
     Index block = 16;           ///< basis vectors per Varimax block (paper: 10 to 20)
     std::vector<Index> fiducials;   ///< designer points, seeded into the first batch
     std::vector<Index> gridPoints;  ///< sparse spatial grid of points (rendering), seeded too
+    /// Only points [0, keyCandidates) may be keys; 0 = every point. Cross point multiplication
+    /// (issue 10, pmsc/Cross.h) trains on (control, target) pairs with the control's points first.
+    Index keyCandidates = 0;
 
     // --- Varimax ---
     double varimaxTolerance = 1e-8;

@@ -360,6 +360,35 @@ void FaceRig::evaluateAll(const ControlVector& controls, double* out) const {
     run(*fullPlan_, prepare(controls), all, out);
 }
 
+void FaceRig::evaluateControl(const ControlVector& controls, std::span<const Index> points, double* out) const {
+    // prepare() without the flesh's pose, which the control does not use.
+    Pose pose;
+    pose.channelWeights.assign(channelNames_.size(), 0.0);
+    for (int c = 0; c < kShapeControlCount; ++c) pose.channelWeights[c] = controls[c];
+    for (int k = 0; k < 4; ++k)
+        pose.channelWeights[kShapeControlCount + k] = controls[JawDeformer::kControls[k]];
+    pose.channelWeights[kShapeControlCount + 4] = controls[EyeBlinkL];
+    pose.channelWeights[kShapeControlCount + 5] = controls[EyeBlinkR];
+    pose.aim = eyes_.aim(controls);
+    for (int k = 0; k < 8; ++k) pose.channelWeights[lookChannel_ + k] = pose.aim.lookWeights[k];
+    for (size_t k = 0; k < combinations().size(); ++k) {
+        const Combination& pair = combinations()[k];
+        pose.channelWeights[combinationChannel_ + k] = controls[pair.a] * controls[pair.b];
+    }
+    pose.jaw = jaw_.transform(controls);
+    pose.blink = {controls[EyeBlinkL], controls[EyeBlinkR]};
+    const Index n = pointCount();
+    for (size_t i = 0; i < points.size(); ++i) {
+        const Index p = points[i];
+        if (p < 0 || p >= n)
+            throw std::out_of_range("face rig: point " + std::to_string(p) + " outside [0, " + std::to_string(n) + ")");
+        const Eigen::Vector3d q = stageA(p, pose);
+        out[3 * i] = q[0];
+        out[3 * i + 1] = q[1];
+        out[3 * i + 2] = q[2];
+    }
+}
+
 FaceRig::ClosureSize FaceRig::closureSize(std::span<const Index> points) const {
     const std::shared_ptr<const Plan> plan = buildPlan(points);
     return {static_cast<Index>(plan->setA.size()), static_cast<Index>(plan->set2.size()), plan->contacts};

@@ -94,6 +94,10 @@ public:
     void evaluate(const ControlVector& controls, std::span<const Index> points, double* out) const;
     /// Poses all N points into out (3N doubles).
     void evaluateAll(const ControlVector& controls, double* out) const;
+    /// The control face of cross point multiplication (paper section 7, issue 10): the rig
+    /// without its expensive stages, i.e. stages 1-4 only (blendshapes, jaw, eyelids, eyes; no
+    /// relax, flesh or contact). Per point, no closure: any subset costs only its own points.
+    void evaluateControl(const ControlVector& controls, std::span<const Index> points, double* out) const;
 
     /// How many vertices pass through each stage when posing `points`: the dependency closure.
     struct ClosureSize {
