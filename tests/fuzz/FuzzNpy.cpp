@@ -7,6 +7,7 @@
 #include "pmsc/Errors.h"
 #include "pmsc/NpyIO.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <vector>
@@ -41,7 +42,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     try {
         const MappedFrames mapped(file.path());
         if (!finite) std::abort();
-        std::vector<double> frame(static_cast<std::size_t>(info.points * info.channels));
+        // Room for a whole frame and for two points (a one-point file has less than two points).
+        std::vector<double> frame(static_cast<std::size_t>(std::max<Index>(info.points, 2) * info.channels));
         mapped.readFrame(info.frames - 1, frame.data());
         const Index points[] = {0, info.points - 1};
         mapped.read(0, points, frame.data());

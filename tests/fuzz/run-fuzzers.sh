@@ -40,7 +40,6 @@ mkdir -p "$BUILD/seeds/skin"
 seed_skin 2 "$MODELS/Collada/box_nested_animation.dae" box_nested_animation.dae
 seed_skin 3 "$MODELS/glTF2/simple_skin/simple_skin.gltf" simple_skin.gltf
 seed_skin 1 "$MODELS/X/test.x" test.x
-seed_skin 6 "$MODELS/MD5/SimpleCube.md5mesh" SimpleCube.md5mesh
 if [ -f "$MODELS/BVH/01_01.bvh" ]; then  # the hierarchy and the first three frames of a mocap take
   { printf '\x00'; sed -n '1,185p' "$MODELS/BVH/01_01.bvh"; printf 'Frames: 3\nFrame Time: .0083333\n';
     sed -n '188,190p' "$MODELS/BVH/01_01.bvh"; } >"$BUILD/seeds/skin/01_01-3frames.bvh"
@@ -61,16 +60,36 @@ for t in "${TARGETS[@]}"; do
   seeds=tests/fuzz/corpus/$t
   [ "$t" = skin ] && seeds=$BUILD/seeds/skin
   log=$BUILD/fuzz-$t.log
-  # -timeout: an input slower than this is a hang; -rss_limit_mb: more memory is a failure.
-  if TMPDIR=${TMPDIR:-/tmp} "$BUILD/bin/fuzz_$t" "$corpus" "$seeds" -max_total_time="$SECONDS_PER" \
-      -timeout=10 -rss_limit_mb=2048 -max_len=65536 -print_final_stats=1 \
-      -artifact_prefix="$BUILD/artifacts/$t/" >"$log" 2>&1; then
-    result=clean
-  else
+  : >"$log"
+  # A report whose stack passes through Assimp::Importer::ReadFile happened inside Assimp's own
+  # importers (a Debian system library, not instrumented, not ours to fix): its input is kept in
+  # artifacts/skin/assimp/, counted, and the fuzzer starts again for the time that is left. Any
+  # other report (our code: SkinEvaluator's load and posing) fails the run.
+  result=clean assimp=0 start=$SECONDS
+  while :; do
+    left=$((SECONDS_PER - (SECONDS - start)))
+    ((left > 0)) || break
+    # -timeout: an input slower than this is a hang; -rss_limit_mb: more memory is a failure.
+    if TMPDIR=${TMPDIR:-/tmp} "$BUILD/bin/fuzz_$t" "$corpus" "$seeds" -max_total_time="$left" \
+        -timeout=10 -rss_limit_mb=2048 -max_len=65536 -print_final_stats=1 \
+        -artifact_prefix="$BUILD/artifacts/$t/" >"$log.run" 2>&1; then
+      cat "$log.run" >>"$log"
+      break
+    fi
+    cat "$log.run" >>"$log"
+    if [ "$t" = skin ] && grep -q 'Assimp::Importer::ReadFile' "$log.run"; then
+      assimp=$((assimp + 1))
+      mkdir -p "$BUILD/artifacts/$t/assimp"
+      mv "$BUILD/artifacts/$t"/{crash,timeout,leak,oom,slow-unit}-* "$BUILD/artifacts/$t/assimp/" 2>/dev/null || true
+      continue
+    fi
     result="FAILED (see $log and $BUILD/artifacts/$t/)"
     status=1
-  fi
-  runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
+    break
+  done
+  rm -f "$log.run"
+  ((assimp == 0)) || result="$result; $assimp inside Assimp's importers (artifacts/$t/assimp)"
+  runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | awk '{n += $1} END {print n}')
   last=$(grep -E '^#[0-9]+' "$log" | tail -1 | grep -oE 'cov: [0-9]+ ft: [0-9]+ corp: [0-9]+/[^ ]+' || true)
   printf 'fuzz %-6s %6ss  %10s runs  %-40s %s\n' "$t" "$SECONDS_PER" "${runs:-?}" "${last:-?}" "$result"
 done
