@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets in build-fuzz (clang, ASan+UBSan) and runs each for a bounded time.
 #
-#   tests/fuzz/run-fuzzers.sh [SECONDS_PER_TARGET] [TARGET...]     (default 30 s; all four targets)
+#   tests/fuzz/run-fuzzers.sh [SECONDS_PER_TARGET] [TARGET...]     (default 30 s; all five targets)
 #
-# Seeds: tests/fuzz/corpus/{npy,model,specs} (small .npy files, models from `pmsc train` on a small
-# set: version 1, version 2 with regions, version 2 with learning and calibration sections, and
-# command-line texts), plus a few animated assets from Debian's assimp-testmodels for `skin`,
+# Seeds: tests/fuzz/corpus/{npy,model,obj,specs} (small .npy files, models from `pmsc train` on a
+# small set: version 1, version 2 with regions, version 2 with learning and calibration sections,
+# small OBJ meshes, and command-line texts), plus a few animated assets from Debian's assimp-testmodels for `skin`,
 # copied at run time (each prefixed with the byte that picks its file extension, FuzzSkin.cpp).
 # What the fuzzers add to the corpus stays in build-fuzz/corpus (not committed). A crash leaves
 # build-fuzz/artifacts/<target>/crash-* and makes this script fail; the summary line per target
@@ -18,7 +18,7 @@ cd "$(dirname "$0")/../.."
 SECONDS_PER=${1:-30}
 shift || true
 TARGETS=("$@")
-((${#TARGETS[@]})) || TARGETS=(npy model specs skin)
+((${#TARGETS[@]})) || TARGETS=(npy model obj specs skin)
 BUILD=${PMSC_FUZZ_BUILD:-build-fuzz}
 JOBS=${PMSC_FUZZ_JOBS:-$(nproc)}
 MODELS=/usr/share/assimp/models
