@@ -26,7 +26,7 @@ MODELS=/usr/share/assimp/models
 CXX=$(command -v clang++ || command -v clang++-14) || { echo "run-fuzzers.sh: no clang++ (Debian: clang-14)" >&2; exit 1; }
 launcher=()
 command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
-cmake -S . -B "$BUILD" -G Ninja -DCMAKE_CXX_COMPILER="$CXX" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+cmake -S . -B "$BUILD" -G Ninja -DCMAKE_CXX_COMPILER="$CXX" -DCMAKE_BUILD_TYPE=None \
   -DPMSC_BUILD_FUZZ=ON -DPMSC_BUILD_TESTS=OFF -DPMSC_BUILD_BENCH=OFF -DPMSC_BUILD_EXAMPLES=OFF \
   "${launcher[@]}" >/dev/null
 cmake --build "$BUILD" -j "$JOBS" --target "${TARGETS[@]/#/fuzz_}"
