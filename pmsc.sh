@@ -5,6 +5,7 @@
 #   ./pmsc.sh test       same set-up, then the whole suite through ctest
 #   ./pmsc.sh sanitize   unit tests under AddressSanitizer+UBSan, engine tests under ThreadSanitizer
 #   ./pmsc.sh build      set-up and build only
+#   ./pmsc.sh fuzz [S]   libFuzzer targets (clang, ASan+UBSan) in build-fuzz, S seconds each (default 30)
 #
 # Environment: PMSC_JOBS (default: nproc), PMSC_BUILD_DIR (default: build).
 set -euo pipefail
@@ -25,6 +26,9 @@ PACKAGES=(
   libopenmpi-dev openmpi-bin  # issue 12: mpirun -n P pmsc train, srun --mpi=pmix
   python3 python3-dev python3-numpy pybind11-dev  # issue 13: the Python module (build/python) and its tests
 )
+
+# `./pmsc.sh fuzz` only: clang and its libFuzzer/sanitizer runtimes.
+FUZZ_PACKAGES=(clang-14 libclang-rt-14-dev)
 
 die() { echo "pmsc.sh: $*" >&2; exit 1; }
 
@@ -80,6 +84,9 @@ case "$cmd" in
     ensure_packages; run_sanitizers ;;
   build)
     ensure_packages; build_release ;;
+  fuzz)
+    ensure_packages "${FUZZ_PACKAGES[@]}"
+    PMSC_FUZZ_JOBS=$JOBS exec tests/fuzz/run-fuzzers.sh "${2:-30}" ;;
   *)
-    echo "usage: ./pmsc.sh demo|test|sanitize|build" >&2; exit 2 ;;
+    echo "usage: ./pmsc.sh demo|test|sanitize|build|fuzz [seconds]" >&2; exit 2 ;;
 esac

@@ -10,12 +10,15 @@
 #include "examples/face/FaceDemo.h"
 
 #include <cstdio>
+#include <optional>
 #include <string>
 
 namespace pmsc::cli {
 
 int runDemoFace(const std::vector<std::string>& args) {
-    std::string data, out, threads, tolerance, basis, regions;
+    std::string data, out;
+    std::optional<Index> threads, basis, regions;
+    std::optional<double> tolerance;
     bool quick = false, quiet = false;
     ArgParser parser(
         "demo face", "--data DIR --out DIR2 [--quick] [--threads T] [--tolerance PCT] [--basis M] [--quiet]",
@@ -30,11 +33,15 @@ int runDemoFace(const std::vector<std::string>& args) {
                   "the ICT-FaceKit FaceXModel folder (generic_neutral_mesh.obj + 57 expressions)", data,
                   true);
     parser.option("--out", "DIR2", "output folder (created if missing)", out, true);
-    parser.option("--threads", "T", "worker threads (default: every core)", threads);
+    // Numbers go through Args' converters (issue 13): "--threads 2.5" is an error, not 2 threads.
+    parser.option("--threads", "T", "worker threads (default: every core)",
+                  [&](const std::string& v) { threads = parseIndex("--threads", v, 0, 1024); });
     parser.option("--tolerance", "PCT", "largest error of a hit, % of the head diagonal (default 1)",
-                  tolerance);
-    parser.option("--basis", "M", "basis vectors (default 48)", basis);
-    parser.option("--regions", "R", "regions of local fail-through (default 16, quick 8; 0 = none)", regions);
+                  [&](const std::string& v) { tolerance = parseDouble("--tolerance", v, 0.001, 100); });
+    parser.option("--basis", "M", "basis vectors (default 48)",
+                  [&](const std::string& v) { basis = parseIndex("--basis", v, 1, 500); });
+    parser.option("--regions", "R", "regions of local fail-through (default 16, quick 8; 0 = none)",
+                  [&](const std::string& v) { regions = parseIndex("--regions", v, 0, 1000); });
     parser.flag("--quick", "9 + 2 short sequences: a smoke test of the whole pipeline (about 20 s)", quick);
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
@@ -42,24 +49,10 @@ int runDemoFace(const std::vector<std::string>& args) {
     face::FaceDemoOptions options = quick ? face::FaceDemoOptions::quickOptions() : face::FaceDemoOptions{};
     options.dataDir = data;
     options.outDir = out;
-    auto number = [&](const std::string& name, const std::string& text, double lo, double hi) {
-        std::size_t used = 0;
-        double v = 0;
-        try {
-            v = std::stod(text, &used);
-        } catch (const std::exception&) {
-            used = 0;
-        }
-        if (used != text.size() || text.empty()) parser.fail(name + ": '" + text + "' is not a number");
-        if (!(v >= lo && v <= hi))
-            parser.fail(name + ": " + text + " outside [" + std::to_string(lo) + ", " + std::to_string(hi) +
-                        "]");
-        return v;
-    };
-    if (!threads.empty()) options.threads = static_cast<int>(number("--threads", threads, 0, 1024));
-    if (!tolerance.empty()) options.tolerancePercent = number("--tolerance", tolerance, 0.001, 100);
-    if (!basis.empty()) options.basis = static_cast<long>(number("--basis", basis, 1, 500));
-    if (!regions.empty()) options.regions = static_cast<long>(number("--regions", regions, 0, 1000));
+    if (threads) options.threads = static_cast<int>(*threads);
+    if (tolerance) options.tolerancePercent = *tolerance;
+    if (basis) options.basis = static_cast<long>(*basis);
+    if (regions) options.regions = static_cast<long>(*regions);
 
     Progress progress("demo face", !quiet);
     options.progress = [&](std::string_view stage, double done, double total) {

@@ -17,24 +17,6 @@ ReplayScratch::ReplayScratch(const Model& model)
       pm(static_cast<std::size_t>(model.points * model.channels)),
       full(pm.size()) {}
 
-namespace {
-
-/// Largest Euclidean distance (over channels) between two frames' points.
-double maxPointError(const double* a, const double* b, Index points, Index channels) {
-    double worst = 0;
-    for (Index p = 0; p < points; ++p) {
-        double sum = 0;
-        for (Index c = 0; c < channels; ++c) {
-            const double d = a[p * channels + c] - b[p * channels + c];
-            sum += d * d;
-        }
-        worst = std::max(worst, sum);
-    }
-    return std::sqrt(worst);
-}
-
-}  // namespace
-
 ReplayFrame replayFrame(const PointMultiplier& multiplier, const SoftCachePolicy& policy,
                         const PointEvaluator& recorded, Index frame, ReplayScratch& s, double* out) {
     const Model& model = multiplier.model();
@@ -157,23 +139,6 @@ ReplayResult replay(const Model& model, const PointEvaluator& recorded, const Re
     result.localFailThrough = engine.localFailThrough();
     result.seconds = stats.wallSeconds;
     return result;
-}
-
-Percentiles percentiles(std::vector<double> values) {
-    Percentiles p;
-    if (values.empty()) return p;
-    std::sort(values.begin(), values.end());
-    const auto at = [&](double q) {
-        const double h = q * static_cast<double>(values.size() - 1);
-        const std::size_t lo = static_cast<std::size_t>(std::floor(h));
-        const std::size_t hi = std::min(lo + 1, values.size() - 1);
-        return values[lo] + (h - static_cast<double>(lo)) * (values[hi] - values[lo]);
-    };
-    p.p50 = at(0.5);
-    p.p99 = at(0.99);
-    p.p995 = at(0.995);
-    p.max = values.back();
-    return p;
 }
 
 nlohmann::ordered_json replayReport(const Model& model, const ReplayResult& result) {

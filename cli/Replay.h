@@ -2,6 +2,7 @@
 #pragma once
 
 #include "pmsc/KeptFrames.h"
+#include "pmsc/Metrics.h"
 #include "pmsc/Model.h"
 #include "pmsc/NpyIO.h"
 #include "pmsc/PointEvaluator.h"
@@ -85,16 +86,9 @@ ReplayFrame replayFrame(const PointMultiplier& multiplier, const SoftCachePolicy
 ReplayResult replay(const Model& model, const PointEvaluator& recorded, const ReplayOptions& options,
                     NpyFrameWriter* out = nullptr);
 
-/// p50, p99, p99.5 and max of a sample.
-struct Percentiles {
-    double p50 = 0, p99 = 0, p995 = 0, max = 0;
-};
-
-/// Percentiles with linear interpolation between closest ranks (NumPy's default,
-/// "linear"): the q-quantile of n sorted values is v[h] + (h - floor h)(v[h+1] - v[h])
-/// at h = q (n - 1). So p50 of an even count is the mean of the middle two, and
-/// max is the largest value. An empty sample gives zeros.
-Percentiles percentiles(std::vector<double> values);
+/// p50, p99, p99.5 (nearest rank) and max of a sample: the project's one definition (pmsc/Metrics.h).
+using pmsc::Percentiles;
+using pmsc::percentiles;
 
 /// The REPORT.json of `pmsc replay`: {"summary": {...}, "frames": [...]} with exactly
 /// the fields issue 2 lists (see README, "Reading a replay report").

@@ -113,51 +113,65 @@ std::string defaultStatsPath(const std::string& outDir, const FrameSpan& frames)
     return (fs::path(outDir) / (name + ".json")).string();
 }
 
-RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const RunOptions& options) {
-    const auto wallStart = Clock::now();
-    const double startedUnix = unixSeconds();
-    const FrameSpan& span = options.frames;
+namespace {
 
-    // --- every check that can fail on bad input, before any work or any file -----------------------
+// runFrames() in named steps: check, scan what is done, run the engine, account, write the stats.
+
+/// Every check that can fail on bad input, before any work or any file.
+void checkEvaluatorFitsModel(const Model& model, const PointEvaluator& evaluator, const RunOptions& options) {
     if (evaluator.pointCount() != model.points || evaluator.channelCount() != model.channels)
         throw InputError("evaluator '" + options.evaluatorSpec + "' has " +
                          std::to_string(evaluator.pointCount()) + " points x " +
                          std::to_string(evaluator.channelCount()) + " channels, but the model " +
                          options.modelPath + " was trained on " + std::to_string(model.points) +
                          " points x " + std::to_string(model.channels) + " channels");
-    checkFramesInside(span, evaluator, options.evaluatorSpec);
-    FrameOutput output(options.outDir, options.format, offeredWriters(evaluator), model.points,
-                       model.channels, options.dtype);
-    ensureWritableFolder(options.outDir);
-    std::optional<KeptFrames> keep;
-    if (!options.keepMisses.empty())
-        keep.emplace(options.keepMisses, model.points, model.channels, options.dtype,
-                     "model=" + options.modelPath + " evaluator=" + options.evaluatorSpec);
+    checkFramesInside(options.frames, evaluator, options.evaluatorSpec);
+}
 
-    RunReport report;
-    report.frames = span.count();
-    report.statsPath = options.statsPath.empty() ? defaultStatsPath(options.outDir, span) : options.statsPath;
-
-    // --- resume: which frames already have a valid output ------------------------------------------------
-    const auto scanStart = Clock::now();
-    std::vector<FrameRecord> records(static_cast<std::size_t>(span.count()));
+/// Resume: which frames of the span already have a valid output (skipped), which are to do.
+struct ResumeScan {
+    std::vector<FrameRecord> records;  // one per frame of the span, in order
     std::vector<Index> toDo;
+    double seconds = 0;
+};
+
+ResumeScan scanOutputs(const FrameOutput& output, const FrameSpan& span, bool force, RunReport& report) {
+    const auto scanStart = Clock::now();
+    ResumeScan scan;
+    scan.records.resize(static_cast<std::size_t>(span.count()));
     for (Index i = 0; i < span.count(); ++i) {
         const Index f = span.frame(i);
-        records[static_cast<std::size_t>(i)].frame = f;
+        FrameRecord& record = scan.records[static_cast<std::size_t>(i)];
+        record.frame = f;
         const bool exists = fs::exists(output.path(f));
-        if (exists && !options.force && output.isValid(f)) {
-            records[static_cast<std::size_t>(i)].state = "skipped";
+        if (exists && !force && output.isValid(f)) {
+            record.state = "skipped";
             ++report.skipped;
             continue;
         }
-        if (exists && !options.force) ++report.replaced;
-        toDo.push_back(f);
+        if (exists && !force) ++report.replaced;
+        scan.toDo.push_back(f);
     }
-    report.staleTemporaries = output.removeStaleTemporaries(toDo);
-    const double scanSeconds = since(scanStart);
+    report.staleTemporaries = output.removeStaleTemporaries(scan.toDo);
+    scan.seconds = since(scanStart);
+    return scan;
+}
 
-    // --- the engine, once per contiguous run of frames still to do -------------------------------------
+/// How the engine's runs ended: their stats, and the error that stopped them, if any.
+struct EngineOutcome {
+    nlohmann::json runs = nlohmann::json::array();
+    std::string status = "ok", error;
+    int exitCode = kExitOk;
+    std::exception_ptr failure;
+    double seconds = 0;
+};
+
+/// The engine, once per contiguous run of the frames to do; adds its counters to `report`. An
+/// error (interrupt, evaluator failure, a write that failed) ends the runs and is returned, not
+/// thrown, so the caller can still commit kept frames and write the stats file.
+EngineOutcome runEngineGroups(const Model& model, const PointEvaluator& evaluator, const RunOptions& options,
+                              const std::vector<Index>& toDo, FileSink& sink, RunReport& report,
+                              Clock::time_point wallStart) {
     engine::EngineOptions engineOptions;
     engineOptions.threads = options.threads;
     engineOptions.cancel = options.cancel;
@@ -182,26 +196,23 @@ RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const R
         progress.update(stage, static_cast<double>(done), static_cast<double>(total));
     };
 
-    FileSink sink(output, records, span, evaluator, keep ? &*keep : nullptr);
-    nlohmann::json engineRuns = nlohmann::json::array();
-    std::string status = "ok", error;
-    int exitCode = kExitOk;
-    std::exception_ptr failure;
+    EngineOutcome outcome;
     const auto engineStart = Clock::now();
+    const Index step = options.frames.step;
     try {
         engine::Engine engine(model, evaluator, engineOptions);
         for (std::size_t i = 0; i < toDo.size();) {
             std::size_t j = i + 1;
-            while (j < toDo.size() && toDo[j] == toDo[j - 1] + span.step) ++j;
-            engine::FrameRange range{toDo[i], static_cast<Index>(j - i), span.step};
+            while (j < toDo.size() && toDo[j] == toDo[j - 1] + step) ++j;
+            engine::FrameRange range{toDo[i], static_cast<Index>(j - i), step};
             try {
                 engine.run(range, sink);
             } catch (...) {
-                engineRuns.push_back(nlohmann::json::parse(engine.lastStats().toJson(-1)));
+                outcome.runs.push_back(nlohmann::json::parse(engine.lastStats().toJson(-1)));
                 throw;
             }
             const engine::RunStats& s = engine.lastStats();
-            engineRuns.push_back(nlohmann::json::parse(s.toJson(-1)));
+            outcome.runs.push_back(nlohmann::json::parse(s.toJson(-1)));
             report.hits += s.hits;
             report.blends += s.blends;
             report.misses += s.misses;
@@ -210,37 +221,34 @@ RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const R
         }
     } catch (...) {
         const ExitReason reason = exitReason(std::current_exception());
-        status = reason.status, error = reason.what, exitCode = reason.code;
-        failure = std::current_exception();
+        outcome.status = reason.status, outcome.error = reason.what, outcome.exitCode = reason.code;
+        outcome.failure = std::current_exception();
     }
     progress.finish();
-    const double engineSeconds = since(engineStart);
-    // The frames kept before a failure are real frames: keep them too (learning needs no order).
-    if (keep) {
-        try {
-            keep->commit();
-            report.kept = keep->count();
-        } catch (const IoError&) {
-            if (!failure) throw;
-        }
-    }
-    report.evaluated = sink.written;
-    if (failure) {  // the counters of a failed group are in its record states
-        report.hits = report.blends = report.misses = 0;
-        for (const auto& r : records) {
-            report.hits += r.state == "hit";
-            report.blends += r.state == "blend";
-            report.misses += r.state == "miss";
-        }
-    }
-    report.seconds = since(wallStart);
+    outcome.seconds = since(engineStart);
+    return outcome;
+}
 
-    // --- the stats file: what a wrangler reads after the farm ran -----------------------------------------
+/// After a failure the counters of the failed group are only in the records' states.
+void recountFromRecords(const std::vector<FrameRecord>& records, RunReport& report) {
+    report.hits = report.blends = report.misses = 0;
+    for (const auto& r : records) {
+        report.hits += r.state == "hit";
+        report.blends += r.state == "blend";
+        report.misses += r.state == "miss";
+    }
+}
+
+/// The stats file: what a wrangler reads after the farm ran.
+nlohmann::json statsJson(const Model& model, const RunOptions& options, const FrameOutput& output,
+                         const RunReport& report, const ResumeScan& scan, EngineOutcome& outcome,
+                         const FileSink& sink, double startedUnix) {
+    const FrameSpan& span = options.frames;
     nlohmann::json j;
     j["pmsc_run_stats"] = 1;
-    j["status"] = status;
-    j["exit_code"] = exitCode;
-    if (!error.empty()) j["error"] = error;
+    j["status"] = outcome.status;
+    j["exit_code"] = outcome.exitCode;
+    if (!outcome.error.empty()) j["error"] = outcome.error;
     j["command"] = options.commandLine;
     j["host"] = hostName();
     j["pid"] = static_cast<long long>(::getpid());
@@ -271,13 +279,14 @@ RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const R
     j["hit_rate"] =
         report.evaluated > 0 ? static_cast<double>(report.hits) / static_cast<double>(report.evaluated) : 0.0;
     j["seconds"] = {{"wall", report.seconds},
-                    {"scan", scanSeconds},
-                    {"engine", engineSeconds},
+                    {"scan", scan.seconds},
+                    {"engine", outcome.seconds},
                     {"write", sink.writeSeconds}};
-    j["frames_per_second"] = engineSeconds > 0 ? static_cast<double>(report.evaluated) / engineSeconds : 0.0;
-    j["engine_runs"] = std::move(engineRuns);
+    j["frames_per_second"] =
+        outcome.seconds > 0 ? static_cast<double>(report.evaluated) / outcome.seconds : 0.0;
+    j["engine_runs"] = std::move(outcome.runs);
     nlohmann::json perFrame = nlohmann::json::array();
-    for (const auto& r : records) {
+    for (const auto& r : scan.records) {
         nlohmann::json f = {{"frame", r.frame}, {"state", r.state}};
         if (r.state == "hit" || r.state == "blend" || r.state == "miss") {
             f["weight"] = r.weight;
@@ -287,8 +296,49 @@ RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const R
         perFrame.push_back(std::move(f));
     }
     j["per_frame"] = std::move(perFrame);
+    return j;
+}
+
+}  // namespace
+
+RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const RunOptions& options) {
+    const auto wallStart = Clock::now();
+    const double startedUnix = unixSeconds();
+    const FrameSpan& span = options.frames;
+
+    checkEvaluatorFitsModel(model, evaluator, options);
+    FrameOutput output(options.outDir, options.format, offeredWriters(evaluator), model.points,
+                       model.channels, options.dtype);
+    ensureWritableFolder(options.outDir);
+    std::optional<KeptFrames> keep;
+    if (!options.keepMisses.empty())
+        keep.emplace(options.keepMisses, model.points, model.channels, options.dtype,
+                     "model=" + options.modelPath + " evaluator=" + options.evaluatorSpec);
+
+    RunReport report;
+    report.frames = span.count();
+    report.statsPath = options.statsPath.empty() ? defaultStatsPath(options.outDir, span) : options.statsPath;
+    ResumeScan scan = scanOutputs(output, span, options.force, report);
+
+    FileSink sink(output, scan.records, span, evaluator, keep ? &*keep : nullptr);
+    EngineOutcome outcome = runEngineGroups(model, evaluator, options, scan.toDo, sink, report, wallStart);
+    // The frames kept before a failure are real frames: keep them too (learning needs no order).
+    if (keep) {
+        try {
+            keep->commit();
+            report.kept = keep->count();
+        } catch (const IoError&) {
+            if (!outcome.failure) throw;
+        }
+    }
+    report.evaluated = sink.written;
+    if (outcome.failure) recountFromRecords(scan.records, report);
+    report.seconds = since(wallStart);
+
+    const std::exception_ptr failure = outcome.failure;
+    const nlohmann::json stats = statsJson(model, options, output, report, scan, outcome, sink, startedUnix);
     try {
-        writeFileAtomically(report.statsPath, j.dump(2) + "\n");
+        writeFileAtomically(report.statsPath, stats.dump(2) + "\n");
     } catch (const IoError&) {
         if (!failure) throw;  // the run's own error matters more than its stats
     }

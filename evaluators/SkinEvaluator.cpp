@@ -5,8 +5,8 @@
 // scene is not documented as safe to read from many threads) and the header stays light.
 #include "evaluators/SkinEvaluator.h"
 
-#include "evaluators/ObjFrameWriter.h"
 #include "pmsc/Errors.h"
+#include "pmsc/ObjIO.h"
 
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
@@ -122,6 +122,7 @@ struct SkinEvaluator::Data {
 
     std::vector<Index> meshOffsets;
     std::vector<std::int64_t> triangles;
+    std::shared_ptr<const ObjMesh> topology;  // the triangles, for the .obj frame writer
 
     Index points() const { return static_cast<Index>(rest.size() / 3); }
 
@@ -132,6 +133,8 @@ struct SkinEvaluator::Data {
     };
     Pose pose(Index frame) const;
     void posePoint(const Pose& pose, Index point, double* out) const;
+
+    struct Loader;  // load(), one named step per part of the scene
 };
 
 SkinEvaluator::Data::Pose SkinEvaluator::Data::pose(Index frame) const {
@@ -256,68 +259,91 @@ SkinOptions parseSkinArgs(const std::string& args) {
     return o;
 }
 
-std::unique_ptr<SkinEvaluator::Data> SkinEvaluator::load(const SkinOptions& options) {
-    auto d = std::make_unique<SkinEvaluator::Data>();
-    d->path = options.path;
-    d->fps = options.fps;
-    const std::string where = "skin: " + options.path + ": ";
+// Reads an Assimp scene into Data in named steps; the scene is only read here.
+struct SkinEvaluator::Data::Loader {
+    Loader(const aiScene& s, Data& data, std::string w) : scene(s), d(data), where(std::move(w)) {}
 
-    // Triangulate only for the .obj faces (it keeps the vertex arrays); nothing that merges, splits
-    // or reorders vertices, so points are the vertices as the importer delivers them.
-    Assimp::Importer importer;
-    const aiScene* scene =
-        importer.ReadFile(options.path, aiProcess_Triangulate | aiProcess_ValidateDataStructure);
+    const aiScene& scene;
+    Data& d;
+    const std::string where;  // "skin: PATH: ", the start of every message
+    const aiAnimation* anim = nullptr;
+    // The scene's nodes in depth-first pre-order (Data's node numbers), by name and per mesh.
+    std::vector<const aiNode*> nodes;
+    std::unordered_map<std::string, int> nodeByName;
+    std::vector<int> firstNodeOfMesh;
+    std::unordered_map<int, std::int32_t> rigidSlotOfNode;
+
+    void pickAnimation(const std::string& wanted);
+    void flattenNodes();
+    void readNodeChannels();
+    void readMeshes();
+    void readInfluences(const aiMesh& mesh, unsigned meshIndex);
+    void readFaces(const aiMesh& mesh, Index offset);
+    void readMorphTargets(const aiMesh& mesh, unsigned meshIndex);
+    void readMorphChannels();
+    void checkKeyOrder() const;
+    std::int32_t rigidSlot(int node);
+};
+
+namespace {
+
+/// Assimp's scene of `path`, triangulated for the .obj faces (it keeps the vertex arrays); nothing
+/// that merges, splits or reorders vertices, so points are the vertices as the importer delivers
+/// them. @throws InputError with Assimp's message.
+const aiScene& importScene(Assimp::Importer& importer, const std::string& path, const std::string& where) {
+    const aiScene* scene = importer.ReadFile(path, aiProcess_Triangulate | aiProcess_ValidateDataStructure);
     if (scene && scene->mNumMeshes == 0)  // Assimp flags such a scene incomplete, without a message
         throw InputError(where + "has no vertices (no mesh in the scene)");
     if (!scene || !scene->mRootNode || (scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE)) {
         std::string why = oneLine(importer.GetErrorString());
         throw InputError(where + "Assimp cannot read it: " + (why.empty() ? "incomplete scene" : why));
     }
+    return *scene;
+}
 
-    // --- animation ---------------------------------------------------------------------------------
-    if (scene->mNumAnimations == 0) throw InputError(where + "has no animation to pose");
-    const aiAnimation* anim = nullptr;
-    if (options.animation.empty()) {
-        anim = scene->mAnimations[0];
-    } else if (isIndex(options.animation)) {
-        unsigned long i = std::stoul(options.animation);
-        if (i >= scene->mNumAnimations)
-            throw InputError(where + "animation " + options.animation + " requested, it has " +
-                             std::to_string(scene->mNumAnimations));
-        anim = scene->mAnimations[i];
+}  // namespace
+
+void SkinEvaluator::Data::Loader::pickAnimation(const std::string& wanted) {
+    if (scene.mNumAnimations == 0) throw InputError(where + "has no animation to pose");
+    if (wanted.empty()) {
+        anim = scene.mAnimations[0];
+    } else if (isIndex(wanted)) {
+        unsigned long i = std::stoul(wanted);
+        if (i >= scene.mNumAnimations)
+            throw InputError(where + "animation " + wanted + " requested, it has " +
+                             std::to_string(scene.mNumAnimations));
+        anim = scene.mAnimations[i];
     } else {
-        for (unsigned i = 0; i < scene->mNumAnimations; ++i)
-            if (options.animation == scene->mAnimations[i]->mName.C_Str()) anim = scene->mAnimations[i];
-        if (!anim) throw InputError(where + "has no animation named '" + options.animation + "'");
+        for (unsigned i = 0; i < scene.mNumAnimations; ++i)
+            if (wanted == scene.mAnimations[i]->mName.C_Str()) anim = scene.mAnimations[i];
+        if (!anim) throw InputError(where + "has no animation named '" + wanted + "'");
     }
-    d->animationName = anim->mName.C_Str();
-    d->ticksPerSecond = anim->mTicksPerSecond > 0 ? anim->mTicksPerSecond : 25.0;
-    const double seconds = std::max(0.0, anim->mDuration) / d->ticksPerSecond;
-    d->frames = static_cast<Index>(std::floor(seconds * d->fps + 1e-9)) + 1;
+    d.animationName = anim->mName.C_Str();
+    d.ticksPerSecond = anim->mTicksPerSecond > 0 ? anim->mTicksPerSecond : 25.0;
+    const double seconds = std::max(0.0, anim->mDuration) / d.ticksPerSecond;
+    d.frames = static_cast<Index>(std::floor(seconds * d.fps + 1e-9)) + 1;
+}
 
-    // --- nodes, depth-first pre-order --------------------------------------------------------------
-    std::unordered_map<std::string, int> nodeByName;
-    std::vector<const aiNode*> nodes;
-    std::vector<int> firstNodeOfMesh(scene->mNumMeshes, -1);
-    {
-        std::vector<std::pair<const aiNode*, int>> stack{{scene->mRootNode, -1}};
-        while (!stack.empty()) {
-            auto [node, par] = stack.back();
-            stack.pop_back();
-            const int index = static_cast<int>(nodes.size());
-            nodes.push_back(node);
-            d->parent.push_back(par);
-            d->restLocal.push_back(toAffine(node->mTransformation));
-            nodeByName.emplace(node->mName.C_Str(), index);  // first of duplicate names wins
-            for (unsigned m = 0; m < node->mNumMeshes; ++m)
-                if (node->mMeshes[m] < scene->mNumMeshes && firstNodeOfMesh[node->mMeshes[m]] < 0)
-                    firstNodeOfMesh[node->mMeshes[m]] = index;
-            for (unsigned c = node->mNumChildren; c-- > 0;) stack.push_back({node->mChildren[c], index});
-        }
+void SkinEvaluator::Data::Loader::flattenNodes() {
+    firstNodeOfMesh.assign(scene.mNumMeshes, -1);
+    std::vector<std::pair<const aiNode*, int>> stack{{scene.mRootNode, -1}};
+    while (!stack.empty()) {
+        auto [node, par] = stack.back();
+        stack.pop_back();
+        const int index = static_cast<int>(nodes.size());
+        nodes.push_back(node);
+        d.parent.push_back(par);
+        d.restLocal.push_back(toAffine(node->mTransformation));
+        nodeByName.emplace(node->mName.C_Str(), index);  // first of duplicate names wins
+        for (unsigned m = 0; m < node->mNumMeshes; ++m)
+            if (node->mMeshes[m] < scene.mNumMeshes && firstNodeOfMesh[node->mMeshes[m]] < 0)
+                firstNodeOfMesh[node->mMeshes[m]] = index;
+        for (unsigned c = node->mNumChildren; c-- > 0;) stack.push_back({node->mChildren[c], index});
     }
+}
 
-    // --- node channels ------------------------------------------------------------------------------
-    d->channelOfNode.assign(nodes.size(), -1);
+void SkinEvaluator::Data::Loader::readNodeChannels() {
+    d.channelOfNode.assign(nodes.size(), -1);
     for (unsigned c = 0; c < anim->mNumChannels; ++c) {
         const aiNodeAnim* na = anim->mChannels[c];
         auto it = nodeByName.find(na->mNodeName.C_Str());
@@ -326,7 +352,7 @@ std::unique_ptr<SkinEvaluator::Data> SkinEvaluator::load(const SkinOptions& opti
         aiVector3D restS, restT;
         aiQuaternion restR;
         nodes[static_cast<std::size_t>(it->second)]->mTransformation.Decompose(restS, restR, restT);
-        SkinEvaluator::Data::Channel ch;
+        Channel ch;
         for (unsigned k = 0; k < na->mNumPositionKeys; ++k) {
             const auto& key = na->mPositionKeys[k];
             ch.positionTimes.push_back(key.mTime);
@@ -355,119 +381,130 @@ std::unique_ptr<SkinEvaluator::Data> SkinEvaluator::load(const SkinOptions& opti
             ch.scalingTimes = {0.0};
             ch.scalings = {Eigen::Vector3d(restS.x, restS.y, restS.z)};
         }
-        d->channelOfNode[static_cast<std::size_t>(it->second)] = static_cast<int>(d->channels.size());
-        d->channels.push_back(std::move(ch));
+        d.channelOfNode[static_cast<std::size_t>(it->second)] = static_cast<int>(d.channels.size());
+        d.channels.push_back(std::move(ch));
     }
+}
 
-    // --- meshes: rest positions, influences, faces, morph targets ------------------------------------
+std::int32_t SkinEvaluator::Data::Loader::rigidSlot(int node) {
+    auto [it, added] = rigidSlotOfNode.emplace(node, static_cast<std::int32_t>(d.paletteNode.size()));
+    if (added) {
+        d.paletteNode.push_back(node);
+        d.paletteOffset.push_back(identityAffine());
+    }
+    return it->second;
+}
+
+void SkinEvaluator::Data::Loader::readMeshes() {
     Index total = 0;
-    for (unsigned m = 0; m < scene->mNumMeshes; ++m) total += scene->mMeshes[m]->mNumVertices;
+    for (unsigned m = 0; m < scene.mNumMeshes; ++m) total += scene.mMeshes[m]->mNumVertices;
     if (total == 0) throw InputError(where + "has no vertices");
-    d->rest.reserve(static_cast<std::size_t>(3 * total));
-    d->influenceStart.reserve(static_cast<std::size_t>(total + 1));
-    d->influenceStart.push_back(0);
-    d->morphs.resize(scene->mNumMeshes);
+    d.rest.reserve(static_cast<std::size_t>(3 * total));
+    d.influenceStart.reserve(static_cast<std::size_t>(total + 1));
+    d.influenceStart.push_back(0);
+    d.morphs.resize(scene.mNumMeshes);
 
-    std::unordered_map<int, std::int32_t> rigidSlotOfNode;
-    auto rigidSlot = [&](int node) {
-        auto [it, added] = rigidSlotOfNode.emplace(node, static_cast<std::int32_t>(d->paletteNode.size()));
-        if (added) {
-            d->paletteNode.push_back(node);
-            d->paletteOffset.push_back(identityAffine());
+    for (unsigned m = 0; m < scene.mNumMeshes; ++m) {
+        const aiMesh& mesh = *scene.mMeshes[m];
+        const Index offset = static_cast<Index>(d.rest.size() / 3);
+        d.meshOffsets.push_back(offset);
+        for (unsigned v = 0; v < mesh.mNumVertices; ++v) {
+            d.rest.push_back(mesh.mVertices[v].x);
+            d.rest.push_back(mesh.mVertices[v].y);
+            d.rest.push_back(mesh.mVertices[v].z);
         }
-        return it->second;
-    };
-
-    for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
-        const aiMesh* mesh = scene->mMeshes[m];
-        const Index offset = static_cast<Index>(d->rest.size() / 3);
-        d->meshOffsets.push_back(offset);
-        const Index nv = mesh->mNumVertices;
-        for (Index v = 0; v < nv; ++v) {
-            d->rest.push_back(mesh->mVertices[v].x);
-            d->rest.push_back(mesh->mVertices[v].y);
-            d->rest.push_back(mesh->mVertices[v].z);
-        }
-
-        // Influences gathered per vertex, then normalized so weights sum to 1 (exporters round
-        // weights; an unnormalized sum would scale the character away from its bones).
-        std::vector<std::vector<std::pair<std::int32_t, double>>> inf(static_cast<std::size_t>(nv));
-        for (unsigned b = 0; b < mesh->mNumBones; ++b) {
-            const aiBone* bone = mesh->mBones[b];
-            auto it = nodeByName.find(bone->mName.C_Str());
-            if (it == nodeByName.end())
-                throw InputError(where + "bone '" + bone->mName.C_Str() + "' has no node in the scene");
-            const auto slot = static_cast<std::int32_t>(d->paletteNode.size());
-            ++d->bones;
-            d->paletteNode.push_back(it->second);
-            d->paletteOffset.push_back(toAffine(bone->mOffsetMatrix));
-            for (unsigned w = 0; w < bone->mNumWeights; ++w) {
-                const aiVertexWeight& vw = bone->mWeights[w];
-                if (vw.mVertexId >= mesh->mNumVertices)
-                    throw InputError(where + "bone '" + bone->mName.C_Str() + "' weights vertex " +
-                                     std::to_string(vw.mVertexId) + " of a mesh with " +
-                                     std::to_string(mesh->mNumVertices));
-                if (vw.mWeight > 0) inf[vw.mVertexId].push_back({slot, vw.mWeight});
-            }
-        }
-        const int meshNode = firstNodeOfMesh[m];
-        for (auto& list : inf) {
-            double sum = 0;
-            for (auto& [slot, w] : list) sum += w;
-            if (list.empty() || !(sum > 0)) {
-                // Unskinned mesh, or a vertex no bone holds: rigid on the mesh's node (root space
-                // when no node references the mesh).
-                list.assign(1, {meshNode < 0 ? -1 : rigidSlot(meshNode), 1.0});
-                sum = 1;
-            }
-            for (auto& [slot, w] : list) {
-                d->influenceSlot.push_back(slot);
-                d->influenceWeight.push_back(w / sum);
-            }
-            d->influenceStart.push_back(static_cast<Index>(d->influenceSlot.size()));
-        }
-
-        for (unsigned f = 0; f < mesh->mNumFaces; ++f) {
-            const aiFace& face = mesh->mFaces[f];
-            for (unsigned k = 1; k + 1 < face.mNumIndices; ++k) {
-                d->triangles.push_back(offset + face.mIndices[0]);
-                d->triangles.push_back(offset + face.mIndices[k]);
-                d->triangles.push_back(offset + face.mIndices[k + 1]);
-            }
-        }
-
-        auto& mo = d->morphs[m];
-        mo.targets = mesh->mNumAnimMeshes;
-        d->morphTargetCount += mo.targets;
-        mo.deltas.assign(static_cast<std::size_t>(mo.targets * nv * 3), 0.0);
-        for (unsigned t = 0; t < mesh->mNumAnimMeshes; ++t) {
-            const aiAnimMesh* am = mesh->mAnimMeshes[t];
-            mo.defaultWeights.push_back(am->mWeight);
-            if (!am->mVertices) continue;  // a normals-only target moves no point
-            if (am->mNumVertices != mesh->mNumVertices)
-                throw InputError(where + "morph target " + std::to_string(t) + " has " +
-                                 std::to_string(am->mNumVertices) + " vertices, its mesh " +
-                                 std::to_string(mesh->mNumVertices));
-            // Assimp stores targets as absolute positions (the glTF and FBX importers add the
-            // displacement to the base); blending their differences from the base is the same
-            // formula as glTF's relative targets and Assimp's normalized/vertex-blend methods.
-            for (Index v = 0; v < nv; ++v)
-                for (int c = 0; c < 3; ++c)
-                    mo.deltas[static_cast<std::size_t>(3 * (t * nv + v) + c)] =
-                        static_cast<double>(am->mVertices[v][c]) - static_cast<double>(mesh->mVertices[v][c]);
-        }
+        readInfluences(mesh, m);
+        readFaces(mesh, offset);
+        readMorphTargets(mesh, m);
     }
-    d->meshOffsets.push_back(total);
+    d.meshOffsets.push_back(total);
 
     // A vertex of a mesh no node references was given slot -1: an identity entry (node -1).
-    if (std::find(d->influenceSlot.begin(), d->influenceSlot.end(), -1) != d->influenceSlot.end()) {
-        const auto identitySlot = static_cast<std::int32_t>(d->paletteNode.size());
-        d->paletteNode.push_back(-1);
-        d->paletteOffset.push_back(identityAffine());
-        std::replace(d->influenceSlot.begin(), d->influenceSlot.end(), -1, identitySlot);
+    if (std::find(d.influenceSlot.begin(), d.influenceSlot.end(), -1) != d.influenceSlot.end()) {
+        const auto identitySlot = static_cast<std::int32_t>(d.paletteNode.size());
+        d.paletteNode.push_back(-1);
+        d.paletteOffset.push_back(identityAffine());
+        std::replace(d.influenceSlot.begin(), d.influenceSlot.end(), -1, identitySlot);
     }
+}
 
-    // --- morph channels: named after the node that holds the mesh (glTF) or the mesh itself ----------
+void SkinEvaluator::Data::Loader::readInfluences(const aiMesh& mesh, unsigned meshIndex) {
+    // Influences gathered per vertex, then normalized so weights sum to 1 (exporters round
+    // weights; an unnormalized sum would scale the character away from its bones).
+    std::vector<std::vector<std::pair<std::int32_t, double>>> inf(mesh.mNumVertices);
+    for (unsigned b = 0; b < mesh.mNumBones; ++b) {
+        const aiBone* bone = mesh.mBones[b];
+        auto it = nodeByName.find(bone->mName.C_Str());
+        if (it == nodeByName.end())
+            throw InputError(where + "bone '" + bone->mName.C_Str() + "' has no node in the scene");
+        const auto slot = static_cast<std::int32_t>(d.paletteNode.size());
+        ++d.bones;
+        d.paletteNode.push_back(it->second);
+        d.paletteOffset.push_back(toAffine(bone->mOffsetMatrix));
+        for (unsigned w = 0; w < bone->mNumWeights; ++w) {
+            const aiVertexWeight& vw = bone->mWeights[w];
+            if (vw.mVertexId >= mesh.mNumVertices)
+                throw InputError(where + "bone '" + bone->mName.C_Str() + "' weights vertex " +
+                                 std::to_string(vw.mVertexId) + " of a mesh with " +
+                                 std::to_string(mesh.mNumVertices));
+            if (vw.mWeight > 0) inf[vw.mVertexId].push_back({slot, vw.mWeight});
+        }
+    }
+    const int meshNode = firstNodeOfMesh[meshIndex];
+    for (auto& list : inf) {
+        double sum = 0;
+        for (auto& [slot, w] : list) sum += w;
+        if (list.empty() || !(sum > 0)) {
+            // Unskinned mesh, or a vertex no bone holds: rigid on the mesh's node (root space
+            // when no node references the mesh).
+            list.assign(1, {meshNode < 0 ? -1 : rigidSlot(meshNode), 1.0});
+            sum = 1;
+        }
+        for (auto& [slot, w] : list) {
+            d.influenceSlot.push_back(slot);
+            d.influenceWeight.push_back(w / sum);
+        }
+        d.influenceStart.push_back(static_cast<Index>(d.influenceSlot.size()));
+    }
+}
+
+void SkinEvaluator::Data::Loader::readFaces(const aiMesh& mesh, Index offset) {
+    for (unsigned f = 0; f < mesh.mNumFaces; ++f) {
+        const aiFace& face = mesh.mFaces[f];
+        for (unsigned k = 1; k + 1 < face.mNumIndices; ++k) {
+            d.triangles.push_back(offset + face.mIndices[0]);
+            d.triangles.push_back(offset + face.mIndices[k]);
+            d.triangles.push_back(offset + face.mIndices[k + 1]);
+        }
+    }
+}
+
+void SkinEvaluator::Data::Loader::readMorphTargets(const aiMesh& mesh, unsigned meshIndex) {
+    auto& mo = d.morphs[meshIndex];
+    const Index nv = mesh.mNumVertices;
+    mo.targets = mesh.mNumAnimMeshes;
+    d.morphTargetCount += mo.targets;
+    mo.deltas.assign(static_cast<std::size_t>(mo.targets * nv * 3), 0.0);
+    for (unsigned t = 0; t < mesh.mNumAnimMeshes; ++t) {
+        const aiAnimMesh* am = mesh.mAnimMeshes[t];
+        mo.defaultWeights.push_back(am->mWeight);
+        if (!am->mVertices) continue;  // a normals-only target moves no point
+        if (am->mNumVertices != mesh.mNumVertices)
+            throw InputError(where + "morph target " + std::to_string(t) + " has " +
+                             std::to_string(am->mNumVertices) + " vertices, its mesh " +
+                             std::to_string(mesh.mNumVertices));
+        // Assimp stores targets as absolute positions (the glTF and FBX importers add the
+        // displacement to the base); blending their differences from the base is the same
+        // formula as glTF's relative targets and Assimp's normalized/vertex-blend methods.
+        for (Index v = 0; v < nv; ++v)
+            for (int c = 0; c < 3; ++c)
+                mo.deltas[static_cast<std::size_t>(3 * (t * nv + v) + c)] =
+                    static_cast<double>(am->mVertices[v][c]) - static_cast<double>(mesh.mVertices[v][c]);
+    }
+}
+
+// Morph channels are named after the node that holds the mesh (glTF) or the mesh itself.
+void SkinEvaluator::Data::Loader::readMorphChannels() {
     for (unsigned c = 0; c < anim->mNumMorphMeshChannels; ++c) {
         const aiMeshMorphAnim* ma = anim->mMorphMeshChannels[c];
         std::vector<unsigned> meshes;
@@ -475,11 +512,11 @@ std::unique_ptr<SkinEvaluator::Data> SkinEvaluator::load(const SkinOptions& opti
             const aiNode* node = nodes[static_cast<std::size_t>(it->second)];
             meshes.assign(node->mMeshes, node->mMeshes + node->mNumMeshes);
         } else {
-            for (unsigned m = 0; m < scene->mNumMeshes; ++m)
-                if (ma->mName == scene->mMeshes[m]->mName) meshes.push_back(m);
+            for (unsigned m = 0; m < scene.mNumMeshes; ++m)
+                if (ma->mName == scene.mMeshes[m]->mName) meshes.push_back(m);
         }
         for (unsigned m : meshes) {
-            auto& mo = d->morphs[m];
+            auto& mo = d.morphs[m];
             if (mo.targets == 0) continue;
             const auto T = static_cast<std::size_t>(mo.targets);
             mo.keyTimes.clear();
@@ -490,21 +527,38 @@ std::unique_ptr<SkinEvaluator::Data> SkinEvaluator::load(const SkinOptions& opti
                 for (unsigned i = 0; i < key.mNumValuesAndWeights; ++i) {
                     if (key.mValues[i] >= T)
                         throw InputError(where + "morph channel '" + ma->mName.C_Str() + "' names target " +
-                                         std::to_string(key.mValues[i]) + " of a mesh with " +
-                                         std::to_string(T));
+                                         std::to_string(key.mValues[i]) + " of a mesh with " + std::to_string(T));
                     mo.keyWeights[k * T + key.mValues[i]] = key.mWeights[i];
                 }
             }
             if (!std::is_sorted(mo.keyTimes.begin(), mo.keyTimes.end()))
-                throw InputError(where + "morph channel '" + ma->mName.C_Str() +
-                                 "' keys are not in time order");
+                throw InputError(where + "morph channel '" + ma->mName.C_Str() + "' keys are not in time order");
         }
     }
-    for (const auto& ch : d->channels)
+}
+
+void SkinEvaluator::Data::Loader::checkKeyOrder() const {
+    for (const auto& ch : d.channels)
         if (!std::is_sorted(ch.positionTimes.begin(), ch.positionTimes.end()) ||
             !std::is_sorted(ch.rotationTimes.begin(), ch.rotationTimes.end()) ||
             !std::is_sorted(ch.scalingTimes.begin(), ch.scalingTimes.end()))
             throw InputError(where + "animation keys are not in time order");
+}
+
+std::unique_ptr<SkinEvaluator::Data> SkinEvaluator::load(const SkinOptions& options) {
+    auto d = std::make_unique<SkinEvaluator::Data>();
+    d->path = options.path;
+    d->fps = options.fps;
+    const std::string where = "skin: " + options.path + ": ";
+    Assimp::Importer importer;  // owns the scene until the end of loading
+    Data::Loader loader(importScene(importer, options.path, where), *d, where);
+    loader.pickAnimation(options.animation);
+    loader.flattenNodes();
+    loader.readNodeChannels();
+    loader.readMeshes();
+    loader.readMorphChannels();
+    loader.checkKeyOrder();
+    d->topology = std::make_shared<const ObjMesh>(triangleMesh(d->triangles));
     return d;
 }
 
@@ -539,7 +593,7 @@ void SkinEvaluator::evaluate(Index frame, std::span<const Index> points, double*
 }
 
 std::vector<std::shared_ptr<const FrameWriter>> SkinEvaluator::frameWriters() const {
-    return {std::make_shared<ObjFrameWriter>(data_->points(), &data_->triangles)};
+    return {std::make_shared<ObjFrameWriter>(data_->points(), data_->topology)};
 }
 
 std::unique_ptr<SkinEvaluator> makeSkinEvaluator(const std::string& args) {

@@ -29,6 +29,7 @@ public:
     /// A non-negative Index as a u64.
     void index(Index v) { put(static_cast<std::uint64_t>(v)); }
     void doubles(const double* values, std::size_t count) {
+        if (count == 0) return;  // an empty Eigen array's data() is null
         out_.append(reinterpret_cast<const char*>(values), count * sizeof(double));
     }
     /// Each index as a u64, in order.
@@ -86,6 +87,9 @@ public:
     }
     void doubles(double* out, std::uint64_t count, std::string_view what) {
         need(count, sizeof(double), what);
+        // An empty Eigen array's data() is null, and memcpy(nullptr, p, 0) is undefined behaviour
+        // (found by fuzz_model on a region with no feather entries, a model `pmsc train` writes).
+        if (count == 0) return;
         std::memcpy(out, bytes_.data() + at_, count * sizeof(double));
         at_ += count * sizeof(double);
     }

@@ -7,6 +7,7 @@
 #include "examples/face/ObjWriter.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
+#include "pmsc/Metrics.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/PointMultiplier.h"
 #include "pmsc/SoftCache.h"
@@ -59,36 +60,11 @@ double threadCpuSeconds() {
     return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
 }
 
-// Nearest-rank percentile (q in [0, 1]) of a copy of `v`.
-double percentile(std::vector<double> v, double q) {
-    if (v.empty()) return 0;
-    std::sort(v.begin(), v.end());
-    const size_t rank = static_cast<size_t>(std::ceil(q * static_cast<double>(v.size())));
-    return v[std::min(v.size() - 1, rank == 0 ? 0 : rank - 1)];
-}
-
 nlohmann::json summary(const std::vector<double>& v) {
     return {{"p50", percentile(v, 0.5)},
             {"p99", percentile(v, 0.99)},
             {"p995", percentile(v, 0.995)},
             {"max", v.empty() ? 0.0 : *std::max_element(v.begin(), v.end())}};
-}
-
-// Largest Euclidean point distance between two frames (N*3 doubles), and where.
-double maxPointError(const double* a, const double* b, Index n, Index* where = nullptr) {
-    double worst = 0;
-    Index at = 0;
-    for (Index p = 0; p < n; ++p) {
-        const double dx = a[3 * p] - b[3 * p], dy = a[3 * p + 1] - b[3 * p + 1],
-                     dz = a[3 * p + 2] - b[3 * p + 2];
-        const double d = dx * dx + dy * dy + dz * dz;
-        if (d > worst) {
-            worst = d;
-            at = p;
-        }
-    }
-    if (where) *where = at;
-    return std::sqrt(worst);
 }
 
 // What the demo knows about one test frame.

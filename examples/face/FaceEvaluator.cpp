@@ -30,7 +30,7 @@ void FaceEvaluator::evaluate(Index frame, std::span<const Index> points, double*
 void FaceEvaluator::evaluateAll(Index frame, double* out) const { rig_->evaluateAll(controls(frame), out); }
 
 std::vector<std::shared_ptr<const FrameWriter>> FaceEvaluator::frameWriters() const {
-    return {std::make_shared<ObjFrameWriter>(mesh_)};
+    return {std::make_shared<ObjFrameWriter>(mesh_->vertexCount(), mesh_)};
 }
 
 std::unique_ptr<FaceEvaluator> makeFaceEvaluator(const std::string& folder,

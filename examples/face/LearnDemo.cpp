@@ -6,6 +6,7 @@
 #include "pmsc/IncrementalSvd.h"
 #include "pmsc/KeptFrames.h"
 #include "pmsc/Learning.h"
+#include "pmsc/Metrics.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/NpyIO.h"
 #include "pmsc/PointMultiplier.h"
@@ -63,13 +64,7 @@ public:
         Score s;
         s.keyRms = pm_.keyRmsError(keys.data(), coords.data());
         pm_.reconstruct(coords.data(), rec.data());
-        double worst = 0;
-        for (Index p = 0; p < n; ++p) {
-            const double dx = rec[3 * p] - full[3 * p], dy = rec[3 * p + 1] - full[3 * p + 1],
-                         dz = rec[3 * p + 2] - full[3 * p + 2];
-            worst = std::max(worst, dx * dx + dy * dy + dz * dz);
-        }
-        s.pmMax = std::sqrt(worst);
+        s.pmMax = maxPointError(rec.data(), full, n);
         return s;
     }
     const Model& model() const { return model_; }
@@ -121,13 +116,6 @@ std::pair<double, Index> bestThreshold(const std::vector<Score>& scores, double 
     }
     if (hits > 0) threshold = s[static_cast<size_t>(hits) - 1].keyRms;
     return {threshold, hits};
-}
-
-double percentile(std::vector<double> v, double q) {
-    if (v.empty()) return 0;
-    std::sort(v.begin(), v.end());
-    const size_t rank = static_cast<size_t>(std::ceil(q * static_cast<double>(v.size())));
-    return v[std::min(v.size() - 1, rank == 0 ? 0 : rank - 1)];
 }
 
 nlohmann::json summarize(const std::vector<Score>& scores, const Model& model, double percent) {

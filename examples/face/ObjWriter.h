@@ -1,34 +1,14 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+// The face rig's names for the project's one OBJ writer (pmsc/ObjIO.h, issue 13): the demo's
+// meshes and `pmsc run --format obj` frames hold the values exactly, as the skin evaluator's do.
 #include "examples/face/ObjReader.h"
-#include "pmsc/FrameWriter.h"
-
-#include <memory>
-#include <span>
-#include <string>
 
 namespace pmsc::face {
 
-/// Writes a posed mesh as Wavefront OBJ text: "v" lines from `positions` (3 per vertex, the
-/// mesh's vertex order) and the mesh's polygons. %.6g keeps a micro-unit at head scale.
-std::string formatObj(const ObjMesh& topology, std::span<const double> positions,
-                      const std::string& comment = "");
-
-/// Writes an OBJ file atomically (temporary file + rename). @throws IoError naming the path.
-void writeObj(const std::string& path, const ObjMesh& topology, std::span<const double> positions,
-              const std::string& comment = "");
-
-/// FrameWriter for posed face meshes (".obj"), for `pmsc run --format obj`.
-class ObjFrameWriter : public FrameWriter {
-public:
-    explicit ObjFrameWriter(std::shared_ptr<const ObjMesh> topology) : topology_(std::move(topology)) {}
-    std::string extension() const override { return ".obj"; }
-    void write(const std::string& path, Index frame, const double* values) const override;
-    bool isValid(const std::string& path) const override;
-
-private:
-    std::shared_ptr<const ObjMesh> topology_;
-};
+using pmsc::formatObj;
+using pmsc::ObjFrameWriter;
+using pmsc::writeObj;
 
 }  // namespace pmsc::face

@@ -2,6 +2,7 @@
 
 #include "examples/synthetic/SmoothNoise.h"
 #include "pmsc/Errors.h"
+#include "pmsc/ObjIO.h"
 
 #include <Eigen/Dense>
 
@@ -18,26 +19,9 @@ namespace pmsc::synthetic {
 
 namespace {
 
-/// The "v x y z" lines of an OBJ file, as 3N doubles.
+/// The "v x y z" lines of an OBJ file, as 3N doubles (the project's one OBJ reader).
 std::vector<double> readObjVertices(const std::string& path) {
-    std::ifstream in(path);
-    if (!in) throw InputError(path + ": cannot open");
-    std::vector<double> v;
-    std::string line;
-    Index lineNo = 0;
-    while (std::getline(in, line)) {
-        ++lineNo;
-        if (line.size() < 2 || line[0] != 'v' || line[1] != ' ') continue;
-        const char* p = line.c_str() + 2;
-        for (int i = 0; i < 3; ++i) {
-            char* end = nullptr;
-            const double x = std::strtod(p, &end);
-            if (end == p || !std::isfinite(x))
-                throw InputError(path + ":" + std::to_string(lineNo) + ": malformed vertex line");
-            v.push_back(x);
-            p = end;
-        }
-    }
+    std::vector<double> v = readObj(path, ObjContent::Positions).positions;
     if (v.empty()) throw InputError(path + ": no vertices");
     return v;
 }

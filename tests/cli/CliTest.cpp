@@ -381,6 +381,28 @@ TEST_F(Cli, UsageMistakes) {
     EXPECT_TRUE(outputs(dir).empty());
 }
 
+// The demo commands parsed numbers with std::stod/std::stol (issue 13): face took "--threads 2.5"
+// as 2 threads and "--regions 1e1" as 10, cornell took " 2" with its blank. They now go through
+// Args' converters like every other command: each is a usage error (exit 2, one line) before any
+// data is read, so no ICT data or scene is needed here.
+TEST_F(Cli, DemoNumbersGoThroughArgs) {
+    TempDir dir;
+    const std::vector<std::string> face{"demo", "face", "--data", dir.file("ict"), "--out", dir.file("face")};
+    const auto with = [](std::vector<std::string> args, std::initializer_list<std::string> more) {
+        args.insert(args.end(), more);
+        return args;
+    };
+    expectFailure(runPmsc(dir, with(face, {"--threads", "2.5"})), 2, {"--threads", "'2.5' is not an integer"});
+    expectFailure(runPmsc(dir, with(face, {"--basis", "4.7"})), 2, {"--basis", "'4.7' is not an integer"});
+    expectFailure(runPmsc(dir, with(face, {"--regions", "1e1"})), 2, {"--regions", "'1e1' is not an integer"});
+    expectFailure(runPmsc(dir, with(face, {"--tolerance", "0"})), 2, {"--tolerance", "out of range"});
+    expectFailure(runPmsc(dir, with(face, {"--tolerance", "1%"})), 2, {"--tolerance", "'1%' is not a number"});
+    const std::vector<std::string> cornell{"demo", "cornell", "--quick", "--out", dir.file("cornell")};
+    expectFailure(runPmsc(dir, with(cornell, {"--threads", " 2"})), 2, {"--threads", "is not an integer"});
+    expectFailure(runPmsc(dir, with(cornell, {"--points", "10"})), 2, {"--points", "out of range"});
+    EXPECT_TRUE(outputs(dir).empty());
+}
+
 TEST_F(Cli, BadEps) {
     TempDir dir;
     for (const char* eps : {"0.2,0.1", "abc", "0.1", "-1,2", "0.1,inf", "0.1,0.2,0.3"}) {

@@ -13,27 +13,6 @@
 namespace {
 
 using pmsc::Index;
-using pmsc::cli::percentiles;
-
-// Reference values: numpy.percentile(v, [50, 99, 99.5]) with the default method="linear".
-TEST(Percentiles, LinearInterpolationBetweenClosestRanks) {
-    const auto p = percentiles({4, 1, 3, 2});
-    EXPECT_DOUBLE_EQ(p.p50, 2.5);
-    EXPECT_DOUBLE_EQ(p.p99, 3.97);    // h = 0.99 * 3 = 2.97: 3 + 0.97 * (4 - 3)
-    EXPECT_DOUBLE_EQ(p.p995, 3.985);  // h = 2.985
-    EXPECT_DOUBLE_EQ(p.max, 4);
-    std::vector<double> ramp(201);
-    for (std::size_t i = 0; i < ramp.size(); ++i) ramp[i] = static_cast<double>(i);
-    const auto q = percentiles(ramp);
-    EXPECT_DOUBLE_EQ(q.p50, 100);
-    EXPECT_DOUBLE_EQ(q.p99, 198);
-    EXPECT_DOUBLE_EQ(q.p995, 199);
-    EXPECT_DOUBLE_EQ(q.max, 200);
-    const auto one = percentiles({7});
-    EXPECT_EQ(one.p50, 7);
-    EXPECT_EQ(one.max, 7);
-    EXPECT_EQ(percentiles({}).max, 0);
-}
 
 /// A model of 3 points x 1 channel with M = 1: basis e = (1, 1, 1)/sqrt 3, key = point 0 and
 /// point 1, mean 0. A frame a*(1,1,1) is reproduced exactly; (1, 0, 0) is not.

@@ -4,7 +4,7 @@
 // targets on small glTF files written here, then subset == full bit for bit and thread safety on
 // real animated characters from Debian's assimp-testmodels.
 #include "tests/common/MissingData.h"
-#include "evaluators/ObjFrameWriter.h"
+#include "pmsc/ObjIO.h"
 #include "evaluators/SkinEvaluator.h"
 #include "pmsc/Errors.h"
 
@@ -432,7 +432,8 @@ TEST(ObjFrameWriter, RoundTripsValuesExactlyAndRejectsDamagedFiles) {
     const ScratchDir scratch;
     const fs::path& dir = scratch.path;
     const std::vector<std::int64_t> tris{0, 1, 2, 1, 3, 2};
-    pmsc::evaluators::ObjFrameWriter w(4, &tris);
+    const auto topology = std::make_shared<const pmsc::ObjMesh>(pmsc::triangleMesh(tris));
+    pmsc::ObjFrameWriter w(4, topology);
     EXPECT_EQ(w.extension(), ".obj");
     const std::vector<double> v{0.1, -2.5e-17, 3, 1.0 / 3, 2, 1e300, -0.0, 5, 6, 7, 8, 9.000000000000002};
     const std::string path = (dir / "f.obj").string();
@@ -442,7 +443,7 @@ TEST(ObjFrameWriter, RoundTripsValuesExactlyAndRejectsDamagedFiles) {
     std::ifstream in(path);
     std::string line, tag;
     std::getline(in, line);
-    EXPECT_EQ(line, "# pmsc frame 7: 4 points, 2 triangles");
+    EXPECT_EQ(line, "# pmsc frame 7: 4 points, 2 polygons");
     std::vector<double> back;
     for (int i = 0; i < 4; ++i) {
         double x, y, z;
@@ -459,7 +460,7 @@ TEST(ObjFrameWriter, RoundTripsValuesExactlyAndRejectsDamagedFiles) {
     }
     std::ofstream(path, std::ios::trunc) << text.substr(0, text.size() / 2);
     EXPECT_FALSE(w.isValid(path));
-    pmsc::evaluators::ObjFrameWriter five(5, &tris);
+    pmsc::ObjFrameWriter five(5, topology);
     w.write(path, 7, v.data());
     EXPECT_FALSE(five.isValid(path));
     std::ofstream(path, std::ios::trunc) << "v 1 2 nan\n";

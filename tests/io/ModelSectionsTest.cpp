@@ -204,3 +204,27 @@ TEST(ModelSections, ByteReaderNamesTheFieldAndNeverReadsPastTheEnd) {
 }
 
 }  // namespace
+
+// Found by fuzz_model (issue 13): an empty array's data() is null, and the codecs handed it to
+// memcpy with a count of 0 (undefined behaviour; UBSan's nonnull check stops the sanitizer build).
+TEST(ModelSections, EmptyArraysWithNullDataAreWrittenAndReadAsNothing) {
+    std::string out;
+    pmsc::ByteWriter writer(out);
+    writer.doubles(nullptr, 0);
+    EXPECT_TRUE(out.empty());
+    pmsc::ByteReader in(out, "f");
+    in.doubles(nullptr, 0, "nothing");
+    EXPECT_NO_THROW(in.expectEnd());
+}
+
+// The model `pmsc train --regions` wrote for the fuzzer's seed: no feather entries at all.
+TEST(ModelSections, RegionsWithoutFeatherEntriesRoundTrip) {
+    pmsc::Model m = pmsc::test::smallModelWithRegions();
+    m.regions->featherStart.assign(static_cast<std::size_t>(m.points) + 1, 0);
+    m.regions->featherRegion.clear();
+    m.regions->featherFactor.clear();
+    const pmsc::Model r = pmsc::decodeModel(pmsc::encodeModel(m), "m.pmsc");
+    ASSERT_TRUE(r.regions.has_value());
+    EXPECT_TRUE(r.regions->featherFactor.empty());
+    EXPECT_EQ(r.regions->featherStart, m.regions->featherStart);
+}

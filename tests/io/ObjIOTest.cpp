@@ -1,4 +1,6 @@
-#include "examples/face/ObjReader.h"
+// The project's one OBJ reader and writer (pmsc/ObjIO.h; issue 13 merged the face rig's, the skin
+// evaluator's and the synthetic ICT frames' copies).
+#include "pmsc/ObjIO.h"
 #include "pmsc/Errors.h"
 
 #include <gtest/gtest.h>
@@ -6,9 +8,11 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <stdexcept>
 #include <string>
+#include <vector>
 
-namespace pmsc::face {
+namespace pmsc {
 namespace {
 
 std::string writeTemp(const std::string& name, const std::string& text) {
@@ -57,5 +61,38 @@ TEST(ObjReader, FaceIndexOutOfRangeAndMissingFileAreInputErrors) {
     }
 }
 
+// The face demo's writer printed "%.6g" and the skin's the shortest exact decimal, so
+// `pmsc run --format obj` was lossy for one evaluator and exact for the other; now there is one
+// writer and every coordinate reads back bit for bit (fails on the former face writer).
+TEST(ObjWriter, CoordinatesReadBackExactlyAndPolygonsAsWritten) {
+    ObjMesh quad;
+    quad.positions = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0};
+    quad.polygonStart = {0, 4, 7};
+    quad.polygonVertices = {0, 1, 2, 3, 0, 2, 3};
+    const std::vector<double> posed{0.1 + 1e-9, 1.0 / 3, -2.5e-17, 123456.789012345, 1e300, -0.0,
+                                    9.000000000000002, 5, 6, 7, 8, 0.30000000000000004};
+    const std::string path = writeTemp("exact.obj", "");
+    writeObj(path, quad, posed, "posed");
+    Index faces = 0;
+    const ObjMesh back = readObj(path, ObjContent::PositionsAndPolygons, &faces);
+    ASSERT_EQ(back.positions.size(), posed.size());
+    for (std::size_t i = 0; i < posed.size(); ++i) EXPECT_EQ(back.positions[i], posed[i]) << i;
+    EXPECT_EQ(back.polygonStart, quad.polygonStart);
+    EXPECT_EQ(back.polygonVertices, quad.polygonVertices);
+    EXPECT_EQ(faces, 2);
+    std::remove(path.c_str());
+}
+
+TEST(ObjWriter, TriangleMeshChecksItsIndices) {
+    const std::vector<std::int64_t> tris{0, 1, 2, 2, 1, 3};
+    const ObjMesh mesh = triangleMesh(tris);
+    EXPECT_EQ(mesh.polygonCount(), 2);
+    EXPECT_EQ(mesh.polygonStart, (std::vector<std::int32_t>{0, 3, 6}));
+    const std::vector<std::int64_t> ragged{0, 1};
+    EXPECT_THROW(triangleMesh(ragged), std::invalid_argument);
+    const std::vector<std::int64_t> negative{0, -1, 2};
+    EXPECT_THROW(triangleMesh(negative), std::invalid_argument);
+}
+
 }  // namespace
-}  // namespace pmsc::face
+}  // namespace pmsc
