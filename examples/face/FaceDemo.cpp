@@ -347,7 +347,8 @@ nlohmann::json runFaceDemo(const FaceDemoOptions& options) {
     if (model.regions) {
         t = Clock::now();
         report["local_fail_through"] = localFailThroughSets(model, evaluator, *animation, validationSeqs, novelSeqs,
-                                                            percent, options.threads, step);
+                                                            percent, options.threads, step,
+                                                            options.quick ? 24 : 0);
         timings["local_fail_through"] = seconds(t);
     }
 

@@ -148,7 +148,8 @@ nlohmann::json localFailThroughReport(const Model& model, const PointEvaluator& 
 nlohmann::json localFailThroughSets(const Model& model, const PointEvaluator& evaluator, const FaceAnimation& animation,
                                     const std::vector<Index>& validationSeqs, const std::vector<Index>& novelSeqs,
                                     double percent, int threads,
-                                    const std::function<void(std::string_view, double, double)>& step) {
+                                    const std::function<void(std::string_view, double, double)>& step,
+                                    Index maxFramesPerSet) {
     std::vector<Index> validationSample, mixedSeqs;
     for (size_t i = 0; i < validationSeqs.size() && i < 4; ++i) validationSample.push_back(validationSeqs[i]);
     for (Index s = 0; s < Index(animation.sequences().size()); ++s)
@@ -162,7 +163,9 @@ nlohmann::json localFailThroughSets(const Model& model, const PointEvaluator& ev
     for (const auto& [name, seqs] : sets) {
         if (seqs->empty()) continue;
         const std::string stage = std::string("local ") + name;
-        local[name] = localFailThroughReport(model, evaluator, animation.framesOf(*seqs), percent, threads,
+        std::vector<Index> frames = animation.framesOf(*seqs);
+        if (maxFramesPerSet > 0 && Index(frames.size()) > maxFramesPerSet) frames.resize(size_t(maxFramesPerSet));
+        local[name] = localFailThroughReport(model, evaluator, frames, percent, threads,
                                              [&](double d) { step(stage, d, 1); });
     }
     return local;

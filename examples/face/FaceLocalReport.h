@@ -32,9 +32,11 @@ nlohmann::json localFailThroughReport(const Model& model, const PointEvaluator& 
 /// novel sequences) and "mixed" (the animation's mixed sequences: novel controls for 1-3 s of a
 /// 5-8 s shot; absent when it has none).
 /// @param step progress hook (stage, done, total) that may throw to cancel
+/// @param maxFramesPerSet > 0: only the first frames of each set (`--quick`: a smoke test)
 nlohmann::json localFailThroughSets(const Model& model, const PointEvaluator& evaluator, const FaceAnimation& animation,
                                     const std::vector<Index>& validationSeqs, const std::vector<Index>& novelSeqs,
                                     double percent, int threads,
-                                    const std::function<void(std::string_view, double, double)>& step);
+                                    const std::function<void(std::string_view, double, double)>& step,
+                                    Index maxFramesPerSet = 0);
 
 }  // namespace pmsc::face
