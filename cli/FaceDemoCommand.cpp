@@ -15,6 +15,30 @@
 
 namespace pmsc::cli {
 
+namespace {
+
+// report.json's "local_fail_through" (FaceLocalReport.h), one line per set and way.
+void printLocalFailThrough(const nlohmann::json& local) {
+    std::printf("  local fail-through: %ld regions, feather %.2f%% of the head diagonal\n",
+                local.at("regions").get<long>(), local.at("feather_width_pct_bbox").get<double>());
+    for (const char* set : {"validation", "novel", "mixed"}) {
+        if (!local.contains(set)) continue;
+        const nlohmann::json& s = local.at(set);
+        for (const char* way : {"local", "whole_frame"}) {
+            const nlohmann::json& w = s.at(way);
+            std::printf("    %-10s %-11s %4ld frames, hit %5.1f%%: points evaluated %5.1f%% (non-hit frames %5.1f%%), "
+                        "soft-cached max error %.3f%%, speedup %.2fx\n",
+                        set, way, s.at("frames").get<long>(), 100 * s.at("hit_rate").get<double>(),
+                        100 * w.at("points_evaluated_fraction_mean").get<double>(),
+                        100 * w.at("points_evaluated_fraction_non_hit_mean").get<double>(),
+                        w.at("soft_max_error_pct_bbox_max").get<double>(),
+                        s.at(std::string("local") == way ? "speedup_local" : "speedup_whole_frame").get<double>());
+        }
+    }
+}
+
+}  // namespace
+
 int runDemoFace(const std::vector<std::string>& args) {
     std::string data, out;
     std::optional<Index> threads, basis, regions;
@@ -40,7 +64,7 @@ int runDemoFace(const std::vector<std::string>& args) {
                   [&](const std::string& v) { tolerance = parseDouble("--tolerance", v, 0.001, 100); });
     parser.option("--basis", "M", "basis vectors (default 48)",
                   [&](const std::string& v) { basis = parseIndex("--basis", v, 1, 500); });
-    parser.option("--regions", "R", "regions of local fail-through (default 16, quick 8; 0 = none)",
+    parser.option("--regions", "R", "regions of local fail-through (default 96, quick 8; 0 = none)",
                   [&](const std::string& v) { regions = parseIndex("--regions", v, 0, 1000); });
     parser.flag("--quick", "9 + 2 short sequences: a smoke test of the whole pipeline (about 20 s)", quick);
     parser.flag("--quiet", "no progress display", quiet);
@@ -88,6 +112,7 @@ int runDemoFace(const std::vector<std::string>& args) {
         1e3 * r.at("timing").at("key_posing").get<double>(),
         1e3 * r.at("timing").at("projection").get<double>(),
         1e3 * r.at("timing").at("reconstruction").get<double>(), num("speedup"));
+    if (r.contains("local_fail_through")) printLocalFailThrough(r.at("local_fail_through"));
     std::printf(
         "  wrote      %s/report.json, frames.csv, keys.png, worst/typical/novel .png and .obj  [%.0f s]\n",
         out.c_str(), r.at("seconds").at("total").get<double>());

@@ -155,6 +155,9 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
         badOption("largest local fraction must be in (0, 1], got " + std::to_string(options.maxLocalFraction));
     if (!(options.energy > 0 && options.energy <= 1)) badOption("energy must be in (0, 1]");
     if (options.minKeys < 1) badOption("min keys must be >= 1");
+    if (!(options.keyRadius >= 0)) badOption("key radius must be >= 0");
+    if (!(options.basisShare > 0 && options.basisShare <= 1)) badOption("basis share must be in (0, 1]");
+    if (!(options.ratioMargin >= 1)) badOption("ratio margin must be >= 1");
     if (q.rows() != n * c) throw std::invalid_argument("learnRegions: q has the wrong row count");
 
     Eigen::MatrixXd pos;
@@ -192,20 +195,20 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
     Index smallBases = 0;
     for (Index ri = 0; ri < r; ++ri) {
         Region& g = out.regions[size_t(ri)];
-        std::vector<std::pair<double, Index>> outside;  // (distance to the region's centroid, key number)
-        Eigen::RowVector3d centroid = Eigen::RowVector3d::Zero();
-        for (const Index p : g.points) centroid += pos.row(p);
-        centroid /= double(g.points.size());
+        std::vector<std::pair<double, Index>> outside;  // (distance to the region's nearest point, key number)
         for (Index key = 0; key < k; ++key) {
             const Index p = model.keyPoints[size_t(key)];
             if (regionOf[size_t(p)] == ri) {
                 g.keys.push_back(key);
             } else {
-                outside.push_back({(pos.row(p) - centroid).norm(), key});
+                double d = std::numeric_limits<double>::infinity();
+                for (const Index other : g.points) d = std::min(d, (pos.row(p) - pos.row(other)).squaredNorm());
+                outside.push_back({std::sqrt(d), key});
             }
         }
         std::sort(outside.begin(), outside.end());
-        for (size_t i = 0; i < outside.size() && Index(g.keys.size()) < options.minKeys; ++i)
+        for (size_t i = 0; i < outside.size() && (Index(g.keys.size()) < options.minKeys ||
+                                                  outside[i].first <= options.keyRadius * diagonal); ++i)
             g.keys.push_back(outside[i].second);
         std::sort(g.keys.begin(), g.keys.end());
 
@@ -226,7 +229,7 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
         for (size_t i = 0; i < local.size(); ++i) qr.middleRows(Index(i) * c, c) = q.middleRows(local[i] * c, c);
 
         const Index kc = Index(g.keys.size()) * c;
-        const Index cap = std::max<Index>(1, std::min({model.basisSize(), (2 * kc) / 3, f - 1}));
+        const Index cap = std::max<Index>(1, std::min({model.basisSize(), Index(options.basisShare * double(kc)), f - 1}));
         SvdOptions o = svd;
         o.seed = svd.seed + 7919u * static_cast<unsigned>(ri + 1);
         const TruncatedSvd local_svd = truncatedSvd(qr, cap, o);
@@ -268,11 +271,13 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
         // rounding noise: the same noise on a new frame would fail it through. Any key error under
         // 1e-6 of the tolerance is noise for such a region, so it is the floor.
         if (tolerance > 0 && cal.ratio == 0) g.epsMin = std::max(g.epsMin, 1e-6 * tolerance);
+        // The margin (RegionOptions::ratioMargin) on the calibrated bound, not on the noise floor.
+        if (tolerance > 0 && cal.ratio > 0) g.epsMin /= options.ratioMargin;
         g.epsMax = 1.5 * g.epsMin;
     }
     if (notes && smallBases > 0)
         notes->push_back("regions: " + std::to_string(smallBases) + " of " + std::to_string(r) +
-                         " regions' local bases were capped by 2/3 of their key values");
+                         " regions' local bases were capped by their share of key values");
 
     // Step 5.
     featherEntries(pos, regionOf, out.featherWidth, out);

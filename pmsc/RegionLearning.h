@@ -24,7 +24,28 @@ struct RegionOptions {
     /// real test.
     double energy = 0.9999;
     /// Fewest keys a region projects from; the nearest keys outside it are added when it holds fewer.
-    Index minKeys = 6;
+    /// 12 (36 key values on a face): with 6 (the first version) a region's key error was noise
+    /// on the ICT face's novel set — frames whose region error exceeded 1% of the head diagonal
+    /// had key errors below those of frames with 0.1% — because most regions (neck, teeth,
+    /// gums, mouth socket) hold no key of their own.
+    Index minKeys = 12;
+    /// Keys within this distance of a region's nearest point (fraction of the positions'
+    /// diagonal) join its keys: a motion that breaks the region shows first at the keys next to
+    /// it (the chin's keys move when jawForward moves the neck below them). 6%: on the face's
+    /// novel set, 3% left regions blind to their neighbours' motion (more frames over the
+    /// tolerance among region hits) and 10% made every region near the mouth fail with it.
+    double keyRadius = 0.06;
+    /// Each region's basis has at most this share of its key values (K_r*C): the rest of the key
+    /// values are left as residual, so the region's key error still tests its points. 0.4 (it was
+    /// 2/3): a region's key RMS measured on 2/3 of a few dozen values left about ten degrees of
+    /// freedom, too few to see a motion its basis absorbs.
+    double basisShare = 0.4;
+    /// Safety factor on each region's calibrated ratio: eps_min = T / (margin r). Held-out slices
+    /// are ordinary motion, but a region fails for motion training never saw, and on the ICT
+    /// face's novel set (cheekPuff, mouthLeft, jawForward) the region error per key error came
+    /// out up to 1.4x the largest held-out ratio (regions bordering the mouth). With 1.5 no
+    /// region hit exceeded the tolerance there; 1 let the worst frame reach 1.36%.
+    double ratioMargin = 1.5;
     /// Point positions (N x 3, one row per point) for spatial clustering and feathering. Empty:
     /// the training mean when C == 3 (a face's rest shape); otherwise regions cannot be learned.
     Eigen::MatrixXd positions;
@@ -42,10 +63,11 @@ struct RegionOptions {
 ///     [position * sqrt(R) / diagonal, loading pattern]: positions keep regions compact (cheap
 ///     subsets, short borders), loading patterns split points that sit close but move apart
 ///     (upper and lower lip), so the points of a region share their motions and so their errors.
-///  3. Keys: the model's keys inside the region, plus the nearest outside it up to minKeys.
+///  3. Keys: the model's keys inside the region, those within keyRadius of it, and the nearest
+///     outside it up to minKeys.
 ///  4. A local basis from the SVD of the region's rows of `q` (its points and its keys), and its
 ///     projector; thresholds calibrated like the frame's (Calibration.h, leave-one-slice-out) for
-///     `tolerance`, or from the training frames' key RMS when tolerance == 0.
+///     `tolerance` (with ratioMargin), or from the training frames' key RMS when tolerance == 0.
 ///  5. Feather entries (Regions.h) from the distance to the nearest point of each other region.
 /// @param q mean-removed training matrix (N*C) x F of this model
 /// @param notes decisions worth a warning are appended

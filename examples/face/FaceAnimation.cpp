@@ -202,7 +202,7 @@ int mirror(int c) {
 bool isLeft(int c) { return mirror(c) != c && controlName(c).back() == 'L'; }
 
 void generateSequence(Random& rng, Index frames, const std::vector<int>& novelPool, bool novel,
-                      std::vector<ControlVector>& out, std::vector<int>& novelUsed) {
+                      std::vector<ControlVector>& out, std::vector<int>& novelUsed, bool mixed = false) {
     std::array<Track, kControlCount> speech, emotion, accent, eyes;
     const double end = static_cast<double>(frames - 1);
 
@@ -324,6 +324,28 @@ void generateSequence(Random& rng, Index frames, const std::vector<int>& novelPo
             }
         }
     }
+    // Mixed: the same controls for 24-72 frames (1-3 s) only, with 6-frame ramps; drawn after
+    // everything above, so the ordinary part is what the same stream would give an ordinary shot.
+    if (mixed) {
+        const Index count = rng.integer(1, 2);
+        const double hold = rng.uniform(24, 72);
+        const double start = rng.uniform(6, std::max(7.0, end - hold - 12));
+        for (Index i = 0; i < count; ++i) {
+            const int c = novelPool[static_cast<size_t>(rng.integer(0, static_cast<Index>(novelPool.size()) - 1))];
+            if (std::find(novelUsed.begin(), novelUsed.end(), c) != novelUsed.end() ||
+                std::find(novelUsed.begin(), novelUsed.end(), mirror(c)) != novelUsed.end()) {
+                continue;
+            }
+            novelUsed.push_back(c);
+            extra[c].key(0, 0);
+            extra[c].key(start, 0);
+            for (double k = start + 6; k < start + 6 + hold; k += rng.uniform(12, 24)) {
+                extra[c].key(k, rng.uniform(FaceAnimation::kNovelMin, 1.0));
+            }
+            extra[c].key(start + 6 + hold, rng.uniform(FaceAnimation::kNovelMin, 1.0));
+            extra[c].key(start + 12 + hold, 0);
+        }
+    }
 
     for (Index f = 0; f < frames; ++f) {
         const double x = static_cast<double>(f);
@@ -355,22 +377,37 @@ FaceAnimation FaceAnimation::generate(const FaceAnimationOptions& options) {
         throw std::invalid_argument("FaceAnimation: novel sequences need novel controls");
     }
     FaceAnimation animation;
-    const Index total = options.sequences + options.novelSequences;
+    if (options.mixedSequences < 0 || (options.mixedSequences > 0 && (options.mixedMinFrames < 96 ||
+                                                                     options.mixedMaxFrames < options.mixedMinFrames))) {
+        throw std::invalid_argument("FaceAnimation: mixed sequences need 96 <= mixedMinFrames <= mixedMaxFrames");
+    }
+    if (options.mixedSequences > 0 && options.novelControls.empty()) {
+        throw std::invalid_argument("FaceAnimation: mixed sequences need novel controls");
+    }
+    const Index total = options.sequences + options.novelSequences + options.mixedSequences;
     for (Index s = 0; s < total; ++s) {
         // Each sequence has its own stream, so adding sequences does not change the others.
         Random rng(static_cast<std::uint64_t>(options.seed) * 0x9E3779B97F4A7C15ull +
                    static_cast<std::uint64_t>(s) * 0xD1B54A32D192ED03ull + 1);
-        const bool novel = s >= options.sequences;
+        const bool mixed = s >= options.sequences + options.novelSequences;
+        const bool novel = !mixed && s >= options.sequences;
         FaceSequence seq;
         char name[32];
-        std::snprintf(name, sizeof name, novel ? "novel%03ld" : "seq%03ld",
-                      static_cast<long>(novel ? s - options.sequences : s));
+        if (mixed) {
+            std::snprintf(name, sizeof name, "mixed%03ld",
+                          static_cast<long>(s - options.sequences - options.novelSequences));
+        } else {
+            std::snprintf(name, sizeof name, novel ? "novel%03ld" : "seq%03ld",
+                          static_cast<long>(novel ? s - options.sequences : s));
+        }
         seq.name = name;
         seq.novel = novel;
+        seq.mixed = mixed;
         seq.firstFrame = animation.frameCount();
-        seq.frameCount = rng.integer(options.minFrames, options.maxFrames);
+        seq.frameCount = mixed ? rng.integer(options.mixedMinFrames, options.mixedMaxFrames)
+                               : rng.integer(options.minFrames, options.maxFrames);
         generateSequence(rng, seq.frameCount, options.novelControls, novel, animation.frames_,
-                         seq.novelControls);
+                         seq.novelControls, mixed);
         animation.sequences_.push_back(std::move(seq));
     }
     return animation;
@@ -389,7 +426,7 @@ void FaceAnimation::splitOrdinary(double fraction, unsigned seed, std::vector<In
                                   std::vector<Index>& validation) const {
     std::vector<Index> ordinary;
     for (Index s = 0; s < static_cast<Index>(sequences_.size()); ++s) {
-        if (!sequences_[s].novel) ordinary.push_back(s);
+        if (!sequences_[s].novel && !sequences_[s].mixed) ordinary.push_back(s);
     }
     Random rng(seed);
     for (Index i = static_cast<Index>(ordinary.size()) - 1; i > 0; --i) {  // Fisher-Yates

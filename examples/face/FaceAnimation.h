@@ -14,6 +14,9 @@ struct FaceSequence {
     Index firstFrame = 0;  ///< in the whole animation
     Index frameCount = 0;
     bool novel = false;              ///< moves controls the ordinary sequences never move
+    /// A "mixed" sequence (issue 9): ordinary, with novel controls moved for a few seconds only
+    /// (novel stays false: it is neither a training candidate nor part of the novel set).
+    bool mixed = false;
     std::vector<int> novelControls;  ///< which ones
 };
 
@@ -27,6 +30,12 @@ struct FaceAnimationOptions {
     unsigned seed = 7;
     Index sequences = 36;  ///< ordinary sequences
     Index novelSequences = 8;
+    /// Mixed sequences, after the novel ones: ordinary motion of mixedMinFrames..mixedMaxFrames
+    /// frames in which one or two novel controls rise (6 frames), hold for 1-3 s and fall again,
+    /// once, at a random time. 0 by default so `face:DIR` keeps its 44 sequences.
+    Index mixedSequences = 0;
+    Index mixedMinFrames = 120;
+    Index mixedMaxFrames = 200;
     Index minFrames = 60;  ///< per sequence, at 24 frames per second
     Index maxFrames = 110;
     /// Controls only novel sequences move (and nothing else does).
@@ -40,7 +49,7 @@ public:
     static constexpr double kFramesPerSecond = 24.0;
     static constexpr double kNovelMin = 0.5;
 
-    /// Ordinary sequences first (indices 0 .. sequences-1), then the novel ones.
+    /// Ordinary sequences first (indices 0 .. sequences-1), then the novel ones, then the mixed.
     static FaceAnimation generate(const FaceAnimationOptions& options);
 
     Index frameCount() const { return static_cast<Index>(frames_.size()); }

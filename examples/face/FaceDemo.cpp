@@ -41,6 +41,8 @@ FaceDemoOptions FaceDemoOptions::quickOptions() {
     o.maxFrames = 36;
     o.timingFrames = 8;
     o.regions = 8;
+    o.featherPercent = 3;
+    o.mixedSequences = 1;
     return o;
 }
 
@@ -122,10 +124,12 @@ nlohmann::json runFaceDemo(const FaceDemoOptions& options) {
         options.maxFrames < options.minFrames ||
         !(options.trainingFraction > 0 && options.trainingFraction < 1) || options.basis < 1 ||
         options.maxKeys < 1 || options.maxKeys > 170 || !(options.tolerancePercent > 0) ||
-        options.timingFrames < 1 || options.threads < 0) {
+        options.timingFrames < 1 || options.threads < 0 || !(options.featherPercent >= 0 && options.featherPercent < 50) ||
+        !(options.maxLocalFraction > 0 && options.maxLocalFraction <= 1) || options.mixedSequences < 0) {
         throw InputError(
             "demo face: options out of range (sequences >= 2, novel >= 1, 8 <= minFrames <= maxFrames, "
-            "0 < training fraction < 1, basis >= 1, 1 <= keys <= 170, tolerance > 0, threads >= 0)");
+            "0 < training fraction < 1, basis >= 1, 1 <= keys <= 170, tolerance > 0, threads >= 0, "
+            "0 <= feather < 50, 0 < largest local fraction <= 1, mixed >= 0)");
     }
     const std::string out = options.outDir + "/";
     auto step = [&](std::string_view stage, double done, double total) {
@@ -147,6 +151,11 @@ nlohmann::json runFaceDemo(const FaceDemoOptions& options) {
     animationOptions.novelSequences = options.novelSequences;
     animationOptions.minFrames = options.minFrames;
     animationOptions.maxFrames = options.maxFrames;
+    animationOptions.mixedSequences = options.mixedSequences;
+    if (options.quick) {
+        animationOptions.mixedMinFrames = 96;
+        animationOptions.mixedMaxFrames = 96;
+    }
     auto animation = std::make_shared<const FaceAnimation>(FaceAnimation::generate(animationOptions));
     const FaceEvaluator evaluator(rig, animation, mesh);
     const Index n = rig->pointCount();
@@ -190,6 +199,8 @@ nlohmann::json runFaceDemo(const FaceDemoOptions& options) {
         to.fiducials.assign(IctFace::multiPie68().begin(), IctFace::multiPie68().end());
         to.tolerance = options.tolerancePercent * percent;
         to.regions.count = options.regions;
+        to.regions.featherFraction = options.featherPercent / 100.0;
+        to.regions.maxLocalFraction = options.maxLocalFraction;
         to.progress = [&](std::string_view stage, double done, double total) {
             return !options.progress ||
                    options.progress(std::string("train: ") + std::string(stage), done, total);
@@ -308,23 +319,12 @@ nlohmann::json runFaceDemo(const FaceDemoOptions& options) {
             ++disagreements;
     }
 
-    // --- local fail-through (issue 9): the validation sample and the novel set, both ways -------------
+    // --- local fail-through (issue 9): validation sample, novel and mixed sets, both ways ------------
     if (model.regions) {
         t = Clock::now();
-        std::vector<Index> validationSample, novelFrames;
-        for (size_t i = 0; i < validationSeqs.size() && i < 4; ++i) {
-            const FaceSequence& seq = animation->sequences()[validationSeqs[i]];
-            for (Index f = 0; f < seq.frameCount; ++f) validationSample.push_back(seq.firstFrame + f);
-        }
-        novelFrames = animation->framesOf(novelSeqs);
-        nlohmann::json local;
-        local["regions"] = model.regions->regionCount();
-        local["feather_width_pct_bbox"] = model.regions->featherWidth / percent;
-        local["validation"] = localFailThroughReport(model, evaluator, validationSample, percent, options.threads,
-                                                     [&](double d) { step("local validation", d, 1); });
-        local["novel"] = localFailThroughReport(model, evaluator, novelFrames, percent, options.threads,
-                                                [&](double d) { step("local novel", d, 1); });
-        report["local_fail_through"] = local;
+        report["local_fail_through"] = localFailThroughSets(model, evaluator, *animation, validationSeqs, novelSeqs,
+                                                            percent, options.threads, step,
+                                                            options.quick ? 24 : 0);
         timings["local_fail_through"] = seconds(t);
     }
 

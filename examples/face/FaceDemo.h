@@ -35,7 +35,18 @@ struct FaceDemoOptions {
     /// core, so every figure of the whole-frame soft cache is unchanged; report.json then gains
     /// "local_fail_through" with the validation (first 4 sequences) and novel sets measured both
     /// ways (FaceLocalReport.h).
-    long regions = 16;
+    long regions = 96;
+    /// Feather width of the regions, % of the head diagonal (RegionOptions::featherFraction).
+    /// 0.75: with 96 regions of ~280 points a band of 3% (the first default) spans several
+    /// regions, and every failing region dragged its neighbours into the full calculation.
+    double featherPercent = 0.75;
+    /// Fraction of the points above which a frame fails through whole
+    /// (RegionOptions::maxLocalFraction). 0.8: a subset pose of the face costs about its share of
+    /// a full pose plus the keys (pmsc_local_bench), so up to 80% of the points still pays.
+    double maxLocalFraction = 0.8;
+    /// Mixed sequences (FaceAnimationOptions::mixedSequences): ordinary shots of 5-8 s that move
+    /// novel controls for 1-3 s only; measured only by the local fail-through report.
+    long mixedSequences = 6;
     /// Calibration target T (TrainingOptions::tolerance) in % of the head's bounding-box
     /// diagonal: the largest point error a hit may have. 1%: the paper's own accuracy criterion
     /// ("less than 1% of the diagonal of the head bounding box"), so a hit is by construction

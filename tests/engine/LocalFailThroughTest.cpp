@@ -2,6 +2,7 @@
 // only the points of failing regions (and their feather bands) evaluated fully.
 #include "engine/Engine.h"
 #include "pmsc/ModelIO.h"
+#include "pmsc/RegionLearning.h"
 #include "pmsc/RegionMultiplier.h"
 #include "pmsc/Training.h"
 
@@ -84,6 +85,13 @@ const Model& trainedModel() {
             for (Index gx = 2; gx < 40; gx += 6) o.gridPoints.push_back(gy * 40 + gx);
         o.regions.featherFraction = 0.08;
         o.regions.energy = 0.999999;
+        // The first version's key rules: the defaults are set for the ICT face (RegionLearning.h),
+        // where a region holds a few hundred of 26,719 points; on this 1,600-point sheet 12 keys
+        // and a 1.5 margin make each of the 9 regions watch most of its neighbours' keys.
+        o.regions.minKeys = 6;
+        o.regions.keyRadius = 0;
+        o.regions.basisShare = 2.0 / 3.0;
+        o.regions.ratioMargin = 1.0;
         return pmsc::train(frames, o);
     }();
     return model;
@@ -164,6 +172,60 @@ TEST(LocalFailThrough, TrainingLearnsCompactRegionsThatRoundTrip) {
     const std::string bytes = pmsc::encodeModel(model);
     const Model back = pmsc::decodeModel(bytes, "m.pmsc");
     EXPECT_EQ(pmsc::encodeModel(back), bytes);
+}
+
+/// Region key neighbourhoods, basis share and ratio margin (issue 9's calibration fix): learned
+/// again from the same training with the rules switched, each must change what it claims to.
+TEST(LocalFailThrough, RegionKeysBasisShareAndRatioMarginDoWhatTheySay) {
+    const LocalSurface training(150, false, 0.0);
+    const pmsc::FrameSet frames = pmsc::evaluateFrames(training, 0, training.frameCount());
+    const Model& model = trainedModel();
+    Eigen::MatrixXd q(model.points * 3, frames.frames);
+    for (Index f = 0; f < frames.frames; ++f)
+        q.col(f) = Eigen::Map<const Eigen::VectorXd>(frames.frame(f), model.points * 3) - model.mean;
+    pmsc::RegionOptions o;
+    o.count = 9;
+    o.featherFraction = 0.08;
+    o.energy = 0.999999;
+    auto learn = [&](const pmsc::RegionOptions& ro) { return pmsc::learnRegions(q, model, ro, kTolerance, 5, {}); };
+    const pmsc::LocalRegions base = learn(o);
+    const Eigen::MatrixXd pos = Eigen::Map<const Eigen::MatrixXd>(model.mean.data(), 3, model.points).transpose();
+    const double diagonal = (pos.colwise().maxCoeff() - pos.colwise().minCoeff()).norm();
+    for (const auto& g : base.regions) {
+        // Every key within keyRadius of the region is one of its keys; at least minKeys (or all K).
+        EXPECT_GE(Index(g.keys.size()), std::min<Index>(o.minKeys, model.keyCount()));
+        for (Index k = 0; k < model.keyCount(); ++k) {
+            double d = 1e300;
+            for (const Index p : g.points) d = std::min(d, (pos.row(model.keyPoints[size_t(k)]) - pos.row(p)).norm());
+            if (d <= o.keyRadius * diagonal) EXPECT_TRUE(std::binary_search(g.keys.begin(), g.keys.end(), k)) << k;
+        }
+        EXPECT_LE(g.basisSize(), std::max<Index>(1, Index(o.basisShare * double(g.keys.size() * 3))));
+    }
+    // The margin divides eps_min of every calibrated region and nothing else changes.
+    pmsc::RegionOptions noMargin = o;
+    noMargin.ratioMargin = 1.0;
+    const pmsc::LocalRegions plain = learn(noMargin);
+    ASSERT_EQ(plain.regionCount(), base.regionCount());
+    for (Index r = 0; r < base.regionCount(); ++r) {
+        const auto& a = base.regions[size_t(r)];
+        const auto& b = plain.regions[size_t(r)];
+        EXPECT_EQ(a.keys, b.keys);
+        if (b.ratio > 0) EXPECT_NEAR(a.epsMin * o.ratioMargin, b.epsMin, 1e-12 * b.epsMin) << r;
+        EXPECT_DOUBLE_EQ(a.epsMax, 1.5 * a.epsMin);
+    }
+    // A larger radius only adds keys.
+    pmsc::RegionOptions wide = o;
+    wide.keyRadius = 0.5;
+    const pmsc::LocalRegions w = learn(wide);
+    for (Index r = 0; r < base.regionCount(); ++r)
+        EXPECT_TRUE(std::includes(w.regions[size_t(r)].keys.begin(), w.regions[size_t(r)].keys.end(),
+                                  base.regions[size_t(r)].keys.begin(), base.regions[size_t(r)].keys.end()));
+    pmsc::RegionOptions bad = o;
+    bad.ratioMargin = 0.5;
+    EXPECT_THROW(learn(bad), std::invalid_argument);
+    bad = o;
+    bad.basisShare = 0;
+    EXPECT_THROW(learn(bad), std::invalid_argument);
 }
 
 TEST(LocalFailThrough, OnlyTheRegionsThatMissAreEvaluatedAndTheErrorStaysUnderTolerance) {

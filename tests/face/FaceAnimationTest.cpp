@@ -68,6 +68,41 @@ TEST(FaceAnimation, NovelControlsMoveOnlyInNovelSequencesAndThroughout) {
     }
 }
 
+/// Mixed sequences (issue 9): appended without changing a frame before them, never split into
+/// training, and moving their novel controls for one window of 1-3 s (plus 6-frame ramps) only.
+TEST(FaceAnimation, MixedSequencesMoveNovelControlsForAFewSecondsOnly) {
+    FaceAnimationOptions o = small();
+    const FaceAnimation plain = FaceAnimation::generate(o);
+    o.mixedSequences = 4;
+    const FaceAnimation a = FaceAnimation::generate(o);
+    ASSERT_EQ(Index(a.sequences().size()), o.sequences + o.novelSequences + 4);
+    for (Index f = 0; f < plain.frameCount(); ++f) ASSERT_EQ(a.frame(f), plain.frame(f)) << f;
+    std::vector<Index> training, validation;
+    a.splitOrdinary(0.5, 3, training, validation);
+    for (const Index s : training) EXPECT_FALSE(a.sequences()[size_t(s)].mixed);
+    for (const Index s : validation) EXPECT_FALSE(a.sequences()[size_t(s)].mixed);
+    for (Index i = o.sequences + o.novelSequences; i < Index(a.sequences().size()); ++i) {
+        const FaceSequence& s = a.sequences()[size_t(i)];
+        EXPECT_TRUE(s.mixed);
+        EXPECT_FALSE(s.novel);
+        EXPECT_GE(s.frameCount, o.mixedMinFrames);
+        ASSERT_FALSE(s.novelControls.empty()) << s.name;
+        Index moving = 0, first = -1, last = -1;
+        for (Index f = s.firstFrame; f < s.firstFrame + s.frameCount; ++f) {
+            bool any = false;
+            for (const int c : s.novelControls) any = any || a.frame(f)[c] > 0;
+            if (any) {
+                ++moving;
+                if (first < 0) first = f;
+                last = f;
+            }
+        }
+        EXPECT_GE(moving, 24) << s.name;                 // at least a second
+        EXPECT_LE(last - first + 1, 72 + 12) << s.name;  // at most 3 s and the ramps, in one window
+        EXPECT_LT(moving, s.frameCount) << s.name;       // ordinary before or after it
+    }
+}
+
 TEST(FaceAnimation, SplitBySequenceIsAboutAThird) {
     const FaceAnimation a = FaceAnimation::generate(small());
     std::vector<Index> training, validation;

@@ -104,6 +104,23 @@ TEST(FaceDemoSmoke, QuickRunWritesACompleteReport) {
     }
     EXPECT_TRUE(fs::exists(out / "keys.png"));
     EXPECT_TRUE(fs::exists(out / "frames.csv"));
+    // Local fail-through (issue 9) reported both ways on the three sets; the whole-frame way
+    // evaluates every point of a non-hit frame, and neither way breaks the tolerance.
+    const nlohmann::json& local = r.at("local_fail_through");
+    for (const char* set : {"validation", "novel", "mixed"}) {
+        ASSERT_TRUE(local.contains(set)) << set;
+        const nlohmann::json& s = local.at(set);
+        EXPECT_GT(s.at("frames").get<long>(), 0) << set;
+        EXPECT_DOUBLE_EQ(s.at("whole_frame").at("points_evaluated_fraction_mean").get<double>(),
+                         1.0 - s.at("hit_rate").get<double>())
+            << set;
+        for (const char* way : {"local", "whole_frame"})
+            EXPECT_LT(s.at(way).at("soft_max_error_pct_bbox_max").get<double>(), r.at("tolerance_pct_bbox").get<double>())
+                << set << " " << way;
+        EXPECT_LE(s.at("local").at("points_evaluated_fraction_mean").get<double>(),
+                  s.at("whole_frame").at("points_evaluated_fraction_mean").get<double>())
+            << set;
+    }
 #endif
 }
 
