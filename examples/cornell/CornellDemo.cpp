@@ -46,6 +46,358 @@ std::string frameTag(Index pathFrame) {
     return buf;
 }
 
+// --- the steps of runCornellDemo, in the order it runs them ------------------------------------
+
+// What every step needs: the options, the worker arena and its size, the progress hook, the timings.
+struct DemoRun {
+    const CornellDemoOptions& o;
+    tbb::task_arena& arena;
+    int threads;              // of the arena and the engine
+    nlohmann::json& timings;  // report.json's "seconds"
+
+    // Reports progress; throws Cancelled when the hook asks to stop.
+    void progress(std::string_view stage, double done, double total) const {
+        if (o.progress && !o.progress(stage, done, total)) throw Cancelled("demo cornell: interrupted");
+    }
+};
+
+void checkOptions(const CornellDemoOptions& o) {
+    if (o.outDir.empty()) throw InputError("demo cornell: --out DIR is required");
+    if (o.points < 1000 || o.points > 4000000)
+        throw InputError("demo cornell: --points " + std::to_string(o.points) + " outside [1000, 4000000]");
+    if (o.samples < 2 || o.samples > 65536)
+        throw InputError("demo cornell: --samples " + std::to_string(o.samples) + " outside [2, 65536]");
+    if (o.basis < 1 || o.keys < 1 || o.gridKeys < 0 || o.gridKeys > o.keys || o.scatteredLights < 1 ||
+        o.pathFrames < 1 || o.pathFullEvery < 1 || o.referenceMultiplier < 1 || o.referencePoints < 1 || o.referenceFrames < 1 ||
+        o.imageSize < 8 || o.renderFrames < 0 || o.threads < 0 || !(o.toleranceFraction > 0))
+        throw InputError("demo cornell: an option is out of range");
+}
+
+void createOutputFolder(const std::string& outDir) {
+    std::error_code ec;
+    std::filesystem::create_directories(outDir, ec);
+    if (ec || !std::filesystem::is_directory(outDir))
+        throw IoError("cannot create " + outDir + ": " + (ec ? ec.message() : "not a directory"));
+}
+
+// 1. The cache's points: surfaces voxelized to about `points` active voxels.
+std::shared_ptr<const CornellWorld> voxelizeBox(const DemoRun& run) {
+    const auto t = Clock::now();
+    run.progress("voxelize", 0, 1);
+    auto world = CornellWorld::create(run.o.points);
+    run.timings["voxelize"] = secondsSince(t);
+    return world;
+}
+
+// 2. Training frames: one point light each on the 12 x 12 grid below the ceiling, by full gathers.
+FrameSet gatherTrainingFrames(const DemoRun& run, const std::shared_ptr<const CornellWorld>& world, const LightRig& rig) {
+    const Index n = static_cast<Index>(world->voxels.size());
+    const CornellEvaluator trainEval(world, rig.trainingLights(), run.o.samples, "cornell-train");
+    const Index trainFrames = trainEval.frameCount();
+    const auto t = Clock::now();
+    FrameSet q(trainFrames, n, 3);
+    for (Index f = 0; f < trainFrames; ++f) {
+        run.progress("training frames", static_cast<double>(f), static_cast<double>(trainFrames));
+        run.arena.execute([&] { trainEval.evaluateAll(f, q.frame(f)); });
+    }
+    run.timings["training_gathers"] = secondsSince(t);
+    return q;
+}
+
+// The largest indirect irradiance (Euclidean over RGB) of any point in any training frame.
+double peakIrradiance(const FrameSet& q) {
+    double peak = 0;
+    for (Index i = 0; i < q.frames * q.points; ++i) {
+        const double* v = q.values.data() + 3 * i;
+        peak = std::max(peak, std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]));
+    }
+    return peak;
+}
+
+// About `count` key points from a sparse spatial grid over the voxels (section 4).
+std::vector<Index> gridKeyPoints(const CornellWorld& world, int count) {
+    const Index n = static_cast<Index>(world.voxels.size());
+    Eigen::MatrixXd positions(n, 3);
+    for (Index i = 0; i < n; ++i) {
+        const Vec3 p = world.voxels.position[static_cast<std::size_t>(i)];
+        positions.row(i) << p.x, p.y, p.z;
+    }
+    return sparseGridPointsByCount(positions, count);
+}
+
+struct TrainedModel {
+    Model model;
+    TrainingReport report;
+    double peak = 0;                // peakIrradiance() of the training frames
+    double tolerance = 0;           // of a hit, toleranceFraction x peak
+    std::size_t gridKeyPoints = 0;  // key points asked of the spatial grid
+    Index trainFrames = 0;
+};
+
+// 3. Train: basis, key points (seeded with a sparse spatial grid), calibrated eps. Releases the
+// training frames (144 x N x 3 doubles) when done.
+TrainedModel trainModel(const DemoRun& run, const CornellWorld& world, FrameSet q) {
+    const CornellDemoOptions& o = run.o;
+    const auto t = Clock::now();
+    TrainedModel trained;
+    trained.trainFrames = q.frames;
+    trained.peak = peakIrradiance(q);
+    TrainingOptions topt;
+    topt.basis = o.basis;
+    topt.maxKeys = o.keys;
+    topt.tolerance = o.toleranceFraction * trained.peak;
+    if (o.gridKeys > 0) topt.gridPoints = gridKeyPoints(world, o.gridKeys);
+    topt.progress = [&](std::string_view stage, double done, double total) {
+        run.progress(std::string("train: ") + std::string(stage), done, total);
+        return true;
+    };
+    run.arena.execute([&] { trained.model = train(q, topt, &trained.report); });
+    q = FrameSet();  // 144 x N x 3 doubles: not needed any more
+    run.timings["train"] = secondsSince(t);
+    trained.tolerance = topt.tolerance;
+    trained.gridKeyPoints = topt.gridPoints.size();
+    return trained;
+}
+
+// 4. Validation frames: scattered lights, then the animation path; which get a full gather
+// (errors measured) and which are rendered.
+struct ValidationFrames {
+    std::vector<PointLight> lights;  // one per frame
+    Index scattered = 0;             // frames [0, scattered) are the scattered lights
+    std::set<Index> fullFrames, renderFrames;
+};
+
+ValidationFrames chooseValidationFrames(const CornellDemoOptions& o, const LightRig& rig) {
+    ValidationFrames v;
+    v.lights = rig.scatteredLights(o.scatteredLights);
+    v.scattered = static_cast<Index>(v.lights.size());
+    for (const PointLight& l : rig.animationPath(o.pathFrames)) v.lights.push_back(l);
+    for (Index f = 0; f < v.scattered; ++f) v.fullFrames.insert(f);
+    for (Index p = 0; p < o.pathFrames; p += o.pathFullEvery) v.fullFrames.insert(v.scattered + p);
+    for (int r = 0; r < o.renderFrames; ++r) {
+        Index p = static_cast<Index>(r) * o.pathFrames / std::max(1, o.renderFrames);
+        p -= p % o.pathFullEvery;  // a frame that has a full gather
+        v.renderFrames.insert(v.scattered + p);
+        v.fullFrames.insert(v.scattered + p);
+    }
+    return v;
+}
+
+struct FullGathers {
+    std::map<Index, std::vector<double>> full;  // per frame of ValidationFrames::fullFrames
+    double secondsPerFrame = 0;
+};
+
+FullGathers gatherFullFrames(const DemoRun& run, const CornellEvaluator& valEval, const std::set<Index>& fullFrames) {
+    const Index n = valEval.pointCount();
+    FullGathers g;
+    const auto t = Clock::now();
+    Index done = 0;
+    for (Index f : fullFrames) {
+        run.progress("validation full gathers", static_cast<double>(done++), static_cast<double>(fullFrames.size()));
+        auto& v = g.full[f];
+        v.resize(static_cast<std::size_t>(3 * n));
+        run.arena.execute([&] { valEval.evaluateAll(f, v.data()); });
+    }
+    g.secondsPerFrame = secondsSince(t) / static_cast<double>(fullFrames.size());
+    return g;
+}
+
+// The points and frames of the converged reference.
+struct ReferenceSubset {
+    std::vector<Index> points;  // sorted
+    Index frames = 0;           // the first this many scattered frames
+    std::set<Index> frameSet;   // the same, as the sink wants them
+};
+
+// Reference subset (fixed seed): a few thousand random points.
+ReferenceSubset chooseReferenceSubset(const CornellDemoOptions& o, Index n, Index scattered) {
+    ReferenceSubset r;
+    std::vector<Index>& subset = r.points;
+    subset.resize(static_cast<std::size_t>(n));
+    std::iota(subset.begin(), subset.end(), Index{0});
+    std::mt19937 rng(20070101);
+    std::shuffle(subset.begin(), subset.end(), rng);
+    subset.resize(std::min<std::size_t>(subset.size(), static_cast<std::size_t>(o.referencePoints)));
+    std::sort(subset.begin(), subset.end());
+    r.frames = std::min<Index>(scattered, o.referenceFrames);
+    for (Index f = 0; f < r.frames; ++f) r.frameSet.insert(f);
+    return r;
+}
+
+// 5. The validation frames through the engine: key points, projection, soft cache per frame.
+engine::RunStats runValidationThroughEngine(const DemoRun& run, const Model& model, const CornellEvaluator& valEval,
+                                            ValidationSink& sink) {
+    engine::EngineOptions eopt;
+    eopt.threads = run.threads;
+    eopt.keepPointMultiplication = true;
+    eopt.progress = [&](const engine::Progress& p) {
+        run.progress("validation through the engine", static_cast<double>(p.framesDone), static_cast<double>(p.framesTotal));
+    };
+    engine::Engine eng(model, valEval, eopt);
+    return eng.run(engine::FrameRange{0, valEval.frameCount(), 1}, sink);
+}
+
+struct ReferenceErrors {
+    RelError full, pm;  // the full gather's and PM's against the converged reference
+};
+
+// 6. Converged reference (referenceMultiplier x the samples) on the subset, scattered frames.
+ReferenceErrors measureAgainstConvergedReference(const DemoRun& run, const std::shared_ptr<const CornellWorld>& world,
+                                                 const LightRig& rig, const ReferenceSubset& reference,
+                                                 std::map<Index, std::vector<double>>& full, ValidationSink& sink) {
+    const CornellDemoOptions& o = run.o;
+    const std::vector<Index>& subset = reference.points;
+    const CornellEvaluator refEval(world, rig.scatteredLights(o.scatteredLights), o.samples * o.referenceMultiplier,
+                                   "cornell-reference");
+    ReferenceErrors errors;
+    const auto t = Clock::now();
+    for (Index f = 0; f < reference.frames; ++f) {
+        run.progress("converged reference", static_cast<double>(f), static_cast<double>(reference.frames));
+        std::vector<double> ref(3 * subset.size());
+        run.arena.execute([&] {
+            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, subset.size(), 16), [&](const auto& r) {
+                refEval.evaluate(f, std::span<const Index>(subset.data() + r.begin(), r.size()), ref.data() + 3 * r.begin());
+            });
+        });
+        std::vector<double> fullAt(3 * subset.size());
+        for (std::size_t i = 0; i < subset.size(); ++i)
+            for (int c = 0; c < 3; ++c) fullAt[3 * i + c] = full[f][static_cast<std::size_t>(3 * subset[i] + c)];
+        errors.full.add(fullAt.data(), ref.data(), ref.size());
+        errors.pm.add(sink.pmAtSubset[f].data(), ref.data(), ref.size());
+    }
+    run.timings["reference"] = secondsSince(t);
+    return errors;
+}
+
+// One camera's render of a frame with both grids: DIR/CAMERA_TAG.png (full | PMSC | |diff| x 10)
+// and .pfm; returns its entry of "images".
+nlohmann::json renderWithBothGrids(const DemoRun& run, const CornellWorld& world, const Camera& cam,
+                                   const PointLight& light, const LightingCacheGrid& fullGrid,
+                                   const LightingCacheGrid& pmGrid, const std::string& tag, Index pathFrame,
+                                   CacheState state) {
+    std::vector<Image> imgs;
+    run.arena.execute([&] { imgs = renderWithCaches(world, cam, light, {&fullGrid, &pmGrid}, run.o.imageSize); });
+    const Image diff = absDifference(imgs[0], imgs[1], 10.0f);
+    const Image panel = sideBySide({&imgs[0], &imgs[1], &diff});
+    const std::string base = run.o.outDir + "/" + cam.name + "_" + tag;
+    writePng(base + ".png", panel, exposureFor(imgs[0]));
+    writePfm(base + ".pfm", panel);
+    RelError imgErr;
+    std::vector<double> a(imgs[1].rgb.begin(), imgs[1].rgb.end()), b(imgs[0].rgb.begin(), imgs[0].rgb.end());
+    imgErr.add(a.data(), b.data(), a.size());
+    return {{"camera", cam.name}, {"path_frame", pathFrame}, {"png", cam.name + "_" + tag + ".png"},
+            {"pfm", cam.name + "_" + tag + ".pfm"}, {"state", toString(state)},
+            {"image_rms_rel_error", imgErr.value()}};
+}
+
+struct WrittenFiles {
+    nlohmann::json images = nlohmann::json::array(), vdbs = nlohmann::json::array();
+};
+
+// 7. Lighting-cache grids and renders from the moving cameras.
+WrittenFiles writeGridsAndRenders(const DemoRun& run, const CornellWorld& world, const ValidationFrames& frames,
+                                  std::map<Index, std::vector<double>>& full, ValidationSink& sink) {
+    const CornellDemoOptions& o = run.o;
+    const auto t = Clock::now();
+    WrittenFiles written;
+    const auto cameraCount = demoCameras(0).size();
+    Index rendered = 0;
+    for (Index f : frames.renderFrames) {
+        const Index pathFrame = f - frames.scattered;
+        const auto rec = std::find_if(sink.records.begin(), sink.records.end(), [&](const auto& r) { return r.frame == f; });
+        CacheMetadata meta{static_cast<std::int32_t>(f), frames.lights[static_cast<std::size_t>(f)].position,
+                           std::string(toString(rec->state)), rec->weight, rec->keyRms};
+        const LightingCacheGrid pmGrid(world.voxels, sink.soft[f], meta);
+        CacheMetadata fullMeta = meta;
+        fullMeta.state = "full";
+        fullMeta.weight = 1;
+        const LightingCacheGrid fullGrid(world.voxels, full[f], fullMeta);
+        const std::string tag = frameTag(pathFrame);
+        for (const auto& [name, grid] : {std::pair{"pmsc", &pmGrid}, std::pair{"full", &fullGrid}}) {
+            const std::string path = o.outDir + "/cache_" + name + "_" + tag + ".vdb";
+            grid->write(path);
+            written.vdbs.push_back(std::filesystem::path(path).filename().string());
+        }
+        const double camT = o.pathFrames > 1 ? static_cast<double>(pathFrame) / (o.pathFrames - 1) : 0.0;
+        for (const Camera& cam : demoCameras(camT)) {
+            run.progress("renders", static_cast<double>(rendered++), static_cast<double>(frames.renderFrames.size() * cameraCount));
+            written.images.push_back(renderWithBothGrids(run, world, cam, frames.lights[static_cast<std::size_t>(f)],
+                                                         fullGrid, pmGrid, tag, pathFrame, rec->state));
+        }
+    }
+    run.timings["grids_and_renders"] = secondsSince(t);
+    return written;
+}
+
+// report.json's "frames": each validation frame's decision and, where it had a full gather, errors.
+nlohmann::json frameTable(const std::vector<ValidationSink::FrameRecord>& records, Index scattered) {
+    nlohmann::json frames = nlohmann::json::array();
+    for (const auto& r : records) {
+        nlohmann::json fr{{"frame", r.frame},
+                          {"kind", r.frame < scattered ? "scattered" : "path"},
+                          {"state", toString(r.state)},
+                          {"weight", r.weight},
+                          {"key_rms", r.keyRms}};
+        if (r.pmRelError >= 0) {
+            fr["pm_rel_error"] = r.pmRelError;
+            fr["soft_rel_error"] = r.softRelError;
+        }
+        frames.push_back(fr);
+    }
+    return frames;
+}
+
+// Sizes, speed, decisions and errors against the full gathers and the converged reference.
+void reportResults(nlohmann::json& report, const CornellDemoOptions& o, Index n, const TrainedModel& trained,
+                   Index testFrames, double fullSecondsPerFrame, const engine::RunStats& stats,
+                   const ValidationSink& sink, const ValidationFrames& frames, const ReferenceSubset& reference,
+                   const ReferenceErrors& refErrors) {
+    const double pmscSecondsPerFrame = stats.wallSeconds / static_cast<double>(testFrames);
+    report["points"] = n;
+    report["key_points"] = trained.model.keyCount();
+    report["basis"] = trained.model.basisSize();
+    report["train_frames"] = trained.trainFrames;
+    report["test_frames"] = testFrames;
+    report["samples_per_point"] = o.samples;
+    report["full_seconds_per_frame"] = fullSecondsPerFrame;
+    report["pmsc_seconds_per_frame"] = pmscSecondsPerFrame;
+    report["speedup"] = fullSecondsPerFrame / pmscSecondsPerFrame;
+    report["rms_rel_error"] = sink.pmError.value();
+    report["soft_rms_rel_error"] = sink.softError.value();
+    report["rms_rel_error_scattered"] = sink.pmScattered.value();
+    report["rms_rel_error_path"] = sink.pmPath.value();
+    report["error_frames"] = frames.fullFrames.size();
+    report["hit_rate"] = static_cast<double>(stats.hits) / static_cast<double>(testFrames);
+    report["hits"] = stats.hits;
+    report["blends"] = stats.blends;
+    report["misses"] = stats.misses;
+    report["reference_rms_rel_error_full"] = refErrors.full.value();
+    report["reference_rms_rel_error_pm"] = refErrors.pm.value();
+    report["reference_points"] = reference.points.size();
+    report["reference_samples_per_point"] = o.samples * o.referenceMultiplier;
+    report["reference_frames"] = reference.frames;
+}
+
+// The model and its training, and the set-up of the box.
+void reportModelAndSetUp(nlohmann::json& report, const DemoRun& run, const CornellWorld& world,
+                         const TrainedModel& trained, const LightRig& rig) {
+    const Model& model = trained.model;
+    report["bounces"] = 1;
+    report["voxel_size_mm"] = world.voxels.voxelSizeMm;
+    report["grid_key_points"] = trained.gridKeyPoints;
+    report["eps_min"] = model.epsMin;
+    report["eps_max"] = model.epsMax;
+    report["tolerance"] = trained.tolerance;
+    report["peak_training_irradiance"] = trained.peak;
+    report["energy_captured"] = model.energyCaptured();
+    report["train_max_point_residual"] = model.trainMaxPointResidual;
+    report["training_warnings"] = trained.report.warnings;
+    report["threads"] = run.threads;
+    report["light_below_ceiling_mm"] = rig.belowCeilingMm;
+    report["quick"] = run.o.quick;
+}
+
 }  // namespace
 
 CornellDemoOptions CornellDemoOptions::quickOptions() {
@@ -65,251 +417,42 @@ CornellDemoOptions CornellDemoOptions::quickOptions() {
 
 nlohmann::json runCornellDemo(const CornellDemoOptions& o) {
     const auto start = Clock::now();
-    if (o.outDir.empty()) throw InputError("demo cornell: --out DIR is required");
-    if (o.points < 1000 || o.points > 4000000)
-        throw InputError("demo cornell: --points " + std::to_string(o.points) + " outside [1000, 4000000]");
-    if (o.samples < 2 || o.samples > 65536)
-        throw InputError("demo cornell: --samples " + std::to_string(o.samples) + " outside [2, 65536]");
-    if (o.basis < 1 || o.keys < 1 || o.gridKeys < 0 || o.gridKeys > o.keys || o.scatteredLights < 1 ||
-        o.pathFrames < 1 || o.pathFullEvery < 1 || o.referenceMultiplier < 1 || o.referencePoints < 1 || o.referenceFrames < 1 ||
-        o.imageSize < 8 || o.renderFrames < 0 || o.threads < 0 || !(o.toleranceFraction > 0))
-        throw InputError("demo cornell: an option is out of range");
-    {
-        std::error_code ec;
-        std::filesystem::create_directories(o.outDir, ec);
-        if (ec || !std::filesystem::is_directory(o.outDir))
-            throw IoError("cannot create " + o.outDir + ": " + (ec ? ec.message() : "not a directory"));
-    }
+    checkOptions(o);
+    createOutputFolder(o.outDir);
     const int threads = o.threads > 0 ? o.threads : tbb::info::default_concurrency();
     tbb::task_arena arena(threads);
-    auto progress = [&](std::string_view stage, double done, double total) {
-        if (o.progress && !o.progress(stage, done, total)) throw Cancelled("demo cornell: interrupted");
-    };
     nlohmann::json report;
     nlohmann::json timings;
+    const DemoRun run{o, arena, threads, timings};
 
-    // 1. The cache's points: surfaces voxelized to about `points` active voxels.
-    auto t = Clock::now();
-    progress("voxelize", 0, 1);
-    const auto world = CornellWorld::create(o.points);
+    const auto world = voxelizeBox(run);
     const Index n = static_cast<Index>(world->voxels.size());
-    timings["voxelize"] = secondsSince(t);
-
-    // 2. Training frames: one point light each on the 12 x 12 grid below the ceiling.
     const LightRig rig;
-    const CornellEvaluator trainEval(world, rig.trainingLights(), o.samples, "cornell-train");
-    const Index trainFrames = trainEval.frameCount();
-    t = Clock::now();
-    FrameSet q(trainFrames, n, 3);
-    for (Index f = 0; f < trainFrames; ++f) {
-        progress("training frames", static_cast<double>(f), static_cast<double>(trainFrames));
-        arena.execute([&] { trainEval.evaluateAll(f, q.frame(f)); });
-    }
-    const double trainGatherSeconds = secondsSince(t);
-    timings["training_gathers"] = trainGatherSeconds;
+    const TrainedModel trained = trainModel(run, *world, gatherTrainingFrames(run, world, rig));
 
-    // 3. Train: basis, key points (seeded with a sparse spatial grid), calibrated eps.
-    t = Clock::now();
-    double peak = 0;
-    for (Index i = 0; i < q.frames * n; ++i) {
-        const double* v = q.values.data() + 3 * i;
-        peak = std::max(peak, std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]));
-    }
-    TrainingOptions topt;
-    topt.basis = o.basis;
-    topt.maxKeys = o.keys;
-    topt.tolerance = o.toleranceFraction * peak;
-    if (o.gridKeys > 0) {
-        Eigen::MatrixXd positions(n, 3);
-        for (Index i = 0; i < n; ++i) {
-            const Vec3 p = world->voxels.position[static_cast<std::size_t>(i)];
-            positions.row(i) << p.x, p.y, p.z;
-        }
-        topt.gridPoints = sparseGridPointsByCount(positions, o.gridKeys);
-    }
-    topt.progress = [&](std::string_view stage, double done, double total) {
-        progress(std::string("train: ") + std::string(stage), done, total);
-        return true;
-    };
-    TrainingReport trep;
-    Model model;
-    arena.execute([&] { model = train(q, topt, &trep); });
-    q = FrameSet();  // 144 x N x 3 doubles: not needed any more
-    timings["train"] = secondsSince(t);
+    const ValidationFrames frames = chooseValidationFrames(o, rig);
+    const CornellEvaluator valEval(world, frames.lights, o.samples, "cornell");
+    FullGathers gathers = gatherFullFrames(run, valEval, frames.fullFrames);
+    const ReferenceSubset reference = chooseReferenceSubset(o, n, frames.scattered);
 
-    // 4. Validation frames: scattered lights, then the animation path. Full gathers of the
-    // frames whose errors are measured and that are rendered.
-    std::vector<PointLight> lights = rig.scatteredLights(o.scatteredLights);
-    const Index scattered = static_cast<Index>(lights.size());
-    for (const PointLight& l : rig.animationPath(o.pathFrames)) lights.push_back(l);
-    const CornellEvaluator valEval(world, lights, o.samples, "cornell");
-    const Index testFrames = valEval.frameCount();
-    std::set<Index> fullFrames, renderFrames;
-    for (Index f = 0; f < scattered; ++f) fullFrames.insert(f);
-    for (Index p = 0; p < o.pathFrames; p += o.pathFullEvery) fullFrames.insert(scattered + p);
-    for (int r = 0; r < o.renderFrames; ++r) {
-        Index p = static_cast<Index>(r) * o.pathFrames / std::max(1, o.renderFrames);
-        p -= p % o.pathFullEvery;  // a frame that has a full gather
-        renderFrames.insert(scattered + p);
-        fullFrames.insert(scattered + p);
-    }
-    std::map<Index, std::vector<double>> full;
-    t = Clock::now();
-    Index done = 0;
-    for (Index f : fullFrames) {
-        progress("validation full gathers", static_cast<double>(done++), static_cast<double>(fullFrames.size()));
-        auto& v = full[f];
-        v.resize(static_cast<std::size_t>(3 * n));
-        arena.execute([&] { valEval.evaluateAll(f, v.data()); });
-    }
-    const double fullSecondsPerFrame = secondsSince(t) / static_cast<double>(fullFrames.size());
-
-    // Reference subset (fixed seed): a few thousand random points.
-    std::vector<Index> subset(static_cast<std::size_t>(n));
-    std::iota(subset.begin(), subset.end(), Index{0});
-    std::mt19937 rng(20070101);
-    std::shuffle(subset.begin(), subset.end(), rng);
-    subset.resize(std::min<std::size_t>(subset.size(), static_cast<std::size_t>(o.referencePoints)));
-    std::sort(subset.begin(), subset.end());
-    const Index referenceFrames = std::min<Index>(scattered, o.referenceFrames);
-    std::set<Index> subsetFrames;
-    for (Index f = 0; f < referenceFrames; ++f) subsetFrames.insert(f);
-
-    // 5. The validation frames through the engine: key points, projection, soft cache per frame.
-    ValidationSink sink("cornell", full, renderFrames, subset, subsetFrames);
-    sink.scatteredCount = scattered;
-    engine::EngineOptions eopt;
-    eopt.threads = threads;
-    eopt.keepPointMultiplication = true;
-    eopt.progress = [&](const engine::Progress& p) {
-        progress("validation through the engine", static_cast<double>(p.framesDone), static_cast<double>(p.framesTotal));
-    };
-    engine::Engine eng(model, valEval, eopt);
-    const engine::RunStats stats = eng.run(engine::FrameRange{0, testFrames, 1}, sink);
-    const double pmscSecondsPerFrame = stats.wallSeconds / static_cast<double>(testFrames);
-
-    // 6. Converged reference (referenceMultiplier x the samples) on the subset, scattered frames.
-    const CornellEvaluator refEval(world, rig.scatteredLights(o.scatteredLights), o.samples * o.referenceMultiplier,
-                                   "cornell-reference");
-    RelError refFull, refPm;
-    t = Clock::now();
-    for (Index f = 0; f < referenceFrames; ++f) {
-        progress("converged reference", static_cast<double>(f), static_cast<double>(referenceFrames));
-        std::vector<double> ref(3 * subset.size());
-        arena.execute([&] {
-            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, subset.size(), 16), [&](const auto& r) {
-                refEval.evaluate(f, std::span<const Index>(subset.data() + r.begin(), r.size()), ref.data() + 3 * r.begin());
-            });
-        });
-        std::vector<double> fullAt(3 * subset.size());
-        for (std::size_t i = 0; i < subset.size(); ++i)
-            for (int c = 0; c < 3; ++c) fullAt[3 * i + c] = full[f][static_cast<std::size_t>(3 * subset[i] + c)];
-        refFull.add(fullAt.data(), ref.data(), ref.size());
-        refPm.add(sink.pmAtSubset[f].data(), ref.data(), ref.size());
-    }
-    timings["reference"] = secondsSince(t);
-
-    // 7. Lighting-cache grids and renders from the moving cameras.
-    t = Clock::now();
-    nlohmann::json images = nlohmann::json::array(), vdbs = nlohmann::json::array();
-    const auto cameraCount = demoCameras(0).size();
-    Index rendered = 0;
-    for (Index f : renderFrames) {
-        const Index pathFrame = f - scattered;
-        const auto rec = std::find_if(sink.records.begin(), sink.records.end(), [&](const auto& r) { return r.frame == f; });
-        CacheMetadata meta{static_cast<std::int32_t>(f), lights[static_cast<std::size_t>(f)].position,
-                           std::string(toString(rec->state)), rec->weight, rec->keyRms};
-        const LightingCacheGrid pmGrid(world->voxels, sink.soft[f], meta);
-        CacheMetadata fullMeta = meta;
-        fullMeta.state = "full";
-        fullMeta.weight = 1;
-        const LightingCacheGrid fullGrid(world->voxels, full[f], fullMeta);
-        const std::string tag = frameTag(pathFrame);
-        for (const auto& [name, grid] : {std::pair{"pmsc", &pmGrid}, std::pair{"full", &fullGrid}}) {
-            const std::string path = o.outDir + "/cache_" + name + "_" + tag + ".vdb";
-            grid->write(path);
-            vdbs.push_back(std::filesystem::path(path).filename().string());
-        }
-        const double camT = o.pathFrames > 1 ? static_cast<double>(pathFrame) / (o.pathFrames - 1) : 0.0;
-        for (const Camera& cam : demoCameras(camT)) {
-            progress("renders", static_cast<double>(rendered++), static_cast<double>(renderFrames.size() * cameraCount));
-            std::vector<Image> imgs;
-            arena.execute([&] {
-                imgs = renderWithCaches(*world, cam, lights[static_cast<std::size_t>(f)], {&fullGrid, &pmGrid}, o.imageSize);
-            });
-            const Image diff = absDifference(imgs[0], imgs[1], 10.0f);
-            const Image panel = sideBySide({&imgs[0], &imgs[1], &diff});
-            const std::string base = o.outDir + "/" + cam.name + "_" + tag;
-            writePng(base + ".png", panel, exposureFor(imgs[0]));
-            writePfm(base + ".pfm", panel);
-            RelError imgErr;
-            std::vector<double> a(imgs[1].rgb.begin(), imgs[1].rgb.end()), b(imgs[0].rgb.begin(), imgs[0].rgb.end());
-            imgErr.add(a.data(), b.data(), a.size());
-            images.push_back({{"camera", cam.name}, {"path_frame", pathFrame}, {"png", cam.name + "_" + tag + ".png"},
-                              {"pfm", cam.name + "_" + tag + ".pfm"}, {"state", toString(rec->state)},
-                              {"image_rms_rel_error", imgErr.value()}});
-        }
-    }
-    timings["grids_and_renders"] = secondsSince(t);
+    ValidationSink sink("cornell", gathers.full, frames.renderFrames, reference.points, reference.frameSet);
+    sink.scatteredCount = frames.scattered;
+    const engine::RunStats stats = runValidationThroughEngine(run, trained.model, valEval, sink);
+    const ReferenceErrors refErrors = measureAgainstConvergedReference(run, world, rig, reference, gathers.full, sink);
+    const WrittenFiles written = writeGridsAndRenders(run, *world, frames, gathers.full, sink);
 
     // 8. The report.
-    nlohmann::json frames = nlohmann::json::array();
-    for (const auto& r : sink.records) {
-        nlohmann::json fr{{"frame", r.frame},
-                          {"kind", r.frame < scattered ? "scattered" : "path"},
-                          {"state", toString(r.state)},
-                          {"weight", r.weight},
-                          {"key_rms", r.keyRms}};
-        if (r.pmRelError >= 0) {
-            fr["pm_rel_error"] = r.pmRelError;
-            fr["soft_rel_error"] = r.softRelError;
-        }
-        frames.push_back(fr);
-    }
-    report["points"] = n;
-    report["key_points"] = model.keyCount();
-    report["basis"] = model.basisSize();
-    report["train_frames"] = trainFrames;
-    report["test_frames"] = testFrames;
-    report["samples_per_point"] = o.samples;
-    report["full_seconds_per_frame"] = fullSecondsPerFrame;
-    report["pmsc_seconds_per_frame"] = pmscSecondsPerFrame;
-    report["speedup"] = fullSecondsPerFrame / pmscSecondsPerFrame;
-    report["rms_rel_error"] = sink.pmError.value();
-    report["soft_rms_rel_error"] = sink.softError.value();
-    report["rms_rel_error_scattered"] = sink.pmScattered.value();
-    report["rms_rel_error_path"] = sink.pmPath.value();
-    report["error_frames"] = fullFrames.size();
-    report["hit_rate"] = static_cast<double>(stats.hits) / static_cast<double>(testFrames);
-    report["hits"] = stats.hits;
-    report["blends"] = stats.blends;
-    report["misses"] = stats.misses;
-    report["reference_rms_rel_error_full"] = refFull.value();
-    report["reference_rms_rel_error_pm"] = refPm.value();
-    report["reference_points"] = subset.size();
-    report["reference_samples_per_point"] = o.samples * o.referenceMultiplier;
-    report["reference_frames"] = referenceFrames;
-    report["bounces"] = 1;
-    report["voxel_size_mm"] = world->voxels.voxelSizeMm;
-    report["grid_key_points"] = topt.gridPoints.size();
-    report["eps_min"] = model.epsMin;
-    report["eps_max"] = model.epsMax;
-    report["tolerance"] = topt.tolerance;
-    report["peak_training_irradiance"] = peak;
-    report["energy_captured"] = model.energyCaptured();
-    report["train_max_point_residual"] = model.trainMaxPointResidual;
-    report["training_warnings"] = trep.warnings;
-    report["threads"] = threads;
-    report["light_below_ceiling_mm"] = rig.belowCeilingMm;
-    report["quick"] = o.quick;
+    reportResults(report, o, n, trained, valEval.frameCount(), gathers.secondsPerFrame, stats, sink, frames, reference,
+                  refErrors);
+    reportModelAndSetUp(report, run, *world, trained, rig);
     report["engine"] = nlohmann::json::parse(stats.toJson());
-    report["frames"] = frames;
-    report["images"] = images;
-    report["vdb_files"] = vdbs;
+    report["frames"] = frameTable(sink.records, frames.scattered);
+    report["images"] = written.images;
+    report["vdb_files"] = written.vdbs;
     timings["total"] = secondsSince(start);
     report["seconds"] = timings;
     writeFileAtomically(o.outDir + "/report.json", report.dump(2) + "\n");
-    progress("done", 1, 1);
+    run.progress("done", 1, 1);
     return report;
 }
 
