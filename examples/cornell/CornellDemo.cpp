@@ -90,7 +90,8 @@ std::shared_ptr<const CornellWorld> voxelizeBox(const DemoRun& run) {
 }
 
 // 2. Training frames: one point light each on the 12 x 12 grid below the ceiling, by full gathers.
-FrameSet gatherTrainingFrames(const DemoRun& run, const std::shared_ptr<const CornellWorld>& world, const LightRig& rig) {
+FrameSet gatherTrainingFrames(const DemoRun& run, const std::shared_ptr<const CornellWorld>& world,
+                              const LightRig& rig) {
     const Index n = static_cast<Index>(world->voxels.size());
     const CornellEvaluator trainEval(world, rig.trainingLights(), run.o.samples, "cornell-train");
     const Index trainFrames = trainEval.frameCount();
@@ -188,13 +189,15 @@ struct FullGathers {
     double secondsPerFrame = 0;
 };
 
-FullGathers gatherFullFrames(const DemoRun& run, const CornellEvaluator& valEval, const std::set<Index>& fullFrames) {
+FullGathers gatherFullFrames(const DemoRun& run, const CornellEvaluator& valEval,
+                             const std::set<Index>& fullFrames) {
     const Index n = valEval.pointCount();
     FullGathers g;
     const auto t = Clock::now();
     Index done = 0;
     for (Index f : fullFrames) {
-        run.progress("validation full gathers", static_cast<double>(done++), static_cast<double>(fullFrames.size()));
+        run.progress("validation full gathers", static_cast<double>(done++),
+                     static_cast<double>(fullFrames.size()));
         auto& v = g.full[f];
         v.resize(static_cast<std::size_t>(3 * n));
         run.arena.execute([&] { valEval.evaluateAll(f, v.data()); });
@@ -226,13 +229,14 @@ ReferenceSubset chooseReferenceSubset(const CornellDemoOptions& o, Index n, Inde
 }
 
 // 5. The validation frames through the engine: key points, projection, soft cache per frame.
-engine::RunStats runValidationThroughEngine(const DemoRun& run, const Model& model, const CornellEvaluator& valEval,
-                                            ValidationSink& sink) {
+engine::RunStats runValidationThroughEngine(const DemoRun& run, const Model& model,
+                                            const CornellEvaluator& valEval, ValidationSink& sink) {
     engine::EngineOptions eopt;
     eopt.threads = run.threads;
     eopt.keepPointMultiplication = true;
     eopt.progress = [&](const engine::Progress& p) {
-        run.progress("validation through the engine", static_cast<double>(p.framesDone), static_cast<double>(p.framesTotal));
+        run.progress("validation through the engine", static_cast<double>(p.framesDone),
+                     static_cast<double>(p.framesTotal));
     };
     engine::Engine eng(model, valEval, eopt);
     return eng.run(engine::FrameRange{0, valEval.frameCount(), 1}, sink);
@@ -243,9 +247,11 @@ struct ReferenceErrors {
 };
 
 // 6. Converged reference (referenceMultiplier x the samples) on the subset, scattered frames.
-ReferenceErrors measureAgainstConvergedReference(const DemoRun& run, const std::shared_ptr<const CornellWorld>& world,
+ReferenceErrors measureAgainstConvergedReference(const DemoRun& run,
+                                                 const std::shared_ptr<const CornellWorld>& world,
                                                  const LightRig& rig, const ReferenceSubset& reference,
-                                                 std::map<Index, std::vector<double>>& full, ValidationSink& sink) {
+                                                 std::map<Index, std::vector<double>>& full,
+                                                 ValidationSink& sink) {
     const CornellDemoOptions& o = run.o;
     const std::vector<Index>& subset = reference.points;
     const CornellEvaluator refEval(world, rig.scatteredLights(o.scatteredLights), o.samples * o.referenceMultiplier,
@@ -277,7 +283,9 @@ nlohmann::json renderWithBothGrids(const DemoRun& run, const CornellWorld& world
                                    const LightingCacheGrid& pmGrid, const std::string& tag, Index pathFrame,
                                    CacheState state) {
     std::vector<Image> imgs;
-    run.arena.execute([&] { imgs = renderWithCaches(world, cam, light, {&fullGrid, &pmGrid}, run.o.imageSize); });
+    run.arena.execute([&] {
+        imgs = renderWithCaches(world, cam, light, {&fullGrid, &pmGrid}, run.o.imageSize);
+    });
     const Image diff = absDifference(imgs[0], imgs[1], 10.0f);
     const Image panel = sideBySide({&imgs[0], &imgs[1], &diff});
     const std::string base = run.o.outDir + "/" + cam.name + "_" + tag;
@@ -286,8 +294,11 @@ nlohmann::json renderWithBothGrids(const DemoRun& run, const CornellWorld& world
     RelError imgErr;
     std::vector<double> a(imgs[1].rgb.begin(), imgs[1].rgb.end()), b(imgs[0].rgb.begin(), imgs[0].rgb.end());
     imgErr.add(a.data(), b.data(), a.size());
-    return {{"camera", cam.name}, {"path_frame", pathFrame}, {"png", cam.name + "_" + tag + ".png"},
-            {"pfm", cam.name + "_" + tag + ".pfm"}, {"state", toString(state)},
+    return {{"camera", cam.name},
+            {"path_frame", pathFrame},
+            {"png", cam.name + "_" + tag + ".png"},
+            {"pfm", cam.name + "_" + tag + ".pfm"},
+            {"state", toString(state)},
             {"image_rms_rel_error", imgErr.value()}};
 }
 
@@ -296,8 +307,9 @@ struct WrittenFiles {
 };
 
 // 7. Lighting-cache grids and renders from the moving cameras.
-WrittenFiles writeGridsAndRenders(const DemoRun& run, const CornellWorld& world, const ValidationFrames& frames,
-                                  std::map<Index, std::vector<double>>& full, ValidationSink& sink) {
+WrittenFiles writeGridsAndRenders(const DemoRun& run, const CornellWorld& world,
+                                  const ValidationFrames& frames, std::map<Index, std::vector<double>>& full,
+                                  ValidationSink& sink) {
     const CornellDemoOptions& o = run.o;
     const auto t = Clock::now();
     WrittenFiles written;
@@ -321,9 +333,11 @@ WrittenFiles writeGridsAndRenders(const DemoRun& run, const CornellWorld& world,
         }
         const double camT = o.pathFrames > 1 ? static_cast<double>(pathFrame) / (o.pathFrames - 1) : 0.0;
         for (const Camera& cam : demoCameras(camT)) {
-            run.progress("renders", static_cast<double>(rendered++), static_cast<double>(frames.renderFrames.size() * cameraCount));
-            written.images.push_back(renderWithBothGrids(run, world, cam, frames.lights[static_cast<std::size_t>(f)],
-                                                         fullGrid, pmGrid, tag, pathFrame, rec->state));
+            run.progress("renders", static_cast<double>(rendered++),
+                         static_cast<double>(frames.renderFrames.size() * cameraCount));
+            written.images.push_back(renderWithBothGrids(run, world, cam,
+                                                         frames.lights[static_cast<std::size_t>(f)], fullGrid,
+                                                         pmGrid, tag, pathFrame, rec->state));
         }
     }
     run.timings["grids_and_renders"] = secondsSince(t);
@@ -351,8 +365,8 @@ nlohmann::json frameTable(const std::vector<ValidationSink::FrameRecord>& record
 // Sizes, speed, decisions and errors against the full gathers and the converged reference.
 void reportResults(nlohmann::json& report, const CornellDemoOptions& o, Index n, const TrainedModel& trained,
                    Index testFrames, double fullSecondsPerFrame, const engine::RunStats& stats,
-                   const ValidationSink& sink, const ValidationFrames& frames, const ReferenceSubset& reference,
-                   const ReferenceErrors& refErrors) {
+                   const ValidationSink& sink, const ValidationFrames& frames,
+                   const ReferenceSubset& reference, const ReferenceErrors& refErrors) {
     const double pmscSecondsPerFrame = stats.wallSeconds / static_cast<double>(testFrames);
     report["points"] = n;
     report["key_points"] = trained.model.keyCount();
@@ -438,12 +452,13 @@ nlohmann::json runCornellDemo(const CornellDemoOptions& o) {
     ValidationSink sink("cornell", gathers.full, frames.renderFrames, reference.points, reference.frameSet);
     sink.scatteredCount = frames.scattered;
     const engine::RunStats stats = runValidationThroughEngine(run, trained.model, valEval, sink);
-    const ReferenceErrors refErrors = measureAgainstConvergedReference(run, world, rig, reference, gathers.full, sink);
+    const ReferenceErrors refErrors =
+        measureAgainstConvergedReference(run, world, rig, reference, gathers.full, sink);
     const WrittenFiles written = writeGridsAndRenders(run, *world, frames, gathers.full, sink);
 
     // 8. The report.
-    reportResults(report, o, n, trained, valEval.frameCount(), gathers.secondsPerFrame, stats, sink, frames, reference,
-                  refErrors);
+    reportResults(report, o, n, trained, valEval.frameCount(), gathers.secondsPerFrame, stats, sink, frames,
+                  reference, refErrors);
     reportModelAndSetUp(report, run, *world, trained, rig);
     report["engine"] = nlohmann::json::parse(stats.toJson());
     report["frames"] = frameTable(sink.records, frames.scattered);

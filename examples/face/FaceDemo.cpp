@@ -121,8 +121,14 @@ FaceScene loadFaceScene(const DemoRun& run) {
     const FaceAnimationOptions animationOptions = animationOptionsFor(run.options);
     auto animation = std::make_shared<const FaceAnimation>(FaceAnimation::generate(animationOptions));
     const double diagonal = face.boundingBoxDiagonal();
-    return FaceScene{rig,      mesh, animationOptions, animation, FaceEvaluator(rig, animation, mesh),
-                     rig->pointCount(), diagonal, diagonal / 100.0};
+    return FaceScene{rig,
+                     mesh,
+                     animationOptions,
+                     animation,
+                     FaceEvaluator(rig, animation, mesh),
+                     rig->pointCount(),
+                     diagonal,
+                     diagonal / 100.0};
 }
 
 // The output folder only once the input is known to be good: a bad --data leaves nothing.
@@ -137,7 +143,8 @@ void createOutputFolder(const std::string& outDir) {
 
 SequenceSplit splitSequences(const FaceDemoOptions& options, const FaceAnimation& animation) {
     SequenceSplit split;
-    animation.splitOrdinary(options.trainingFraction, options.seed + 4, split.trainingSeqs, split.validationSeqs);
+    animation.splitOrdinary(options.trainingFraction, options.seed + 4, split.trainingSeqs,
+                            split.validationSeqs);
     for (Index s = 0; s < static_cast<Index>(animation.sequences().size()); ++s) {
         if (animation.sequences()[s].novel) split.novelSeqs.push_back(s);
     }
@@ -145,7 +152,8 @@ SequenceSplit splitSequences(const FaceDemoOptions& options, const FaceAnimation
     return split;
 }
 
-FrameSet poseTrainingFrames(const DemoRun& run, const FaceScene& scene, const std::vector<Index>& trainingFrames) {
+FrameSet poseTrainingFrames(const DemoRun& run, const FaceScene& scene,
+                            const std::vector<Index>& trainingFrames) {
     const Clock::time_point t = Clock::now();
     FrameSet training(static_cast<Index>(trainingFrames.size()), scene.n, 3);
     std::atomic<Index> posed{0};
@@ -175,7 +183,8 @@ TrainedModel trainModel(const DemoRun& run, const FrameSet& training, double per
     to.regions.featherFraction = options.featherPercent / 100.0;
     to.regions.maxLocalFraction = options.maxLocalFraction;
     to.progress = [&](std::string_view stage, double done, double total) {
-        return !options.progress || options.progress(std::string("train: ") + std::string(stage), done, total);
+        return !options.progress ||
+               options.progress(std::string("train: ") + std::string(stage), done, total);
     };
     run.arena.execute([&] { trained.model = train(training, to, &trained.report); });
     run.timings["train"] = seconds(t);
@@ -227,7 +236,8 @@ void measureAgainstFullPoses(const DemoRun& run, const FaceScene& scene, const M
             // soft = (1 - w) pm + w full, so its error is (1 - w) times PM's, point by point.
             r.softMax = (1.0 - d.weight) * r.pmMax;
             const Index k = ++done;
-            if (k % 32 == 0) run.step("ground truth", static_cast<double>(k), static_cast<double>(records.size()));
+            if (k % 32 == 0)
+                run.step("ground truth", static_cast<double>(k), static_cast<double>(records.size()));
         });
     });
 }
@@ -304,7 +314,8 @@ nlohmann::json measureLocalFailThrough(const DemoRun& run, const FaceScene& scen
     const Clock::time_point t = Clock::now();
     nlohmann::json local = localFailThroughSets(
         model, scene.evaluator, *scene.animation, split.validationSeqs, split.novelSeqs, scene.percent,
-        run.options.threads, [&run](std::string_view stage, double done, double total) { run.step(stage, done, total); },
+        run.options.threads,
+        [&run](std::string_view stage, double done, double total) { run.step(stage, done, total); },
         run.options.quick ? 24 : 0);
     run.timings["local_fail_through"] = seconds(t);
     return local;
@@ -313,17 +324,20 @@ nlohmann::json measureLocalFailThrough(const DemoRun& run, const FaceScene& scen
 // Timing: full pose vs PMSC, one frame at a time, one thread, interleaved, on validation frames
 // spread over the set.
 PoseTimings timeFullPoseAgainstPmsc(const DemoRun& run, const FaceScene& scene, const Model& model,
-                                    const PointMultiplier& pm, const std::vector<const FrameRecord*>& validation) {
+                                    const PointMultiplier& pm,
+                                    const std::vector<const FrameRecord*>& validation) {
     const Clock::time_point t = Clock::now();
     PoseTimings pt;
     const Index timed = std::min<Index>(run.options.timingFrames, static_cast<Index>(validation.size()));
     pt.timed = timed;
     const FaceEvaluator& evaluator = scene.evaluator;
     std::vector<double> full(static_cast<size_t>(3 * scene.n)), rec(static_cast<size_t>(3 * scene.n));
-    std::vector<double> keys(static_cast<size_t>(3 * model.keyCount())), coords(static_cast<size_t>(model.basisSize()));
+    std::vector<double> keys(static_cast<size_t>(3 * model.keyCount())),
+        coords(static_cast<size_t>(model.basisSize()));
     evaluator.evaluate(validation.front()->frame, model.keyPoints, keys.data());  // warm the key plan cache
     for (Index i = 0; i < timed; ++i) {
-        const Index frame = validation[static_cast<size_t>(i * static_cast<Index>(validation.size()) / timed)]->frame;
+        const Index frame =
+            validation[static_cast<size_t>(i * static_cast<Index>(validation.size()) / timed)]->frame;
         double c0 = threadCpuSeconds();
         Clock::time_point w0 = Clock::now();
         evaluator.evaluateAll(frame, full.data());
@@ -368,7 +382,8 @@ nlohmann::json runFaceDemo(const FaceDemoOptions& options) {
     timings["load_and_rig"] = seconds(t);
     const SequenceSplit split = splitSequences(options, *scene.animation);
 
-    const TrainedModel trained = trainModel(run, poseTrainingFrames(run, scene, split.trainingFrames), scene.percent);
+    const TrainedModel trained =
+        trainModel(run, poseTrainingFrames(run, scene, split.trainingFrames), scene.percent);
     const Model& model = trained.model;
     const PointMultiplier pm(model);
     const SoftCachePolicy policy(model.epsMin, model.epsMax);

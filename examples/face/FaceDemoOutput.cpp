@@ -35,7 +35,8 @@ std::vector<float> errorColours(const std::vector<double>& pose, const std::vect
                                 double percent) {
     std::vector<float> colours(static_cast<size_t>(3 * n));
     for (Index p = 0; p < n; ++p) {
-        const auto a = errorColour((Eigen::Vector3d(&pose[3 * p]) - Eigen::Vector3d(&full[3 * p])).norm(), percent);
+        const auto a =
+            errorColour((Eigen::Vector3d(&pose[3 * p]) - Eigen::Vector3d(&full[3 * p])).norm(), percent);
         for (int c = 0; c < 3; ++c) colours[3 * p + c] = a[c];
     }
     return colours;
@@ -66,11 +67,13 @@ RgbImage comparisonSheet(const FacePictures& pics, const std::vector<double>* po
 // LABEL_{full,pm,soft}.obj and LABEL.png of one shown frame; returns its entry of "shown_frames".
 nlohmann::json writeShownFrame(const DemoRun& run, const FaceScene& scene, const Model& model,
                                const PointMultiplier& pm, const FacePictures& pics, const std::string& label,
-                               const FrameRecord& record, const std::vector<double>& soft, nlohmann::json& files) {
+                               const FrameRecord& record, const std::vector<double>& soft,
+                               nlohmann::json& files) {
     const Index n = scene.n;
     const std::string& out = run.out;
     std::vector<double> full(static_cast<size_t>(3 * n)), pmPose(static_cast<size_t>(3 * n));
-    std::vector<double> keys(static_cast<size_t>(3 * model.keyCount())), coords(static_cast<size_t>(model.basisSize()));
+    std::vector<double> keys(static_cast<size_t>(3 * model.keyCount())),
+        coords(static_cast<size_t>(model.basisSize()));
     scene.evaluator.evaluateAll(record.frame, full.data());
     for (Index k = 0; k < model.keyCount(); ++k) {
         for (int c = 0; c < 3; ++c) keys[3 * k + c] = full[3 * model.keyPoints[k] + c];
@@ -80,7 +83,8 @@ nlohmann::json writeShownFrame(const DemoRun& run, const FaceScene& scene, const
     const FaceSequence& seq = scene.animation->sequences()[record.sequence];
     const std::string frameName = seq.name + " frame " + std::to_string(record.frame - seq.firstFrame);
     writeObj(out + label + "_full.obj", *scene.mesh, full, "pmsc demo face: " + frameName + ", full pose");
-    writeObj(out + label + "_pm.obj", *scene.mesh, pmPose, "pmsc demo face: " + frameName + ", point multiplication");
+    writeObj(out + label + "_pm.obj", *scene.mesh, pmPose,
+             "pmsc demo face: " + frameName + ", point multiplication");
     writeObj(out + label + "_soft.obj", *scene.mesh, soft,
              std::string("pmsc demo face: ") + frameName + ", soft cache (" + stateName(record.state) + ")");
     const std::vector<float> grey(static_cast<size_t>(3 * n), 0.8f);
@@ -102,7 +106,8 @@ nlohmann::json writeShownFrame(const DemoRun& run, const FaceScene& scene, const
 }
 
 // keys.png: the neutral face with the key points (red) and the fiducials (blue).
-void writeKeyPointsImage(const DemoRun& run, const FaceScene& scene, const Model& model, const FacePictures& pics) {
+void writeKeyPointsImage(const DemoRun& run, const FaceScene& scene, const Model& model,
+                         const FacePictures& pics) {
     const std::vector<double>& rest = scene.rig->restPositions();
     std::vector<float> colour(static_cast<size_t>(3 * scene.n), 0.8f);
     RgbImage image = pics.renderer.render(rest, colour, pics.faceView);
@@ -121,8 +126,8 @@ void writeFramesCsv(const DemoRun& run, const FaceScene& scene, const std::vecto
     for (const FrameRecord& r : records) {
         std::snprintf(line, sizeof line, "%ld,%s,%s,%.9g,%s,%.6f,%.6f,%.6f,%d\n", static_cast<long>(r.frame),
                       scene.animation->sequences()[r.sequence].name.c_str(), r.novel ? "novel" : "validation",
-                      r.keyRms, stateName(r.state), r.weight, r.pmMax / scene.percent, r.softMax / scene.percent,
-                      r.engineAgrees ? 1 : 0);
+                      r.keyRms, stateName(r.state), r.weight, r.pmMax / scene.percent,
+                      r.softMax / scene.percent, r.engineAgrees ? 1 : 0);
         csv << line;
     }
     writeFileAtomically(run.out + "frames.csv", csv.str());
@@ -152,8 +157,9 @@ ErrorSamples collectErrors(const std::vector<FrameRecord>& records, double perce
 }  // namespace
 
 // Files: renders, meshes, the model, the per-frame table.
-WrittenFiles writeFiles(const DemoRun& run, const FaceScene& scene, const Model& model, const PointMultiplier& pm,
-                        const std::vector<FrameRecord>& records, const TestFrames& sets, const EngineTotals& engine) {
+WrittenFiles writeFiles(const DemoRun& run, const FaceScene& scene, const Model& model,
+                        const PointMultiplier& pm, const std::vector<FrameRecord>& records,
+                        const TestFrames& sets, const EngineTotals& engine) {
     const Clock::time_point t = Clock::now();
     run.step("write", 0, 1);
     const FacePictures pics{FaceRenderer(scene.rig->topology(), FaceRenderer::ictHiddenVertices(scene.n))};
@@ -173,8 +179,8 @@ WrittenFiles writeFiles(const DemoRun& run, const FaceScene& scene, const Model&
 }
 
 // What was run on what: sizes of the face, the model and the sets.
-void reportSetUp(nlohmann::json& report, const FaceDemoOptions& options, const FaceScene& scene, const Model& model,
-                 const SequenceSplit& split, const TestFrames& sets) {
+void reportSetUp(nlohmann::json& report, const FaceDemoOptions& options, const FaceScene& scene,
+                 const Model& model, const SequenceSplit& split, const TestFrames& sets) {
     report["experiment"] =
         "paper section 7: facial articulation, point multiplication and soft caching of a face rig";
     report["quick"] = options.quick;
@@ -198,19 +204,20 @@ void reportTiming(nlohmann::json& report, const PoseTimings& pt) {
     report["full_seconds_per_frame"] = fullSeconds;
     report["pmsc_seconds_per_frame"] = pmscSeconds;
     report["speedup"] = fullSeconds / pmscSeconds;
-    report["timing"] = {{"clock",
-                         "thread CPU time, one thread, one frame at a time, full pose and PMSC interleaved "
-                         "on the same frames"},
-                        {"frames", timed},
-                        {"full_pose", fullSeconds},
-                        {"key_posing", pt.cpuKeys / static_cast<double>(timed)},
-                        {"projection", pt.cpuProject / static_cast<double>(timed)},
-                        {"reconstruction", pt.cpuReconstruct / static_cast<double>(timed)},
-                        {"key_cost_fraction", pt.cpuKeys / pt.cpuFull},
-                        {"wall",
-                         {{"full_pose", pt.wallFull / static_cast<double>(timed)},
-                          {"pmsc", (pt.wallKeys + pt.wallProject + pt.wallReconstruct) / static_cast<double>(timed)},
-                          {"speedup", pt.wallFull / (pt.wallKeys + pt.wallProject + pt.wallReconstruct)}}}};
+    report["timing"] = {
+        {"clock",
+         "thread CPU time, one thread, one frame at a time, full pose and PMSC interleaved "
+         "on the same frames"},
+        {"frames", timed},
+        {"full_pose", fullSeconds},
+        {"key_posing", pt.cpuKeys / static_cast<double>(timed)},
+        {"projection", pt.cpuProject / static_cast<double>(timed)},
+        {"reconstruction", pt.cpuReconstruct / static_cast<double>(timed)},
+        {"key_cost_fraction", pt.cpuKeys / pt.cpuFull},
+        {"wall",
+         {{"full_pose", pt.wallFull / static_cast<double>(timed)},
+          {"pmsc", (pt.wallKeys + pt.wallProject + pt.wallReconstruct) / static_cast<double>(timed)},
+          {"speedup", pt.wallFull / (pt.wallKeys + pt.wallProject + pt.wallReconstruct)}}}};
 }
 
 // Where the selector put the key points (upstream region table, face split by the mouth box), and
@@ -244,8 +251,8 @@ void reportKeyPoints(nlohmann::json& report, const FaceRig& rig, const Model& mo
 
 // Decisions, errors and thresholds: the headline rates and the validation, novel and engine sections.
 void reportAccuracy(nlohmann::json& report, const FaceDemoOptions& options, const FaceScene& scene,
-                    const TrainedModel& trained, const std::vector<FrameRecord>& records, const TestFrames& sets,
-                    const EngineTotals& engine) {
+                    const TrainedModel& trained, const std::vector<FrameRecord>& records,
+                    const TestFrames& sets, const EngineTotals& engine) {
     const Model& model = trained.model;
     const double percent = scene.percent;
     const ErrorSamples e = collectErrors(records, percent);

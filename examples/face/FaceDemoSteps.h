@@ -112,7 +112,9 @@ struct PoseTimings {
     Index timed = 0;  // frames
 
     double fullSeconds() const { return cpuFull / static_cast<double>(timed); }
-    double pmscSeconds() const { return (cpuKeys + cpuProject + cpuReconstruct) / static_cast<double>(timed); }
+    double pmscSeconds() const {
+        return (cpuKeys + cpuProject + cpuReconstruct) / static_cast<double>(timed);
+    }
 };
 
 struct WrittenFiles {
@@ -123,19 +125,20 @@ struct WrittenFiles {
 // --- FaceDemoOutput.cpp ---------------------------------------------------------------------------
 
 // Files: renders, meshes, the model, the per-frame table.
-WrittenFiles writeFiles(const DemoRun& run, const FaceScene& scene, const Model& model, const PointMultiplier& pm,
-                        const std::vector<FrameRecord>& records, const TestFrames& sets, const EngineTotals& engine);
+WrittenFiles writeFiles(const DemoRun& run, const FaceScene& scene, const Model& model,
+                        const PointMultiplier& pm, const std::vector<FrameRecord>& records,
+                        const TestFrames& sets, const EngineTotals& engine);
 
 // What was run on what: sizes of the face, the model and the sets.
-void reportSetUp(nlohmann::json& report, const FaceDemoOptions& options, const FaceScene& scene, const Model& model,
-                 const SequenceSplit& split, const TestFrames& sets);
+void reportSetUp(nlohmann::json& report, const FaceDemoOptions& options, const FaceScene& scene,
+                 const Model& model, const SequenceSplit& split, const TestFrames& sets);
 void reportTiming(nlohmann::json& report, const PoseTimings& pt);
 // Where the selector put the key points (upstream region table, face split by the mouth box), and
 // what posing them costs.
 void reportKeyPoints(nlohmann::json& report, const FaceRig& rig, const Model& model);
 // Decisions, errors and thresholds: the headline rates and the validation, novel and engine sections.
 void reportAccuracy(nlohmann::json& report, const FaceDemoOptions& options, const FaceScene& scene,
-                    const TrainedModel& trained, const std::vector<FrameRecord>& records, const TestFrames& sets,
-                    const EngineTotals& engine);
+                    const TrainedModel& trained, const std::vector<FrameRecord>& records,
+                    const TestFrames& sets, const EngineTotals& engine);
 
 }  // namespace pmsc::face::demo
