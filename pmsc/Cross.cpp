@@ -57,24 +57,6 @@ double median(std::vector<double> v) {
 
 }  // namespace
 
-void CrossState::validate(Index points, const std::vector<Index>& keys) const {
-    if (controlPoints < 1 || controlPoints >= points)
-        throw std::invalid_argument("cross: control points " + std::to_string(controlPoints) + " must be in [1, " +
-                                    std::to_string(points) + ") (the joint point count)");
-    for (Index k : keys)
-        if (k >= controlPoints)
-            throw std::invalid_argument("cross: key point " + std::to_string(k) + " is not a control point (< " +
-                                        std::to_string(controlPoints) + ")");
-    if (!(coverage > 0 && coverage < 1)) throw std::invalid_argument("cross: coverage must be in (0, 1)");
-    if (!(quantile >= 0) || !std::isfinite(quantile)) throw std::invalid_argument("cross: bad quantile");
-    if (!(scale >= 0) || !std::isfinite(scale)) throw std::invalid_argument("cross: bad scale");
-    if (keyRms.size() != targetError.size())
-        throw std::invalid_argument("cross: held-out key RMS and target error counts differ");
-    for (size_t i = 0; i < keyRms.size(); ++i)
-        if (!(keyRms[i] >= 0) || !(targetError[i] >= 0) || !std::isfinite(keyRms[i]) || !std::isfinite(targetError[i]))
-            throw std::invalid_argument("cross: held-out score " + std::to_string(i) + " is not a finite number >= 0");
-}
-
 Model trainCross(const FrameSet& control, const FrameSet& target, const CrossOptions& options, CrossReport* reportOut) {
     const auto start = std::chrono::steady_clock::now();
     CrossReport local;
@@ -197,47 +179,5 @@ CrossMultiplier::Result CrossMultiplier::applyFrame(const double* control, doubl
 }
 
 // --- section CROSSPM -----------------------------------------------------------------------------
-
-namespace {
-
-bool crossPresent(const Model& model) { return model.cross.has_value(); }
-
-void encodeCross(const Model& model, ByteWriter& out) {
-    const CrossState& s = *model.cross;
-    out.index(s.controlPoints);
-    out.f64(s.coverage);
-    out.f64(s.quantile);
-    out.f64(s.scale);
-    out.index(s.slices);
-    out.index(static_cast<Index>(s.keyRms.size()));
-    out.doubles(s.keyRms.data(), s.keyRms.size());
-    out.doubles(s.targetError.data(), s.targetError.size());
-}
-
-void decodeCross(ByteReader& in, Model& model) {
-    CrossState s;
-    s.controlPoints = in.index("control points", static_cast<std::uint64_t>(model.points));
-    s.coverage = in.finite("coverage");
-    s.quantile = in.finite("quantile");
-    s.scale = in.finite("scale");
-    s.slices = in.index("slices", static_cast<std::uint64_t>(1) << 40);
-    const std::uint64_t n = in.count("score count", 16);
-    s.keyRms.resize(n);
-    in.doubles(s.keyRms.data(), n, "key RMS scores");
-    s.targetError.resize(n);
-    in.doubles(s.targetError.data(), n, "target error scores");
-    try {
-        s.validate(model.points, model.keyPoints);
-    } catch (const std::invalid_argument& e) {
-        in.fail(e.what());
-    }
-    model.cross = std::move(s);
-}
-
-}  // namespace
-
-ModelSectionCodec crossSectionCodec() {
-    return {{'C', 'R', 'O', 'S', 'S', 'P', 'M', '\0'}, &crossPresent, &encodeCross, &decodeCross};
-}
 
 }  // namespace pmsc
