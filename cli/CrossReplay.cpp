@@ -74,21 +74,33 @@ nlohmann::ordered_json pct(const Percentiles& p) {
     return {{"p50", p.p50}, {"p99", p.p99}, {"p995", p.p995}, {"max", p.max}};
 }
 
+/// The per-frame columns and counts both the report and the printed summary are made of.
+struct CrossTally {
+    std::vector<double> key, bound, error;  // error only when the targets were measured
+    Index inside = 0, overTolerance = 0;
+};
+
+CrossTally tally(const Model& model, const CrossReplayResult& result) {
+    CrossTally t;
+    for (const CrossFrame& f : result.frames) {
+        t.key.push_back(f.keyRms);
+        t.bound.push_back(f.bound);
+        if (result.measured) {
+            t.error.push_back(f.targetMaxError);
+            t.inside += f.targetMaxError <= f.bound;
+        }
+        t.overTolerance += model.tolerance > 0 && f.bound > model.tolerance;
+    }
+    return t;
+}
+
 }  // namespace
 
 nlohmann::ordered_json crossReplayReport(const Model& model, const CrossReplayResult& result) {
     const CrossState& st = *model.cross;
-    std::vector<double> key, bound, error;
-    Index inside = 0, overTolerance = 0;
-    for (const CrossFrame& f : result.frames) {
-        key.push_back(f.keyRms);
-        bound.push_back(f.bound);
-        if (result.measured) {
-            error.push_back(f.targetMaxError);
-            inside += f.targetMaxError <= f.bound;
-        }
-        overTolerance += model.tolerance > 0 && f.bound > model.tolerance;
-    }
+    const CrossTally t = tally(model, result);
+    const std::vector<double>&key = t.key, &bound = t.bound, &error = t.error;
+    const Index inside = t.inside, overTolerance = t.overTolerance;
     nlohmann::ordered_json summary = {
         {"cross", true},
         {"fail_through", "impossible: cross point multiplication has no full calculation of the target to fall back on"},
@@ -131,17 +143,9 @@ nlohmann::ordered_json crossReplayReport(const Model& model, const CrossReplayRe
 void printCrossReplaySummary(std::ostream& out, const Model& model, const CrossReplayResult& result) {
     const CrossState& st = *model.cross;
     const double frames = static_cast<double>(result.frames.size());
-    std::vector<double> key, bound, error;
-    Index inside = 0, over = 0;
-    for (const CrossFrame& f : result.frames) {
-        key.push_back(f.keyRms);
-        bound.push_back(f.bound);
-        if (result.measured) {
-            error.push_back(f.targetMaxError);
-            inside += f.targetMaxError <= f.bound;
-        }
-        over += model.tolerance > 0 && f.bound > model.tolerance;
-    }
+    const CrossTally t = tally(model, result);
+    const std::vector<double>&key = t.key, &bound = t.bound, &error = t.error;
+    const Index inside = t.inside, over = t.overTolerance;
     out << "cross replay: " << result.frames.size() << " control frames of " << st.controlPoints << " points -> "
         << model.points - st.controlPoints << " target points through M = " << model.basisSize() << ", K = "
         << model.keyCount() << " control keys in " << fmt("%.3f", result.seconds) << " s ("

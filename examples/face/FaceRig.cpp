@@ -182,7 +182,7 @@ FaceRig::FaceRig(const IctFace& face)
 
 FaceRig::~FaceRig() = default;
 
-FaceRig::Pose FaceRig::prepare(const ControlVector& controls) const {
+FaceRig::Pose FaceRig::prepareControl(const ControlVector& controls) const {
     Pose pose;
     pose.channelWeights.assign(channelNames_.size(), 0.0);
     for (int c = 0; c < kShapeControlCount; ++c) pose.channelWeights[c] = controls[c];
@@ -198,6 +198,11 @@ FaceRig::Pose FaceRig::prepare(const ControlVector& controls) const {
     }
     pose.jaw = jaw_.transform(controls);
     pose.blink = {controls[EyeBlinkL], controls[EyeBlinkR]};
+    return pose;
+}
+
+FaceRig::Pose FaceRig::prepare(const ControlVector& controls) const {
+    Pose pose = prepareControl(controls);
     pose.lipStick = controls[LipStick];
     pose.flesh = flesh_.prepare(controls, pose.jaw);
     return pose;
@@ -361,22 +366,7 @@ void FaceRig::evaluateAll(const ControlVector& controls, double* out) const {
 }
 
 void FaceRig::evaluateControl(const ControlVector& controls, std::span<const Index> points, double* out) const {
-    // prepare() without the flesh's pose, which the control does not use.
-    Pose pose;
-    pose.channelWeights.assign(channelNames_.size(), 0.0);
-    for (int c = 0; c < kShapeControlCount; ++c) pose.channelWeights[c] = controls[c];
-    for (int k = 0; k < 4; ++k)
-        pose.channelWeights[kShapeControlCount + k] = controls[JawDeformer::kControls[k]];
-    pose.channelWeights[kShapeControlCount + 4] = controls[EyeBlinkL];
-    pose.channelWeights[kShapeControlCount + 5] = controls[EyeBlinkR];
-    pose.aim = eyes_.aim(controls);
-    for (int k = 0; k < 8; ++k) pose.channelWeights[lookChannel_ + k] = pose.aim.lookWeights[k];
-    for (size_t k = 0; k < combinations().size(); ++k) {
-        const Combination& pair = combinations()[k];
-        pose.channelWeights[combinationChannel_ + k] = controls[pair.a] * controls[pair.b];
-    }
-    pose.jaw = jaw_.transform(controls);
-    pose.blink = {controls[EyeBlinkL], controls[EyeBlinkR]};
+    const Pose pose = prepareControl(controls);  // the control does not use the flesh's pose
     const Index n = pointCount();
     for (size_t i = 0; i < points.size(); ++i) {
         const Index p = points[i];

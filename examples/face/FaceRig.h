@@ -88,6 +88,9 @@ public:
 
     Index pointCount() const { return static_cast<Index>(rest_.size() / 3); }
     Pose prepare(const ControlVector& controls) const;
+    /// prepare() up to the stages the control rig uses (channel weights, eye aim, jaw, blink):
+    /// no lip stick, no flesh pose.
+    Pose prepareControl(const ControlVector& controls) const;
 
     /// Poses `points` (any order, no duplicates needed) into out[3*i + c].
     /// @throws std::out_of_range for a point outside [0, N).
