@@ -100,6 +100,7 @@ struct Engine::Impl {
     PointEvaluator::FailThroughShape shape;
     PointMultiplier pm;
     SoftCachePolicy policy;
+    Index chunkPoints;  ///< points per fail-through chunk (and per piece of a local frame)
     FramePlan plan;
     std::optional<RegionMultiplier> regions;  ///< set when frames are routed region by region
     int threads;
@@ -118,14 +119,12 @@ struct Engine::Impl {
           shape(e.failThroughShape()),
           pm(checked(m, e, options)),
           policy(options.policy ? *options.policy : SoftCachePolicy(m.epsMin, m.epsMax)),
-          plan(FramePlan::make(
-              m, options.pointsWanted,
-              options.chunkPoints > 0  ? options.chunkPoints
-              : shape.chunkPoints > 0 ? shape.chunkPoints
-                                      : automaticChunkPoints(options.pointsWanted.empty()
-                                                                 ? m.points
-                                                                 : Index(options.pointsWanted.size())),
-              options.wholeFrameFailThrough || shape.wholeFrame)),
+          chunkPoints(options.chunkPoints > 0  ? options.chunkPoints
+                      : shape.chunkPoints > 0 ? shape.chunkPoints
+                                              : automaticChunkPoints(options.pointsWanted.empty()
+                                                                         ? m.points
+                                                                         : Index(options.pointsWanted.size()))),
+          plan(FramePlan::make(m, options.pointsWanted, chunkPoints, options.wholeFrameFailThrough || shape.wholeFrame)),
           threads(options.threads > 0 ? options.threads : tbb::info::default_concurrency()),
           maxInFlight(options.maxFramesInFlight > 0 ? options.maxFramesInFlight : 2 * Index(threads)),
           arena(threads) {
@@ -271,10 +270,11 @@ void Engine::Impl::runGraph(FrameRange range, FrameSink& sink, nodes::RunControl
     std::optional<nodes::LocalBranch> localBody;
     std::optional<nodes::LocalCombiner> featherBody;
     if (regions) {
-        localBody.emplace(evaluator, *regions, model.channels);
-        featherBody.emplace(*regions, model.channels);
+        // The local frame's full evaluation: one call when the evaluator is failed through
+        // whole (its subset poses share work), else pieces of the fail-through's chunk size.
+        localBody.emplace(evaluator, *regions, model.channels, shape.wholeFrame ? 0 : chunkPoints);
+        featherBody.emplace(model.channels);
     }
-    const Index regionCount = regions ? regions->regionCount() : 0;
     nodes::OrderedSink sinkBody(plan, sink, options.failurePolicy, control);
     const bool stopOnFailure = options.failurePolicy == FailurePolicy::StopRun;
     const Index chunkCount = Index(plan.chunks.size());
@@ -293,10 +293,11 @@ void Engine::Impl::runGraph(FrameRange range, FrameSink& sink, nodes::RunControl
     //    │                                                          │                v            │
     //    │                                                          │  gather (the last branch     │
     //    │                                                          │   sends the frame on)        │
-    //    │               monitor ──local (issue 9): one message per region──> local (unlimited:    │
-    //    │                                            region PM and/or the failing region's fail  │
-    //    │                                            set) ─> local gather (the last branch runs   │
-    //    │                                            the feathered blend, sends the frame on) ──┐ │
+    //    │               monitor ──local (issue 9): one message per region, then one per piece │
+    //    │                 of the failing points ──> local (unlimited: region PM, or a piece of   │
+    //    │                                            the failing regions' fail sets' union) ─>   │
+    //    │                                            local gather (the last branch runs the      │
+    //    │                                            feathered blend, sends the frame on) ─────┐ │
     //    │                                                          v                v          v v
     //    └──────────────── slot ── sink (serial) <── sequencer (restores order) <──────────────────┘
     //
@@ -381,8 +382,9 @@ void Engine::Impl::runGraph(FrameRange range, FrameSink& sink, nodes::RunControl
         } else if (route == Route::FailThrough) {
             sendChunks(slot, std::get<1>(out));
         } else if (route == Route::Local) {
-            slot->chunksLeft.store(regionCount, std::memory_order_relaxed);
-            for (Index r = 0; r < regionCount; ++r) send(slot, std::get<3>(out), ChunkMsg{slot, r});
+            const Index messages = localBody->messages(*slot);
+            slot->chunksLeft.store(messages, std::memory_order_relaxed);
+            for (Index i = 0; i < messages; ++i) send(slot, std::get<3>(out), ChunkMsg{slot, i});
         } else {
             send(slot, std::get<2>(out), slot);
         }

@@ -47,6 +47,11 @@ struct FrameResult {
     std::span<const double> regionKeyErrors;
     /// Local frames only: each point's feathered weight of the full result (N).
     std::span<const double> pointWeights;
+    /// Local frames only: the points evaluated fully (ascending; pointsEvaluated of them) and
+    /// their full values (channel-minor), before the feathered blend: what a learning step
+    /// needs from a frame that missed in places.
+    std::span<const Index> fullPoints;
+    std::span<const double> fullValues;
 };
 
 /// The consumer of a run, implemented by the user: a file writer, a renderer's

@@ -29,10 +29,10 @@ Route ErrorMonitor::operator()(FrameSlot& slot) const {
         }
         slot.regionsEvaluated = true;
         regions_->pointWeights(slot.regionWeights, slot.pointWeights.data());
-        Index full = 0;
-        for (const double w : slot.pointWeights) full += w > 0;
+        const Index full = regions_->fullPoints(slot.pointWeights, slot.localPoints.data());
         if (double(full) <= regions_->regions().maxLocalFraction * double(slot.pointWeights.size())) {
             slot.local = true;
+            slot.localCount = full;
             slot.pointsEvaluated = full;
             return Route::Local;
         }

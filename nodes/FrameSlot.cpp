@@ -26,7 +26,8 @@ void FrameSlot::enableRegions(const RegionMultiplier& regions, Index points, Ind
     regionStates.assign(size_t(r), CacheState::Hit);
     regionWeights.assign(size_t(r), 0.0);
     pointWeights.assign(size_t(points), 0.0);
-    localFull.assign(size_t(regions.failPoints() * c), 0.0);
+    localPoints.assign(size_t(points), 0);
+    localFull.assign(size_t(points * c), 0.0);
 }
 
 Index FrameSlot::liveCount() { return gLiveSlots.load(std::memory_order_relaxed); }
@@ -39,6 +40,7 @@ void FrameSlot::reset(Index sequenceNumber, Index frameNumber) {
     decision = CacheDecision{};
     pmValid = false;
     local = false;
+    localCount = 0;
     regionsEvaluated = false;
     pointsEvaluated = 0;
     chunksLeft.store(0, std::memory_order_relaxed);

@@ -66,7 +66,9 @@ struct FrameSlot {
     std::vector<CacheState> regionStates;     ///< R decisions (all Hit on a global hit)
     std::vector<double> regionWeights;        ///< R weights of the full result
     std::vector<double> pointWeights;         ///< N feathered weights w_p (local frames)
-    std::vector<double> localFull;            ///< full values of the failing regions' fail sets
+    std::vector<Index> localPoints;           ///< N: the points evaluated fully, ascending (first localCount)
+    Index localCount = 0;                     ///< how many of localPoints this frame uses
+    std::vector<double> localFull;            ///< N*C: full values of localPoints[i] at i*C
     bool regionsEvaluated = false;            ///< the region decisions above belong to this frame
     /// Points whose full value this frame computed in its fail-through (0 for a hit, N for a
     /// whole-frame fail-through, the points with w_p > 0 for a local frame).

@@ -1,24 +1,43 @@
 #include "nodes/LocalBranch.h"
 
+#include <algorithm>
 #include <cmath>
+#include <span>
 #include <string>
 
 namespace pmsc::nodes {
 
-void LocalBranch::operator()(FrameSlot& slot, Index region) const {
+Index LocalBranch::messages(const FrameSlot& slot) const {
+    const Index pieces = slot.localCount == 0   ? 0
+                         : piecePoints_ <= 0 ? 1
+                                             : (slot.localCount + piecePoints_ - 1) / piecePoints_;
+    return regions_.regionCount() + pieces;
+}
+
+void LocalBranch::operator()(FrameSlot& slot, Index message) const {
     if (slot.failed()) return;
-    const double w = slot.regionWeights[size_t(region)];
-    if (w < 1) regions_.reconstruct(region, slot.regionCoords.data() + regions_.coordsOffset(region), slot.values.data());
-    if (!(w > 0)) return;
-    const std::vector<Index>& set = regions_.failSet(region);
-    double* out = slot.localFull.data() + regions_.failOffset(region) * channels_;
+    const Index regions = regions_.regionCount();
+    if (message >= regions) {
+        evaluatePiece(slot, message - regions);
+        return;
+    }
+    if (slot.regionWeights[size_t(message)] < 1)
+        regions_.reconstruct(message, slot.regionCoords.data() + regions_.coordsOffset(message), slot.values.data());
+}
+
+void LocalBranch::evaluatePiece(FrameSlot& slot, Index piece) const {
+    const Index first = piecePoints_ <= 0 ? 0 : piece * piecePoints_;
+    const Index last = piecePoints_ <= 0 ? slot.localCount : std::min(slot.localCount, first + piecePoints_);
+    const std::span<const Index> set(slot.localPoints.data() + first, size_t(last - first));
+    double* out = slot.localFull.data() + first * channels_;
+    const Index order = regions_.regionCount() + piece;  // the lowest failing message names the frame's error
     try {
         evaluator_.evaluate(slot.frame, set, out);
     } catch (const std::exception& e) {
-        slot.fail(kName, "evaluator '" + evaluator_.name() + "': " + e.what(), region);
+        slot.fail(kName, "evaluator '" + evaluator_.name() + "': " + e.what(), order);
         return;
     } catch (...) {
-        slot.fail(kName, "evaluator '" + evaluator_.name() + "': unknown exception", region);
+        slot.fail(kName, "evaluator '" + evaluator_.name() + "': unknown exception", order);
         return;
     }
     const Index n = Index(set.size()) * channels_;
@@ -27,7 +46,7 @@ void LocalBranch::operator()(FrameSlot& slot, Index region) const {
             slot.fail(kName,
                       "evaluator '" + evaluator_.name() + "' returned " + std::to_string(out[i]) + " at point " +
                           std::to_string(set[size_t(i / channels_)]) + " channel " + std::to_string(i % channels_),
-                      region);
+                      order);
             return;
         }
     }
@@ -35,13 +54,11 @@ void LocalBranch::operator()(FrameSlot& slot, Index region) const {
 
 void LocalCombiner::operator()(FrameSlot& slot) const {
     if (slot.failed()) return;
-    const Index n = Index(slot.pointWeights.size());
     const Index c = channels_;
-    for (Index p = 0; p < n; ++p) {
+    for (Index i = 0; i < slot.localCount; ++i) {
+        const Index p = slot.localPoints[size_t(i)];
         const double w = slot.pointWeights[size_t(p)];
-        if (!(w > 0)) continue;
-        const Index at = regions_.fullValueAt(p, slot.regionWeights);
-        const double* full = slot.localFull.data() + at * c;
+        const double* full = slot.localFull.data() + i * c;
         double* out = slot.values.data() + p * c;
         if (w >= 1) {
             for (Index ch = 0; ch < c; ++ch) out[ch] = full[ch];

@@ -7,29 +7,42 @@
 
 namespace pmsc::nodes {
 
-/// One region of a locally failed-through frame (issue 9; paper section 9, "compute the full
-/// calculation on a subset of the domain"): the engine sends a frame's regions as separate
-/// messages to an unlimited node, so the regions' point multiplications and the failing
-/// regions' full evaluations run as parallel branches.
+/// The branches of a locally failed-through frame (issue 9; paper section 9, "compute the full
+/// calculation on a subset of the domain"). The engine sends a local frame as messages() separate
+/// messages to an unlimited node, so they run as parallel branches:
+///  - messages 0 .. R-1, one per region: region r reconstructs its points from its own
+///    coordinates (unless its weight is 1: nothing of that PM would be used);
+///  - messages R .. R+P-1, one per piece: the frame's fully evaluated points (those with
+///    w_p > 0, the union of the failing regions' fail sets; FrameSlot::localPoints) split into
+///    P pieces of `piecePoints` (one piece when piecePoints is 0: an evaluator whose subset
+///    poses share work, like the face rig's relax rings, poses the union's closure once).
 ///
-/// Branch r reconstructs region r's points from its own coordinates (unless its weight is 1:
-/// nothing of that PM would be used) and, when its weight is above 0, evaluates its fail set
-/// (its points and its feather band) into its part of the slot's full-values buffer. Branches
-/// write disjoint parts of the slot. An evaluator failure or a non-finite value fails the frame.
-/// Thread-safe (concurrent regions and frames).
+/// Decision: the union, not one evaluation per failing region. On the ICT face's novel set the
+/// failing regions' fail sets held 19,960 points a frame against 14,688 in their union (bands
+/// shared by neighbours that fail together), and posing them region by region cost 30.2 ms
+/// against 20.9 ms for the union in one call (one closure instead of dozens of small ones).
+///
+/// Branches write disjoint parts of the slot. An evaluator failure or a non-finite value fails
+/// the frame. Thread-safe (concurrent branches and frames).
 class LocalBranch {
 public:
     static constexpr const char* kName = "local";
 
-    LocalBranch(const PointEvaluator& evaluator, const RegionMultiplier& regions, Index channels)
-        : evaluator_(evaluator), regions_(regions), channels_(channels) {}
+    /// @param piecePoints points per piece of the full evaluation; 0 = one piece
+    LocalBranch(const PointEvaluator& evaluator, const RegionMultiplier& regions, Index channels, Index piecePoints)
+        : evaluator_(evaluator), regions_(regions), channels_(channels), piecePoints_(piecePoints) {}
 
-    void operator()(FrameSlot& slot, Index region) const;
+    /// How many branch messages the local frame in `slot` takes (regions, then pieces).
+    Index messages(const FrameSlot& slot) const;
+    void operator()(FrameSlot& slot, Index message) const;
 
 private:
+    void evaluatePiece(FrameSlot& slot, Index piece) const;
+
     const PointEvaluator& evaluator_;
     const RegionMultiplier& regions_;
     Index channels_;
+    Index piecePoints_;
 };
 
 /// The end of a locally failed-through frame, after every branch: the feathered blend
@@ -39,12 +52,11 @@ class LocalCombiner {
 public:
     static constexpr const char* kName = "feather";
 
-    LocalCombiner(const RegionMultiplier& regions, Index channels) : regions_(regions), channels_(channels) {}
+    explicit LocalCombiner(Index channels) : channels_(channels) {}
 
     void operator()(FrameSlot& slot) const;
 
 private:
-    const RegionMultiplier& regions_;
     Index channels_;
 };
 

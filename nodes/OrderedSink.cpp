@@ -46,7 +46,11 @@ void OrderedSink::operator()(FrameSlot& slot) {
             result.regionStates = slot.regionStates;
             result.regionKeyErrors = slot.regionKeyErrors;
         }
-        if (slot.local) result.pointWeights = slot.pointWeights;
+        if (slot.local) {
+            result.pointWeights = slot.pointWeights;
+            result.fullPoints = std::span<const Index>(slot.localPoints.data(), size_t(slot.localCount));
+            result.fullValues = std::span<const double>(slot.localFull.data(), size_t(slot.localCount * plan_.channels));
+        }
         if (slot.pmValid) {
             result.pmValues = slot.pmValues;
         } else if (slot.decision.state == CacheState::Hit && !slot.pmValues.empty()) {

@@ -19,10 +19,8 @@ RegionMultiplier::RegionMultiplier(const Model& model) : model_(model), regions_
     const Index c = model.channels;
     const Index r = regions_.regionCount();
     regionOf_ = regions_.regionOfPoints(n);
-    ownPosition_.assign(size_t(n), -1);
     for (Index ri = 0; ri < r; ++ri) {
         const Region& g = regions_.regions[size_t(ri)];
-        for (size_t i = 0; i < g.points.size(); ++i) ownPosition_[size_t(g.points[i])] = Index(i);
         Eigen::VectorXd mean(Index(g.keys.size()) * c);
         for (size_t i = 0; i < g.keys.size(); ++i) {
             const Index p = model.keyPoints[size_t(g.keys[i])];
@@ -33,22 +31,7 @@ RegionMultiplier::RegionMultiplier(const Model& model) : model_(model), regions_
         coordsOffset_.push_back(coordsSize_);
         coordsSize_ += g.basisSize();
         policies_.emplace_back(g.epsMin, g.epsMax);
-        failOffset_.push_back(failPoints_);
-        failSets_.push_back(g.points);
-    }
-    // Feather bands, in point order, and where each entry's point sits in that region's fail set.
-    featherPosition_.assign(regions_.featherRegion.size(), -1);
-    for (Index p = 0; p < n; ++p) {
-        for (Index e = regions_.featherStart[size_t(p)]; e < regions_.featherStart[size_t(p) + 1]; ++e) {
-            auto& set = failSets_[size_t(regions_.featherRegion[size_t(e)])];
-            featherPosition_[size_t(e)] = Index(set.size());
-            set.push_back(p);
-        }
-    }
-    failPoints_ = 0;
-    for (Index ri = 0; ri < r; ++ri) {
-        failOffset_[size_t(ri)] = failPoints_;
-        failPoints_ += Index(failSets_[size_t(ri)].size());
+        failSets_.push_back(regions_.failSet(ri));
     }
 }
 
@@ -94,14 +77,11 @@ void RegionMultiplier::pointWeights(std::span<const double> regionWeights, doubl
     }
 }
 
-Index RegionMultiplier::fullValueAt(Index p, std::span<const double> regionWeights) const {
-    const Index own = regionOf_[size_t(p)];
-    if (regionWeights[size_t(own)] > 0) return failOffset_[size_t(own)] + ownPosition_[size_t(p)];
-    for (Index e = regions_.featherStart[size_t(p)]; e < regions_.featherStart[size_t(p) + 1]; ++e) {
-        const Index r = regions_.featherRegion[size_t(e)];
-        if (regionWeights[size_t(r)] > 0) return failOffset_[size_t(r)] + featherPosition_[size_t(e)];
-    }
-    return -1;
+Index RegionMultiplier::fullPoints(std::span<const double> pointWeights, Index* points) const {
+    Index count = 0;
+    for (size_t p = 0; p < pointWeights.size(); ++p)
+        if (pointWeights[p] > 0) points[count++] = Index(p);
+    return count;
 }
 
 void RegionMultiplier::reconstruct(Index r, const double* coords, double* frame) const {

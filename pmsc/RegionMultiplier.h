@@ -44,28 +44,21 @@ public:
     /// Region r's fail set (its points, then its feather band): the points evaluated fully when
     /// it blends or misses.
     const std::vector<Index>& failSet(Index r) const { return failSets_[size_t(r)]; }
-    /// Offset (in points) of region r's fail set in a frame's full-values scratch buffer, and
-    /// the buffer's size in points.
-    Index failOffset(Index r) const { return failOffset_[size_t(r)]; }
-    Index failPoints() const { return failPoints_; }
-    /// Where point p's full value is in the scratch buffer when `regionWeights` sends it to the
-    /// full calculation (its own region's fail set if that region fails, else the first failing
-    /// region whose band holds it); -1 if no failing region evaluates it.
-    Index fullValueAt(Index p, std::span<const double> regionWeights) const;
+    /// The points a frame evaluates fully: those with w_p > 0 (`pointWeights` from
+    /// pointWeights()), ascending, into `points` (room for N); returns how many. This is the
+    /// union of the failing regions' fail sets, each point once: bands shared by two failing
+    /// regions are evaluated once, and one call poses the union's dependency closure once.
+    Index fullPoints(std::span<const double> pointWeights, Index* points) const;
 
 private:
     const Model& model_;
     const LocalRegions& regions_;
     std::vector<Index> regionOf_;
-    std::vector<Index> ownPosition_;        ///< p's position in its region's points
-    std::vector<Index> featherPosition_;    ///< per feather entry: p's position in that region's fail set
     std::vector<Eigen::VectorXd> keyMean_;  ///< per region, K_r*C
     std::vector<Eigen::VectorXd> projectedKeyMean_;
     std::vector<Index> coordsOffset_;
     Index coordsSize_ = 0;
     std::vector<std::vector<Index>> failSets_;
-    std::vector<Index> failOffset_;
-    Index failPoints_ = 0;
     std::vector<SoftCachePolicy> policies_;
 };
 

@@ -104,13 +104,16 @@ struct Collected {
     Index pointsEvaluated;
     std::vector<CacheState> regions;
     std::vector<double> values, weights;
+    std::vector<Index> fullPoints;
+    std::vector<double> fullValues;
 };
 class CollectingSink : public pmsc::engine::FrameSink {
 public:
     std::vector<Collected> frames;
     void write(const pmsc::engine::FrameResult& r) override {
         frames.push_back({r.state, r.local, r.pointsEvaluated, {r.regionStates.begin(), r.regionStates.end()},
-                          {r.values.begin(), r.values.end()}, {r.pointWeights.begin(), r.pointWeights.end()}});
+                          {r.values.begin(), r.values.end()}, {r.pointWeights.begin(), r.pointWeights.end()},
+                          {r.fullPoints.begin(), r.fullPoints.end()}, {r.fullValues.begin(), r.fullValues.end()}});
     }
 };
 
@@ -197,7 +200,9 @@ TEST(LocalFailThrough, RegionKeysBasisShareAndRatioMarginDoWhatTheySay) {
         for (Index k = 0; k < model.keyCount(); ++k) {
             double d = 1e300;
             for (const Index p : g.points) d = std::min(d, (pos.row(model.keyPoints[size_t(k)]) - pos.row(p)).norm());
-            if (d <= o.keyRadius * diagonal) EXPECT_TRUE(std::binary_search(g.keys.begin(), g.keys.end(), k)) << k;
+            if (d <= o.keyRadius * diagonal) {
+                EXPECT_TRUE(std::binary_search(g.keys.begin(), g.keys.end(), k)) << k;
+            }
         }
         EXPECT_LE(g.basisSize(), std::max<Index>(1, Index(o.basisShare * double(g.keys.size() * 3))));
     }
@@ -210,7 +215,9 @@ TEST(LocalFailThrough, RegionKeysBasisShareAndRatioMarginDoWhatTheySay) {
         const auto& a = base.regions[size_t(r)];
         const auto& b = plain.regions[size_t(r)];
         EXPECT_EQ(a.keys, b.keys);
-        if (b.ratio > 0) EXPECT_NEAR(a.epsMin * o.ratioMargin, b.epsMin, 1e-12 * b.epsMin) << r;
+        if (b.ratio > 0) {
+            EXPECT_NEAR(a.epsMin * o.ratioMargin, b.epsMin, 1e-12 * b.epsMin) << r;
+        }
         EXPECT_DOUBLE_EQ(a.epsMax, 1.5 * a.epsMin);
     }
     // A larger radius only adds keys.
@@ -267,6 +274,46 @@ TEST(LocalFailThrough, OnlyTheRegionsThatMissAreEvaluatedAndTheErrorStaysUnderTo
     // regions fail; still well under the whole frame.
     EXPECT_LE(fraction / double(std::max<Index>(1, localFrames)), 0.7);
     EXPECT_LT(localEvaluations, wholeEvaluations);
+}
+
+// A local frame evaluates the union of its failing regions' fail sets, each point once (bands
+// shared by two failing regions are not posed twice), and hands those full values to the sink.
+TEST(LocalFailThrough, EachFailingPointIsEvaluatedOnceAndItsFullValueReachesTheSink) {
+    const Model& model = trainedModel();
+    const LocalSurface novel(40, true, 1000.0);
+    Index evaluated = 0;
+    const auto local = runNovel(model, true, 2, &evaluated);
+    const Index n = model.points, k = model.keyCount();
+    Index expected = 0, localFrames = 0, framesWithSharedBands = 0;
+    const pmsc::RegionMultiplier regions(model);
+    for (Index f = 0; f < Index(local.size()); ++f) {
+        const Collected& c = local[size_t(f)];
+        expected += k;  // every frame evaluates its keys
+        if (c.state == CacheState::Hit) continue;
+        if (!c.local) {
+            expected += n - k;  // whole-frame fail-through: the rest of the points
+            continue;
+        }
+        ++localFrames;
+        expected += c.pointsEvaluated;
+        std::vector<Index> want;
+        for (Index p = 0; p < n; ++p)
+            if (c.weights[size_t(p)] > 0) want.push_back(p);
+        EXPECT_EQ(c.fullPoints, want) << "frame " << f;
+        EXPECT_EQ(Index(c.fullPoints.size()), c.pointsEvaluated);
+        std::vector<double> truth(c.fullPoints.size() * 3);
+        novel.evaluate(f, c.fullPoints, truth.data());
+        EXPECT_EQ(c.fullValues, truth) << "frame " << f;
+        // Frames where failing regions' fail sets overlap: the old per-region branches posed
+        // the shared points twice.
+        Index sum = 0;
+        for (Index r = 0; r < regions.regionCount(); ++r)
+            if (c.regions[size_t(r)] != CacheState::Hit) sum += Index(regions.failSet(r).size());
+        framesWithSharedBands += sum > c.pointsEvaluated;
+    }
+    EXPECT_GE(localFrames, 30);
+    EXPECT_GT(framesWithSharedBands, 0);  // the test exercises the overlap
+    EXPECT_EQ(evaluated, expected);
 }
 
 TEST(LocalFailThrough, BitIdenticalAtAnyThreadCount) {
