@@ -71,6 +71,7 @@ int runInspect(const std::vector<std::string>& args) {
                                    {"ratio", g.ratio}});
             j["feather_width"] = model.regions->featherWidth;
             j["max_local_fraction"] = model.regions->maxLocalFraction;
+            j["region_key_points"] = model.regions->extraKeyPoints;
             j["regions"] = std::move(regions);
         }
         if (model.learning)
@@ -127,7 +128,8 @@ int runInspect(const std::vector<std::string>& args) {
         const LocalRegions& lr = *model.regions;
         std::cout << "  regions       R = " << lr.regionCount() << " (local fail-through), feather width "
                   << fmt("%.6g", lr.featherWidth) << ", whole frame above " << fmt("%.3g", 100 * lr.maxLocalFraction)
-                  << "% of the points\n";
+                  << "% of the points, " << lr.extraKeyPoints.size()
+                  << " region keys (evaluated for frames that miss as a whole)\n";
         std::cout << "    region   points  keys  basis     eps_min     eps_max\n";
         for (Index r = 0; r < lr.regionCount(); ++r) {
             const Region& g = lr.regions[size_t(r)];

@@ -190,6 +190,11 @@ int runTrain(const std::vector<std::string>& args) {
                   "feather width of region borders, fraction of the bounding-box diagonal (default " +
                       std::to_string(options.regions.featherFraction) + ")",
                   [&](const std::string& v) { options.regions.featherFraction = parseDouble("--feather", v, 0.0, 0.5); });
+    parser.option("--region-keys", "N",
+                  "keys of its own every region gets: a region holding fewer of the model's keys gets region\n"
+                  "keys among its points, evaluated only for frames that miss as a whole (default " +
+                      std::to_string(options.regions.ownKeys) + "; 0 = none)",
+                  [&](const std::string& v) { options.regions.ownKeys = parseIndex("--region-keys", v, 0, 1000); });
     std::string targetsPath;
     parser.option("--targets", "TARGET.npy",
                   "cross point multiplication (paper section 7): frame f of --frames (the control) and frame f of\n"
@@ -200,7 +205,7 @@ int runTrain(const std::vector<std::string>& args) {
     if (!parser.parse(args)) return kExitOk;
     if (!targetsPath.empty()) {
         if (framePaths.size() != 1) parser.fail("--targets takes exactly one --frames file (the control)");
-        for (const char* o : {"--regions", "--feather", "--learn-rank", "--calibration", "--memory-limit",
+        for (const char* o : {"--regions", "--feather", "--region-keys", "--learn-rank", "--calibration", "--memory-limit",
                               "--out-of-core", "--block-points"})
             if (parser.given(o))
                 parser.fail(std::string(o) + " does not apply to a cross model (--targets): it has no fail-through, "

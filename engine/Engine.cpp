@@ -263,7 +263,8 @@ void Engine::Impl::runGraph(FrameRange range, FrameSink& sink, nodes::RunControl
     const auto seconds = [](Clock::duration d) { return std::chrono::duration<double>(d).count(); };
     const nodes::KeyPointEvaluator keysBody(model, evaluator);
     const nodes::Projector projectBody(pm);
-    const nodes::ErrorMonitor monitorBody(pm, policy, options.keepPointMultiplication, regions ? &*regions : nullptr);
+    const nodes::ErrorMonitor monitorBody(pm, policy, options.keepPointMultiplication, regions ? &*regions : nullptr,
+                                          &evaluator);
     const nodes::Reconstructor reconstructBody(pm, plan);
     const nodes::FailThroughEvaluator failThroughBody(evaluator, plan);
     const nodes::Blender blendBody(pm, plan);

@@ -1,6 +1,8 @@
 #include "nodes/ErrorMonitor.h"
 
+#include <exception>
 #include <limits>
+#include <string>
 
 namespace pmsc::nodes {
 
@@ -19,9 +21,24 @@ Route ErrorMonitor::operator()(FrameSlot& slot) const {
         return Route::Reconstruct;
     }
     if (regions_) {
+        const std::vector<Index>& regionKeys = regions_->regionKeyPoints();
+        if (!regionKeys.empty()) {
+            // A non-finite region key value makes its regions' errors NaN, so they miss; an
+            // exception fails the frame like one from the key-point evaluator.
+            try {
+                evaluator_->evaluate(slot.frame, regionKeys, slot.regionKeyValues.data());
+            } catch (const std::exception& e) {
+                slot.fail(kName, "evaluator '" + evaluator_->name() + "' (region keys): " + e.what());
+                return Route::Done;
+            } catch (...) {
+                slot.fail(kName, "evaluator '" + evaluator_->name() + "' (region keys): unknown exception");
+                return Route::Done;
+            }
+        }
         const Index r = regions_->regionCount();
         for (Index i = 0; i < r; ++i) {
-            const double e = regions_->project(i, slot.keyValues.data(), slot.regionCoords.data() + regions_->coordsOffset(i));
+            const double e = regions_->project(i, slot.keyValues.data(), slot.regionKeyValues.data(),
+                                               slot.regionCoords.data() + regions_->coordsOffset(i));
             const CacheDecision d = regions_->decide(i, e);
             slot.regionKeyErrors[size_t(i)] = e;
             slot.regionStates[size_t(i)] = d.state;

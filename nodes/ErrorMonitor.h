@@ -2,6 +2,7 @@
 #pragma once
 
 #include "nodes/FrameSlot.h"
+#include "pmsc/PointEvaluator.h"
 #include "pmsc/PointMultiplier.h"
 #include "pmsc/RegionMultiplier.h"
 #include "pmsc/SoftCache.h"
@@ -33,8 +34,12 @@ public:
     /// the points to the full calculation; then, like a frame whose keys are not finite, it fails
     /// through whole as before. A global hit stays a global hit: a frame the whole-frame test
     /// accepts is reconstructed exactly as without regions.
-    ErrorMonitor(const PointMultiplier& pm, SoftCachePolicy policy, bool keepPm, const RegionMultiplier* regions)
-        : pm_(pm), policy_(policy), keepPm_(keepPm), regions_(regions) {}
+    /// The region keys (LocalRegions::extraKeyPoints) are evaluated here, through `evaluator`,
+    /// only for such frames: a hit costs what it cost without regions. An evaluator failure
+    /// there fails the frame.
+    ErrorMonitor(const PointMultiplier& pm, SoftCachePolicy policy, bool keepPm, const RegionMultiplier* regions,
+                 const PointEvaluator* evaluator)
+        : pm_(pm), policy_(policy), keepPm_(keepPm), regions_(regions), evaluator_(evaluator) {}
 
     Route operator()(FrameSlot& slot) const;
 
@@ -43,6 +48,7 @@ private:
     SoftCachePolicy policy_;
     bool keepPm_;
     const RegionMultiplier* regions_ = nullptr;
+    const PointEvaluator* evaluator_ = nullptr;
 };
 
 }  // namespace pmsc::nodes

@@ -21,6 +21,7 @@ FrameSlot::~FrameSlot() { gLiveSlots.fetch_sub(1, std::memory_order_relaxed); }
 
 void FrameSlot::enableRegions(const RegionMultiplier& regions, Index points, Index c) {
     const Index r = regions.regionCount();
+    regionKeyValues.assign(regions.regionKeyPoints().size() * size_t(c), 0.0);
     regionCoords.assign(size_t(regions.coordsSize()), 0.0);
     regionKeyErrors.assign(size_t(r), 0.0);
     regionStates.assign(size_t(r), CacheState::Hit);

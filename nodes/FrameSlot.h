@@ -61,6 +61,7 @@ struct FrameSlot {
     /// Sizes the local buffers for `regions` (once, before the slot's first run).
     void enableRegions(const RegionMultiplier& regions, Index points, Index channels);
     bool local = false;                       ///< this frame is routed region by region
+    std::vector<double> regionKeyValues;      ///< E*C values of the region keys (frames that do not hit)
     std::vector<double> regionCoords;         ///< every region's coordinates (RegionMultiplier::coordsOffset)
     std::vector<double> regionKeyErrors;      ///< R key RMS errors (empty entries 0 on a global hit)
     std::vector<CacheState> regionStates;     ///< R decisions (all Hit on a global hit)

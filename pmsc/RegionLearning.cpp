@@ -190,14 +190,44 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
     out.regions.resize(size_t(r));
     for (Index p = 0; p < n; ++p) out.regions[size_t(regionOf[size_t(p)])].points.push_back(p);
 
+    // Step 3a: region keys where a region holds fewer than ownKeys of the model's keys:
+    // farthest-point sampling over its points, seeded by its most moving point.
+    if (options.ownKeys > 0) {
+        std::vector<Index> inside(size_t(r), 0);
+        for (const Index p : model.keyPoints) ++inside[size_t(regionOf[size_t(p)])];
+        for (Index ri = 0; ri < r; ++ri) {
+            const std::vector<Index>& pts = out.regions[size_t(ri)].points;
+            const Index need = std::min<Index>(options.ownKeys - inside[size_t(ri)], Index(pts.size()));
+            if (need <= 0) continue;
+            Index seed = 0;
+            double most = -1;
+            for (size_t i = 0; i < pts.size(); ++i) {
+                const double motion = q.middleRows(pts[i] * c, c).squaredNorm();
+                if (motion > most) most = motion, seed = Index(i);
+            }
+            std::vector<double> nearest(pts.size(), std::numeric_limits<double>::infinity());
+            Index next = seed;
+            for (Index j = 0; j < need; ++j) {
+                out.extraKeyPoints.push_back(pts[size_t(next)]);
+                for (size_t i = 0; i < pts.size(); ++i)
+                    nearest[i] = std::min(nearest[i], (pos.row(pts[i]) - pos.row(pts[size_t(next)])).squaredNorm());
+                next = Index(std::max_element(nearest.begin(), nearest.end()) - nearest.begin());
+            }
+        }
+    }
+    const Index modelKeys = model.keyCount();
+    const auto keyPoint = [&](Index key) {
+        return key < modelKeys ? model.keyPoints[size_t(key)] : out.extraKeyPoints[size_t(key - modelKeys)];
+    };
+
     // Steps 3-4: keys, local basis, projector, thresholds.
-    const Index k = model.keyCount();
+    const Index k = modelKeys + Index(out.extraKeyPoints.size());
     Index smallBases = 0;
     for (Index ri = 0; ri < r; ++ri) {
         Region& g = out.regions[size_t(ri)];
         std::vector<std::pair<double, Index>> outside;  // (distance to the region's nearest point, key number)
         for (Index key = 0; key < k; ++key) {
-            const Index p = model.keyPoints[size_t(key)];
+            const Index p = keyPoint(key);
             if (regionOf[size_t(p)] == ri) {
                 g.keys.push_back(key);
             } else {
@@ -216,7 +246,7 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
         std::vector<Index> local = g.points;
         std::vector<Index> keyLocal;  // position of each key in `local`
         for (const Index key : g.keys) {
-            const Index p = model.keyPoints[size_t(key)];
+            const Index p = keyPoint(key);
             const auto at = std::lower_bound(g.points.begin(), g.points.end(), p);
             if (at != g.points.end() && *at == p) {
                 keyLocal.push_back(at - g.points.begin());

@@ -14,7 +14,8 @@ const LocalRegions& regionsOf(const Model& model) {
 }
 }  // namespace
 
-RegionMultiplier::RegionMultiplier(const Model& model) : model_(model), regions_(regionsOf(model)) {
+RegionMultiplier::RegionMultiplier(const Model& model)
+    : model_(model), regions_(regionsOf(model)), modelKeys_(model.keyCount()) {
     const Index n = model.points;
     const Index c = model.channels;
     const Index r = regions_.regionCount();
@@ -23,7 +24,9 @@ RegionMultiplier::RegionMultiplier(const Model& model) : model_(model), regions_
         const Region& g = regions_.regions[size_t(ri)];
         Eigen::VectorXd mean(Index(g.keys.size()) * c);
         for (size_t i = 0; i < g.keys.size(); ++i) {
-            const Index p = model.keyPoints[size_t(g.keys[i])];
+            const Index key = g.keys[i];
+            const Index p = key < model.keyCount() ? model.keyPoints[size_t(key)]
+                                                   : regions_.extraKeyPoints[size_t(key - model.keyCount())];
             mean.segment(Index(i) * c, c) = model.mean.segment(p * c, c);
         }
         projectedKeyMean_.push_back(g.projector * mean);
@@ -35,7 +38,7 @@ RegionMultiplier::RegionMultiplier(const Model& model) : model_(model), regions_
     }
 }
 
-double RegionMultiplier::project(Index r, const double* keyValues, double* coords) const {
+double RegionMultiplier::project(Index r, const double* keyValues, const double* regionKeyValues, double* coords) const {
     const Region& g = regions_.regions[size_t(r)];
     const Index c = model_.channels;
     const Index kc = Index(g.keys.size()) * c;
@@ -48,7 +51,8 @@ double RegionMultiplier::project(Index r, const double* keyValues, double* coord
     }
     for (size_t i = 0; i < g.keys.size(); ++i) {
         for (Index ch = 0; ch < c; ++ch) {
-            const double v = keyValues[g.keys[i] * c + ch];
+            const Index key = g.keys[i];
+            const double v = key < modelKeys_ ? keyValues[key * c + ch] : regionKeyValues[(key - modelKeys_) * c + ch];
             if (!std::isfinite(v)) return std::numeric_limits<double>::quiet_NaN();
             k[Index(i) * c + ch] = v;
         }

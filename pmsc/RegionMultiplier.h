@@ -29,8 +29,12 @@ public:
 
     /// Region r's coordinates b_r = P_r (k_r - mean_{K_r}) and returns its key RMS error (the
     /// frame's measure, PointMultiplier::keyRmsError, over the region's keys). NaN if a key value
-    /// of the region is not finite.
-    double project(Index r, const double* keyValues, double* coords) const;
+    /// of the region is not finite. `regionKeyValues`: the values of LocalRegions::extraKeyPoints
+    /// (E*C; may be null when the model has none).
+    double project(Index r, const double* keyValues, const double* regionKeyValues, double* coords) const;
+    /// Points of the region keys (LocalRegions::extraKeyPoints), evaluated for frames that do not
+    /// hit as a whole.
+    const std::vector<Index>& regionKeyPoints() const { return regions_.extraKeyPoints; }
     /// The region's soft-cache decision for its key error (its own calibrated thresholds).
     CacheDecision decide(Index r, double keyRmsError) const;
 
@@ -53,6 +57,7 @@ public:
 private:
     const Model& model_;
     const LocalRegions& regions_;
+    Index modelKeys_;
     std::vector<Index> regionOf_;
     std::vector<Eigen::VectorXd> keyMean_;  ///< per region, K_r*C
     std::vector<Eigen::VectorXd> projectedKeyMean_;

@@ -43,8 +43,10 @@ std::vector<Index> LocalRegions::failSet(Index r) const {
 void LocalRegions::validate(const Model& model) const {
     const Index n = model.points;
     const Index c = model.channels;
-    const Index k = model.keyCount();
+    const Index k = model.keyCount() + static_cast<Index>(extraKeyPoints.size());
     if (regions.empty()) invalid("no regions");
+    for (const Index p : extraKeyPoints)
+        if (p < 0 || p >= n) invalid("region key point " + std::to_string(p) + " outside [0, " + std::to_string(n) + ")");
     if (!std::isfinite(featherWidth) || featherWidth < 0)
         invalid("feather width must be finite and >= 0, got " + std::to_string(featherWidth));
     if (!(maxLocalFraction > 0 && maxLocalFraction <= 1))
@@ -111,6 +113,9 @@ void LocalRegions::validate(const Model& model) const {
 //            u64[P] points, u64[Kr] key numbers, f64[P*C*M_r] basis, f64[Kr*C*M_r] key basis,
 //            f64[M_r*Kr*C] projector (matrices column-major)
 //   u64 E feather entries, u64[N+1] feather start, u64[E] regions, f64[E] factors
+//   only when the model has region keys: u64 X region keys, u64[X] their points (a region's key
+//   numbers K .. K+X-1 name them). A section without them (the first version 2 files) ends
+//   after the factors and is read as before.
 
 namespace {
 
@@ -138,6 +143,10 @@ void encodeRegions(const Model& model, ByteWriter& out) {
     out.indices(regions.featherStart);
     out.indices(regions.featherRegion);
     out.doubles(regions.featherFactor.data(), regions.featherFactor.size());
+    if (!regions.extraKeyPoints.empty()) {
+        out.index(static_cast<Index>(regions.extraKeyPoints.size()));
+        out.indices(regions.extraKeyPoints);
+    }
 }
 
 void decodeRegions(ByteReader& in, Model& model) {
@@ -157,14 +166,16 @@ void decodeRegions(ByteReader& in, Model& model) {
         const std::uint64_t points = in.count(name + " point count", 8);
         const std::uint64_t keys = in.count(name + " key count", 8);
         const std::uint64_t m = in.u64(name + " basis size");
-        if (points > n || keys > k || m == 0 || m > points * c)
+        if (points > n || keys > k + n || m == 0 || m > points * c)
             in.fail(name + ": sizes out of range (points " + std::to_string(points) + ", keys " + std::to_string(keys) +
                     ", basis " + std::to_string(m) + ")");
         g.epsMin = in.finite(name + " eps_min");
         g.epsMax = in.finite(name + " eps_max");
         g.ratio = in.finite(name + " ratio");
         g.points = in.indices(points, n, name + " point");
-        g.keys = in.indices(keys, k, name + " key number");
+        // Key numbers may name region keys (K .. K+X-1, X <= N, read at the end): validate()
+        // checks them against X once it is known.
+        g.keys = in.indices(keys, k + n, name + " key number");
         // Sizes are bounded by N and K above, so these products cannot wrap; doubles() checks
         // each against the bytes left before copying.
         std::uint64_t basisValues = 0;
@@ -183,6 +194,11 @@ void decodeRegions(ByteReader& in, Model& model) {
     regions.featherRegion = in.indices(entries, count, "feather region");
     regions.featherFactor.resize(entries);
     in.doubles(regions.featherFactor.data(), entries, "feather factor");
+    if (in.remaining() > 0) {
+        const std::uint64_t extra = in.count("region key count", 8);
+        if (extra == 0 || extra > n) in.fail("region key count " + std::to_string(extra) + " outside [1, N]");
+        regions.extraKeyPoints = in.indices(extra, n, "region key point");
+    }
     try {
         regions.validate(model);
     } catch (const std::invalid_argument& e) {

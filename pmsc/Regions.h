@@ -51,6 +51,10 @@ struct LocalRegions {
     /// (one full evaluation costs less than many partial ones).
     double maxLocalFraction = 0.6;
     /// Feather entries of point p: [featherStart[p], featherStart[p+1]) in featherRegion/featherFactor.
+    /// Region keys (issue 9): points evaluated, like the model's keys, for frames that miss as a
+    /// whole, so that regions holding none of the model's keys see their own motion. Key number
+    /// K + i in Region::keys is extraKeyPoints[i].
+    std::vector<Index> extraKeyPoints;
     std::vector<Index> featherStart;  ///< N+1
     std::vector<Index> featherRegion;
     std::vector<double> featherFactor;  ///< in (0, 1]

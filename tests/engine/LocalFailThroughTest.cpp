@@ -13,6 +13,8 @@
 #include <cstdlib>
 #include <cmath>
 #include <numbers>
+#include <stdexcept>
+#include <string>
 #include <vector>
 
 namespace {
@@ -92,6 +94,9 @@ const Model& trainedModel() {
         o.regions.keyRadius = 0;
         o.regions.basisShare = 2.0 / 3.0;
         o.regions.ratioMargin = 1.0;
+        // Region keys (RegionOptions::ownKeys): more than most regions of the sheet hold of the
+        // model's keys, so the routing below also evaluates region keys.
+        o.regions.ownKeys = 16;
         return pmsc::train(frames, o);
     }();
     return model;
@@ -142,24 +147,6 @@ TEST(LocalFailThrough, TrainingLearnsCompactRegionsThatRoundTrip) {
     ASSERT_TRUE(model.regions.has_value());
     const auto& regions = *model.regions;
     EXPECT_GE(regions.regionCount(), 4);
-    if (std::getenv("PMSC_DEBUG_REGIONS")) {
-        std::printf("global eps %g %g M %lld K %lld\n", model.epsMin, model.epsMax, (long long)model.basisSize(), (long long)model.keyCount());
-        for (const auto& g : regions.regions) {
-            double cx = 0, cy = 0;
-            for (const Index p : g.points) cx += double(p % 40) / 39, cy += double(p / 40) / 39;
-            std::printf("centroid %.2f %.2f ", cx / double(g.points.size()), cy / double(g.points.size()));
-            std::printf("region points %zu keys %zu M %lld eps %g %g ratio %g\n", g.points.size(), g.keys.size(), (long long)g.basisSize(), g.epsMin, g.epsMax, g.ratio);
-        }
-        const LocalSurface novel(40, true, 1000.0);
-        std::vector<double> keys(model.keyPoints.size() * 3);
-        pmsc::RegionMultiplier rm(model);
-        std::vector<double> coords(rm.coordsSize());
-        for (Index f = 0; f < 3; ++f) {
-            novel.evaluate(f, model.keyPoints, keys.data());
-            for (Index r = 0; r < rm.regionCount(); ++r) std::printf(" %g", rm.project(r, keys.data(), coords.data() + rm.coordsOffset(r)));
-            std::printf("\n");
-        }
-    }
     EXPECT_LE(regions.regionCount(), 9);
     // Compact: no region spans more than half of the sheet in both directions.
     for (const auto& g : regions.regions) {
@@ -172,9 +159,22 @@ TEST(LocalFailThrough, TrainingLearnsCompactRegionsThatRoundTrip) {
         EXPECT_GT(g.epsMin, 0);
         EXPECT_GE(Index(g.keys.size()) * 3, g.basisSize());
     }
+    // Region keys: every region holds at least ownKeys (16) keys of its own, the model's or
+    // region keys, and region keys lie in regions that held fewer of the model's.
+    ASSERT_FALSE(regions.extraKeyPoints.empty());
+    const std::vector<Index> of = regions.regionOfPoints(model.points);
+    std::vector<Index> own(size_t(regions.regionCount()), 0), modelOwn(size_t(regions.regionCount()), 0);
+    for (const Index p : model.keyPoints) ++own[size_t(of[size_t(p)])], ++modelOwn[size_t(of[size_t(p)])];
+    for (const Index p : regions.extraKeyPoints) {
+        EXPECT_LT(modelOwn[size_t(of[size_t(p)])], 16) << p;
+        ++own[size_t(of[size_t(p)])];
+    }
+    for (Index r = 0; r < regions.regionCount(); ++r)
+        EXPECT_GE(own[size_t(r)], std::min<Index>(16, Index(regions.regions[size_t(r)].points.size()))) << r;
     const std::string bytes = pmsc::encodeModel(model);
     const Model back = pmsc::decodeModel(bytes, "m.pmsc");
     EXPECT_EQ(pmsc::encodeModel(back), bytes);
+    EXPECT_EQ(back.regions->extraKeyPoints, regions.extraKeyPoints);
 }
 
 /// Region key neighbourhoods, basis share and ratio margin (issue 9's calibration fix): learned
@@ -190,6 +190,7 @@ TEST(LocalFailThrough, RegionKeysBasisShareAndRatioMarginDoWhatTheySay) {
     o.count = 9;
     o.featherFraction = 0.08;
     o.energy = 0.999999;
+    o.ratioMargin = 1.5;  // not the default (1): the margin's effect is tested below
     auto learn = [&](const pmsc::RegionOptions& ro) { return pmsc::learnRegions(q, model, ro, kTolerance, 5, {}); };
     const pmsc::LocalRegions base = learn(o);
     const Eigen::MatrixXd pos = Eigen::Map<const Eigen::MatrixXd>(model.mean.data(), 3, model.points).transpose();
@@ -252,12 +253,6 @@ TEST(LocalFailThrough, OnlyTheRegionsThatMissAreEvaluatedAndTheErrorStaysUnderTo
         const Collected& w = whole[size_t(f)];
         EXPECT_EQ(l.state, w.state);  // the whole-frame decision is the same
         EXPECT_LE(maxPointError(l.values, truth), kTolerance) << "frame " << f;
-        if (std::getenv("PMSC_DEBUG_REGIONS") && maxPointError(l.values, truth) > kTolerance) {
-            const auto of = model.regions->regionOfPoints(n);
-            Index worst = 0; double we = 0;
-            for (Index p = 0; p < n; ++p) { const double e = std::hypot(l.values[3*p]-truth[3*p], l.values[3*p+1]-truth[3*p+1], l.values[3*p+2]-truth[3*p+2]); if (e > we) we = e, worst = p; }
-            std::printf("frame %lld worst point %lld (%.2f %.2f) region %lld state %d weight %g local %d\n", (long long)f, (long long)worst, double(worst%40)/39, double(worst/40)/39, (long long)of[worst], int(l.regions[of[worst]]), l.weights.empty() ? -1.0 : l.weights[worst], int(l.local));
-        }
         if (l.state == CacheState::Hit) {
             EXPECT_EQ(l.values, w.values);  // a global hit is reconstructed exactly as before
             continue;
@@ -284,12 +279,15 @@ TEST(LocalFailThrough, EachFailingPointIsEvaluatedOnceAndItsFullValueReachesTheS
     Index evaluated = 0;
     const auto local = runNovel(model, true, 2, &evaluated);
     const Index n = model.points, k = model.keyCount();
+    const Index e = Index(model.regions->extraKeyPoints.size());
+    ASSERT_GT(e, 0);  // the model has region keys
     Index expected = 0, localFrames = 0, framesWithSharedBands = 0;
     const pmsc::RegionMultiplier regions(model);
     for (Index f = 0; f < Index(local.size()); ++f) {
         const Collected& c = local[size_t(f)];
         expected += k;  // every frame evaluates its keys
-        if (c.state == CacheState::Hit) continue;
+        if (c.state == CacheState::Hit) continue;  // region keys only for frames that do not hit
+        expected += e;
         if (!c.local) {
             expected += n - k;  // whole-frame fail-through: the rest of the points
             continue;
@@ -314,6 +312,50 @@ TEST(LocalFailThrough, EachFailingPointIsEvaluatedOnceAndItsFullValueReachesTheS
     EXPECT_GE(localFrames, 30);
     EXPECT_GT(framesWithSharedBands, 0);  // the test exercises the overlap
     EXPECT_EQ(evaluated, expected);
+}
+
+/// The novel sheet, except that evaluating the region keys throws.
+class RegionKeysFail : public pmsc::PointEvaluator {
+public:
+    RegionKeysFail(const LocalSurface& inner, std::vector<Index> regionKeys) : inner_(inner), keys_(std::move(regionKeys)) {}
+    std::string name() const override { return "region-keys-fail"; }
+    Index pointCount() const override { return inner_.pointCount(); }
+    Index channelCount() const override { return 3; }
+    Index frameCount() const override { return inner_.frameCount(); }
+    void evaluate(Index frame, std::span<const Index> points, double* out) const override {
+        if (std::equal(points.begin(), points.end(), keys_.begin(), keys_.end())) throw std::runtime_error("no region keys today");
+        inner_.evaluate(frame, points, out);
+    }
+
+private:
+    const LocalSurface& inner_;
+    std::vector<Index> keys_;
+};
+
+TEST(LocalFailThrough, ARegionKeyFailureFailsOnlyTheFramesThatNeedThem) {
+    const Model& model = trainedModel();
+    const LocalSurface novel(40, true, 1000.0);
+    const RegionKeysFail evaluator(novel, model.regions->extraKeyPoints);
+    pmsc::engine::EngineOptions o;
+    o.threads = 2;
+    o.failurePolicy = pmsc::engine::FailurePolicy::MarkFailedAndContinue;
+    pmsc::engine::Engine engine(model, evaluator, o);
+    struct Sink : pmsc::engine::FrameSink {
+        Index failed = 0, hits = 0;
+        void write(const pmsc::engine::FrameResult& r) override {
+            if (r.failed) {
+                ++failed;
+                EXPECT_NE(r.error.find("region keys"), std::string::npos) << r.error;
+                EXPECT_NE(r.error.find("no region keys today"), std::string::npos) << r.error;
+            } else {
+                EXPECT_EQ(r.state, CacheState::Hit);  // only a hit never asks for the region keys
+                ++hits;
+            }
+        }
+    } sink;
+    engine.run({0, novel.frameCount(), 1}, sink);
+    EXPECT_GE(sink.failed, 30);
+    EXPECT_EQ(sink.failed + sink.hits, novel.frameCount());
 }
 
 TEST(LocalFailThrough, BitIdenticalAtAnyThreadCount) {
