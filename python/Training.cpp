@@ -95,7 +95,7 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
                                     std::vector<Index> gridPoints, const std::string& selector, double tolerance,
                                     Index slices, const std::string& calibration, double coverage, Index learnRank,
                                     unsigned seed, int powerIterations, Index regions, double feather,
-                                    py::object progress) {
+                                    Index regionKeys, py::object progress) {
     TrainingOptions o;
     o.basis = basis;
     o.energy = energy;
@@ -116,6 +116,8 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     o.powerIterations = powerIterations;
     o.regions.count = regions;
     o.regions.featherFraction = feather;
+    o.regions.ownKeys = regionKeys;
+    if (regionKeys < 0) throw InputError("region_keys: must be >= 0 (0 = none), got " + std::to_string(regionKeys));
     if (regions < 0) throw InputError("regions: must be >= 0 (0 = none), got " + std::to_string(regions));
     if (!(feather >= 0 && feather <= 0.5)) throw InputError("feather: must be in [0, 0.5], got " + std::to_string(feather));
     if (calibration != "max" && !(tolerance > 0)) throw InputError("calibration and coverage need a tolerance");
@@ -178,7 +180,7 @@ void bindTraining(py::module_& m) {
           "fiducials"_a = std::vector<Index>{}, "grid_points"_a = std::vector<Index>{},
           "selector"_a = "teleconnection", "tolerance"_a = 0.0, "slices"_a = 5, "calibration"_a = "max",
           "coverage"_a = 0.9, "learn_rank"_a = 0, "seed"_a = 20070101u, "power_iterations"_a = 2,
-          "regions"_a = 0, "feather"_a = 0.03, "progress"_a = py::none(),
+          "regions"_a = 0, "feather"_a = 0.03, "region_keys"_a = 4, "progress"_a = py::none(),
           "Trains a model as `pmsc train` does (same options, same model bytes). frames: an array (F, N, C), a "
           ".npy path, or a list of them (shots). progress(stage, done, total) may return False to cancel.");
 }

@@ -4,7 +4,8 @@
 #   tests/fuzz/run-fuzzers.sh [SECONDS_PER_TARGET] [TARGET...]     (default 30 s; all five targets)
 #
 # Seeds: tests/fuzz/corpus/{npy,model,obj,specs} (small .npy files, models from `pmsc train` on a
-# small set: version 1, version 2 with regions, version 2 with learning and calibration sections,
+# small set: version 1, version 2 with regions (with and without region keys), version 2 with
+# learning and calibration sections,
 # small OBJ meshes, and command-line texts), plus a few animated assets from Debian's assimp-testmodels for `skin`,
 # copied at run time (each prefixed with the byte that picks its file extension, FuzzSkin.cpp).
 # What the fuzzers add to the corpus stays in build-fuzz/corpus (not committed). A crash leaves
