@@ -19,8 +19,9 @@ namespace {
 
 // report.json's "local_fail_through" (FaceLocalReport.h), one line per set and way.
 void printLocalFailThrough(const nlohmann::json& local) {
-    std::printf("  local fail-through: %ld regions, feather %.2f%% of the head diagonal\n",
-                local.at("regions").get<long>(), local.at("feather_width_pct_bbox").get<double>());
+    std::printf("  local fail-through: %ld regions, %ld region keys, feather %.2f%% of the head diagonal\n",
+                local.at("regions").get<long>(), local.at("region_keys").get<long>(),
+                local.at("feather_width_pct_bbox").get<double>());
     for (const char* set : {"validation", "novel", "mixed"}) {
         if (!local.contains(set)) continue;
         const nlohmann::json& s = local.at(set);

@@ -156,6 +156,7 @@ nlohmann::json localFailThroughSets(const Model& model, const PointEvaluator& ev
         if (animation.sequences()[size_t(s)].mixed) mixedSeqs.push_back(s);
     nlohmann::json local;
     local["regions"] = model.regions->regionCount();
+    local["region_keys"] = model.regions->extraKeyPoints.size();
     local["feather_width_pct_bbox"] = model.regions->featherWidth / percent;
     local["max_local_fraction"] = model.regions->maxLocalFraction;
     const std::pair<const char*, const std::vector<Index>*> sets[] = {
