@@ -75,12 +75,13 @@ void checkOptions(const CornellDemoOptions& o) {
     if (o.regions < 0 || o.regions > 1024)
         throw InputError("demo cornell: --regions " + std::to_string(o.regions) + " outside [0, 1024]");
     if (!(o.featherPercent >= 0 && o.featherPercent <= 50))
-        throw InputError("demo cornell: --feather " + std::to_string(o.featherPercent) + " outside [0, 50] (% of the box's diagonal)");
+        throw InputError("demo cornell: --feather " + std::to_string(o.featherPercent) +
+                         " outside [0, 50] (% of the box's diagonal)");
     if (!(o.localChangeMm == 0 || (o.localChangeMm >= 10 && o.localChangeMm <= 150)))
         throw InputError("demo cornell: --local-change " + std::to_string(o.localChangeMm) +
                          " is not 0 (none) or an edge in [10, 150] mm");
     if (o.localChangeMm > 0 && o.regions == 0)
-        throw InputError("demo cornell: --local-change needs regions (--regions R > 0); pass --local-change 0 without them");
+        throw InputError("demo cornell: --local-change needs --regions R > 0 (or --local-change 0)");
     if (o.localChangeMm > 0 && (o.localChangeLights < 1 || o.localChangeLights > o.scatteredLights))
         throw InputError("demo cornell: the local change's lights (" + std::to_string(o.localChangeLights) +
                          ") must be in [1, scattered lights = " + std::to_string(o.scatteredLights) + "]");
@@ -482,17 +483,17 @@ nlohmann::json runCornellDemo(const CornellDemoOptions& o) {
     const WrittenFiles written = writeGridsAndRenders(run, *world, frames, gathers.full, sink);
     if (trained.model.regions) {
         const auto t = Clock::now();
-        const LocalFailThroughInputs in{
-            .model = trained.model,
-            .validation = valEval,
-            .scattered = frames.scattered,
-            .fullGathers = gathers.full,
-            .tolerance = trained.tolerance,
-            .changeEdgeMm = o.localChangeMm,
-            .changeLights = o.localChangeLights,
-            .threads = threads,
-            .inArena = [&](const std::function<void()>& f) { arena.execute(f); },
-            .progress = [&](std::string_view stage, double done, double total) { run.progress(stage, done, total); }};
+        const LocalFailThroughInputs in{.model = trained.model,
+                                        .validation = valEval,
+                                        .scattered = frames.scattered,
+                                        .fullGathers = gathers.full,
+                                        .tolerance = trained.tolerance,
+                                        .changeEdgeMm = o.localChangeMm,
+                                        .changeLights = o.localChangeLights,
+                                        .threads = threads,
+                                        .inArena = [&](const std::function<void()>& f) { arena.execute(f); },
+                                        .progress = [&](std::string_view stage, double done,
+                                                        double total) { run.progress(stage, done, total); }};
         report["local_fail_through"] = measureLocalFailThrough(in);
         timings["local_fail_through"] = secondsSince(t);
     }

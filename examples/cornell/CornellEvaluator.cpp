@@ -56,7 +56,8 @@ std::shared_ptr<const CornellWorld> CornellWorld::withScene(const CornellWorld& 
     if (b.size() < a.size() || !std::equal(a.begin(), a.end(), b.begin(), [](const Quad& x, const Quad& y) {
             return x.name == y.name && x.area() == y.area();
         }))
-        throw std::invalid_argument("CornellWorld::withScene: the changed scene must begin with the base scene's quads");
+        throw std::invalid_argument(
+            "CornellWorld::withScene: the changed scene must begin with the base scene's quads");
     auto w = std::make_shared<CornellWorld>();
     w->scene = std::move(scene);
     w->tracer = std::make_shared<RayTracer>(w->scene, base.tracer->mode());
