@@ -62,6 +62,13 @@ struct DemoRun {
     }
 };
 
+// A number as a user typed it: 5, not 5.000000.
+std::string shortNumber(double v) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%g", v);
+    return buf;
+}
+
 void checkOptions(const CornellDemoOptions& o) {
     if (o.outDir.empty()) throw InputError("demo cornell: --out DIR is required");
     if (o.points < 1000 || o.points > 4000000)
@@ -75,10 +82,10 @@ void checkOptions(const CornellDemoOptions& o) {
     if (o.regions < 0 || o.regions > 1024)
         throw InputError("demo cornell: --regions " + std::to_string(o.regions) + " outside [0, 1024]");
     if (!(o.featherPercent >= 0 && o.featherPercent <= 50))
-        throw InputError("demo cornell: --feather " + std::to_string(o.featherPercent) +
+        throw InputError("demo cornell: --feather " + shortNumber(o.featherPercent) +
                          " outside [0, 50] (% of the box's diagonal)");
     if (!(o.localChangeMm == 0 || (o.localChangeMm >= 10 && o.localChangeMm <= 150)))
-        throw InputError("demo cornell: --local-change " + std::to_string(o.localChangeMm) +
+        throw InputError("demo cornell: --local-change " + shortNumber(o.localChangeMm) +
                          " is not 0 (none) or an edge in [10, 150] mm");
     if (o.localChangeMm > 0 && o.regions == 0)
         throw InputError("demo cornell: --local-change needs --regions R > 0 (or --local-change 0)");
