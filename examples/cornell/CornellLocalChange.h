@@ -15,21 +15,27 @@
 namespace pmsc::cornell {
 
 /// Issue 9's local change of the Cornell box: a white cube of edge `edgeMm` standing on the floor
-/// against the back wall (10 mm from it), centred on x = 200 mm, between the blocks and the green
-/// wall. Training never sees it: it throws a contact shadow on the floor and the back wall next to
-/// it, covers the floor under it and reflects light onto both.
+/// 10 mm from a wall. Training never sees it: it covers the floor under it, throws a contact shadow
+/// on the floor and the wall next to it, and reflects light onto both.
 ///
-/// Where: on the floor, for a contact shadow; against the back wall because the keys see a change
-/// there. Measured at --quick (6,000 points, 48 regions, the first 8 scattered lights): a 100 mm
-/// cube here fails 2 of 8 frames as a whole, both routed locally. The same kind of cube elsewhere
-/// changed the full gather by 0.6-1.1 tolerances and was never seen: by the red wall (80-120 mm,
-/// z 90-210), by the green wall (120 mm at z 400-520: every frame a hit with a largest error of
-/// 1.1 tolerances), in the front right corner, or against the back wall at x 230-400. A change
-/// that reaches no key point (200 of the cache's points) cannot be detected by key errors, global
-/// or per region: the limit of the method, not of the routing.
+/// Where: whereKeysSee() puts it where the most key points lie within half an edge of it, because a
+/// change no key point sees cannot be detected by any key error, the frame's or a region's.
+/// Measured: a 100 mm cube at the fixed place againstBackWall() failed 2 of 8 frames as a whole at
+/// --quick (6,000 points), both routed locally, but at the default size (160,432 points, other
+/// keys) every frame hit with a largest error of 1.05 tolerances. At --quick, cubes by the red wall
+/// (80-120 mm, z 90-210), by the green wall (120 mm, z 400-520: every frame a hit with a largest
+/// error of 1.11 tolerances), in the front right corner and against the back wall at x 230-400
+/// changed the full gather by 0.6-1.1 tolerances and no frame missed.
 struct LocalChangeBox {
     Vec3 lo, hi;
+    /// On the floor against the back wall, centred on x = 200 mm (clear of both blocks for edges
+    /// up to 150 mm).
     static LocalChangeBox againstBackWall(double edgeMm);
+    /// Among cubes every 10 mm along the foot of the back, green and red walls (10 mm from the wall,
+    /// 5 mm clear of the blocks), the first with the most `keys` (point indices of world's voxels)
+    /// within edgeMm / 2 of it; that count into *keysNear.
+    static LocalChangeBox whereKeysSee(double edgeMm, const CornellWorld& world,
+                                       const std::vector<Index>& keys, Index* keysNear = nullptr);
 };
 
 /// What measureLocalFailThrough needs from the demo: the model, the validation evaluator and the
@@ -54,10 +60,10 @@ struct LocalFailThroughInputs {
 /// examples::localFailThroughReport() (errors as multiples of the tolerance) both ways on
 /// - "validation": the scattered validation lights (the ordinary validation set), and
 /// - "local_change": the same cache points and the first changeLights scattered lights in the box
-///   with LocalChangeBox::againstBackWall(changeEdgeMm), against full gathers of that changed scene;
-///   with the change itself: its box, the points it covers, and how far the changed full gather
-///   moves from the unchanged one (largest move over the tolerance, fraction of points moved by
-///   more than a tenth of the tolerance).
+///   with LocalChangeBox::whereKeysSee(changeEdgeMm, ..., the model's keys), against full gathers of that
+///   changed scene; with the change itself: its box, the points it covers, and how far the changed full
+///   gather moves from the unchanged one (largest move over the tolerance, fraction of points moved by more
+///   than a tenth of the tolerance).
 nlohmann::json measureLocalFailThrough(const LocalFailThroughInputs& in);
 
 }  // namespace pmsc::cornell

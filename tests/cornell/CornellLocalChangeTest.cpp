@@ -43,6 +43,31 @@ TEST(CornellLocalChange, TheBoxStandsAgainstTheBackWallClearOfTheBlocks) {
     }
 }
 
+// The demo's cube goes where key points would see it: given keys clustered by the green wall at
+// z = 420, the chosen cube stands within half an edge of them all, 10 mm from that wall, clear of
+// the blocks.
+TEST(CornellLocalChange, WhereKeysSeePutsTheCubeByTheKeys) {
+    const auto world = CornellWorld::create(3000);
+    std::vector<Index> keys;
+    for (Index p = 0; p < Index(world->voxels.size()); ++p) {
+        const Vec3 x = world->voxels.position[size_t(p)];
+        if (x.y < 1 && x.x > 60 && x.x < 90 && std::abs(x.z - 420) < 30) keys.push_back(p);
+    }
+    ASSERT_GE(keys.size(), 2u);
+    Index near = -1;
+    const LocalChangeBox b = LocalChangeBox::whereKeysSee(80, *world, keys, &near);
+    EXPECT_EQ(near, Index(keys.size()));
+    EXPECT_DOUBLE_EQ(b.lo.x, 10);
+    EXPECT_DOUBLE_EQ(b.hi.x - b.lo.x, 80);
+    for (const Index k : keys) {  // each within half an edge of the cube
+        const Vec3 x = world->voxels.position[size_t(k)];
+        const double dz = std::max({b.lo.z - x.z, 0.0, x.z - b.hi.z}), dx = std::max(x.x - b.hi.x, 0.0);
+        EXPECT_LE(std::hypot(dx, dz), 40) << "key " << k;
+    }
+    EXPECT_FALSE(world->scene.insideBlock({b.lo.x, 1, b.lo.z}, -5));
+    EXPECT_FALSE(world->scene.insideBlock({b.hi.x, 1, b.hi.z}, -5));
+}
+
 TEST(CornellLocalChange, TheChangedWorldKeepsThePointsAndTheCubeShadowsTheFloorNextToIt) {
     const auto base = CornellWorld::create(3000);
     const LocalChangeBox box = LocalChangeBox::againstBackWall(100);
