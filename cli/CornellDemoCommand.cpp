@@ -69,11 +69,11 @@ int runDemoCornell(const std::vector<std::string>& args) {
     parser.option("--feather", "PCT",
                   "feather width of the regions' borders, % of the box's diagonal (default 3)",
                   [&](const std::string& v) { feather = parseDouble("--feather", v, 0, 50); });
-    parser.option(
-        "--local-change", "MM",
-        "edge of the local change, a cube on the floor against the back wall that training never saw,\n"
-        "measured with the scattered lights both ways (default 100; 0 = none; else 10-150)",
-        [&](const std::string& v) { localChange = parseDouble("--local-change", v, 0, 150); });
+    parser.option("--local-change", "MM",
+                  "edge of a cube on the floor by a wall, where key points see it, that training never saw;\n"
+                  "                     the scattered lights in that box, measured both ways (default 100; 0 "
+                  "= none; else 10-150)",
+                  [&](const std::string& v) { localChange = parseDouble("--local-change", v, 0, 150); });
     parser.flag("--quick", "small settings, a smoke test of the whole pipeline (under 30 s)", quick);
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
