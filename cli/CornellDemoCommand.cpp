@@ -26,16 +26,20 @@ void printLocalFailThrough(const nlohmann::json& local) {
     for (const char* set : {"validation", "local_change"}) {
         if (!local.contains(set)) continue;
         const nlohmann::json& s = local.at(set);
-        for (const char* way : {"local", "whole_frame"}) {
+        for (const char* way : {"local", "whole_frame", "regions_every_frame"}) {
+            if (!s.contains(way)) continue;
             const nlohmann::json& w = s.at(way);
+            const std::string speedup = std::string("speedup_") + way;
             std::printf(
-                "    %-12s %-11s hit rate %5.1f%%, gathered %5.1f%% of the points, max error %.3f, RMS %.4f, "
+                "    %-12s %-19s %s %5.1f%%, gathered %5.1f%% of the points, max error %.3f, RMS %.4f, "
                 "speedup %.1fx\n",
-                set, way, 100 * s.at("hit_rate").get<double>(),
+                set, way, w.contains("frames_without_gathers") ? "no gather" : "hit rate ",
+                100 * (w.contains("frames_without_gathers")
+                           ? w.at("frames_without_gathers").get<double>() / s.at("frames").get<double>()
+                           : s.at("hit_rate").get<double>()),
                 100 * w.at("points_evaluated_fraction_mean").get<double>(),
                 w.at("soft_max_error_over_tolerance").get<double>(),
-                w.at("soft_rms_error_over_tolerance").get<double>(),
-                s.at(std::string("local") == way ? "speedup_local" : "speedup_whole_frame").get<double>());
+                w.at("soft_rms_error_over_tolerance").get<double>(), s.at(speedup).get<double>());
         }
     }
 }

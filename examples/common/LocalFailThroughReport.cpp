@@ -1,6 +1,7 @@
 #include "examples/common/LocalFailThroughReport.h"
 
 #include "engine/Engine.h"
+#include "pmsc/SoftCache.h"
 
 #include <tbb/task_arena.h>
 
@@ -84,16 +85,26 @@ double runFrames(engine::Engine& engine, const std::vector<Index>& frames, Sink&
 nlohmann::json localFailThroughReport(const Model& model, const PointEvaluator& evaluator,
                                       const std::vector<Index>& frames, const LocalReportScale& scale,
                                       int threads, const std::function<void(double)>& progress,
-                                      const FullValues& fullValues) {
+                                      const FullValues& fullValues, bool regionsEveryFrame) {
     nlohmann::json j;
     const Index n = model.points, c = model.channels;
     const double count = std::max<double>(1, double(frames.size()));
     // Errors, `threads` cores, both ways: local fail-through (the default for a model with regions)
     // and whole-frame fail-through; each output against the frame's full values.
-    for (const bool localWay : {true, false}) {
+    struct Way {
+        const char* name;
+        bool local, everyFrame;
+    };
+    std::vector<Way> ways = {{"local", true, false}, {"whole_frame", false, false}};
+    if (regionsEveryFrame && model.regions) ways.push_back({"regions_every_frame", true, true});
+    for (const Way& way : ways) {
+        const bool localWay = way.local && !way.everyFrame;
         engine::EngineOptions o;
         o.threads = threads;
-        o.localFailThrough = localWay;
+        o.localFailThrough = way.local;
+        // Thresholds (0, 0): no frame passes the whole-frame test, so every frame is decided region
+        // by region; one whose regions all hit is a local frame with no point gathered.
+        if (way.everyFrame) o.policy = SoftCachePolicy(0, 0);
         engine::Engine engine(model, evaluator, o);
         ErrorSink sink(evaluator, fullValues, n, c);
         runFrames(engine, frames, sink);
@@ -129,7 +140,13 @@ nlohmann::json localFailThroughReport(const Model& model, const PointEvaluator& 
             for (const auto& r : s.regions) regions.push_back({r.hits, r.blends, r.misses});
             w["region_states_last_run"] = regions;
         }
-        j[localWay ? "local" : "whole_frame"] = w;
+        if (way.everyFrame) {
+            Index none = 0;
+            for (const double f : sink.fraction) none += f == 0;
+            w["frames_without_gathers"] = none;
+            w["local_frames"] = local;
+        }
+        j[way.name] = w;
         if (progress) progress(localWay ? 0.2 : 0.4);
     }
     // Speed, one thread, the three ways in one run.
@@ -159,6 +176,14 @@ nlohmann::json localFailThroughReport(const Model& model, const PointEvaluator& 
                                              {"whole_frame_fail_through", wholeSeconds / count}};
         j["speedup_local"] = localSeconds > 0 ? fullSeconds / localSeconds : 0.0;
         j["speedup_whole_frame"] = wholeSeconds > 0 ? fullSeconds / wholeSeconds : 0.0;
+        if (ways.size() > 2) {
+            o.localFailThrough = true;
+            o.policy = SoftCachePolicy(0, 0);
+            engine::Engine every(model, evaluator, o);
+            const double everySeconds = runFrames(every, frames, sink);
+            j["one_thread_seconds_per_frame"]["regions_every_frame"] = everySeconds / count;
+            j["speedup_regions_every_frame"] = everySeconds > 0 ? fullSeconds / everySeconds : 0.0;
+        }
     }
     if (progress) progress(1.0);
     return j;

@@ -39,10 +39,14 @@ using FullValues = std::function<void(Index frame, double* out)>;
 /// Keys: frames, hit_rate, non_hit_frames, local_fail_through, local{...}, whole_frame{...}, clock,
 /// one_thread_seconds_per_frame{full_pose, local_fail_through, whole_frame_fail_through},
 /// speedup_local, speedup_whole_frame.
+/// @param regionsEveryFrame also a third way, "regions_every_frame" (errors, frames_without_gathers,
+///        speedup_regions_every_frame): whole-frame thresholds (0, 0), so the regions decide every
+///        frame, also those the whole-frame test would accept (an experiment: the engine's rule
+///        asks the regions only on frames that do not hit as a whole)
 /// @param progress called with the done fraction in [0, 1]; may throw to cancel
 nlohmann::json localFailThroughReport(const Model& model, const PointEvaluator& evaluator,
                                       const std::vector<Index>& frames, const LocalReportScale& scale,
                                       int threads, const std::function<void(double done)>& progress = {},
-                                      const FullValues& fullValues = {});
+                                      const FullValues& fullValues = {}, bool regionsEveryFrame = false);
 
 }  // namespace pmsc::examples

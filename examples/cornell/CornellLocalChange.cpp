@@ -123,7 +123,7 @@ nlohmann::json measureLocalChange(const LocalFailThroughInputs& in) {
     for (Index f = 0; f < frames; ++f) all[size_t(f)] = f;
     nlohmann::json j = examples::localFailThroughReport(
         in.model, changed, all, toleranceScale(in.tolerance), in.threads,
-        [&](double d) { in.progress("local fail-through: local change", d, 1); }, lookUp(full));
+        [&](double d) { in.progress("local fail-through: local change", d, 1); }, lookUp(full), true);
     j["box_lo_mm"] = mm(box.lo);
     j["box_hi_mm"] = mm(box.hi);
     j["lights"] = "the first " + std::to_string(in.changeLights) + " scattered validation lights";
@@ -147,7 +147,7 @@ nlohmann::json measureLocalFailThrough(const LocalFailThroughInputs& in) {
     for (Index f = 0; f < in.scattered; ++f) scattered[size_t(f)] = f;
     j["validation"] = examples::localFailThroughReport(
         in.model, in.validation, scattered, toleranceScale(in.tolerance), in.threads,
-        [&](double d) { in.progress("local fail-through: validation", d, 1); }, lookUp(in.fullGathers));
+        [&](double d) { in.progress("local fail-through: validation", d, 1); }, lookUp(in.fullGathers), true);
     if (in.changeEdgeMm > 0 && in.changeLights > 0) j["local_change"] = measureLocalChange(in);
     return j;
 }
