@@ -135,6 +135,13 @@ TEST(CornellDemoQuick, LocalChangeMissesAsAWholeFrameIsRoutedLocallyAndStaysUnde
     EXPECT_LT(local.at("soft_max_error_over_tolerance").get<double>(), 1);
     EXPECT_EQ(local.at("frames_over_tolerance").get<int>(), 0);
     EXPECT_GT(c.at("speedup_local").get<double>(), 0);  // no speed ratio asserted (loaded machines)
+    // The experiment: regions decide every frame, so every frame goes their way (local or whole).
+    for (const nlohmann::json* set : {&v, &c}) {
+        const nlohmann::json& e = set->at("regions_every_frame");
+        EXPECT_LE(e.at("frames_without_gathers").get<int>(), e.at("local_frames").get<int>());
+        EXPECT_GT(e.at("points_evaluated_fraction_mean").get<double>(), 0);
+        EXPECT_LT(e.at("soft_max_error_over_tolerance").get<double>(), 1);
+    }
     std::filesystem::remove_all(dir);
 }
 
