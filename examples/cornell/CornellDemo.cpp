@@ -2,6 +2,7 @@
 
 #include "engine/Engine.h"
 #include "examples/cornell/CornellEvaluator.h"
+#include "examples/cornell/CornellLocalChange.h"
 #include "examples/cornell/DemoValidation.h"
 #include "examples/cornell/ImageIO.h"
 #include "examples/cornell/LightingCacheGrid.h"
@@ -61,6 +62,13 @@ struct DemoRun {
     }
 };
 
+// A number as a user typed it: 5, not 5.000000.
+std::string shortNumber(double v) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%g", v);
+    return buf;
+}
+
 void checkOptions(const CornellDemoOptions& o) {
     if (o.outDir.empty()) throw InputError("demo cornell: --out DIR is required");
     if (o.points < 1000 || o.points > 4000000)
@@ -71,6 +79,19 @@ void checkOptions(const CornellDemoOptions& o) {
         o.pathFrames < 1 || o.pathFullEvery < 1 || o.referenceMultiplier < 1 || o.referencePoints < 1 || o.referenceFrames < 1 ||
         o.imageSize < 8 || o.renderFrames < 0 || o.threads < 0 || !(o.toleranceFraction > 0))
         throw InputError("demo cornell: an option is out of range");
+    if (o.regions < 0 || o.regions > 1024)
+        throw InputError("demo cornell: --regions " + std::to_string(o.regions) + " outside [0, 1024]");
+    if (!(o.featherPercent >= 0 && o.featherPercent <= 50))
+        throw InputError("demo cornell: --feather " + shortNumber(o.featherPercent) +
+                         " outside [0, 50] (% of the box's diagonal)");
+    if (!(o.localChangeMm == 0 || (o.localChangeMm >= 10 && o.localChangeMm <= 150)))
+        throw InputError("demo cornell: --local-change " + shortNumber(o.localChangeMm) +
+                         " is not 0 (none) or an edge in [10, 150] mm");
+    if (o.localChangeMm > 0 && o.regions == 0)
+        throw InputError("demo cornell: --local-change needs --regions R > 0 (or --local-change 0)");
+    if (o.localChangeMm > 0 && (o.localChangeLights < 1 || o.localChangeLights > o.scatteredLights))
+        throw InputError("demo cornell: the local change's lights (" + std::to_string(o.localChangeLights) +
+                         ") must be in [1, scattered lights = " + std::to_string(o.scatteredLights) + "]");
 }
 
 void createOutputFolder(const std::string& outDir) {
@@ -148,6 +169,18 @@ TrainedModel trainModel(const DemoRun& run, const CornellWorld& world, FrameSet 
     topt.maxKeys = o.keys;
     topt.tolerance = o.toleranceFraction * trained.peak;
     if (o.gridKeys > 0) topt.gridPoints = gridKeyPoints(world, o.gridKeys);
+    if (o.regions > 0) {
+        // Local fail-through (issue 9): regions clustered on the voxels' positions (RGB values are
+        // no positions) and their loading patterns.
+        topt.regions.count = o.regions;
+        topt.regions.featherFraction = o.featherPercent / 100.0;
+        const Index n = static_cast<Index>(world.voxels.size());
+        topt.regions.positions.resize(n, 3);
+        for (Index i = 0; i < n; ++i) {
+            const Vec3 p = world.voxels.position[static_cast<std::size_t>(i)];
+            topt.regions.positions.row(i) << p.x, p.y, p.z;
+        }
+    }
     topt.progress = [&](std::string_view stage, double done, double total) {
         run.progress(std::string("train: ") + std::string(stage), done, total);
         return true;
@@ -455,6 +488,22 @@ nlohmann::json runCornellDemo(const CornellDemoOptions& o) {
     const ReferenceErrors refErrors =
         measureAgainstConvergedReference(run, world, rig, reference, gathers.full, sink);
     const WrittenFiles written = writeGridsAndRenders(run, *world, frames, gathers.full, sink);
+    if (trained.model.regions) {
+        const auto t = Clock::now();
+        const LocalFailThroughInputs in{.model = trained.model,
+                                        .validation = valEval,
+                                        .scattered = frames.scattered,
+                                        .fullGathers = gathers.full,
+                                        .tolerance = trained.tolerance,
+                                        .changeEdgeMm = o.localChangeMm,
+                                        .changeLights = o.localChangeLights,
+                                        .threads = threads,
+                                        .inArena = [&](const std::function<void()>& f) { arena.execute(f); },
+                                        .progress = [&](std::string_view stage, double done,
+                                                        double total) { run.progress(stage, done, total); }};
+        report["local_fail_through"] = measureLocalFailThrough(in);
+        timings["local_fail_through"] = secondsSince(t);
+    }
 
     // 8. The report.
     reportResults(report, o, n, trained, valEval.frameCount(), gathers.secondsPerFrame, stats, sink, frames,

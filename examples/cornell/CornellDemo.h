@@ -36,6 +36,20 @@ struct CornellDemoOptions {
     int imageSize = 256;
     int renderFrames = 2;          ///< path frames rendered per camera (spread over the path)
     int threads = 0;               ///< 0 = every core; full gathers and the engine use the same
+    /// Regions of local fail-through (issue 9) learned in training, from the voxels' positions;
+    /// 0 = none (a version-1 model; no "local_fail_through" in the report). 48, measured at --quick
+    /// on a 100 mm cube against the back wall at x 150-250 (its 2 frames that miss as a whole): 16 regions gathered 54% of the
+    /// points of those frames, 32 sent one of them whole (77% on average), 48 routed both locally
+    /// at 42% (speedup over full gathers 6.5x, whole-frame 3.5x), 64 gained nothing (41%, 6.2x).
+    int regions = 48;
+    /// Feather width of the regions' borders, % of the box's diagonal (965 mm): 29 mm, 1.6 voxels
+    /// at --quick and 8 at the default size. 1.5% is under one --quick voxel (no feathering at
+    /// all; it gathered 34% of the points); 5% gathered 48% for the same largest error.
+    double featherPercent = 3;
+    /// Edge (mm) of issue 9's local change (LocalChangeBox: a cube on the floor against the back
+    /// wall, never seen in training); 0 = no local-change set. Needs regions > 0.
+    double localChangeMm = 100;
+    int localChangeLights = 8;     ///< the local-change set: the first this many scattered lights
     bool quick = false;            ///< small settings for a smoke test (set by quickOptions)
     /// Progress hook: (stage, done, total); return false to cancel (throws pmsc::Cancelled).
     std::function<bool(std::string_view, double, double)> progress;
@@ -48,13 +62,15 @@ struct CornellDemoOptions {
 /// - report.json (returned too): points, key_points, basis, train_frames, test_frames,
 ///   samples_per_point, full_seconds_per_frame, pmsc_seconds_per_frame, speedup,
 ///   rms_rel_error, hit_rate, reference_rms_rel_error_full, reference_rms_rel_error_pm, and more;
+///   with regions, "local_fail_through" (CornellLocalChange.h: the scattered lights and the local
+///   change, each with local and whole-frame fail-through);
 /// - cache_{pmsc,full}_pathNNN.vdb: the lighting-cache grids of the rendered frames;
 /// - CAMERA_pathNNN.png (full | PMSC | |diff| x 10) and .pfm (the same, linear).
 ///
 /// Steps: voxelize the box; 144 training frames by full gathers; pmsc::train; full gathers of
 /// the validation frames that are checked; the validation frames through the engine
 /// (pmsc::engine::Engine, soft cache per frame); the converged reference on a subset; grids,
-/// renders, report.
+/// renders; with regions, local fail-through on the scattered lights and the local change; report.
 /// @throws pmsc::InputError for bad options, pmsc::IoError for outputs that cannot be written,
 ///         pmsc::Cancelled when the progress hook asks to stop.
 nlohmann::json runCornellDemo(const CornellDemoOptions& options);

@@ -7,6 +7,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <sstream>
@@ -46,6 +47,21 @@ std::shared_ptr<const CornellWorld> CornellWorld::create(std::size_t points, Tra
     w->scene = CornellScene::standard();
     w->tracer = std::make_shared<RayTracer>(w->scene, mode);
     w->voxels = SurfaceVoxels::voxelizeToCount(w->scene, points);
+    return w;
+}
+
+std::shared_ptr<const CornellWorld> CornellWorld::withScene(const CornellWorld& base, CornellScene scene) {
+    const auto& a = base.scene.quads();
+    const auto& b = scene.quads();
+    if (b.size() < a.size() || !std::equal(a.begin(), a.end(), b.begin(), [](const Quad& x, const Quad& y) {
+            return x.name == y.name && x.area() == y.area();
+        }))
+        throw std::invalid_argument(
+            "CornellWorld::withScene: the changed scene must begin with the base scene's quads");
+    auto w = std::make_shared<CornellWorld>();
+    w->scene = std::move(scene);
+    w->tracer = std::make_shared<RayTracer>(w->scene, base.tracer->mode());
+    w->voxels = base.voxels;
     return w;
 }
 

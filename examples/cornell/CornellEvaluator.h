@@ -22,6 +22,10 @@ struct CornellWorld {
 
     /// The measured box voxelized to about `points` surface voxels.
     static std::shared_ptr<const CornellWorld> create(std::size_t points, TraceMode mode = TraceMode::Stream);
+    /// The same points (voxels, ids, normals) in a changed scene (its own BVH, the same trace
+    /// mode): a scene whose quads begin with `base`'s, as CornellScene::withBox makes.
+    /// @throws std::invalid_argument if `scene` does not begin with base's quads.
+    static std::shared_ptr<const CornellWorld> withScene(const CornellWorld& base, CornellScene scene);
 };
 
 /// Direct irradiance (RGB) from a point light at surface point p with unit normal n, with a

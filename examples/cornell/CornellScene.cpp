@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <stdexcept>
 
 namespace pmsc::cornell {
 
@@ -120,6 +121,24 @@ CornellScene CornellScene::standard() {
             {v(472, 0, 406), v(472, 330, 406), v(314, 330, 456), v(314, 0, 456)},
             {v(314, 0, 456), v(314, 330, 456), v(265, 330, 296), v(265, 0, 296)},
             {v(265, 0, 296), v(265, 330, 296), v(423, 330, 247), v(423, 0, 247)}}});
+    return s;
+}
+
+CornellScene CornellScene::withBox(const std::string& name, Vec3 lo, Vec3 hi) const {
+    if (!(lo.x < hi.x && lo.y < hi.y && lo.z < hi.z))
+        throw std::invalid_argument("CornellScene::withBox: '" + name + "' needs lo < hi in x, y and z");
+    CornellScene s = *this;
+    const Vec3 centre = (lo + hi) * 0.5;
+    auto face = [&](const std::string& side, std::array<Vec3, 4> c) {
+        s.quads_.push_back(makeQuad(name + " " + side, c, kWhite, centre, false));
+    };
+    const double x0 = lo.x, y0 = lo.y, z0 = lo.z, x1 = hi.x, y1 = hi.y, z1 = hi.z;
+    face("top", {v(x0, y1, z0), v(x1, y1, z0), v(x1, y1, z1), v(x0, y1, z1)});
+    face("front", {v(x0, y0, z0), v(x1, y0, z0), v(x1, y1, z0), v(x0, y1, z0)});
+    face("back", {v(x0, y0, z1), v(x0, y1, z1), v(x1, y1, z1), v(x1, y0, z1)});
+    face("left", {v(x1, y0, z0), v(x1, y0, z1), v(x1, y1, z1), v(x1, y1, z0)});
+    face("right", {v(x0, y0, z0), v(x0, y1, z0), v(x0, y1, z1), v(x0, y0, z1)});
+    if (lo.y > 0) face("bottom", {v(x0, y0, z0), v(x0, y0, z1), v(x1, y0, z1), v(x1, y0, z0)});
     return s;
 }
 

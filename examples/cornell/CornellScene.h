@@ -63,6 +63,14 @@ public:
     /// True if p lies strictly inside one of the two blocks (their footprint, below their top).
     bool insideBlock(Vec3 p, double marginMm = 0) const;
 
+    /// This scene with an axis-aligned box [lo, hi] (mm) added: white, its faces' normals pointing
+    /// out; no bottom face when it stands on the floor (lo.y <= 0), whose floor it covers. Its quads
+    /// come after this scene's, so every quad index of this scene (SurfaceVoxels::quad) keeps its
+    /// meaning. Not a block for insideBlock(): it is a change of the lit scene (issue 9's local
+    /// change), while the cache's points stay those voxelized without it.
+    /// @throws std::invalid_argument unless lo < hi in every axis.
+    CornellScene withBox(const std::string& name, Vec3 lo, Vec3 hi) const;
+
     /// The measured camera: (278, 273, -800) looking down +z, 39.3077 degrees.
     static Camera standardCamera();
 

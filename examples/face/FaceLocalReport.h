@@ -14,28 +14,16 @@
 
 namespace pmsc::face {
 
-/// Local fail-through (issue 9) on one set of frames, measured both ways against the full pose:
-/// - errors: the engine with local fail-through (every core), each output against a full pose:
-///   largest point error per frame (% of the head diagonal), local frames, fraction of points
-///   evaluated fully (mean over the set's frames and over its non-hit frames);
-/// - speed: the same frames at ONE thread through the engine with local fail-through, with
-///   whole-frame fail-through (`--whole-frame-fail-through`), and full poses (evaluateAll), all in
-///   this run: seconds per frame and speedups over full posing.
-/// @param percent model units per % of the head diagonal
-nlohmann::json localFailThroughReport(const Model& model, const PointEvaluator& evaluator,
-                                      const std::vector<Index>& frames, double percent, int threads,
-                                      const std::function<void(double done)>& progress = {});
-
 /// The face demo's section "local_fail_through" of report.json: regions, feather width, and
-/// localFailThroughReport() on three sets: "validation" (the first 4 validation sequences: a
-/// sample, every frame of it through the engine twice and posed fully three times), "novel" (the
-/// novel sequences) and "mixed" (the animation's mixed sequences: novel controls for 1-3 s of a
-/// 5-8 s shot; absent when it has none).
+/// examples::localFailThroughReport() (errors in % of the head diagonal, frames over 1%) on three sets:
+/// "validation" (the first 4 validation sequences: a sample, every frame of it through the engine twice and
+/// posed fully three times), "novel" (the novel sequences) and "mixed" (the animation's mixed sequences:
+/// novel controls for 1-3 s of a 5-8 s shot; absent when it has none).
 /// @param step progress hook (stage, done, total) that may throw to cancel
 /// @param maxFramesPerSet > 0: only the first frames of each set (`--quick`: a smoke test)
-nlohmann::json localFailThroughSets(const Model& model, const PointEvaluator& evaluator, const FaceAnimation& animation,
-                                    const std::vector<Index>& validationSeqs, const std::vector<Index>& novelSeqs,
-                                    double percent, int threads,
+nlohmann::json localFailThroughSets(const Model& model, const PointEvaluator& evaluator,
+                                    const FaceAnimation& animation, const std::vector<Index>& validationSeqs,
+                                    const std::vector<Index>& novelSeqs, double percent, int threads,
                                     const std::function<void(std::string_view, double, double)>& step,
                                     Index maxFramesPerSet = 0);
 

@@ -93,6 +93,72 @@ TEST(CornellDemoQuick, WritesAReportWithinBoundsImagesAndVdbFilesThatVdbPrintLis
     std::filesystem::remove_all(dir);
 }
 
+// Issue 9 at --quick: the scattered lights stay hits both ways; the local change (a cube training
+// never saw) moves the full gather by more than the tolerance, fails some frames as a whole, and
+// every one of them is routed locally: fewer points gathered than a whole-frame fail-through, and
+// no frame over the tolerance.
+TEST(CornellDemoQuick, LocalChangeMissesAsAWholeFrameIsRoutedLocallyAndStaysUnderTheTolerance) {
+    const std::string dir = tempDir("local");
+    int status = -1;
+    const std::string output = run(std::string(PMSC_BINARY) + " demo cornell --quick --quiet --out " + dir, status);
+    ASSERT_EQ(status, 0) << output;
+    EXPECT_NE(output.find("local_change local"), std::string::npos) << output;
+    std::ifstream f(dir + "/report.json");
+    const nlohmann::json r = nlohmann::json::parse(f);
+    ASSERT_TRUE(r.contains("local_fail_through")) << r.dump(1);
+    const nlohmann::json& l = r.at("local_fail_through");
+    EXPECT_EQ(l.at("regions").get<int>(), 48);
+    EXPECT_DOUBLE_EQ(l.at("tolerance").get<double>(), r.at("tolerance").get<double>());
+
+    const nlohmann::json& v = l.at("validation");
+    EXPECT_EQ(v.at("frames").get<int>(), 8);
+    for (const char* way : {"local", "whole_frame"}) {
+        EXPECT_LT(v.at(way).at("soft_max_error_over_tolerance").get<double>(), 1) << way;
+        EXPECT_EQ(v.at(way).at("frames_over_tolerance").get<int>(), 0) << way;
+    }
+
+    const nlohmann::json& c = l.at("local_change");
+    EXPECT_EQ(c.at("frames").get<int>(), 8);
+    EXPECT_GT(c.at("points_covered").get<int>(), 0);
+    EXPECT_GT(c.at("change_max_over_tolerance").get<double>(), 1) << "the change must matter";
+    const int nonHit = c.at("non_hit_frames").get<int>();
+    EXPECT_GE(nonHit, 1) << "no frame of the local change missed as a whole";
+    EXPECT_TRUE(c.at("local_fail_through").get<bool>());
+    const nlohmann::json& local = c.at("local");
+    const nlohmann::json& whole = c.at("whole_frame");
+    EXPECT_EQ(local.at("local_frames").get<int>(), nonHit) << "a frame failed through whole";
+    EXPECT_GT(local.at("points_evaluated_fraction_non_hit_mean").get<double>(), 0);
+    EXPECT_LT(local.at("points_evaluated_fraction_non_hit_mean").get<double>(), 0.6);
+    EXPECT_DOUBLE_EQ(whole.at("points_evaluated_fraction_non_hit_mean").get<double>(), 1.0);
+    EXPECT_LT(local.at("points_evaluated_fraction_mean").get<double>(),
+              whole.at("points_evaluated_fraction_mean").get<double>());
+    EXPECT_LT(local.at("soft_max_error_over_tolerance").get<double>(), 1);
+    EXPECT_EQ(local.at("frames_over_tolerance").get<int>(), 0);
+    EXPECT_GT(c.at("speedup_local").get<double>(), 0);  // no speed ratio asserted (loaded machines)
+    // The experiment: regions decide every frame, so every frame goes their way (local or whole).
+    for (const nlohmann::json* set : {&v, &c}) {
+        const nlohmann::json& e = set->at("regions_every_frame");
+        EXPECT_LE(e.at("frames_without_gathers").get<int>(), e.at("local_frames").get<int>());
+        EXPECT_GT(e.at("points_evaluated_fraction_mean").get<double>(), 0);
+        EXPECT_LT(e.at("soft_max_error_over_tolerance").get<double>(), 1);
+    }
+    std::filesystem::remove_all(dir);
+}
+
+// Each bad value of the local fail-through options is one line and exit code 2, before any work.
+TEST(CornellDemoQuick, BadLocalFailThroughOptionsAreOneLineAndExitCode2) {
+    const std::string dir = tempDir("badlocal");
+    for (const std::string bad : {"--local-change 5", "--local-change 151", "--local-change x", "--regions -1",
+                                  "--regions 0 --local-change 50", "--feather 60"}) {
+        int status = -1;
+        const std::string out = run(std::string(PMSC_BINARY) + " demo cornell --quick --out " + dir + " " + bad, status);
+        EXPECT_EQ(WEXITSTATUS(status), 2) << bad << ": " << out;
+        EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << bad << ": " << out;
+        EXPECT_FALSE(std::filesystem::exists(dir + "/report.json")) << bad;
+    }
+    std::filesystem::remove_all(dir);
+}
+
 TEST(CornellDemoQuick, BadOptionsAreOneLineAndExitCode2) {
     const std::string dir = tempDir("bad");
     int status = -1;
