@@ -215,13 +215,10 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
             }
         }
     }
-    const Index modelKeys = model.keyCount();
-    const auto keyPoint = [&](Index key) {
-        return key < modelKeys ? model.keyPoints[size_t(key)] : out.extraKeyPoints[size_t(key - modelKeys)];
-    };
+    const auto keyPoint = [&](Index key) { return out.keyPoint(model, key); };
 
     // Steps 3-4: keys, local basis, projector, thresholds.
-    const Index k = modelKeys + Index(out.extraKeyPoints.size());
+    const Index k = model.keyCount() + Index(out.extraKeyPoints.size());
     Index smallBases = 0;
     for (Index ri = 0; ri < r; ++ri) {
         Region& g = out.regions[size_t(ri)];

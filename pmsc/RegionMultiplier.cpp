@@ -24,9 +24,7 @@ RegionMultiplier::RegionMultiplier(const Model& model)
         const Region& g = regions_.regions[size_t(ri)];
         Eigen::VectorXd mean(Index(g.keys.size()) * c);
         for (size_t i = 0; i < g.keys.size(); ++i) {
-            const Index key = g.keys[i];
-            const Index p = key < model.keyCount() ? model.keyPoints[size_t(key)]
-                                                   : regions_.extraKeyPoints[size_t(key - model.keyCount())];
+            const Index p = regions_.keyPoint(model, g.keys[i]);
             mean.segment(Index(i) * c, c) = model.mean.segment(p * c, c);
         }
         projectedKeyMean_.push_back(g.projector * mean);
@@ -34,7 +32,6 @@ RegionMultiplier::RegionMultiplier(const Model& model)
         coordsOffset_.push_back(coordsSize_);
         coordsSize_ += g.basisSize();
         policies_.emplace_back(g.epsMin, g.epsMax);
-        failSets_.push_back(regions_.failSet(ri));
     }
 }
 

@@ -45,9 +45,6 @@ public:
     /// only r's points are written).
     void reconstruct(Index r, const double* coords, double* frame) const;
 
-    /// Region r's fail set (its points, then its feather band): the points evaluated fully when
-    /// it blends or misses.
-    const std::vector<Index>& failSet(Index r) const { return failSets_[size_t(r)]; }
     /// The points a frame evaluates fully: those with w_p > 0 (`pointWeights` from
     /// pointWeights()), ascending, into `points` (room for N); returns how many. This is the
     /// union of the failing regions' fail sets, each point once: bands shared by two failing
@@ -63,7 +60,6 @@ private:
     std::vector<Eigen::VectorXd> projectedKeyMean_;
     std::vector<Index> coordsOffset_;
     Index coordsSize_ = 0;
-    std::vector<std::vector<Index>> failSets_;
     std::vector<SoftCachePolicy> policies_;
 };
 

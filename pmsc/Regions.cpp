@@ -29,6 +29,11 @@ std::vector<Index> LocalRegions::regionOfPoints(Index n) const {
     return of;
 }
 
+Index LocalRegions::keyPoint(const Model& model, Index key) const {
+    const Index k = model.keyCount();
+    return key < k ? model.keyPoints[size_t(key)] : extraKeyPoints[size_t(key - k)];
+}
+
 std::vector<Index> LocalRegions::failSet(Index r) const {
     std::vector<Index> out = regions[size_t(r)].points;
     const Index n = static_cast<Index>(featherStart.size()) - 1;

@@ -60,6 +60,9 @@ struct LocalRegions {
     std::vector<double> featherFactor;  ///< in (0, 1]
 
     Index regionCount() const { return static_cast<Index>(regions.size()); }
+    /// The point of key number `key` of a region: the model's key `key` (< K), else region key
+    /// extraKeyPoints[key - K].
+    Index keyPoint(const Model& model, Index key) const;
     /// region of every point (N entries), from Region::points.
     std::vector<Index> regionOfPoints(Index n) const;
     /// Region r's fail set: its points, then every point with a feather entry naming r, ascending

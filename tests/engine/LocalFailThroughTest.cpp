@@ -282,7 +282,7 @@ TEST(LocalFailThrough, EachFailingPointIsEvaluatedOnceAndItsFullValueReachesTheS
     const Index e = Index(model.regions->extraKeyPoints.size());
     ASSERT_GT(e, 0);  // the model has region keys
     Index expected = 0, localFrames = 0, framesWithSharedBands = 0;
-    const pmsc::RegionMultiplier regions(model);
+    const pmsc::LocalRegions& regions = *model.regions;
     for (Index f = 0; f < Index(local.size()); ++f) {
         const Collected& c = local[size_t(f)];
         expected += k;  // every frame evaluates its keys
