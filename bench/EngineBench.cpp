@@ -60,7 +60,7 @@ private:
 void plainLoop(const Model& model, const PointEvaluator& e, const PointMultiplier& pm,
                const SoftCachePolicy& policy, Index frames, engine::FrameSink& sink) {
     const Index c = model.channels;
-    std::vector<double> keys(size_t(model.keyCount() * c)), coords(size_t(model.basisSize()));
+    std::vector<double> keys(size_t(model.keyCount() * c)), coords(size_t(model.coordCount()));
     std::vector<double> out(size_t(model.points * c)), full(size_t(model.points * c));
     engine::FrameResult r;
     for (Index f = 0; f < frames; ++f) {

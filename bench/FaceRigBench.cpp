@@ -90,7 +90,7 @@ void BM_FaceKeyPose(benchmark::State& state) {
 void BM_FaceReconstruct(benchmark::State& state) {
     const Setup& s = setup();
     const PointMultiplier pm(s.model);
-    std::vector<double> coords(static_cast<size_t>(s.model.basisSize()), 0.1),
+    std::vector<double> coords(static_cast<size_t>(s.model.coordCount()), 0.1),
         out(static_cast<size_t>(3 * s.model.points));
     for (auto _ : state) {
         pm.reconstruct(coords.data(), out.data());
@@ -102,7 +102,7 @@ void BM_FacePmsc(benchmark::State& state) {
     const Setup& s = setup();
     const PointMultiplier pm(s.model);
     std::vector<double> keys(static_cast<size_t>(3 * s.model.keyCount())),
-        coords(static_cast<size_t>(s.model.basisSize()));
+        coords(static_cast<size_t>(s.model.coordCount()));
     std::vector<double> out(static_cast<size_t>(3 * s.model.points));
     size_t i = 0;
     for (auto _ : state) {

@@ -51,7 +51,7 @@ Speed measureSpeed(const PointEvaluator& evaluator, const Model& model, Index fr
     const PointMultiplier multiplier(model);
     std::vector<double> full(static_cast<std::size_t>(model.points * model.channels)), out(full.size());
     std::vector<double> keys(static_cast<std::size_t>(model.keyCount() * model.channels));
-    std::vector<double> coords(static_cast<std::size_t>(model.basisSize()));
+    std::vector<double> coords(static_cast<std::size_t>(model.coordCount()));
     Speed s;
     double sink = 0;
     // Repeat until each measurement has run for a while, so the figure is not timer noise.

@@ -13,7 +13,7 @@ namespace pmsc::cli {
 
 ReplayScratch::ReplayScratch(const Model& model)
     : keys(static_cast<std::size_t>(model.keyCount() * model.channels)),
-      coords(static_cast<std::size_t>(model.basisSize())),
+      coords(static_cast<std::size_t>(model.coordCount())),
       pm(static_cast<std::size_t>(model.points * model.channels)),
       full(pm.size()) {}
 
@@ -59,7 +59,7 @@ public:
                KeptFrames* keep, std::function<void(Index, const double*)> frameOut)
         : model_(model), recorded_(recorded), result_(result), out_(out), keep_(keep), frameOut_(std::move(frameOut)),
           full_(static_cast<std::size_t>(model.points * model.channels)), multiplier_(model),
-          pm_(full_.size()), coords_(static_cast<std::size_t>(model.basisSize())) {}
+          pm_(full_.size()), coords_(static_cast<std::size_t>(model.coordCount())) {}
 
     void write(const engine::FrameResult& r) override {
         ReplayFrame& row = result_.frames[static_cast<std::size_t>(r.sequence)];

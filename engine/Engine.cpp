@@ -191,7 +191,7 @@ std::span<const std::unique_ptr<FrameSlot>> Engine::Impl::takeSlots(Index frames
     // allocate nor page-fault frame buffers again.
     const Index slotCount = std::min(maxInFlight, frames);
     while (Index(pool.size()) < slotCount) {
-        pool.push_back(std::make_unique<FrameSlot>(plan, model.keyCount(), model.basisSize(),
+        pool.push_back(std::make_unique<FrameSlot>(plan, model.keyCount(), model.coordCount(),
                                                    options.keepPointMultiplication));
         if (regions) pool.back()->enableRegions(*regions, model.points, model.channels);
     }

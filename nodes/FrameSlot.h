@@ -23,7 +23,7 @@ namespace pmsc::nodes {
 struct FrameSlot {
     /// @param[in] plan         sizes the buffers (output points, scratch)
     /// @param[in] keyCount     K of the model
-    /// @param[in] basisSize    M of the model
+    /// @param[in] basisSize    Model::coordCount(): M, or M x C when the channels share the basis
     /// @param[in] keepPm       also hold the point-multiplication result of every frame
     FrameSlot(const FramePlan& plan, Index keyCount, Index basisSize, bool keepPm);
     ~FrameSlot();
@@ -46,7 +46,7 @@ struct FrameSlot {
 
     std::vector<double> keyValues;  ///< K*C, model key order, channel-minor
     bool keysFinite = true;         ///< false forces a fail-through of every point
-    std::vector<double> coords;     ///< M pose-space coordinates
+    std::vector<double> coords;     ///< Model::coordCount() pose-space coordinates
     double keyRmsError = 0;         ///< section 5's key-point error (NaN if keys not finite)
     CacheDecision decision;         ///< hit / blend / miss and the weight of the full result
 

@@ -59,15 +59,19 @@ CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index cha
 
 CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::MatrixXd& keyRows,
                            const std::vector<Index>& keys, Index basisSize, double tolerance, Index slices,
-                           const Eigen::MatrixXd& gram, CalibrationRule rule, double coverage) {
+                           const Eigen::MatrixXd& gram, CalibrationRule rule, double coverage, Index group) {
     const Index f = q.frames();
+    if (group < 1 || f % group != 0)
+        throw std::invalid_argument("calibrate: " + std::to_string(f) + " frames are not whole groups of " +
+                                    std::to_string(group));
+    const Index groups = f / group;
     const Index channels = q.channels();
     if (!(tolerance > 0) || !std::isfinite(tolerance)) {
         throw std::invalid_argument("calibration tolerance must be a positive number, got " +
                                     std::to_string(tolerance));
     }
-    if (slices < 2 || slices > f) {
-        throw std::invalid_argument("calibration slices must be in [2, " + std::to_string(f) +
+    if (slices < 2 || slices > groups) {
+        throw std::invalid_argument("calibration slices must be in [2, " + std::to_string(groups) +
                                     "] (the frame count), got " + std::to_string(slices));
     }
     if (basisSize < 1) throw std::invalid_argument("calibration: basis size must be >= 1");
@@ -83,8 +87,8 @@ CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::Matrix
     Index smallestM = basisSize;
     Eigen::MatrixXd uBlock, residual;
     for (Index slice = 0; slice < slices; ++slice) {
-        const Index first = slice * f / slices;
-        const Index last = (slice + 1) * f / slices;  // exclusive
+        const Index first = group * (slice * groups / slices);
+        const Index last = group * ((slice + 1) * groups / slices);  // exclusive
         const Index out = last - first;
         const Index in = f - out;
         const Index right = f - last;

@@ -100,10 +100,13 @@ double conformalQuantile(std::vector<double> values, double coverage);
 /// takes the frame-space route; `svd` is no longer used). One pass over q's blocks per fold; the
 /// per-frame largest point errors are reduced over ranks.
 /// @param keyRows Q's rows at the keys (K*C x F), the same q as `gram` (centred or not)
+/// @param group   frames that belong together and stay in one slice: consecutive runs of
+///                `group` columns (shared channels: the C channel frames of one frame; F must be
+///                a multiple of it, and slices at most F / group)
 CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::MatrixXd& keyRows,
                            const std::vector<Index>& keys, Index basisSize, double tolerance, Index slices,
                            const Eigen::MatrixXd& gram, CalibrationRule rule = CalibrationRule::MaxRatio,
-                           double coverage = 0.9);
+                           double coverage = 0.9, Index group = 1);
 
 /// Key RMS error (PointMultiplier::keyRmsError) of every column of a mean-removed matrix `q`
 /// under the model's basis and key projector: e_t = sqrt((1/K) ||(I - B_K P) Q_K[:,t]||^2).

@@ -160,7 +160,7 @@ CrossMultiplier::CrossMultiplier(const Model& model)
       pm_(model) {}
 
 CrossMultiplier::Result CrossMultiplier::apply(const double* keyValues, double* target) const {
-    Eigen::VectorXd coords(model_.basisSize());
+    Eigen::VectorXd coords(model_.coordCount());
     pm_.project(keyValues, coords.data());
     Result r;
     r.keyRms = pm_.keyRmsError(keyValues, coords.data());

@@ -88,6 +88,9 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
         }
     };
     model.validate();
+    if (model.sharedChannels)
+        throw InputError("learn: the model's channels share one basis (train --shared-channels); pmsc learn updates "
+                         "models with a basis per channel in this version: retrain on all frames");
     checkFrames(model, newFrames);
     if (options.basis < 0 || options.maxRank < 0) throw std::invalid_argument("learn: basis and rank must be >= 0");
     if (options.slices < 2) throw std::invalid_argument("learn: slices must be >= 2");

@@ -34,9 +34,10 @@ void Model::validate() const {
         invalid("mean has " + std::to_string(mean.size()) + " values, expected N*C = " +
                 std::to_string(rows));
     }
-    if (basis.rows() != rows) {
-        invalid("basis has " + std::to_string(basis.rows()) + " rows, expected N*C = " +
-                std::to_string(rows));
+    const Index basisRows = points * basisChannels();
+    if (basis.rows() != basisRows) {
+        invalid("basis has " + std::to_string(basis.rows()) + " rows, expected " +
+                (sharedChannels ? "N = " : "N*C = ") + std::to_string(basisRows));
     }
     const Index m = basis.cols();
     if (m < 1) invalid("basis is empty (M = 0)");
@@ -58,11 +59,16 @@ void Model::validate() const {
         if (seen[static_cast<size_t>(p)]) invalid("key point " + std::to_string(p) + " repeated");
         seen[static_cast<size_t>(p)] = 1;
     }
-    const Index kc = keyCount() * channels;
+    const Index kc = keyCount() * basisChannels();
     if (projector.rows() != m || projector.cols() != kc) {
         invalid("projector is " + std::to_string(projector.rows()) + " x " +
-                std::to_string(projector.cols()) + ", expected M x K*C = " + std::to_string(m) +
-                " x " + std::to_string(kc));
+                std::to_string(projector.cols()) + ", expected " + (sharedChannels ? "M x K = " : "M x K*C = ") +
+                std::to_string(m) + " x " + std::to_string(kc));
+    }
+    if (sharedChannels && (regions || learning || cross)) {
+        invalid(std::string("a model whose channels share the basis has no ") +
+                (regions ? "regions (local fail-through)" : learning ? "learning state (pmsc learn)" : "cross section") +
+                " in this version");
     }
     if (selector != Selector::Teleconnection && selector != Selector::QDeim) {
         invalid("unknown selector " + std::to_string(static_cast<int>(selector)));

@@ -31,12 +31,23 @@ struct Model {
     Index trainFrames = 0;  ///< F used for training
 
     Eigen::VectorXd mean;            ///< N*C training mean (paper footnote 1)
-    Eigen::MatrixXd basis;           ///< (N*C) x M, orthonormal columns a_i[x] (section 3)
+    /// (N*C) x M, orthonormal columns a_i[x] (section 3); N x M when sharedChannels.
+    Eigen::MatrixXd basis;
+    /// The channels share one basis over the points (issue 11; `TrainingOptions::sharedChannels`):
+    /// basis is N x M, projector M x K, and a frame has M coordinates per channel (C*M in all,
+    /// coords[j*C + c]); channel c of a frame is mean_c + basis * coords_c. Decision, for light:
+    /// red, green and blue carry the same transport (same shadows, same paths), so they share
+    /// spatial modes, and a light's colour, a factor per channel, is reproduced exactly when the
+    /// training varied colour or intensity (the channel means then lie in, or near, the span), where a
+    /// basis over (point, channel) rows spans only the colours it was trained with. The key
+    /// values of all channels determine their coordinates through one K x M system.
+    bool sharedChannels = false;
     Eigen::VectorXd singularValues;  ///< M singular values of the mean-removed training matrix
     double totalEnergy = 0;          ///< squared Frobenius norm of the mean-removed training matrix
 
     std::vector<Index> keyPoints;  ///< K point indices, in selection order, no duplicates
-    Eigen::MatrixXd projector;     ///< M x (K*C) least-squares projector, key values -> pose-space coords
+    /// M x (K*C) least-squares projector, key values -> pose-space coords (M x K when sharedChannels)
+    Eigen::MatrixXd projector;
 
     Selector selector = Selector::Teleconnection;
     double epsMin = 0;     ///< soft cache: at or below, a hit (section 5)
@@ -57,6 +68,10 @@ struct Model {
     std::optional<CrossState> cross;
 
     Index basisSize() const { return basis.cols(); }
+    /// Rows of the basis per point: C, or 1 when the channels share the basis.
+    Index basisChannels() const { return sharedChannels ? 1 : channels; }
+    /// Pose-space coordinates of one frame: M, or C*M when the channels share the basis.
+    Index coordCount() const { return sharedChannels ? basis.cols() * channels : basis.cols(); }
     Index keyCount() const { return static_cast<Index>(keyPoints.size()); }
     /// Fraction of the training energy the basis captures.
     double energyCaptured() const;

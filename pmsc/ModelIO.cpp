@@ -101,6 +101,13 @@ std::uint64_t fnv1a64(const void* data, std::size_t bytes) {
     return hash;
 }
 
+std::uint32_t modelFormatVersion(const Model& model) {
+    if (model.sharedChannels) return kModelFormatVersionFlags;
+    for (const ModelSectionCodec& codec : modelSectionCodecs())
+        if (codec.present(model)) return kModelFormatVersionSections;
+    return kModelFormatVersionCore;
+}
+
 std::string encodeModel(const Model& model) {
     model.validate();
     const std::uint64_t n = static_cast<std::uint64_t>(model.points);
@@ -113,7 +120,8 @@ std::string encodeModel(const Model& model) {
     std::string out;
     out.reserve(kModelHeaderBytes + 8 * (n * c * (m + 1) + m + k + m * k * c + 1));
     out.append(kModelMagic, sizeof kModelMagic);
-    put<std::uint32_t>(out, sections.empty() ? kModelFormatVersionCore : kModelFormatVersion);
+    const std::uint32_t version = modelFormatVersion(model);
+    put<std::uint32_t>(out, version);
     put<std::uint32_t>(out, 0);
     put<std::uint64_t>(out, n);
     put<std::uint64_t>(out, c);
@@ -121,18 +129,19 @@ std::string encodeModel(const Model& model) {
     put<std::uint64_t>(out, k);
     put<std::uint64_t>(out, static_cast<std::uint64_t>(model.trainFrames));
     put<std::uint32_t>(out, static_cast<std::uint32_t>(model.selector));
-    put<std::uint32_t>(out, 0);
+    put<std::uint32_t>(out, model.sharedChannels ? kModelFlagSharedChannels : 0u);
     put<double>(out, model.epsMin);
     put<double>(out, model.epsMax);
     put<double>(out, model.tolerance);
     put<double>(out, model.trainMaxPointResidual);
     put<double>(out, model.totalEnergy);
     putDoubles(out, model.mean.data(), n * c);
-    putDoubles(out, model.basis.data(), n * c * m);
+    const std::uint64_t bc = static_cast<std::uint64_t>(model.basisChannels());
+    putDoubles(out, model.basis.data(), n * bc * m);
     putDoubles(out, model.singularValues.data(), m);
     for (const Index key : model.keyPoints) put<std::uint64_t>(out, static_cast<std::uint64_t>(key));
-    putDoubles(out, model.projector.data(), m * k * c);
-    if (!sections.empty()) {
+    putDoubles(out, model.projector.data(), m * k * bc);
+    if (version >= kModelFormatVersionSections) {
         put<std::uint64_t>(out, sections.size());
         for (const ModelSectionCodec* codec : sections) {
             out.append(codec->tag.data(), codec->tag.size());
@@ -159,7 +168,7 @@ Model decodeModel(std::string_view bytes, const std::string& name) {
                       std::to_string(kModelHeaderBytes + 8) + ")");
     }
     const auto version = get<std::uint32_t>(bytes, 8);
-    if (version != kModelFormatVersionCore && version != kModelFormatVersion)
+    if (version < kModelFormatVersionCore || version > kModelFormatVersion)
         bad(name, "unsupported model format version " + std::to_string(version) + " (this build reads versions " +
                       std::to_string(kModelFormatVersionCore) + " to " + std::to_string(kModelFormatVersion) + ")");
     const bool hasSections = version >= 2;
@@ -170,17 +179,25 @@ Model decodeModel(std::string_view bytes, const std::string& name) {
     const auto k = get<std::uint64_t>(bytes, 40);
     const auto trainFrames = get<std::uint64_t>(bytes, 48);
     const auto selector = get<std::uint32_t>(bytes, 56);
+    const auto flags = get<std::uint32_t>(bytes, 60);
     const std::string sizes = "N=" + std::to_string(n) + ", C=" + std::to_string(c) +
                               ", M=" + std::to_string(m) + ", K=" + std::to_string(k);
     if (n == 0 || c == 0 || m == 0 || k == 0)
         bad(name, "inconsistent sizes in the header (" + sizes + "): all must be positive");
 
-    // Expected length = header + 8*(N*C + N*C*M + M + K + M*K*C) + checksum, all
-    // computed without wrapping; only a file that is exactly that long is parsed (version 2:
-    // at least that long plus the section count), so every allocation below is bounded by the
-    // real file length.
-    std::uint64_t nc = 0, ncm = 0, kc = 0, mkc = 0, values = 0, expected = 0;
-    const bool ok = mulOk(n, c, nc) && mulOk(nc, m, ncm) && mulOk(k, c, kc) && mulOk(m, kc, mkc) &&
+    if (version < kModelFormatVersionFlags && flags != 0)
+        bad(name, "the header's reserved word (offset 60) is " + std::to_string(flags) + ", not 0, in a version-" +
+                      std::to_string(version) + " file");
+    if ((flags & ~kModelFlagSharedChannels) != 0)
+        bad(name, "unknown model flags " + std::to_string(flags) + " (this build knows only 1: shared channels)");
+    const bool shared = (flags & kModelFlagSharedChannels) != 0;
+    // Expected length = header + 8*(N*C + N*B*M + M + K + M*K*B) + checksum, B = C (or 1 when
+    // the channels share the basis), all computed without wrapping; only a file that is exactly
+    // that long is parsed (version 2: at least that long plus the section count), so every
+    // allocation below is bounded by the real file length.
+    const std::uint64_t b = shared ? 1 : c;
+    std::uint64_t nc = 0, nb = 0, ncm = 0, kc = 0, mkc = 0, values = 0, expected = 0;
+    const bool ok = mulOk(n, c, nc) && mulOk(n, b, nb) && mulOk(nb, m, ncm) && mulOk(k, b, kc) && mulOk(m, kc, mkc) &&
                     addOk(nc, ncm, values) && addOk(values, m, values) && addOk(values, k, values) &&
                     addOk(values, mkc, values) && mulOk(values, 8, expected) &&
                     addOk(expected, kModelHeaderBytes + 8, expected);
@@ -207,7 +224,7 @@ Model decodeModel(std::string_view bytes, const std::string& name) {
     }
     if (selector > static_cast<std::uint32_t>(Selector::QDeim))
         bad(name, "unknown key-point selector " + std::to_string(selector));
-    if (m > nc) bad(name, "inconsistent sizes (" + sizes + "): more basis vectors than values per frame");
+    if (m > nb) bad(name, "inconsistent sizes (" + sizes + "): more basis vectors than basis rows");
     if (k > n) bad(name, "inconsistent sizes (" + sizes + "): more key points than points");
     if (trainFrames > static_cast<std::uint64_t>(INT64_MAX))
         bad(name, "inconsistent header: " + std::to_string(trainFrames) + " training frames");
@@ -217,6 +234,7 @@ Model decodeModel(std::string_view bytes, const std::string& name) {
     model.channels = static_cast<Index>(c);
     model.trainFrames = static_cast<Index>(trainFrames);
     model.selector = static_cast<Selector>(selector);
+    model.sharedChannels = shared;
     model.epsMin = get<double>(bytes, 64);
     model.epsMax = get<double>(bytes, 72);
     model.tolerance = get<double>(bytes, 80);
@@ -229,7 +247,7 @@ Model decodeModel(std::string_view bytes, const std::string& name) {
     };
     model.mean.resize(static_cast<Index>(nc));
     readDoubles(model.mean.data(), nc);
-    model.basis.resize(static_cast<Index>(nc), static_cast<Index>(m));
+    model.basis.resize(static_cast<Index>(nb), static_cast<Index>(m));
     readDoubles(model.basis.data(), ncm);
     model.singularValues.resize(static_cast<Index>(m));
     readDoubles(model.singularValues.data(), m);
@@ -249,7 +267,15 @@ Model decodeModel(std::string_view bytes, const std::string& name) {
     } catch (const std::invalid_argument& e) {
         bad(name, std::string("inconsistent model: ") + e.what());
     }
-    if (hasSections) decodeSections(bytes.substr(coreEnd, length - 8 - coreEnd), name, model);
+    if (hasSections) {
+        decodeSections(bytes.substr(coreEnd, length - 8 - coreEnd), name, model);
+        // Again with the sections: what they may not be combined with (shared channels have none).
+        try {
+            model.validate();
+        } catch (const std::invalid_argument& e) {
+            bad(name, std::string("inconsistent model: ") + e.what());
+        }
+    }
     return model;
 }
 

@@ -10,7 +10,13 @@
 namespace pmsc {
 
 /// Newest model file layout this build writes and reads (it reads every older one too).
-inline constexpr std::uint32_t kModelFormatVersion = 2;
+inline constexpr std::uint32_t kModelFormatVersion = 3;
+/// Version 2 with the header's flags word (offset 60) in use: written only for a model with a
+/// flag set (shared channels, issue 11), so an older build says "unsupported version 3" instead
+/// of misreading the arrays.
+inline constexpr std::uint32_t kModelFormatVersionFlags = 3;
+/// Version 1 with tagged sections (issue 9).
+inline constexpr std::uint32_t kModelFormatVersionSections = 2;
 /// The layout without sections. A model with no optional part is still written as version 1,
 /// byte for byte as before version 2 existed, so older builds keep reading it.
 inline constexpr std::uint32_t kModelFormatVersionCore = 1;
@@ -27,24 +33,26 @@ inline constexpr std::uint32_t kModelFormatVersionCore = 1;
 ///   40      8  u64      K  key points
 ///   48      8  u64      training frames
 ///   56      4  u32      selector (0 teleconnection, 1 Q-DEIM)
-///   60      4  u32      reserved, 0
+///   60      4  u32      reserved, 0; version 3: flags, 1 = the channels share the basis
+///                       (issue 11; then B = 1 below, else B = C)
 ///   64      8  f64      eps_min
 ///   72      8  f64      eps_max
 ///   80      8  f64      tolerance (0: not calibrated)
 ///   88      8  f64      largest point residual of PM on the training set
 ///   96      8  f64      total energy of the mean-removed training matrix
 ///   104     8*N*C       mean, f64, point-major, channel-minor
-///           8*N*C*M     basis, f64, column-major ((N*C) x M)
+///           8*N*B*M     basis, f64, column-major ((N*B) x M)
 ///           8*M         singular values, f64
 ///           8*K         key point indices, u64, selection order
-///           8*M*K*C     projector, f64, column-major (M x (K*C))
+///           8*M*K*B     projector, f64, column-major (M x (K*B))
 ///   end-8   8  u64      FNV-1a 64 checksum of every byte before it
 ///
 /// The whole file size follows from the header, so a reader knows before it
 /// allocates anything whether the file can hold what the header claims.
 ///
-/// Version 2 (issue 9) is version 1 with version 2 in the header and, between the projector and
-/// the checksum, optional tagged sections:
+/// Version 3 (issue 11) is version 2 with the flags word in use; it is written only when a flag
+/// is set. Version 2 (issue 9) is version 1 with version 2 in the header and, between the
+/// projector and the checksum, optional tagged sections (version 3 has them too):
 ///
 ///           8  u64      S  section count
 ///           S times:    char tag[8] (ASCII, '\0'-padded), u64 payload length L, L bytes payload
@@ -55,8 +63,14 @@ inline constexpr std::uint32_t kModelFormatVersionCore = 1;
 /// length past the end, and a payload its codec does not read exactly.
 inline constexpr std::size_t kModelHeaderBytes = 104;
 
+/// Header flag (offset 60): Model::sharedChannels.
+inline constexpr std::uint32_t kModelFlagSharedChannels = 1;
+
 /// FNV-1a, 64 bit (offset basis 0xcbf29ce484222325, prime 0x100000001b3).
 std::uint64_t fnv1a64(const void* data, std::size_t bytes);
+
+/// The version encodeModel() writes for `model`: 3 with a header flag, else 2 with sections, else 1.
+std::uint32_t modelFormatVersion(const Model& model);
 
 /// The bytes of a model file. @throws std::invalid_argument if model.validate() fails.
 std::string encodeModel(const Model& model);

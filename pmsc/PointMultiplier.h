@@ -13,7 +13,8 @@ namespace pmsc {
 ///
 /// Thread safety: all methods are const and may run concurrently.
 /// Buffers: key values are K*C doubles in model key order, channel-minor;
-/// coordinates are M doubles; point values are channel-minor.
+/// coordinates are Model::coordCount() doubles (M, or M x C channel-minor when the channels
+/// share the basis); point values are channel-minor.
 class PointMultiplier {
 public:
     /// Keeps a reference to `model`, which must outlive this object.
@@ -41,8 +42,9 @@ public:
 private:
     const Model& model_;
     Eigen::VectorXd keyMean_;   // K*C
-    Eigen::MatrixXd keyBasis_;  // (K*C) x M
-    Eigen::VectorXd projectedKeyMean_;  // M: P mean_K, so project() needs no temporary
+    Eigen::MatrixXd keyBasis_;  // (K*C) x M; K x M when the channels share the basis
+    Eigen::VectorXd projectedKeyMean_;  // M (or M x C): P mean_K, so project() needs no temporary
+    Eigen::VectorXd panels_;  // shared channels: the basis in panels of rows (PointMultiplier.cpp)
 };
 
 }  // namespace pmsc

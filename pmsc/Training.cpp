@@ -3,6 +3,7 @@
 #include "pmsc/Calibration.h"
 #include "pmsc/Errors.h"
 #include "pmsc/KeyPointSelector.h"
+#include "pmsc/PointMultiplier.h"
 #include "pmsc/QDeim.h"
 #include "pmsc/RowBlockOps.h"
 #include "pmsc/Subspace.h"
@@ -56,8 +57,13 @@ void validateOptions(const TrainingOptions& o, Index points, Index frames) {
     if (!std::isfinite(o.tolerance) || o.tolerance < 0) {
         badOption("tolerance must be >= 0 (0 = no calibration), got " + num(o.tolerance));
     }
-    if (o.tolerance > 0 && (o.calibrationSlices < 2 || o.calibrationSlices > frames)) {
-        badOption("calibration slices must be in [2, " + std::to_string(frames) + "], got " +
+    if (o.calibrationGroup < 1 || frames % o.calibrationGroup != 0) {
+        badOption("calibration group must divide the " + std::to_string(frames) + " frames, got " +
+                  std::to_string(o.calibrationGroup));
+    }
+    const Index groups = frames / o.calibrationGroup;
+    if (o.tolerance > 0 && (o.calibrationSlices < 2 || o.calibrationSlices > groups)) {
+        badOption("calibration slices must be in [2, " + std::to_string(groups) + "], got " +
                   std::to_string(o.calibrationSlices));
     }
     if (o.calibrationRule != CalibrationRule::MaxRatio && o.calibrationRule != CalibrationRule::Conformal) {
@@ -130,10 +136,84 @@ void formLeftVectors(RowBlocks& q, TruncatedSvd& svd, Index count) {
     svd.u.rightCols(count - have) = more;
 }
 
+/// TrainingOptions::sharedChannels: the C=1 model of the channel frames, turned into a model of
+/// C channels sharing its basis.
+Model trainSharedChannels(const FrameSet& frames, const TrainingOptions& options, TrainingReport* reportOut) {
+    if (options.regions.count > 0 || options.learnRank > 0)
+        throw std::invalid_argument(std::string("train: channels sharing the basis do not combine with ") +
+                                    (options.regions.count > 0 ? "regions (local fail-through)" : "a learning rank (pmsc learn)") +
+                                    " in this version");
+    const Index n = frames.points, c = frames.channels, f = frames.frames;
+    // Each point-channel's mean over the frames, removed before the channels become frames, so
+    // the C=1 training (whose mean is then zero) learns the variation alone and the model keeps
+    // a mean per channel.
+    Eigen::VectorXd mean = frames.matrix().rowwise().mean();
+    FrameSet split(f * c, n, 1);
+    for (Index t = 0; t < f; ++t) {
+        const double* in = frames.frame(t);
+        for (Index ch = 0; ch < c; ++ch) {
+            double* out = split.frame(t * c + ch);
+            for (Index p = 0; p < n; ++p) out[p] = in[p * c + ch] - mean[p * c + ch];
+        }
+    }
+    TrainingOptions one = options;
+    one.sharedChannels = false;
+    // A frame's channels are held out together: held in, its other channels would tell the fold
+    // most of what it is asked to predict. (The C=1 training then checks --slices against the F
+    // groups, with the same message as for any model.)
+    one.calibrationGroup = c;
+    TrainingReport localReport;
+    TrainingReport& report = reportOut ? *reportOut : localReport;
+    Model model = train(split, one, &report);
+    split = FrameSet();
+    for (Index p = 0; p < n; ++p)
+        for (Index ch = 0; ch < c; ++ch) mean[p * c + ch] += model.mean[p];
+    model.mean = std::move(mean);
+    model.channels = c;
+    model.trainFrames = f;
+    model.sharedChannels = true;
+    // The largest point residual on the training frames, Euclidean over the channels like
+    // everywhere else (the C=1 training measured it per channel).
+    PointMultiplier pm(model);
+    const Index k = model.keyCount();
+    std::vector<double> keys(static_cast<std::size_t>(k * c)), coords(static_cast<std::size_t>(model.coordCount())),
+        values(static_cast<std::size_t>(n * c));
+    double worst = 0;
+    std::vector<double> keyErrors(static_cast<std::size_t>(f));
+    for (Index t = 0; t < f; ++t) {
+        const double* in = frames.frame(t);
+        for (Index i = 0; i < k; ++i)
+            for (Index ch = 0; ch < c; ++ch)
+                keys[static_cast<std::size_t>(i * c + ch)] = in[model.keyPoints[static_cast<std::size_t>(i)] * c + ch];
+        pm.project(keys.data(), coords.data());
+        keyErrors[static_cast<std::size_t>(t)] = pm.keyRmsError(keys.data(), coords.data());
+        pm.reconstruct(coords.data(), values.data());
+        for (Index p = 0; p < n; ++p) {
+            double e = 0;
+            for (Index ch = 0; ch < c; ++ch) e += (values[p * c + ch] - in[p * c + ch]) * (values[p * c + ch] - in[p * c + ch]);
+            worst = std::max(worst, e);
+        }
+    }
+    model.trainMaxPointResidual = std::sqrt(worst);
+    if (!(options.tolerance > 0)) {
+        // Uncalibrated eps are the training frames' largest key error (thresholdsFromKeyRows):
+        // here the Euclidean one over the channels the runtime measures, not the C=1 training's
+        // per channel, which is up to sqrt(C) smaller and would call training frames misses.
+        model.epsMin = *std::max_element(keyErrors.begin(), keyErrors.end());
+        model.epsMax = 1.5 * model.epsMin;
+        report.calibration.epsMin = model.epsMin;
+        report.calibration.epsMax = model.epsMax;
+        report.calibration.keyRms = keyErrors;
+    }
+    model.validate();
+    return model;
+}
+
 }  // namespace
 
 Model train(const FrameSet& frames, const TrainingOptions& options, TrainingReport* reportOut) {
     validateFrames(frames);
+    if (options.sharedChannels && frames.channels > 1) return trainSharedChannels(frames, options, reportOut);
     MatrixBlocks q(frames);
     SingleProcess one;
     return train(q, one, options, reportOut);
@@ -146,6 +226,10 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
     report = TrainingReport{};
     report.ranks = comm.size();
     report.blockPoints = q.blockPoints();
+    if (options.sharedChannels && q.channels() > 1)
+        throw std::invalid_argument(
+            "channels sharing the basis are trained in memory on one process; drop the shared channels, "
+            "or train in memory without MPI");
     if (options.regions.count > 0 && (comm.size() != 1 || dynamic_cast<const MatrixBlocks*>(&q) == nullptr))
         throw std::invalid_argument(
             "regions (local fail-through) are learned from the training matrix in memory on one process; "
@@ -345,7 +429,7 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
     if (options.tolerance > 0) {
         report.calibration =
             calibrate(q, comm, keyRows, keys, m, options.tolerance, options.calibrationSlices, gram,
-                      options.calibrationRule, options.calibrationCoverage);
+                      options.calibrationRule, options.calibrationCoverage, options.calibrationGroup);
         model.tolerance = options.tolerance;
     } else {
         report.calibration = thresholdsFromKeyRows(keyRows, basisKeyRows, channels, model.projector);

@@ -59,6 +59,24 @@ struct TrainingOptions {
     /// @pre 0 or >= the final M (it is raised to M with a warning otherwise).
     Index learnRank = 0;
 
+    // --- channels (issue 11) ---
+    /// The channels share one basis over the points (Model::sharedChannels): training sees each
+    /// channel of each frame as a frame of its own (F*C columns of N rows, each point-channel's
+    /// mean removed), so M vectors of N values serve every channel. For light (RGB): a light's
+    /// colour is reproduced exactly (when the training varies colour or intensity: Model.h) and
+    /// reconstruction reads N*M values instead of N*C*M. Keys
+    /// are points as before; eps are calibrated on the channel frames, and since a point's
+    /// channel errors each stay under ratio x their key error, the same eps bound the Euclidean
+    /// point error by ratio x the Euclidean key error (PointMultiplier::keyRmsError); without a
+    /// tolerance eps are the training frames' largest Euclidean key error. A frame's channels stay
+    /// in one calibration slice (calibrationGroup).
+    /// In memory and on one process only, without regions, learning or cross targets.
+    bool sharedChannels = false;
+    /// Consecutive training frames that stay together in one calibration slice (set by the
+    /// shared-channel training to C, so no frame's channels are held in and out at once); 1 =
+    /// every frame on its own. The frame count must be a multiple of it.
+    Index calibrationGroup = 1;
+
     // --- local fail-through (issue 9): regions.count = 0 keeps the model a version-1 model ---
     RegionOptions regions;
 

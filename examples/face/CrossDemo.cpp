@@ -230,7 +230,7 @@ nlohmann::json runCrossDemo(const CrossDemoOptions& options) {
     {
         std::vector<double> full(static_cast<size_t>(3 * n)), rec(static_cast<size_t>(3 * n)),
             keys(static_cast<size_t>(3 * model.keyCount()));
-        Eigen::VectorXd coords(model.basisSize());
+        Eigen::VectorXd coords(model.coordCount());
         const PointMultiplier pm(model);
         for (Index i = 0; i < timed; ++i) {
             const ControlVector& c =

@@ -221,7 +221,7 @@ void measureAgainstFullPoses(const DemoRun& run, const FaceScene& scene, const M
             FrameRecord& r = records[i];
             std::vector<double> full(static_cast<size_t>(3 * n)), rec(static_cast<size_t>(3 * n));
             std::vector<double> keys(static_cast<size_t>(3 * keyCount)),
-                coords(static_cast<size_t>(model.basisSize()));
+                coords(static_cast<size_t>(model.coordCount()));
             scene.evaluator.evaluateAll(r.frame, full.data());
             for (Index k = 0; k < keyCount; ++k) {
                 for (int c = 0; c < 3; ++c) keys[3 * k + c] = full[3 * model.keyPoints[k] + c];
@@ -333,7 +333,7 @@ PoseTimings timeFullPoseAgainstPmsc(const DemoRun& run, const FaceScene& scene, 
     const FaceEvaluator& evaluator = scene.evaluator;
     std::vector<double> full(static_cast<size_t>(3 * scene.n)), rec(static_cast<size_t>(3 * scene.n));
     std::vector<double> keys(static_cast<size_t>(3 * model.keyCount())),
-        coords(static_cast<size_t>(model.basisSize()));
+        coords(static_cast<size_t>(model.coordCount()));
     evaluator.evaluate(validation.front()->frame, model.keyPoints, keys.data());  // warm the key plan cache
     for (Index i = 0; i < timed; ++i) {
         const Index frame =

@@ -73,7 +73,7 @@ nlohmann::json writeShownFrame(const DemoRun& run, const FaceScene& scene, const
     const std::string& out = run.out;
     std::vector<double> full(static_cast<size_t>(3 * n)), pmPose(static_cast<size_t>(3 * n));
     std::vector<double> keys(static_cast<size_t>(3 * model.keyCount())),
-        coords(static_cast<size_t>(model.basisSize()));
+        coords(static_cast<size_t>(model.coordCount()));
     scene.evaluator.evaluateAll(record.frame, full.data());
     for (Index k = 0; k < model.keyCount(); ++k) {
         for (int c = 0; c < 3; ++c) keys[3 * k + c] = full[3 * model.keyPoints[k] + c];

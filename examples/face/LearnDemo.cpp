@@ -56,7 +56,7 @@ public:
     explicit Probe(const Model& model) : model_(model), pm_(model) {}
     Score score(const double* full) const {
         const Index n = model_.points, k = model_.keyCount();
-        std::vector<double> keys(static_cast<size_t>(3 * k)), coords(static_cast<size_t>(model_.basisSize())),
+        std::vector<double> keys(static_cast<size_t>(3 * k)), coords(static_cast<size_t>(model_.coordCount())),
             rec(static_cast<size_t>(3 * n));
         for (Index i = 0; i < k; ++i)
             for (int c = 0; c < 3; ++c) keys[static_cast<size_t>(3 * i + c)] = full[3 * model_.keyPoints[static_cast<size_t>(i)] + c];

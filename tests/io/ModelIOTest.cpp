@@ -106,6 +106,65 @@ std::string decodeMessage(const std::string& bytes, const std::string& name) {
     return "NO ERROR";
 }
 
+TEST(ModelFile, SharedChannelsRoundTripAsVersion3WithTheFlagAndAThirdOfTheBasis) {
+    const Model m = pmsc::test::smallSharedChannelModel();
+    const std::string bytes = pmsc::encodeModel(m);
+    // Version 3, header flag 1 at offset 60, no sections; basis N x M and projector M x K
+    // instead of (N*C) x M, M x K*C.
+    std::uint32_t version, flags;
+    std::memcpy(&version, bytes.data() + 8, 4);
+    std::memcpy(&flags, bytes.data() + 60, 4);
+    EXPECT_EQ(version, pmsc::kModelFormatVersionFlags);
+    EXPECT_EQ(flags, pmsc::kModelFlagSharedChannels);
+    EXPECT_EQ(bytes.size(), pmsc::kModelHeaderBytes + 8 * (21 + 7 * 3 + 3 + 3 + 3 * 3) + 8 + 8);
+    const Model r = pmsc::decodeModel(bytes, "shared.pmsc");
+    EXPECT_TRUE(r.sharedChannels);
+    EXPECT_EQ(r.channels, 3);
+    EXPECT_EQ(r.basis, m.basis);
+    EXPECT_EQ(r.projector, m.projector);
+    EXPECT_EQ(r.mean, m.mean);
+    EXPECT_EQ(r.coordCount(), 9);
+    EXPECT_EQ(pmsc::encodeModel(r), bytes);
+    // A plain model is still version 1 with 0 there, byte for byte as before issue 11.
+    const std::string plain = pmsc::encodeModel(smallModel());
+    std::memcpy(&version, plain.data() + 8, 4);
+    std::memcpy(&flags, plain.data() + 60, 4);
+    EXPECT_EQ(version, 1u);
+    EXPECT_EQ(flags, 0u);
+}
+
+TEST(ModelFile, FlagsOnlyInVersion3AndOnlyKnownOnesAndOnlyWithoutSectionsTheyExclude) {
+    std::string bytes = pmsc::encodeModel(pmsc::test::smallSharedChannelModel());
+    poke<std::uint32_t>(bytes, 60, 6);
+    reseal(bytes);
+    std::string what = decodeMessage(bytes, "m.pmsc");
+    EXPECT_NE(what.find("m.pmsc: unknown model flags 6"), std::string::npos) << what;
+    // A version-1 file's reserved word must stay 0.
+    bytes = pmsc::encodeModel(smallModel());
+    poke<std::uint32_t>(bytes, 60, pmsc::kModelFlagSharedChannels);
+    reseal(bytes);
+    what = decodeMessage(bytes, "m.pmsc");
+    EXPECT_NE(what.find("m.pmsc: the header's reserved word (offset 60) is 1, not 0, in a version-1 file"),
+              std::string::npos) << what;
+    // Version 3 without the flag: the per-channel arrays no longer fit the file.
+    bytes = pmsc::encodeModel(pmsc::test::smallSharedChannelModel());
+    poke<std::uint32_t>(bytes, 60, 0);
+    reseal(bytes);
+    what = decodeMessage(bytes, "m.pmsc");
+    EXPECT_NE(what.find("m.pmsc: truncated model file or corrupted header"), std::string::npos) << what;
+    // A shared-channel model with a section it cannot have (here the regions of a region model,
+    // spliced in): one InputError naming the file, not a model validate() would refuse later.
+    const std::string shared = pmsc::encodeModel(pmsc::test::smallSharedChannelModel());
+    const std::string regions = pmsc::encodeModel(pmsc::test::smallModelWithRegions());
+    const std::size_t regionsCore = pmsc::kModelHeaderBytes + 8 * (21 + 21 * 3 + 3 + 3 + 3 * 9);
+    const std::size_t sharedCore = pmsc::kModelHeaderBytes + 8 * (21 + 7 * 3 + 3 + 3 + 3 * 3);
+    bytes = shared.substr(0, sharedCore) + regions.substr(regionsCore, regions.size() - 8 - regionsCore) + "12345678";
+    reseal(bytes);
+    what = decodeMessage(bytes, "m.pmsc");
+    EXPECT_EQ(what.rfind("m.pmsc: ", 0), 0u) << what;
+    EXPECT_NE(what.find("share the basis has no regions"), std::string::npos) << what;
+}
+
 // Every length is decoded from memory (the file system makes 700 file round trips slow); a
 // sample goes through real files to cover readModel's own path.
 TEST(ModelFile, EveryTruncationIsRejected) {
@@ -164,14 +223,14 @@ TEST(ModelFile, WrongVersionSaysFoundAndSupported) {
     TempDir dir;
     const auto path = dir.file("m.pmsc");
     std::string bytes = pmsc::encodeModel(smallModel());
-    poke<std::uint32_t>(bytes, 8, 3);
+    poke<std::uint32_t>(bytes, 8, 4);
     reseal(bytes);
     writeBytes(path, bytes);
-    expectRejected(path, {"unsupported model format version 3", "reads versions 1 to 2"});
+    expectRejected(path, {"unsupported model format version 4", "reads versions 1 to 3"});
     poke<std::uint32_t>(bytes, 8, 0);
     reseal(bytes);
     writeBytes(path, bytes);
-    expectRejected(path, {"version 0", "reads versions 1 to 2"});
+    expectRejected(path, {"version 0", "reads versions 1 to 3"});
 }
 
 TEST(ModelFile, AbsurdSizesAreRejectedBeforeAllocating) {
@@ -217,7 +276,7 @@ TEST(ModelFile, SizesThatFitTheLengthButNotEachOther) {
     u64(0);
     reseal(bytes);
     writeBytes(path, bytes);
-    expectRejected(path, {"more basis vectors than values"});
+    expectRejected(path, {"more basis vectors than basis rows"});
 }
 
 TEST(ModelFile, KeyIndexOutOfRangeAndDuplicateKeys) {

@@ -32,6 +32,17 @@ inline pmsc::Model smallModel() {
     return m;
 }
 
+/// smallModel()'s sizes with the channels sharing the basis (issue 11): basis 7 x 3, projector 3 x 3.
+inline pmsc::Model smallSharedChannelModel() {
+    pmsc::Model m = smallModel();
+    Eigen::MatrixXd random(7, 3);
+    for (Eigen::Index i = 0; i < random.size(); ++i) random.data()[i] = std::sin(1.1 * i + 0.4);
+    m.basis = Eigen::HouseholderQR<Eigen::MatrixXd>(random).householderQ() * Eigen::MatrixXd::Identity(7, 3);
+    m.sharedChannels = true;
+    m.projector = pmsc::makeProjector(m.basis, 1, m.keyPoints);
+    return m;
+}
+
 /// smallModel() with two regions (issue 9): points {0,1,2,3} and {4,5,6}, keys {4,0} and {4,6}
 /// (key numbers {0,1} and {0,2}), local bases of 1 and 2 vectors, feather entries on 3 and 4.
 inline pmsc::Model smallModelWithRegions() {
