@@ -35,9 +35,7 @@ int runInspect(const std::vector<std::string>& args) {
 
     const Model model = readModel(modelPath);
     // The version the file holds (a model without sections is written as version 1).
-    const unsigned version = model.regions || model.learning || model.calibrationRecord || model.cross
-                                 ? kModelFormatVersion
-                                 : kModelFormatVersionCore;
+    const unsigned version = modelFormatVersion(model);
     const auto bytes = std::filesystem::file_size(modelPath);
     const char* selector = model.selector == Selector::QDeim ? "qdeim" : "teleconnection";
     if (json) {
@@ -47,6 +45,7 @@ int runInspect(const std::vector<std::string>& args) {
         j["bytes"] = bytes;
         j["points"] = model.points;
         j["channels"] = model.channels;
+        j["shared_channels"] = model.sharedChannels;
         j["train_frames"] = model.trainFrames;
         j["basis"] = model.basisSize();
         j["key_points"] = model.keyCount();
@@ -96,7 +95,7 @@ int runInspect(const std::vector<std::string>& args) {
     std::cout << modelPath << ": pmsc model, format version " << version << ", " << bytes
               << " bytes\n";
     std::cout << "  points        N = " << model.points << ", channels C = " << model.channels
-              << ", trained on " << model.trainFrames << " frames\n";
+              << (model.sharedChannels ? " (sharing one basis)" : "") << ", trained on " << model.trainFrames << " frames\n";
     std::cout << "  basis         M = " << model.basisSize() << ", captures "
               << fmt("%.4f", 100 * model.energyCaptured()) << "% of the training energy (total "
               << fmt("%.6g", model.totalEnergy) << ")\n";

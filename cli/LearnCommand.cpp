@@ -107,6 +107,9 @@ int runLearn(const std::vector<std::string>& args) {
     if (model.cross)
         throw InputError(modelPath + " is a cross model (train --targets): pmsc learn updates plain models; retrain "
                          "on all (control, target) pairs");
+    if (model.sharedChannels)
+        throw InputError(modelPath + " shares one basis among its channels (train --shared-channels): pmsc learn "
+                         "updates models with a basis per channel in this version; retrain on all frames");
     const FrameSet frames = readAll(paths);
     if (frames.points != model.points || frames.channels != model.channels)
         throw InputError(paths.front() + ": frames have " + std::to_string(frames.points) + " points x " +

@@ -201,8 +201,21 @@ int runTrain(const std::vector<std::string>& args) {
                   "TARGET.npy are a pair; learns their joint subspace with keys among the control's points, and an\n"
                   "error bound on the target from held-out pairs (--coverage, default 0.9; --slices folds)",
                   targetsPath);
+    bool sharedChannels = false;
+    parser.flag("--shared-channels",
+                "the channels share one basis over the points (issue 11; for light: RGB share their spatial\n"
+                "modes, a light's colour is reproduced exactly and reconstruction reads a third of the basis)",
+                sharedChannels);
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
+    if (sharedChannels) {
+        for (const char* o : {"--targets", "--regions", "--feather", "--region-keys", "--learn-rank", "--memory-limit",
+                              "--out-of-core", "--block-points"})
+            if (parser.given(o))
+                parser.fail(std::string(o) + " does not combine with --shared-channels in this version (shared-channel "
+                            "models are trained in memory on one process, without regions, learning or cross targets)");
+        options.sharedChannels = true;
+    }
     if (!targetsPath.empty()) {
         if (framePaths.size() != 1) parser.fail("--targets takes exactly one --frames file (the control)");
         for (const char* o : {"--regions", "--feather", "--region-keys", "--learn-rank", "--calibration", "--memory-limit",
@@ -267,6 +280,10 @@ int runTrain(const std::vector<std::string>& args) {
             }
         }
         auto bound = [&](Index bp) {
+            if (options.sharedChannels && c > 1)  // the C=1 training of F*C channel frames, beside the frames
+                return trainingMemoryBound(n, 1, f * c, options.maxBasis, options.block, options.maxKeys, bp,
+                                           comm.size(), /*rootRank=*/true) +
+                       static_cast<std::uint64_t>(8) * static_cast<std::uint64_t>(n * c * f);
             return trainingMemoryBound(n, c, f, options.maxBasis, options.block, options.maxKeys, bp, comm.size(),
                                        /*rootRank=*/true);
         };
@@ -275,6 +292,10 @@ int runTrain(const std::vector<std::string>& args) {
         const bool stream = comm.size() > 1 || outOfCore || (limit > 0 && inMemoryBytes > limit) ||
                             (limit == 0 && static_cast<double>(inMemoryBytes) > physical / 2);
         Index bp = 0;
+        if (stream && options.sharedChannels)
+            throw InputError("train: --shared-channels trains in memory on one process, but " +
+                             std::string(comm.size() > 1 ? "MPI started several ranks"
+                                                         : "the frames do not fit in memory (or the limit)"));
         if (stream) {
             const Index defaultPoints = std::max<Index>(1, (Index{64} << 20) / (c * f * 8));
             bp = blockPoints > 0 ? blockPoints : defaultPoints;

@@ -37,16 +37,16 @@ std::pair<py::array_t<double, py::array::c_style>, py::ssize_t> keyBatch(const M
 
 std::pair<py::array_t<double, py::array::c_style>, py::ssize_t> coordBatch(const Model& m, py::handle coords) {
     auto a = doubleArray(coords);
-    const py::ssize_t mm = static_cast<py::ssize_t>(m.basisSize());
+    const py::ssize_t mm = static_cast<py::ssize_t>(m.coordCount());
     if (a.ndim() == 1 && a.shape(0) == mm) return {a, -1};
     if (a.ndim() == 2 && a.shape(1) == mm) return {a, a.shape(0)};
-    throw InputError("coords: shape " + shapeText(a) + " is not (M,) = (" + std::to_string(mm) + ",) or (frames, M)");
+    throw InputError("coords: shape " + shapeText(a) + " is not (M,) = (" + std::to_string(mm) + ",) or (frames, M) (M x C values when the channels share the basis)");
 }
 
 py::array project(const PyModel& self, py::handle keys) {
     const Model& m = self.get();
     auto [k, batch] = keyBatch(m, keys);
-    const py::ssize_t frames = batch < 0 ? 1 : batch, kc = m.keyCount() * m.channels, mm = m.basisSize();
+    const py::ssize_t frames = batch < 0 ? 1 : batch, kc = m.keyCount() * m.channels, mm = m.coordCount();
     py::array_t<double> out(batch < 0 ? std::vector<py::ssize_t>{mm} : std::vector<py::ssize_t>{batch, mm});
     const double* in = k.data();
     double* o = out.mutable_data();
@@ -60,7 +60,7 @@ py::object keyError(const PyModel& self, py::handle keys, py::object coords) {
     auto [k, batch] = keyBatch(m, keys);
     py::array_t<double, py::array::c_style> b = coords.is_none() ? py::array_t<double, py::array::c_style>(project(self, k))
                                                                  : coordBatch(m, coords).first;
-    const py::ssize_t frames = batch < 0 ? 1 : batch, kc = m.keyCount() * m.channels, mm = m.basisSize();
+    const py::ssize_t frames = batch < 0 ? 1 : batch, kc = m.keyCount() * m.channels, mm = m.coordCount();
     const py::ssize_t coordFrames = b.ndim() == 2 ? b.shape(0) : -1;
     if (coordFrames != batch || b.size() != frames * mm)
         throw InputError("key_error: " + std::to_string(frames) + " frames of keys but coords of shape " + shapeText(b));
@@ -78,7 +78,7 @@ py::object keyError(const PyModel& self, py::handle keys, py::object coords) {
 py::array reconstruct(const PyModel& self, py::handle coords, py::object pointsArg) {
     const Model& m = self.get();
     auto [b, batch] = coordBatch(m, coords);
-    const py::ssize_t frames = batch < 0 ? 1 : batch, mm = m.basisSize();
+    const py::ssize_t frames = batch < 0 ? 1 : batch, mm = m.coordCount();
     std::vector<Index> points;
     if (!pointsArg.is_none()) {
         auto p = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>::ensure(pointsArg);
@@ -107,6 +107,7 @@ py::dict modelInfo(const Model& m) {
     d["points"] = m.points;
     d["channels"] = m.channels;
     d["basis"] = m.basisSize();
+    d["shared_channels"] = m.sharedChannels;
     d["key_points"] = m.keyCount();
     d["train_frames"] = m.trainFrames;
     d["eps_min"] = m.epsMin;
@@ -160,18 +161,18 @@ void bindModel(py::module_& m) {
         }, "(N, C) training mean, a read-only view")
         .def_property_readonly("basis", [](py::object self) {
             const Model& m = self.cast<const PyModel&>().get();
-            return readOnlyView(m.basis.data(), {m.points, m.channels, m.basisSize()},
-                                {m.channels, 1, m.points * m.channels}, self);
-        }, "(N, C, M) basis vectors, a read-only view")
+            return readOnlyView(m.basis.data(), {m.points, m.basisChannels(), m.basisSize()},
+                                {m.basisChannels(), 1, m.points * m.basisChannels()}, self);
+        }, "(N, C, M) basis vectors, a read-only view ((N, 1, M) when the channels share the basis)")
         .def_property_readonly("singular_values", [](py::object self) {
             const Model& m = self.cast<const PyModel&>().get();
             return readOnlyView(m.singularValues.data(), {m.basisSize()}, {1}, self);
         })
         .def_property_readonly("projector", [](py::object self) {
             const Model& m = self.cast<const PyModel&>().get();
-            return readOnlyView(m.projector.data(), {m.basisSize(), m.keyCount() * m.channels},
+            return readOnlyView(m.projector.data(), {m.basisSize(), m.keyCount() * m.basisChannels()},
                                 {1, m.basisSize()}, self);
-        }, "(M, K*C) least-squares projector, a read-only view")
+        }, "(M, K*C) least-squares projector, a read-only view ((M, K) when the channels share the basis)")
         .def_property_readonly("info", [](const PyModel& s) { return modelInfo(s.get()); },
                                "sizes, eps, tolerance, energy, as `pmsc inspect` shows them")
         .def_property_readonly("training_report", [](const PyModel& s) { return s.trainingReport; },

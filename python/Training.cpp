@@ -11,6 +11,7 @@
 #include <pybind11/numpy.h>
 #include <pybind11/stl.h>
 
+#include <algorithm>
 #include <optional>
 #include <vector>
 
@@ -95,7 +96,7 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
                                     std::vector<Index> gridPoints, const std::string& selector, double tolerance,
                                     Index slices, const std::string& calibration, double coverage, Index learnRank,
                                     unsigned seed, int powerIterations, Index regions, double feather,
-                                    Index regionKeys, py::object progress) {
+                                    Index regionKeys, bool sharedChannels, py::object progress) {
     TrainingOptions o;
     o.basis = basis;
     o.energy = energy;
@@ -117,6 +118,7 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     o.regions.count = regions;
     o.regions.featherFraction = feather;
     o.regions.ownKeys = regionKeys;
+    o.sharedChannels = sharedChannels;
     if (regionKeys < 0) throw InputError("region_keys: must be >= 0 (0 = none), got " + std::to_string(regionKeys));
     if (regions < 0) throw InputError("regions: must be >= 0 (0 = none), got " + std::to_string(regions));
     if (!(feather >= 0 && feather <= 0.5)) throw InputError("feather: must be in [0, 0.5], got " + std::to_string(feather));
@@ -144,7 +146,13 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     Model model;
     try {
         py::gil_scoped_release nogil;
-        if (t.view) {
+        if (t.view && o.sharedChannels && t.view->channels() > 1) {
+            // Channels sharing the basis train from a frame set in memory (the channels become frames).
+            const FrameArray& a = *t.view;
+            FrameSet copy(a.frames(), a.points(), a.channels());
+            std::copy(a.doubles(), a.doubles() + copy.values.size(), copy.values.begin());
+            model = train(copy, o, &report);
+        } else if (t.view) {
             // A float64 C-order array is the training matrix Q as it lies ((N*C) x F, column-major):
             // centred straight from it, the one copy training makes anyway.
             const FrameArray& a = *t.view;
@@ -180,7 +188,7 @@ void bindTraining(py::module_& m) {
           "fiducials"_a = std::vector<Index>{}, "grid_points"_a = std::vector<Index>{},
           "selector"_a = "teleconnection", "tolerance"_a = 0.0, "slices"_a = 5, "calibration"_a = "max",
           "coverage"_a = 0.9, "learn_rank"_a = 0, "seed"_a = 20070101u, "power_iterations"_a = 2,
-          "regions"_a = 0, "feather"_a = 0.03, "region_keys"_a = 4, "progress"_a = py::none(),
+          "regions"_a = 0, "feather"_a = 0.03, "region_keys"_a = 4, "shared_channels"_a = false, "progress"_a = py::none(),
           "Trains a model as `pmsc train` does (same options, same model bytes). frames: an array (F, N, C), a "
           ".npy path, or a list of them (shots). progress(stage, done, total) may return False to cancel.");
 }

@@ -30,6 +30,24 @@ class ModelTest(TempDirTest):
         self.assertEqual(m.info["key_points"], 30)
         self.assertEqual(m.training_report["warnings"], [])
 
+    def test_shared_channels_model_is_its_own_arithmetic(self):
+        # Channels sharing the basis (issue 11): basis (N, 1, M), projector (M, K), M x C
+        # coordinates per frame; channel c = mean_c + basis @ coords_c.
+        f = self.frames
+        m = pmsc.train(f, max_keys=30, basis=6, shared_channels=True, seed=3)
+        self.assertTrue(m.info["shared_channels"])
+        self.assertEqual(m.basis.shape, (300, 1, 6))
+        self.assertEqual(m.projector.shape, (6, 30))
+        keys = f[:, m.key_points]                                       # (F, K, C)
+        coords = m.project(keys)
+        self.assertEqual(coords.shape, (len(f), 6 * 3))
+        expect = np.einsum("mk,fkc->fmc", m.projector, keys - m.mean[m.key_points]).reshape(len(f), -1)
+        np.testing.assert_allclose(coords, expect, rtol=1e-9, atol=1e-9)
+        values = m.reconstruct(coords[4])
+        expect = m.mean + m.basis[:, 0, :] @ coords[4].reshape(6, 3)
+        np.testing.assert_allclose(values.reshape(300, 3), expect, rtol=1e-9, atol=1e-9)
+        self.assertFalse(self.model.info["shared_channels"])
+
     def test_runtime_is_the_papers_arithmetic(self):
         # b = P (k - mean_K); x = mean + B b; key error = RMS over keys of the Euclidean key residual.
         m, f = self.model, self.frames
