@@ -14,11 +14,11 @@ namespace pmsc::cli {
 
 int runDemoVolume(const std::vector<std::string>& args) {
     std::string out, mesh, density, grid;
-    bool quick = false, quiet = false, noVdbRender = false;
+    bool quick = false, quiet = false, noVdbRender = false, separateChannels = false;
     volume::VolumeDemoOptions defaults;
     long spiral = -1, colours = -1, gridKeys = -1;
     long voxels = -1, samples = -1, threads = -1, basis = -1, keys = -1, azimuths = -1;
-    std::vector<double> elevations;
+    std::vector<double> elevations, kelvin;
     ArgParser parser("demo volume", "--out DIR [--mesh FILE | --density FILE.vdb [--grid NAME]] [options]",
                      "Issue 11: smoke made from a mesh with OpenVDB (meshToLevelSet, fog volume, noise), lit\n"
                      "by a spherical light moving around and over it with a changing colour temperature.\n"
@@ -53,10 +53,23 @@ int runDemoVolume(const std::vector<std::string>& args) {
                   [&](const std::string& v) { spiral = parseIndex("--spiral", v, 0, 4096); });
     parser.option("--colours", "C", "training colour temperatures along the spiral (2 or 3)",
                   [&](const std::string& v) { colours = parseIndex("--colours", v, 1, 8); });
+    parser.option("--kelvin", "LOW,HIGH", "the light's colour temperatures: training from LOW to HIGH, validation between (default "
+                  + std::to_string(static_cast<int>(defaults.rig.kelvinLow)) + "," + std::to_string(static_cast<int>(defaults.rig.kelvinHigh))
+                  + "; LOW = HIGH: one colour)",
+                  [&](const std::string& v) {
+                      kelvin.clear();
+                      for (Index k : parseIndexList("--kelvin", v)) {
+                          if (k < 1000 || k > 40000) throw UsageError("--kelvin: " + std::to_string(k) + " K is out of range (must be in [1000, 40000])");
+                          kelvin.push_back(static_cast<double>(k));
+                      }
+                      if (kelvin.size() != 2 || kelvin[0] > kelvin[1]) throw UsageError("--kelvin: give LOW,HIGH with LOW <= HIGH, not '" + v + "'");
+                  });
     parser.option("--grid-keys", "G", "key voxels seeded from a sparse spatial grid (at most K)",
                   [&](const std::string& v) { gridKeys = parseIndex("--grid-keys", v, 0, 100000); });
     parser.option("--threads", "T", "worker threads (default: every core)",
                   [&](const std::string& v) { threads = parseIndex("--threads", v, 0, 1024); });
+    parser.flag("--separate-channels", "a basis over (voxel, channel) rows instead of one shared by red, green and blue",
+                separateChannels);
     parser.flag("--no-vdb-render", "skip OpenVDB's vdb_render view of the density", noVdbRender);
     parser.flag("--quick", "small settings, a smoke test of the whole pipeline (under 30 s)", quick);
     parser.flag("--quiet", "no progress display", quiet);
@@ -77,10 +90,15 @@ int runDemoVolume(const std::vector<std::string>& args) {
     if (!elevations.empty()) options.rig.elevations = elevations;
     if (spiral >= 0) options.rig.spiral = static_cast<int>(spiral);
     if (colours > 0) options.rig.colours = static_cast<int>(colours);
+    if (!kelvin.empty()) {
+        options.rig.kelvinLow = kelvin[0];
+        options.rig.kelvinHigh = kelvin[1];
+    }
     if (gridKeys >= 0) options.gridKeys = static_cast<int>(gridKeys);
     if (options.gridKeys > options.keys) options.gridKeys = options.keys;
     if (threads >= 0) options.threads = static_cast<int>(threads);
     if (noVdbRender) options.vdbRender = false;
+    if (separateChannels) options.sharedChannels = false;
 
     Progress progress("demo volume", !quiet);
     options.progress = [&](std::string_view stage, double done, double total) { return progress.update(stage, done, total); };
@@ -89,9 +107,9 @@ int runDemoVolume(const std::vector<std::string>& args) {
 
     auto num = [&](const char* key) { return r.at(key).get<double>(); };
     std::printf("Volume lighting cache (issue 11): %ld active voxels (voxel %.4f m, sigma_t %.3g/m), %ld key voxels, "
-                "%ld basis vectors, %d shadow rays/voxel, %d scattering octaves\n",
+                "%ld basis vectors (%s), %d shadow rays/voxel, %d scattering octaves\n",
                 r.at("points").get<long>(), num("voxel_size_m"), num("sigma_t_per_m"), r.at("key_points").get<long>(),
-                r.at("basis").get<long>(), r.at("light_samples").get<int>(), r.at("multiple_scattering_octaves").get<int>());
+                r.at("basis").get<long>(), r.at("shared_channels").get<bool>() ? "shared by R, G, B" : "over voxel-channel rows", r.at("light_samples").get<int>(), r.at("multiple_scattering_octaves").get<int>());
     std::printf("  training  %ld frames, validation %ld frames through the engine (hit rate %.1f%%: %ld hit, %ld blend, %ld miss)\n",
                 r.at("train_frames").get<long>(), r.at("test_frames").get<long>(), 100.0 * num("hit_rate"),
                 r.at("hits").get<long>(), r.at("blends").get<long>(), r.at("misses").get<long>());

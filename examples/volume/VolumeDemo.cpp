@@ -85,6 +85,17 @@ float mediumExposure(const Image& img) {
 /// subspace (mean + span of the basis): the best any reconstruction from this basis can do, with
 /// every voxel known. PM's error above it is the price of knowing only the key voxels.
 void addProjectionError(const Model& model, const double* x, RelError& err) {
+    if (model.sharedChannels) {
+        // Every channel onto mean_c + span(basis): the basis is N x M, the values N x C.
+        using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+        const Eigen::Map<const RowMajor> v(x, model.points, model.channels);
+        const Eigen::Map<const RowMajor> mean(model.mean.data(), model.points, model.channels);
+        const RowMajor r = v - mean;
+        const Eigen::MatrixXd c = model.basis.transpose() * r;
+        const RowMajor proj = mean + model.basis * c;
+        err.add(proj.data(), x, static_cast<std::size_t>(proj.size()));
+        return;
+    }
     const Eigen::Map<const Eigen::VectorXd> v(x, model.mean.size());
     const Eigen::VectorXd r = v - model.mean;
     const Eigen::VectorXd c = model.basis.transpose() * r;
@@ -183,6 +194,7 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
     TrainingOptions topt;
     topt.basis = o.basis;
     topt.maxKeys = o.keys;
+    topt.sharedChannels = o.sharedChannels;
     topt.tolerance = o.toleranceFraction * peak;
     if (o.gridKeys > 0) {
         Eigen::MatrixXd positions(n, 3);
@@ -389,6 +401,7 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
     report["multiple_scattering_octaves"] = world->medium.octaves;
     report["key_points"] = model.keyCount();
     report["basis"] = model.basisSize();
+    report["shared_channels"] = model.sharedChannels;
     report["train_frames"] = trainFrames;
     report["train_full_calculations"] = trainCalculations;
     report["test_frames"] = testFrames;

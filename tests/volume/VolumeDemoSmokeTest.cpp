@@ -8,6 +8,8 @@
 
 #include <gtest/gtest.h>
 
+#include <sys/wait.h>
+
 #include <algorithm>
 #include <array>
 #include <cctype>
@@ -93,15 +95,41 @@ TEST(VolumeEvaluatorCli, ExportTrainAndRunWriteCacheFilesWithTheDensityTopology)
     ASSERT_EQ(status, 0) << out;
     out = run(bin + " train --frames " + dir + "/t.npy --out " + dir + "/m.pmsc --basis 8 --max-keys 40", status);
     ASSERT_EQ(status, 0) << out;
-    out = run(bin + " run --model " + dir + "/m.pmsc --evaluator volume:" + dir + "/box.vdb --frames 64-66 --out " + dir +
-                  "/frames --format vdb --quiet",
+    // `pmsc run --format vdb` with MODEL writes caches of the density's topology into FOLDER.
+    const auto runWritesCaches = [&](const std::string& model, const std::string& folder) {
+        int runStatus = -1;
+        const std::string runOut = run(bin + " run --model " + dir + "/" + model + " --evaluator volume:" + dir +
+                                           "/box.vdb --frames 64-66 --out " + dir + "/" + folder + " --format vdb --quiet",
+                                       runStatus);
+        ASSERT_EQ(runStatus, 0) << runOut;
+        for (int f = 64; f <= 66; ++f) {
+            const auto cache = pmsc::volume::ScatterCache::read(dir + "/" + folder + "/frame.0000" + std::to_string(f) + ".vdb");
+            EXPECT_EQ(cache.activeVoxelCount(), 13 * 13 * 13);
+            EXPECT_EQ(cache.info().frame, f);
+            EXPECT_EQ(cache.info().state, "soft-cached");
+        }
+    };
+    runWritesCaches("m.pmsc", "frames");
+    // The same with red, green and blue sharing one basis (the volume demo's default).
+    out = run(bin + " train --frames " + dir + "/t.npy --out " + dir + "/s.pmsc --basis 8 --max-keys 40 --shared-channels --quiet",
               status);
     ASSERT_EQ(status, 0) << out;
-    for (int f = 64; f <= 66; ++f) {
-        const auto cache = pmsc::volume::ScatterCache::read(dir + "/frames/frame.0000" + std::to_string(f) + ".vdb");
-        EXPECT_EQ(cache.activeVoxelCount(), 13 * 13 * 13);
-        EXPECT_EQ(cache.info().frame, f);
-        EXPECT_EQ(cache.info().state, "soft-cached");
+    out = run(bin + " inspect " + dir + "/s.pmsc", status);
+    ASSERT_EQ(status, 0) << out;
+    EXPECT_NE(out.find("channels C = 3 (sharing one basis)"), std::string::npos) << out;
+    runWritesCaches("s.pmsc", "shared");
+    // pmsc learn refuses the shared model with one line.
+    out = run(bin + " learn --model " + dir + "/s.pmsc --frames " + dir + "/t.npy --out " + dir + "/learned.pmsc --quiet",
+              status);
+    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 2) << out;
+    EXPECT_NE(out.find("shares one basis among its channels"), std::string::npos) << out;
+    EXPECT_FALSE(std::filesystem::exists(dir + "/learned.pmsc"));
+    // What shared channels do not combine with: one line, exit code 2, no model written.
+    for (const char* extra : {"--regions 2", "--learn-rank 10", "--out-of-core"}) {
+        out = run(bin + " train --frames " + dir + "/t.npy --out " + dir + "/bad.pmsc --shared-channels " + extra, status);
+        EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 2) << extra << ": " << out;
+        EXPECT_NE(out.find("does not combine with --shared-channels"), std::string::npos) << out;
+        EXPECT_FALSE(std::filesystem::exists(dir + "/bad.pmsc"));
     }
     std::filesystem::remove_all(dir);
 }
@@ -126,7 +154,8 @@ TEST(VolumeEvaluatorCli, MissingFileNoFloatGridAndWrongGridNameAreOneLineAndExit
         EXPECT_NE(out.find(what), std::string::npos) << out;
         EXPECT_FALSE(std::filesystem::exists(dir + "/f.npy"));
     }
-    for (const char* bad : {"--voxels ten", "--elevations 30,95", "--elevations 30,x", "--spiral -1", "--colours 0"}) {
+    for (const char* bad : {"--voxels ten", "--elevations 30,95", "--elevations 30,x", "--spiral -1", "--colours 0",
+                            "--kelvin 6500,4000", "--kelvin 500,6500", "--kelvin 5000", "--kelvin 4000,5000,6000"}) {
         int status = -1;
         const std::string out = run(std::string(PMSC_BINARY) + " demo volume --quick --out " + dir + "/d " + bad, status);
         EXPECT_EQ(WEXITSTATUS(status), 2) << bad << ": " << out;
