@@ -102,7 +102,9 @@ double conformalQuantile(std::vector<double> values, double coverage);
 /// @param keyRows Q's rows at the keys (K*C x F), the same q as `gram` (centred or not)
 /// @param group   frames that belong together and stay in one slice: consecutive runs of
 ///                `group` columns (shared channels: the C channel frames of one frame; F must be
-///                a multiple of it, and slices at most F / group)
+///                a multiple of it, and slices at most F / group). The returned stats have one
+///                entry per group: e = sqrt(sum e^2), E = sqrt(sum E^2) over its members (the
+///                frame's Euclidean key error and a bound on its Euclidean point error)
 CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::MatrixXd& keyRows,
                            const std::vector<Index>& keys, Index basisSize, double tolerance, Index slices,
                            const Eigen::MatrixXd& gram, CalibrationRule rule = CalibrationRule::MaxRatio,

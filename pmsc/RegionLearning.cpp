@@ -158,6 +158,8 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
     if (!(options.keyRadius >= 0)) badOption("key radius must be >= 0");
     if (!(options.basisShare > 0 && options.basisShare <= 1)) badOption("basis share must be in (0, 1]");
     if (!(options.ratioMargin >= 1)) badOption("ratio margin must be >= 1");
+    if (model.sharedChannels)  // its basis has N rows, not N*C; Model::validate refuses the pair too
+        throw std::invalid_argument("learnRegions: a model whose channels share the basis has no regions in this version");
     if (q.rows() != n * c) throw std::invalid_argument("learnRegions: q has the wrong row count");
 
     Eigen::MatrixXd pos;

@@ -65,11 +65,12 @@ struct TrainingOptions {
     /// mean removed), so M vectors of N values serve every channel. For light (RGB): a light's
     /// colour is reproduced exactly (when the training varies colour or intensity: Model.h) and
     /// reconstruction reads N*M values instead of N*C*M. Keys
-    /// are points as before; eps are calibrated on the channel frames, and since a point's
-    /// channel errors each stay under ratio x their key error, the same eps bound the Euclidean
-    /// point error by ratio x the Euclidean key error (PointMultiplier::keyRmsError); without a
-    /// tolerance eps are the training frames' largest Euclidean key error. A frame's channels stay
-    /// in one calibration slice (calibrationGroup).
+    /// are points as before. eps are calibrated per frame, not per channel frame: a frame's
+    /// channels stay in one calibration slice (calibrationGroup), and each held-out frame has one
+    /// ratio, the bound sqrt(sum_c E_c^2) on its Euclidean point error over its Euclidean key
+    /// error (PointMultiplier::keyRmsError, what the runtime compares with eps), so the conformal
+    /// rule's coverage counts frames; without a tolerance eps are the training frames' largest
+    /// Euclidean key error.
     /// In memory and on one process only, without regions, learning or cross targets.
     bool sharedChannels = false;
     /// Consecutive training frames that stay together in one calibration slice (set by the

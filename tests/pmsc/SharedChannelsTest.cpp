@@ -1,14 +1,18 @@
 // Channels sharing one basis (Model::sharedChannels, TrainingOptions::sharedChannels; issue 11).
+#include "pmsc/Calibration.h"
+#include "pmsc/Communicator.h"
 #include "pmsc/Errors.h"
 #include "pmsc/Learning.h"
 #include "pmsc/Model.h"
 #include "pmsc/PointMultiplier.h"
+#include "pmsc/RowBlocks.h"
 #include "pmsc/Training.h"
 
 #include "Synthetic.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <vector>
@@ -41,7 +45,14 @@ struct LightFrames {
         const Eigen::MatrixXd w = pmsc::test::gaussian(rank, frames, 13);
         for (Index f = 0; f < frames; ++f) {
             // Two colours only, alternating: a colour between them is outside their plane.
-            const std::vector<double> colour = f % 2 ? std::vector<double>{1.2, 1.0, 0.7} : std::vector<double>{0.8, 1.0, 1.3};
+            std::vector<double> colour = f % 2 ? std::vector<double>{1.2, 1.0, 0.7} : std::vector<double>{0.8, 1.0, 1.3};
+            if (c != 3) {  // other channel counts: the same two ramps over the channels
+                colour.assign(static_cast<size_t>(c), 1.0);
+                for (Index ch = 0; ch < c; ++ch) {
+                    const double t = c > 1 ? static_cast<double>(ch) / static_cast<double>(c - 1) : 0.0;
+                    colour[static_cast<size_t>(ch)] = f % 2 ? 1.2 - 0.5 * t : 0.8 + 0.5 * t;
+                }
+            }
             frame(w.col(f), colour, q.frame(f));
         }
         return q;
@@ -228,4 +239,92 @@ TEST(SharedChannels, CombinationsThisVersionDoesNotSupportAreRejectedWithAReason
     pmsc::Model m = pmsc::train(q, options(3, 8, false));
     m.sharedChannels = true;
     EXPECT_THROW(m.validate(), std::invalid_argument);
+}
+
+TEST(SharedChannels, ReconstructRangeIsTheWholeFrameForAnyChunkAcrossThePanels) {
+    // The engine reconstructs a frame in chunks of points that need not line up with the kernel's
+    // panels of 256 rows (PointMultiplier.cpp): every chunking gives the whole frame's values, bit
+    // for bit, for 1 to 4 channels and a C the kernel does not special-case (5).
+    for (Index c : {1, 2, 3, 4, 5}) {
+        const LightFrames data(700, c, 4);
+        const pmsc::FrameSet q = data.training(16);
+        const pmsc::Model model = pmsc::train(q, options(4, 12, true));
+        ASSERT_EQ(model.sharedChannels, c > 1);
+        const pmsc::PointMultiplier pm(model);
+        std::vector<double> coords(static_cast<size_t>(model.coordCount()));
+        for (size_t i = 0; i < coords.size(); ++i) coords[i] = 0.1 * std::sin(static_cast<double>(i) + 0.5);
+        std::vector<double> all(static_cast<size_t>(700 * c));
+        pm.reconstruct(coords.data(), all.data());
+        for (Index chunk : {1, 7, 255, 256, 257, 300, 699, 700}) {
+            std::vector<double> pieces(all.size(), std::nan(""));
+            for (Index first = 0; first < 700; first += chunk) {
+                const Index count = std::min<Index>(chunk, 700 - first);
+                pm.reconstructRange(coords.data(), first, count, pieces.data() + first * c);
+            }
+            for (size_t i = 0; i < all.size(); ++i)
+                ASSERT_EQ(pieces[i], all[i]) << "C " << c << " chunk " << chunk << " value " << i;
+        }
+        // Against the formula, mean_c + basis * coords_c (or the plain model's when C = 1).
+        for (Index p : {0, 255, 256, 511, 512, 699})
+            for (Index ch = 0; ch < c; ++ch) {
+                double v = model.mean[p * c + ch];
+                for (Index j = 0; j < model.basisSize(); ++j)
+                    v += model.sharedChannels ? model.basis(p, j) * coords[static_cast<size_t>(j * c + ch)]
+                                              : model.basis(p * c + ch, j) * coords[static_cast<size_t>(j)];
+                EXPECT_NEAR(all[static_cast<size_t>(p * c + ch)], v, 1e-12) << "C " << c << " point " << p;
+            }
+    }
+}
+
+TEST(SharedChannels, CalibrationScoresOneEntryPerFrameInTheRuntimesMeasures) {
+    // Grouped calibration (shared channels: a frame's C channel frames are one group) gives one
+    // entry per group: e = sqrt(sum e^2) (the frame's Euclidean key error) and E = sqrt(sum E^2)
+    // (a bound on its Euclidean point error). With slice boundaries that fall on group boundaries
+    // anyway (12 columns, 4 slices, groups of 3) the folds are the same as ungrouped, so the
+    // grouped entries are exactly the ungrouped ones combined.
+    const Eigen::MatrixXd q = pmsc::test::gaussian(90, 12, 21) * 0.1 +
+                              pmsc::test::gaussian(90, 3, 22) * pmsc::test::gaussian(3, 12, 23);
+    const std::vector<Index> keys{2, 11, 30, 47, 63, 80};
+    pmsc::MatrixBlocks blocks(q, 1, /*centre=*/false);
+    pmsc::SingleProcess one;
+    const Eigen::MatrixXd keyRows = pmsc::gatherKeyRows(q, 1, keys), gram = pmsc::gramMatrix(q);
+    const auto flat = pmsc::calibrate(blocks, one, keyRows, keys, 2, 1.0, 4, gram);
+    const auto grouped = pmsc::calibrate(blocks, one, keyRows, keys, 2, 1.0, 4, gram, pmsc::CalibrationRule::MaxRatio,
+                                         0.9, 3);
+    ASSERT_EQ(flat.frames.size(), 12u);
+    ASSERT_EQ(grouped.frames.size(), 4u);
+    for (size_t g = 0; g < 4; ++g) {
+        EXPECT_EQ(grouped.frames[g], static_cast<Index>(g));
+        double k2 = 0, e2 = 0;
+        for (size_t j = 3 * g; j < 3 * g + 3; ++j) {
+            k2 += flat.keyRms[j] * flat.keyRms[j];
+            e2 += flat.maxPointError[j] * flat.maxPointError[j];
+        }
+        EXPECT_NEAR(grouped.keyRms[g], std::sqrt(k2), 1e-12 * std::sqrt(k2));
+        EXPECT_NEAR(grouped.maxPointError[g], std::sqrt(e2), 1e-12 * std::sqrt(e2));
+    }
+    // sqrt(sum E^2) / sqrt(sum e^2) <= max E / e: grouping never asks for a larger ratio.
+    EXPECT_LE(grouped.maxRatio, flat.maxRatio * (1 + 1e-12));
+    EXPECT_EQ(grouped.usableFrames, 4);
+    // Slices count groups; a column count that is not whole groups is refused.
+    EXPECT_THROW((void)pmsc::calibrate(blocks, one, keyRows, keys, 2, 1.0, 5, gram, pmsc::CalibrationRule::MaxRatio, 0.9, 3),
+                 std::invalid_argument);
+    EXPECT_THROW((void)pmsc::calibrate(blocks, one, keyRows, keys, 2, 1.0, 2, gram, pmsc::CalibrationRule::MaxRatio, 0.9, 5),
+                 std::invalid_argument);
+}
+
+TEST(SharedChannels, TrainingReportsOneCalibrationEntryPerFrame) {
+    const LightFrames data(200, 3, 6);
+    const pmsc::FrameSet q = data.training(30);
+    pmsc::TrainingOptions o = options(5, 12, true);
+    o.tolerance = 0.05;
+    o.calibrationRule = pmsc::CalibrationRule::Conformal;
+    o.calibrationCoverage = 0.8;
+    pmsc::TrainingReport report;
+    const pmsc::Model model = pmsc::train(q, o, &report);
+    ASSERT_EQ(report.calibration.frames.size(), 30u);
+    for (size_t f = 0; f < 30; ++f) EXPECT_EQ(report.calibration.frames[f], static_cast<Index>(f));
+    EXPECT_LE(report.calibration.usableFrames, 30);
+    EXPECT_GT(model.epsMin, 0);
+    EXPECT_EQ(report.calibration.rule, pmsc::CalibrationRule::Conformal);
 }
