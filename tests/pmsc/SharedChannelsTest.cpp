@@ -243,8 +243,8 @@ TEST(SharedChannels, CombinationsThisVersionDoesNotSupportAreRejectedWithAReason
 
 TEST(SharedChannels, ReconstructRangeIsTheWholeFrameForAnyChunkAcrossThePanels) {
     // The engine reconstructs a frame in chunks of points that need not line up with the kernel's
-    // panels of 256 rows (PointMultiplier.cpp): every chunking gives the whole frame's values, bit
-    // for bit, for 1 to 4 channels and a C the kernel does not special-case (5).
+    // panels of 256 rows (PointMultiplier.cpp): every chunking gives the whole frame's values, for
+    // 1 to 4 channels and a C the kernel does not special-case (5).
     for (Index c : {1, 2, 3, 4, 5}) {
         const LightFrames data(700, c, 4);
         const pmsc::FrameSet q = data.training(16);
@@ -261,8 +261,15 @@ TEST(SharedChannels, ReconstructRangeIsTheWholeFrameForAnyChunkAcrossThePanels) 
                 const Index count = std::min<Index>(chunk, 700 - first);
                 pm.reconstructRange(coords.data(), first, count, pieces.data() + first * c);
             }
-            for (size_t i = 0; i < all.size(); ++i)
-                ASSERT_EQ(pieces[i], all[i]) << "C " << c << " chunk " << chunk << " value " << i;
+            // Bit for bit through the shared kernel (each point's sum runs in the same order in any
+            // chunk); a plain model (C = 1) goes through Eigen's GEMV, whose vectorized and scalar
+            // paths may round differently for different chunk lengths.
+            for (size_t i = 0; i < all.size(); ++i) {
+                if (model.sharedChannels)
+                    ASSERT_EQ(pieces[i], all[i]) << "C " << c << " chunk " << chunk << " value " << i;
+                else
+                    ASSERT_NEAR(pieces[i], all[i], 1e-14) << "C " << c << " chunk " << chunk << " value " << i;
+            }
         }
         // Against the formula, mean_c + basis * coords_c (or the plain model's when C = 1).
         for (Index p : {0, 255, 256, 511, 512, 699})
