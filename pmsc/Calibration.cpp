@@ -167,22 +167,21 @@ CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::Matrix
         // rule's coverage counts frames, as its users read it, and both rules bound the point
         // error a user measures; per channel the max rule would be a little more conservative
         // (max_c E_c / e_c >= E_f / e_f) at the price of counting each frame C times.
-        CalibrationStats grouped = s;
-        grouped.frames.clear();
-        grouped.keyRms.clear();
-        grouped.maxPointError.clear();
-        for (std::size_t i = 0; i + static_cast<std::size_t>(group) <= s.frames.size();
-             i += static_cast<std::size_t>(group)) {
+        // Folded in place: group f is read from entries f*g.. before entry f is written.
+        const std::size_t g = static_cast<std::size_t>(group), groups = s.frames.size() / g;
+        for (std::size_t f = 0; f < groups; ++f) {
             double k2 = 0, e2 = 0;
-            for (std::size_t j = i; j < i + static_cast<std::size_t>(group); ++j) {
+            for (std::size_t j = f * g; j < (f + 1) * g; ++j) {
                 k2 += s.keyRms[j] * s.keyRms[j];
                 e2 += s.maxPointError[j] * s.maxPointError[j];  // NaN stays NaN
             }
-            grouped.frames.push_back(s.frames[i] / group);
-            grouped.keyRms.push_back(std::sqrt(k2));
-            grouped.maxPointError.push_back(std::sqrt(e2));
+            s.frames[f] = s.frames[f * g] / group;
+            s.keyRms[f] = std::sqrt(k2);
+            s.maxPointError[f] = std::sqrt(e2);
         }
-        s = std::move(grouped);
+        s.frames.resize(groups);
+        s.keyRms.resize(groups);
+        s.maxPointError.resize(groups);
     }
     setThresholds(s, tolerance, rule, coverage);
     return s;
