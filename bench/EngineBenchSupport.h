@@ -89,7 +89,8 @@ public:
           recorded_(recorded),
           table_(size_t(recorded * model.points * model.channels)) {
         if (model.sharedChannels)
-            throw std::invalid_argument("RecordedEvaluator: a model whose channels share the basis is not supported");
+            throw std::invalid_argument(
+                "RecordedEvaluator: a model whose channels share the basis is not supported");
         const Index rows = model.points * model.channels;
         Eigen::VectorXd b(model.basisSize());
         for (Index f = 0; f < recorded; ++f) {

@@ -43,7 +43,8 @@ public:
             for (int k = 0; k < 160; ++k) busy += std::sqrt(double(k + p + frame));  // ~0.5 us of work
             for (Index c = 0; c < 3; ++c) {
                 double v = model_.mean[p * 3 + c] + 1e-30 * busy;
-                for (Index j = 0; j < kBasis; ++j) v += model_.basis(p * 3 + c, j) * std::sin(0.3 * double(frame) + double(j));
+                for (Index j = 0; j < kBasis; ++j)
+                    v += model_.basis(p * 3 + c, j) * std::sin(0.3 * double(frame) + double(j));
                 if (miss_ && p < kPoints / kRegions) v += 0.5 * std::cos(double(p) * 0.01 + double(frame));
                 out[i * 3 + c] = v;
             }
@@ -66,13 +67,15 @@ const pmsc::Model& model() {
         m.trainFrames = 10;
         Eigen::MatrixXd g(kPoints * 3, kBasis);
         for (Index i = 0; i < g.size(); ++i) g.data()[i] = std::sin(0.37 * double(i) + 0.1);
-        m.basis = Eigen::HouseholderQR<Eigen::MatrixXd>(g).householderQ() * Eigen::MatrixXd::Identity(kPoints * 3, kBasis);
+        m.basis = Eigen::HouseholderQR<Eigen::MatrixXd>(g).householderQ() *
+                  Eigen::MatrixXd::Identity(kPoints * 3, kBasis);
         m.mean = Eigen::VectorXd::LinSpaced(kPoints * 3, -1, 1);
         m.singularValues = Eigen::VectorXd::LinSpaced(kBasis, 4, 1);
         m.totalEnergy = m.singularValues.squaredNorm();
         const Index size = kPoints / kRegions;
         for (Index r = 0; r < kRegions; ++r)
-            for (Index k = 0; k < kKeysPerRegion; ++k) m.keyPoints.push_back(r * size + (k * size) / kKeysPerRegion + 7);
+            for (Index k = 0; k < kKeysPerRegion; ++k)
+                m.keyPoints.push_back(r * size + (k * size) / kKeysPerRegion + 7);
         m.projector = pmsc::makeProjector(m.basis, 3, m.keyPoints);
         m.epsMin = 1e-6;
         m.epsMax = 2e-6;
@@ -95,7 +98,8 @@ const pmsc::Model& model() {
             lr.regions.push_back(std::move(reg));
             for (Index d = 1; d <= 64; ++d) {  // bands on both sides of each border
                 if (r > 0) feather[size_t(r * size - d)].push_back({r, 1.0 - double(d) / 65.0});
-                if (r + 1 < kRegions) feather[size_t((r + 1) * size + d - 1)].push_back({r, 1.0 - double(d) / 65.0});
+                if (r + 1 < kRegions)
+                    feather[size_t((r + 1) * size + d - 1)].push_back({r, 1.0 - double(d) / 65.0});
             }
         }
         lr.featherStart.push_back(0);
@@ -123,7 +127,8 @@ void fullEvaluation(benchmark::State& state) {
     std::vector<double> out(kPoints * 3);
     for (auto _ : state)
         for (Index f = 0; f < kFrames; ++f) e.evaluateAll(f, out.data());
-    state.counters["seconds_per_frame"] = benchmark::Counter(double(kFrames), benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
+    state.counters["seconds_per_frame"] = benchmark::Counter(
+        double(kFrames), benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
 }
 
 void engineMiss(benchmark::State& state, bool local) {
@@ -139,7 +144,8 @@ void engineMiss(benchmark::State& state, bool local) {
         evaluated = stats.pointsEvaluatedFraction;
         if (local && stats.localFrames != kFrames) state.SkipWithError("frames were not routed locally");
     }
-    state.counters["seconds_per_frame"] = benchmark::Counter(double(kFrames), benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
+    state.counters["seconds_per_frame"] = benchmark::Counter(
+        double(kFrames), benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
     state.counters["points_evaluated_fraction"] = evaluated;
 }
 
@@ -178,10 +184,12 @@ int main(int argc, char** argv) {
     const double evaluated = reporter.fraction["localMiss"];
     const double regionShare = double(kPoints / kRegions) / double(kPoints);
     if (full > 0) {
-        std::printf("{\"region_points_over_n\": %.4f, \"points_evaluated_fraction\": %.4f, "
-                    "\"local_miss_over_full\": %.4f, \"goal\": %.4f, \"met\": %s, \"whole_frame_miss_over_full\": %.4f}\n",
-                    regionShare, evaluated, local / full, regionShare + 0.10,
-                    local / full <= regionShare + 0.10 ? "true" : "false", whole / full);
+        std::printf(
+            "{\"region_points_over_n\": %.4f, \"points_evaluated_fraction\": %.4f, "
+            "\"local_miss_over_full\": %.4f, \"goal\": %.4f, \"met\": %s, \"whole_frame_miss_over_full\": "
+            "%.4f}\n",
+            regionShare, evaluated, local / full, regionShare + 0.10,
+            local / full <= regionShare + 0.10 ? "true" : "false", whole / full);
     }
     return 0;
 }

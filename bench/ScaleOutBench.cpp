@@ -50,7 +50,8 @@ const Data& data() {
         Data out;
         out.grid = envInt("PMSC_SCALEOUT_GRID", 300);
         out.frames = envInt("PMSC_SCALEOUT_FRAMES", 800);
-        std::string pattern = (std::filesystem::temp_directory_path() / "pmsc-scaleout-bench-XXXXXX").string();
+        std::string pattern =
+            (std::filesystem::temp_directory_path() / "pmsc-scaleout-bench-XXXXXX").string();
         if (!::mkdtemp(pattern.data())) throw std::runtime_error("mkdtemp failed");
         out.dir = pattern;
         out.path = out.dir + "/train.npy";
@@ -69,7 +70,8 @@ const Data& data() {
         }
         writer.commit();
         std::fprintf(stderr, "training set: %d frames x %d points x 3 channels, %.0f MB at %s\n", out.frames,
-                     out.grid * out.grid, double(out.frames) * out.grid * out.grid * 3 * 8 / 1e6, out.path.c_str());
+                     out.grid * out.grid, double(out.frames) * out.grid * out.grid * 3 * 8 / 1e6,
+                     out.path.c_str());
         return out;
     }();
     return d;
@@ -94,7 +96,8 @@ void BM_Train_OutOfCore(benchmark::State& state) {
     const Index n = shots.front().info.points;
     for (auto _ : state) {
         // 64 MiB blocks, as pmsc train picks without a memory limit.
-        pmsc::NpyBlocks blocks(shots, {0, n}, std::max<Index>(1, (Index{64} << 20) / (3 * data().frames * 8)));
+        pmsc::NpyBlocks blocks(shots, {0, n},
+                               std::max<Index>(1, (Index{64} << 20) / (3 * data().frames * 8)));
         pmsc::SingleProcess one;
         benchmark::DoNotOptimize(pmsc::train(blocks, one, options()).keyPoints.data());
     }
@@ -105,12 +108,13 @@ void BM_Train_MpiRanks(benchmark::State& state) {
     const int ranks = static_cast<int>(state.range(0));
     // yield_when_idle: a rank waiting in a collective gives its core away instead of spinning,
     // which matters when the 2 ranks share 2 cores with anything else.
-    const std::string command = std::string("env OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 "
-                                            "OMPI_MCA_mpi_yield_when_idle=1 ") +
-                                PMSC_MPIEXEC + " --oversubscribe -n " + std::to_string(ranks) + " " + PMSC_BINARY +
-                                " train --frames " + data().path + " --out " + data().dir + "/model-" +
-                                std::to_string(ranks) + ".pmsc " + kCliOptions + " > " + data().dir + "/log-" +
-                                std::to_string(ranks) + ".txt 2>&1";
+    const std::string command = std::string(
+                                    "env OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 "
+                                    "OMPI_MCA_mpi_yield_when_idle=1 ") +
+                                PMSC_MPIEXEC + " --oversubscribe -n " + std::to_string(ranks) + " " +
+                                PMSC_BINARY + " train --frames " + data().path + " --out " + data().dir +
+                                "/model-" + std::to_string(ranks) + ".pmsc " + kCliOptions + " > " +
+                                data().dir + "/log-" + std::to_string(ranks) + ".txt 2>&1";
     for (auto _ : state) {
         if (std::system(command.c_str()) != 0) state.SkipWithError(("failed: " + command).c_str());
     }
@@ -183,8 +187,8 @@ int main(int argc, char** argv) {
     const double two = reporter.median("BM_Train_MpiRanks/2/iterations:1/real_time");
     std::printf("load average before %s, after %s (2 cores)\n", before.c_str(), loadAverage().c_str());
     if (inMemory > 0 && outOfCore > 0) {
-        std::printf("out of core / in memory: %.3f (%.2f s / %.2f s, medians)\n", outOfCore / inMemory, outOfCore,
-                    inMemory);
+        std::printf("out of core / in memory: %.3f (%.2f s / %.2f s, medians)\n", outOfCore / inMemory,
+                    outOfCore, inMemory);
     }
     if (one > 0 && two > 0) {
         std::printf("2 ranks / 1 rank: %.3f (%.2f s / %.2f s, medians; goal <= 0.6)\n", two / one, two, one);

@@ -16,9 +16,9 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <ctime>
 #include <random>
 #include <string>
-#include <ctime>
 
 namespace {
 
@@ -45,7 +45,8 @@ pmsc::FrameSet faceLikeFrames(pmsc::Index frames, pmsc::Index points, unsigned s
     Eigen::MatrixXd centre(shapes, 3), dir(shapes, 3);
     Eigen::VectorXd radius(shapes), amp(shapes), freq(shapes), phase(shapes);
     for (int k = 0; k < shapes; ++k) {
-        const pmsc::Index p = static_cast<pmsc::Index>(std::abs(uniform(rng)) * static_cast<double>(points - 1));
+        const pmsc::Index p =
+            static_cast<pmsc::Index>(std::abs(uniform(rng)) * static_cast<double>(points - 1));
         centre.row(k) = rest.row(p);
         dir.row(k) = Eigen::RowVector3d(uniform(rng), uniform(rng), uniform(rng)).normalized();
         radius[k] = 1.5 + 3.0 * std::abs(uniform(rng));
@@ -134,13 +135,16 @@ int main(int argc, char** argv) {
     const double cpu = cpuSeconds();
     std::printf("  %-12s %6.2f s wall %6.2f s cpu\n", stage.c_str(),
                 std::chrono::duration<double>(now - stageStart).count(), cpu - stageCpu);
-    std::printf("train: %.2f s wall, %.2f s cpu  (M = %ld of %ld requested, K = %ld, rounds = %ld, energy %.6f)\n", report.seconds, cpu - trainCpu,
-                static_cast<long>(model.basisSize()), static_cast<long>(report.requestedBasis),
-                static_cast<long>(model.keyCount()), static_cast<long>(report.iterations), model.energyCaptured());
+    std::printf(
+        "train: %.2f s wall, %.2f s cpu  (M = %ld of %ld requested, K = %ld, rounds = %ld, energy %.6f)\n",
+        report.seconds, cpu - trainCpu, static_cast<long>(model.basisSize()),
+        static_cast<long>(report.requestedBasis), static_cast<long>(model.keyCount()),
+        static_cast<long>(report.iterations), model.energyCaptured());
     std::printf("largest training point residual per round:");
     for (double r : report.residualPerRound) std::printf(" %.4g", r);
     std::printf("\neps = [%.4g, %.4g]", model.epsMin, model.epsMax);
-    if (o.tolerance > 0) std::printf(" (calibrated for T = %g, r = %.3g)", o.tolerance, report.calibration.ratio);
+    if (o.tolerance > 0)
+        std::printf(" (calibrated for T = %g, r = %.3g)", o.tolerance, report.calibration.ratio);
     std::printf("\n");
     for (const auto& w : report.warnings) std::printf("warning: %s\n", w.c_str());
     return 0;

@@ -35,8 +35,9 @@ const Scene& scene() {
         Scene s;
         FogOptions fog;
         fog.targetVoxels = 60000;
-        s.world = VolumeWorld::create(DensityVolume::fromMesh(std::string(PMSC_ASSIMP_MODELS_DIR) + "/OBJ/WusonOBJ.obj", fog),
-                                      MediumSettings{}, "bench");
+        s.world = VolumeWorld::create(
+            DensityVolume::fromMesh(std::string(PMSC_ASSIMP_MODELS_DIR) + "/OBJ/WusonOBJ.obj", fog),
+            MediumSettings{}, "bench");
         const VolumeRig rig;
         s.eval = std::make_unique<VolumeEvaluator>(s.world, rig.path(*s.world, 8));
         s.shuffled.resize(s.world->density.voxelCount());
@@ -50,7 +51,8 @@ const Scene& scene() {
 
 void BM_VolumeEvaluate(benchmark::State& state) {
     const Scene& s = scene();
-    const std::size_t count = state.range(0) > 0 ? static_cast<std::size_t>(state.range(0)) : s.shuffled.size();
+    const std::size_t count =
+        state.range(0) > 0 ? static_cast<std::size_t>(state.range(0)) : s.shuffled.size();
     std::vector<Index> points(s.shuffled.begin(), s.shuffled.begin() + static_cast<std::ptrdiff_t>(count));
     std::sort(points.begin(), points.end());
     std::vector<double> out(3 * count);
@@ -61,8 +63,9 @@ void BM_VolumeEvaluate(benchmark::State& state) {
         frame = (frame + 1) % s.eval->frameCount();
     }
     state.counters["voxels"] = static_cast<double>(count);
-    state.counters["ns_per_voxel"] = benchmark::Counter(static_cast<double>(state.iterations() * count),
-                                                        benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+    state.counters["ns_per_voxel"] =
+        benchmark::Counter(static_cast<double>(state.iterations() * count),
+                           benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
 }
 BENCHMARK(BM_VolumeEvaluate)->Arg(200)->Arg(2000)->Arg(20000)->Arg(0)->Unit(benchmark::kMillisecond);
 
@@ -91,7 +94,8 @@ void BM_KeysVersusAll(benchmark::State& state) {
     state.counters["N"] = static_cast<double>(n);
     state.counters["keys_over_all"] = keySeconds / allSeconds;
     state.counters["K_over_N"] = static_cast<double>(k) / static_cast<double>(n);
-    state.counters["linearity"] = (keySeconds / static_cast<double>(k)) / (allSeconds / static_cast<double>(n));
+    state.counters["linearity"] =
+        (keySeconds / static_cast<double>(k)) / (allSeconds / static_cast<double>(n));
 }
 BENCHMARK(BM_KeysVersusAll)->Unit(benchmark::kMillisecond)->Iterations(8);
 
@@ -120,7 +124,8 @@ void BM_ReconstructSharedVsSeparate(benchmark::State& state) {
     const Model shared = reconstructionModel(n, m, true), separate = reconstructionModel(n, m, false);
     const PointMultiplier pmShared(shared), pmSeparate(separate);
     std::vector<double> coordsShared(static_cast<std::size_t>(shared.coordCount()), 0.1),
-        coordsSeparate(static_cast<std::size_t>(separate.coordCount()), 0.1), out(static_cast<std::size_t>(3 * n));
+        coordsSeparate(static_cast<std::size_t>(separate.coordCount()), 0.1),
+        out(static_cast<std::size_t>(3 * n));
     double sharedSeconds = 0, separateSeconds = 0;
     using Clock = std::chrono::steady_clock;
     for (auto _ : state) {

@@ -10,18 +10,18 @@ namespace pmsc::cli {
 /// an exit code (cli/ExitCodes.h); errors are thrown as the typed exceptions of
 /// pmsc/Errors.h and turned into one stderr line and an exit code by main().
 /// One declaration per command; main.cpp's table maps names to them.
-int runTrain(const std::vector<std::string>& args);         // cli/TrainCommand.cpp
-int runReplay(const std::vector<std::string>& args);        // cli/ReplayCommand.cpp
-int runInspect(const std::vector<std::string>& args);       // cli/InspectCommand.cpp
-int runDemo(const std::vector<std::string>& args);          // cli/DemoCommand.cpp
+int runTrain(const std::vector<std::string>& args);          // cli/TrainCommand.cpp
+int runReplay(const std::vector<std::string>& args);         // cli/ReplayCommand.cpp
+int runInspect(const std::vector<std::string>& args);        // cli/InspectCommand.cpp
+int runDemo(const std::vector<std::string>& args);           // cli/DemoCommand.cpp
 int runDemoSynthetic(const std::vector<std::string>& args);  // cli/DemoCommand.cpp (examples/synthetic)
-int runLearn(const std::vector<std::string>& args);         // cli/LearnCommand.cpp
-int runRun(const std::vector<std::string>& args);           // cli/RunCommand.cpp (render farm)
-int runExportFrames(const std::vector<std::string>& args);  // cli/ExportFramesCommand.cpp
-int runDemoCornell(const std::vector<std::string>& args);   // cli/CornellDemoCommand.cpp (examples/cornell)
-int runDemoLearn(const std::vector<std::string>& args);     // cli/LearnDemoCommand.cpp (examples/face)
-int runDemoCross(const std::vector<std::string>& args);     // cli/CrossDemoCommand.cpp (issue 10)
-int runDemoFace(const std::vector<std::string>& args);      // cli/FaceDemoCommand.cpp (examples/face)
-int runDemoVolume(const std::vector<std::string>& args);    // cli/VolumeDemoCommand.cpp (examples/volume)
+int runLearn(const std::vector<std::string>& args);          // cli/LearnCommand.cpp
+int runRun(const std::vector<std::string>& args);            // cli/RunCommand.cpp (render farm)
+int runExportFrames(const std::vector<std::string>& args);   // cli/ExportFramesCommand.cpp
+int runDemoCornell(const std::vector<std::string>& args);    // cli/CornellDemoCommand.cpp (examples/cornell)
+int runDemoLearn(const std::vector<std::string>& args);      // cli/LearnDemoCommand.cpp (examples/face)
+int runDemoCross(const std::vector<std::string>& args);      // cli/CrossDemoCommand.cpp (issue 10)
+int runDemoFace(const std::vector<std::string>& args);       // cli/FaceDemoCommand.cpp (examples/face)
+int runDemoVolume(const std::vector<std::string>& args);     // cli/VolumeDemoCommand.cpp (examples/volume)
 
 }  // namespace pmsc::cli

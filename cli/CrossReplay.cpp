@@ -48,7 +48,8 @@ CrossReplayResult crossReplay(const Model& model, const PointEvaluator& control,
                 for (Index p = 0; p < nt; ++p) {
                     double s = 0;
                     for (Index j = 0; j < c; ++j) {
-                        const double d = target[static_cast<size_t>(p * c + j)] - full[static_cast<size_t>(p * c + j)];
+                        const double d =
+                            target[static_cast<size_t>(p * c + j)] - full[static_cast<size_t>(p * c + j)];
                         s += d * d;
                     }
                     worst = std::max(worst, s);
@@ -103,19 +104,23 @@ nlohmann::ordered_json crossReplayReport(const Model& model, const CrossReplayRe
     const Index inside = t.inside, overTolerance = t.overTolerance;
     nlohmann::ordered_json summary = {
         {"cross", true},
-        {"fail_through", "impossible: cross point multiplication has no full calculation of the target to fall back on"},
+        {"fail_through",
+         "impossible: cross point multiplication has no full calculation of the target to fall back on"},
         {"frames", result.frames.size()},
         {"control_points", st.controlPoints},
         {"target_points", model.points - st.controlPoints},
         {"channels", model.channels},
         {"key_points", model.keyCount()},
         {"basis", model.basisSize()},
-        {"bound", {{"rule", "bound = quantile * (key_rms + scale): split-conformal quantile of held-out target error / (key RMS + scale)"},
-                   {"coverage", st.coverage},
-                   {"quantile", st.quantile},
-                   {"scale", st.scale},
-                   {"held_out_pairs", st.keyRms.size()},
-                   {"slices", st.slices}}},
+        {"bound",
+         {{"rule",
+           "bound = quantile * (key_rms + scale): split-conformal quantile of held-out target error / (key "
+           "RMS + scale)"},
+          {"coverage", st.coverage},
+          {"quantile", st.quantile},
+          {"scale", st.scale},
+          {"held_out_pairs", st.keyRms.size()},
+          {"slices", st.slices}}},
         {"key_rms", pct(percentiles(key))},
         {"bound_max_point_error", pct(percentiles(bound))},
     };
@@ -127,7 +132,8 @@ nlohmann::ordered_json crossReplayReport(const Model& model, const CrossReplayRe
         summary["target_max_point_error"] = pct(percentiles(error));
         summary["frames_inside_bound"] = inside;
         summary["inside_bound_rate"] =
-            result.frames.empty() ? 0.0 : static_cast<double>(inside) / static_cast<double>(result.frames.size());
+            result.frames.empty() ? 0.0
+                                  : static_cast<double>(inside) / static_cast<double>(result.frames.size());
     }
     summary["seconds"] = result.seconds;
     nlohmann::ordered_json rows = nlohmann::ordered_json::array();
@@ -146,20 +152,22 @@ void printCrossReplaySummary(std::ostream& out, const Model& model, const CrossR
     const CrossTally t = tally(model, result);
     const std::vector<double>&key = t.key, &bound = t.bound, &error = t.error;
     const Index inside = t.inside, over = t.overTolerance;
-    out << "cross replay: " << result.frames.size() << " control frames of " << st.controlPoints << " points -> "
-        << model.points - st.controlPoints << " target points through M = " << model.basisSize() << ", K = "
-        << model.keyCount() << " control keys in " << fmt("%.3f", result.seconds) << " s ("
-        << fmt("%.1f", frames / std::max(result.seconds, 1e-9)) << " frames/s, " << result.threads << " threads)\n";
+    out << "cross replay: " << result.frames.size() << " control frames of " << st.controlPoints
+        << " points -> " << model.points - st.controlPoints
+        << " target points through M = " << model.basisSize() << ", K = " << model.keyCount()
+        << " control keys in " << fmt("%.3f", result.seconds) << " s ("
+        << fmt("%.1f", frames / std::max(result.seconds, 1e-9)) << " frames/s, " << result.threads
+        << " threads)\n";
     out << "  fail-through impossible (cross point multiplication): every frame is the reconstruction\n";
     out << "  bound       target's largest point error <= " << fmt("%.6g", st.quantile) << " x (key RMS + "
         << fmt("%.6g", st.scale) << ") for " << fmt("%.0f", 100 * st.coverage)
         << "% of frames like the held-out training pairs (" << st.keyRms.size() << ")\n";
     const Percentiles k = percentiles(key), b = percentiles(bound);
     out << "  per frame                        p50         p99       p99.5         max\n";
-    out << "    control key RMS         " << fmt(" %11.5g", k.p50) << fmt(" %11.5g", k.p99) << fmt(" %11.5g", k.p995)
-        << fmt(" %11.5g", k.max) << "\n";
-    out << "    bound                   " << fmt(" %11.5g", b.p50) << fmt(" %11.5g", b.p99) << fmt(" %11.5g", b.p995)
-        << fmt(" %11.5g", b.max) << "\n";
+    out << "    control key RMS         " << fmt(" %11.5g", k.p50) << fmt(" %11.5g", k.p99)
+        << fmt(" %11.5g", k.p995) << fmt(" %11.5g", k.max) << "\n";
+    out << "    bound                   " << fmt(" %11.5g", b.p50) << fmt(" %11.5g", b.p99)
+        << fmt(" %11.5g", b.p995) << fmt(" %11.5g", b.max) << "\n";
     if (result.measured) {
         const Percentiles e = percentiles(error);
         out << "    target error (measured) " << fmt(" %11.5g", e.p50) << fmt(" %11.5g", e.p99)
@@ -169,7 +177,8 @@ void printCrossReplaySummary(std::ostream& out, const Model& model, const CrossR
             << fmt("%.0f", 100 * st.coverage) << "%)\n";
     }
     if (model.tolerance > 0)
-        out << "  tolerance   " << over << " frames have a bound over " << fmt("%.6g", model.tolerance) << "\n";
+        out << "  tolerance   " << over << " frames have a bound over " << fmt("%.6g", model.tolerance)
+            << "\n";
 }
 
 }  // namespace pmsc::cli

@@ -27,7 +27,7 @@ struct CrossReplayResult {
     std::vector<CrossFrame> frames;  ///< in frame order
     double seconds = 0;              ///< wall time of the per-frame loop
     int threads = 0;
-    bool measured = false;           ///< true targets were given
+    bool measured = false;  ///< true targets were given
 };
 
 struct CrossReplayOptions {

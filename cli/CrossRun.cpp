@@ -23,14 +23,16 @@ RunReport runCrossFrames(const Model& model, const PointEvaluator& control, cons
     const CrossMultiplier cross(model);
     const FrameSpan& span = options.frames;
     if (control.pointCount() != cross.controlPoints() || control.channelCount() != model.channels)
-        throw InputError("evaluator '" + options.evaluatorSpec + "' has " + std::to_string(control.pointCount()) +
-                         " points x " + std::to_string(control.channelCount()) + " channels, but the cross model " +
+        throw InputError("evaluator '" + options.evaluatorSpec + "' has " +
+                         std::to_string(control.pointCount()) + " points x " +
+                         std::to_string(control.channelCount()) + " channels, but the cross model " +
                          options.modelPath + " takes a control of " + std::to_string(cross.controlPoints()) +
                          " points x " + std::to_string(model.channels) + " channels");
     if (!options.keepMisses.empty())
         throw UsageError("--keep-misses: " + options.modelPath + " is a cross model, which has no misses");
     if (options.wholeFrameFailThrough)
-        throw UsageError("--whole-frame-fail-through: " + options.modelPath + " is a cross model, which cannot fail through");
+        throw UsageError("--whole-frame-fail-through: " + options.modelPath +
+                         " is a cross model, which cannot fail through");
     if (options.format != "npy")
         throw UsageError("--format: a cross model writes its target frames as npy only");
     checkFramesInside(span, control, options.evaluatorSpec);
@@ -82,11 +84,15 @@ RunReport runCrossFrames(const Model& model, const PointEvaluator& control, cons
         {"model", options.modelPath},
         {"evaluator", options.evaluatorSpec},
         {"cross", true},
-        {"fail_through", "impossible: cross point multiplication has no full calculation of the target to fall back on"},
+        {"fail_through",
+         "impossible: cross point multiplication has no full calculation of the target to fall back on"},
         {"frames", span.text()},
         {"evaluated", report.evaluated},
         {"skipped", report.skipped},
-        {"bound", {{"coverage", cross.state().coverage}, {"quantile", cross.state().quantile}, {"scale", cross.state().scale}}},
+        {"bound",
+         {{"coverage", cross.state().coverage},
+          {"quantile", cross.state().quantile},
+          {"scale", cross.state().scale}}},
         {"seconds", report.seconds},
         {"per_frame", rows}};
     if (model.tolerance > 0) {

@@ -22,12 +22,13 @@ int runTrainCross(const std::string& controlPath, const std::string& targetsPath
     const auto start = std::chrono::steady_clock::now();
     const NpyInfo ci = readNpyInfo(controlPath), ti = readNpyInfo(targetsPath);
     if (ci.frames != ti.frames)
-        throw InputError("train: " + controlPath + " has " + std::to_string(ci.frames) + " control frames but " +
-                         targetsPath + " has " + std::to_string(ti.frames) +
+        throw InputError("train: " + controlPath + " has " + std::to_string(ci.frames) +
+                         " control frames but " + targetsPath + " has " + std::to_string(ti.frames) +
                          " target frames: cross training needs one target frame per control frame");
     if (ci.channels != ti.channels)
         throw InputError("train: " + controlPath + " has " + std::to_string(ci.channels) + " channels but " +
-                         targetsPath + " has " + std::to_string(ti.channels) + ": cross training needs the same channels");
+                         targetsPath + " has " + std::to_string(ti.channels) +
+                         ": cross training needs the same channels");
     const FrameSet control = readFrames(controlPath).frames;
     const FrameSet target = readFrames(targetsPath).frames;
     CrossOptions options;
@@ -44,11 +45,12 @@ int runTrainCross(const std::string& controlPath, const std::string& targetsPath
     progress.finish();
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     const CrossState& st = *model.cross;
-    std::cout << "trained " << outPath << " (cross point multiplication) from " << control.frames << " pairs: "
-              << ci.points << " control points -> " << ti.points << " target points x " << ci.channels
-              << " channels in " << fmt("%.2f", seconds) << " s (bound scoring " << fmt("%.2f", report.scoringSeconds)
-              << " s)\n";
-    std::cout << "  basis       M = " << model.basisSize() << " of the joint (control, target) subspace, captures "
+    std::cout << "trained " << outPath << " (cross point multiplication) from " << control.frames
+              << " pairs: " << ci.points << " control points -> " << ti.points << " target points x "
+              << ci.channels << " channels in " << fmt("%.2f", seconds) << " s (bound scoring "
+              << fmt("%.2f", report.scoringSeconds) << " s)\n";
+    std::cout << "  basis       M = " << model.basisSize()
+              << " of the joint (control, target) subspace, captures "
               << fmt("%.4f", 100.0 * model.energyCaptured()) << "% of the training energy\n";
     std::cout << "  key points  K = " << model.keyCount() << " control points ("
               << (model.selector == Selector::QDeim ? "Q-DEIM" : "Varimax + teleconnection") << ")\n";
@@ -56,11 +58,12 @@ int runTrainCross(const std::string& controlPath, const std::string& targetsPath
               << fmt("%.6g", model.trainMaxPointResidual) << "\n";
     std::cout << "  fail-through impossible: replay gives every frame its control key RMS e and the bound\n";
     std::cout << "  bound       target's largest point error <= " << fmt("%.6g", st.quantile) << " x (e + "
-              << fmt("%.6g", st.scale) << "): conformal quantile at coverage " << fmt("%.4g", st.coverage) << " of "
-              << st.keyRms.size() << " held-out training pairs (" << st.slices << " slices; "
+              << fmt("%.6g", st.scale) << "): conformal quantile at coverage " << fmt("%.4g", st.coverage)
+              << " of " << st.keyRms.size() << " held-out training pairs (" << st.slices << " slices; "
               << fmt("%.1f", 100.0 * report.heldOutCoverage) << "% of them inside)\n";
     if (model.tolerance > 0)
-        std::cout << "  tolerance   " << fmt("%.6g", model.tolerance) << ": replay flags frames whose bound exceeds it\n";
+        std::cout << "  tolerance   " << fmt("%.6g", model.tolerance)
+                  << ": replay flags frames whose bound exceeds it\n";
     for (const auto& w : report.training.warnings) std::cout << "  warning: " << w << "\n";
     return kExitOk;
 }

@@ -1,8 +1,8 @@
 #include "cli/EvaluatorRegistry.h"
 
 #include "examples/cornell/CornellEvaluator.h"
-#include "examples/face/FaceEvaluator.h"
 #include "examples/face/CrossDemo.h"
+#include "examples/face/FaceEvaluator.h"
 #include "examples/volume/VolumeEvaluator.h"
 
 namespace pmsc::cli {
@@ -25,6 +25,8 @@ const evaluators::EvaluatorRegistry& evaluatorRegistry() {
 
 const std::vector<EvaluatorKind>& evaluatorKinds() { return evaluatorRegistry().kinds(); }
 
-std::unique_ptr<PointEvaluator> makeEvaluator(const std::string& spec) { return evaluatorRegistry().make(spec); }
+std::unique_ptr<PointEvaluator> makeEvaluator(const std::string& spec) {
+    return evaluatorRegistry().make(spec);
+}
 
 }  // namespace pmsc::cli

@@ -27,13 +27,15 @@ void printLocalFailThrough(const nlohmann::json& local) {
         const nlohmann::json& s = local.at(set);
         for (const char* way : {"local", "whole_frame"}) {
             const nlohmann::json& w = s.at(way);
-            std::printf("    %-10s %-11s %4ld frames, hit %5.1f%%: points evaluated %5.1f%% (non-hit frames %5.1f%%), "
-                        "soft-cached max error %.3f%%, speedup %.2fx\n",
-                        set, way, s.at("frames").get<long>(), 100 * s.at("hit_rate").get<double>(),
-                        100 * w.at("points_evaluated_fraction_mean").get<double>(),
-                        100 * w.at("points_evaluated_fraction_non_hit_mean").get<double>(),
-                        w.at("soft_max_error_pct_bbox_max").get<double>(),
-                        s.at(std::string("local") == way ? "speedup_local" : "speedup_whole_frame").get<double>());
+            std::printf(
+                "    %-10s %-11s %4ld frames, hit %5.1f%%: points evaluated %5.1f%% (non-hit frames "
+                "%5.1f%%), "
+                "soft-cached max error %.3f%%, speedup %.2fx\n",
+                set, way, s.at("frames").get<long>(), 100 * s.at("hit_rate").get<double>(),
+                100 * w.at("points_evaluated_fraction_mean").get<double>(),
+                100 * w.at("points_evaluated_fraction_non_hit_mean").get<double>(),
+                w.at("soft_max_error_pct_bbox_max").get<double>(),
+                s.at(std::string("local") == way ? "speedup_local" : "speedup_whole_frame").get<double>());
         }
     }
 }
@@ -47,7 +49,8 @@ int runDemoFace(const std::vector<std::string>& args) {
     bool quick = false, quiet = false;
     ArgParser parser(
         "demo face",
-        "--data DIR --out DIR2 [--quick] [--threads T] [--tolerance PCT] [--basis M] [--regions R] [--seed S] [--quiet]",
+        "--data DIR --out DIR2 [--quick] [--threads T] [--tolerance PCT] [--basis M] [--regions R] [--seed "
+        "S] [--quiet]",
         "Section 7 of the paper on the ICT face (26,719 points): a rig with a jaw rotating about its\n"
         "hinge, eyelids rotating over the eyeballs, eyes that aim, correctives, relax, muscle flesh\n"
         "and lip and eyelid contact poses 36 animated sequences (speech, emotions, blinks, gaze);\n"

@@ -1,8 +1,8 @@
 // `pmsc inspect`: what a model file holds.
 #include "cli/Args.h"
-#include "cli/Format.h"
 #include "cli/Commands.h"
 #include "cli/ExitCodes.h"
+#include "cli/Format.h"
 #include "pmsc/ModelIO.h"
 
 #include <nlohmann/json.hpp>
@@ -92,10 +92,10 @@ int runInspect(const std::vector<std::string>& args) {
         std::cout << j.dump(2) << "\n";
         return kExitOk;
     }
-    std::cout << modelPath << ": pmsc model, format version " << version << ", " << bytes
-              << " bytes\n";
+    std::cout << modelPath << ": pmsc model, format version " << version << ", " << bytes << " bytes\n";
     std::cout << "  points        N = " << model.points << ", channels C = " << model.channels
-              << (model.sharedChannels ? " (sharing one basis)" : "") << ", trained on " << model.trainFrames << " frames\n";
+              << (model.sharedChannels ? " (sharing one basis)" : "") << ", trained on " << model.trainFrames
+              << " frames\n";
     std::cout << "  basis         M = " << model.basisSize() << ", captures "
               << fmt("%.4f", 100 * model.energyCaptured()) << "% of the training energy (total "
               << fmt("%.6g", model.totalEnergy) << ")\n";
@@ -126,17 +126,16 @@ int runInspect(const std::vector<std::string>& args) {
     if (model.regions) {
         const LocalRegions& lr = *model.regions;
         std::cout << "  regions       R = " << lr.regionCount() << " (local fail-through), feather width "
-                  << fmt("%.6g", lr.featherWidth) << ", whole frame above " << fmt("%.3g", 100 * lr.maxLocalFraction)
-                  << "% of the points, " << lr.extraKeyPoints.size()
+                  << fmt("%.6g", lr.featherWidth) << ", whole frame above "
+                  << fmt("%.3g", 100 * lr.maxLocalFraction) << "% of the points, " << lr.extraKeyPoints.size()
                   << " region keys (evaluated for frames that miss as a whole)\n";
         std::cout << "    region   points  keys  basis     eps_min     eps_max\n";
         for (Index r = 0; r < lr.regionCount(); ++r) {
             const Region& g = lr.regions[size_t(r)];
-            std::cout << "    " << fmt("%6.0f", double(r)) << " "
-                      << fmt("%8.0f", double(g.points.size())) << " "
-                      << fmt("%5.0f", double(g.keys.size())) << " "
-                      << fmt("%6.0f", double(g.basisSize())) << " " << fmt("%11.5g", g.epsMin)
-                      << " " << fmt("%11.5g", g.epsMax) << "\n";
+            std::cout << "    " << fmt("%6.0f", double(r)) << " " << fmt("%8.0f", double(g.points.size()))
+                      << " " << fmt("%5.0f", double(g.keys.size())) << " "
+                      << fmt("%6.0f", double(g.basisSize())) << " " << fmt("%11.5g", g.epsMin) << " "
+                      << fmt("%11.5g", g.epsMax) << "\n";
         }
     }
     if (model.learning)
@@ -151,10 +150,11 @@ int runInspect(const std::vector<std::string>& args) {
                   << ", " << model.calibrationRecord->keyRms.size() << " held-out frames stored\n";
     if (model.cross)
         std::cout << "  cross         points 0.." << model.cross->controlPoints - 1 << " are the control, "
-                  << model.points - model.cross->controlPoints << " target points follow; no fail-through; bound "
-                  << fmt("%.6g", model.cross->quantile) << " x (key RMS + " << fmt("%.6g", model.cross->scale)
-                  << ") at coverage " << fmt("%.3g", model.cross->coverage) << " ("
-                  << model.cross->keyRms.size() << " held-out pairs)\n";
+                  << model.points - model.cross->controlPoints
+                  << " target points follow; no fail-through; bound " << fmt("%.6g", model.cross->quantile)
+                  << " x (key RMS + " << fmt("%.6g", model.cross->scale) << ") at coverage "
+                  << fmt("%.3g", model.cross->coverage) << " (" << model.cross->keyRms.size()
+                  << " held-out pairs)\n";
     return kExitOk;
 }
 

@@ -30,7 +30,7 @@ extern "C" void onSignal(int signal) {
         return;
     }
     if (now - gFirstSignalNs.load() < kRepeatNs) return;  // the same request delivered twice
-    std::signal(signal, SIG_DFL);                          // asked again: stop now
+    std::signal(signal, SIG_DFL);                         // asked again: stop now
     std::raise(signal);
 }
 

@@ -24,7 +24,8 @@ std::vector<std::string> splitPaths(const std::string& text) {
     std::size_t start = 0;
     while (true) {
         const std::size_t comma = text.find(',', start);
-        const std::string item = text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+        const std::string item =
+            text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
         if (item.empty()) throw UsageError("--frames: empty file name in '" + text + "'");
         out.push_back(item);
         if (comma == std::string::npos) break;
@@ -60,13 +61,14 @@ int runLearn(const std::vector<std::string>& args) {
     std::string modelPath, framesText, outPath, rule;
     LearnOptions options;
     bool quiet = false;
-    ArgParser parser("learn", "--model MODEL.pmsc --frames NEW.npy[,MORE.npy...] --out NEW_MODEL.pmsc [options]",
-                     "Updates a model with new frames (typically the misses `replay`/`run --keep-misses` kept)\n"
-                     "without its training frames (paper section 5): mean and basis by Brand's incremental SVD,\n"
-                     "keys selected again by the model's selector, the projector, and eps re-calibrated on the\n"
-                     "new frames by cross-fitting. Exact and approximate parts: README, 'Learning from misses'.\n"
-                     "A model trained with --learn-rank R keeps R singular vectors and its calibration scores,\n"
-                     "so updates lose less; any model can learn.");
+    ArgParser parser(
+        "learn", "--model MODEL.pmsc --frames NEW.npy[,MORE.npy...] --out NEW_MODEL.pmsc [options]",
+        "Updates a model with new frames (typically the misses `replay`/`run --keep-misses` kept)\n"
+        "without its training frames (paper section 5): mean and basis by Brand's incremental SVD,\n"
+        "keys selected again by the model's selector, the projector, and eps re-calibrated on the\n"
+        "new frames by cross-fitting. Exact and approximate parts: README, 'Learning from misses'.\n"
+        "A model trained with --learn-rank R keeps R singular vectors and its calibration scores,\n"
+        "so updates lose less; any model can learn.");
     parser.option("--model", "MODEL.pmsc", "model to update", modelPath, true);
     parser.option("--frames", "NEW.npy[,MORE.npy]", "new frames, one or more .npy files (comma-separated)",
                   framesText, true);
@@ -75,8 +77,10 @@ int runLearn(const std::vector<std::string>& args) {
                   [&](const std::string& v) { options.basis = parseIndex("--basis", v, 1); });
     parser.option("--rank", "R", "rank the incremental state keeps (default: the model's)",
                   [&](const std::string& v) { options.maxRank = parseIndex("--rank", v, 1); });
-    parser.option("--calibration", "RULE", "max or conformal (default: the rule the model was calibrated by)", rule);
-    parser.option("--coverage", "C", "coverage of the conformal rule, in (0, 1) (default: the model's, else 0.9)",
+    parser.option("--calibration", "RULE", "max or conformal (default: the rule the model was calibrated by)",
+                  rule);
+    parser.option("--coverage", "C",
+                  "coverage of the conformal rule, in (0, 1) (default: the model's, else 0.9)",
                   [&](const std::string& v) {
                       const double c = parseDouble("--coverage", v, 0.0, 1.0);
                       if (!(c > 0 && c < 1)) throw UsageError("--coverage: must be in (0, 1), got " + v);
@@ -105,10 +109,12 @@ int runLearn(const std::vector<std::string>& args) {
     const auto start = std::chrono::steady_clock::now();
     const Model model = readModel(modelPath);
     if (model.cross)
-        throw InputError(modelPath + " is a cross model (train --targets): pmsc learn updates plain models; retrain "
+        throw InputError(modelPath +
+                         " is a cross model (train --targets): pmsc learn updates plain models; retrain "
                          "on all (control, target) pairs");
     if (model.sharedChannels)
-        throw InputError(modelPath + " shares one basis among its channels (train --shared-channels): pmsc learn "
+        throw InputError(modelPath +
+                         " shares one basis among its channels (train --shared-channels): pmsc learn "
                          "updates models with a basis per channel in this version; retrain on all frames");
     const FrameSet frames = readAll(paths);
     if (frames.points != model.points || frames.channels != model.channels)
@@ -125,24 +131,28 @@ int runLearn(const std::vector<std::string>& args) {
     progress.finish();
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
-    std::cout << "learned " << outPath << " from " << modelPath << " + " << report.newFrames << " new frames in "
-              << fmt("%.2f", seconds) << " s (update " << fmt("%.2f", report.seconds) << " s: subspace "
-              << fmt("%.2f", report.secondsSubspace) << ", keys " << fmt("%.2f", report.secondsKeys)
-              << ", calibration " << fmt("%.2f", report.secondsCalibration) << ")\n";
+    std::cout << "learned " << outPath << " from " << modelPath << " + " << report.newFrames
+              << " new frames in " << fmt("%.2f", seconds) << " s (update " << fmt("%.2f", report.seconds)
+              << " s: subspace " << fmt("%.2f", report.secondsSubspace) << ", keys "
+              << fmt("%.2f", report.secondsKeys) << ", calibration " << fmt("%.2f", report.secondsCalibration)
+              << ")\n";
     std::cout << "  frames      " << model.trainFrames << " -> " << learned.trainFrames << " (update "
               << learned.learning->updates << ")\n";
     std::cout << "  basis       M = " << report.basisBefore << " -> " << report.basisAfter << ", state rank "
               << report.rankBefore << " -> " << report.rankAfter << ", captures "
               << fmt("%.4f", 100.0 * learned.energyCaptured()) << "% of all frames' energy; largest angle to "
               << "the old basis " << fmt("%.3g", report.largestAngle * 180.0 / 3.141592653589793) << " deg\n";
-    std::cout << "  key points  K = " << learned.keyCount() << ", " << report.keysKept << " of them keys before\n";
-    std::cout << "  new frames  largest key RMS under the old model " << fmt("%.6g", report.oldModelNewFramesKeyRmsMax)
-              << ", largest point error of the new model " << fmt("%.6g", report.newFramesMaxPointError) << "\n";
-    std::cout << "  eps         [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax) << "] -> ["
-              << fmt("%.6g", learned.epsMin) << ", " << fmt("%.6g", learned.epsMax) << "]";
+    std::cout << "  key points  K = " << learned.keyCount() << ", " << report.keysKept
+              << " of them keys before\n";
+    std::cout << "  new frames  largest key RMS under the old model "
+              << fmt("%.6g", report.oldModelNewFramesKeyRmsMax) << ", largest point error of the new model "
+              << fmt("%.6g", report.newFramesMaxPointError) << "\n";
+    std::cout << "  eps         [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax)
+              << "] -> [" << fmt("%.6g", learned.epsMin) << ", " << fmt("%.6g", learned.epsMax) << "]";
     if (learned.tolerance > 0) {
         std::cout << " for tolerance " << fmt("%.6g", learned.tolerance) << " ("
-                  << toString(learned.calibrationRecord ? learned.calibrationRecord->rule : CalibrationRule::MaxRatio)
+                  << toString(learned.calibrationRecord ? learned.calibrationRecord->rule
+                                                        : CalibrationRule::MaxRatio)
                   << " rule; ratio " << fmt("%.4g", report.calibrationRatioNew) << " on the new frames, "
                   << fmt("%.4g", report.calibrationRatioOld) << " on the stored scores)";
     }

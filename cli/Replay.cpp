@@ -57,9 +57,16 @@ class ReplaySink : public engine::FrameSink {
 public:
     ReplaySink(const Model& model, const PointEvaluator& recorded, ReplayResult& result, NpyFrameWriter* out,
                KeptFrames* keep, std::function<void(Index, const double*)> frameOut)
-        : model_(model), recorded_(recorded), result_(result), out_(out), keep_(keep), frameOut_(std::move(frameOut)),
-          full_(static_cast<std::size_t>(model.points * model.channels)), multiplier_(model),
-          pm_(full_.size()), coords_(static_cast<std::size_t>(model.coordCount())) {}
+        : model_(model),
+          recorded_(recorded),
+          result_(result),
+          out_(out),
+          keep_(keep),
+          frameOut_(std::move(frameOut)),
+          full_(static_cast<std::size_t>(model.points * model.channels)),
+          multiplier_(model),
+          pm_(full_.size()),
+          coords_(static_cast<std::size_t>(model.coordCount())) {}
 
     void write(const engine::FrameResult& r) override {
         ReplayFrame& row = result_.frames[static_cast<std::size_t>(r.sequence)];
@@ -85,15 +92,16 @@ public:
             multiplier_.reconstruct(coords_.data(), pm_.data());
             pm = pm_.data();
         }
-        row.pmMaxPointError = pm == nullptr ? std::numeric_limits<double>::quiet_NaN()
-                                            : maxPointError(pm, full, n, c);
+        row.pmMaxPointError =
+            pm == nullptr ? std::numeric_limits<double>::quiet_NaN() : maxPointError(pm, full, n, c);
         row.local = r.local;
         row.pointsEvaluatedFraction = double(r.pointsEvaluated) / double(n);
         row.regionStates.assign(r.regionStates.begin(), r.regionStates.end());
         row.softMaxPointError = maxPointError(r.values.data(), full, n, c);
         if (out_) out_->writeFrame(r.sequence, r.values.data());
         if (frameOut_) frameOut_(r.sequence, r.values.data());
-        if (keep_ && !r.failed && r.state != CacheState::Hit) keep_->add(r.frame, r.state, r.keyRmsError, full);
+        if (keep_ && !r.failed && r.state != CacheState::Hit)
+            keep_->add(r.frame, r.state, r.keyRmsError, full);
     }
 
 private:
@@ -129,7 +137,9 @@ ReplayResult replay(const Model& model, const PointEvaluator& recorded, const Re
     engineOptions.cancel = options.cancel;
     engineOptions.localFailThrough = options.localFailThrough;
     if (options.progress) {
-        engineOptions.progress = [&](const engine::Progress& p) { options.progress(p.framesDone, p.framesTotal); };
+        engineOptions.progress = [&](const engine::Progress& p) {
+            options.progress(p.framesDone, p.framesTotal);
+        };
     }
     engine::Engine engine(model, recorded, std::move(engineOptions));
     ReplaySink sink(model, recorded, result, out, options.keep, options.frameOut);
@@ -169,7 +179,8 @@ nlohmann::ordered_json replayReport(const Model& model, const ReplayResult& resu
         for (std::size_t i = 0; i < result.frames.size(); ++i) {
             const auto& r = result.frames[i];
             std::string states;
-            for (const CacheState st : r.regionStates) states += st == CacheState::Hit ? 'h' : st == CacheState::Blend ? 'b' : 'm';
+            for (const CacheState st : r.regionStates)
+                states += st == CacheState::Hit ? 'h' : st == CacheState::Blend ? 'b' : 'm';
             frames[i]["local"] = r.local;
             frames[i]["points_evaluated_fraction"] = r.pointsEvaluatedFraction;
             frames[i]["regions"] = states;
@@ -199,7 +210,8 @@ nlohmann::ordered_json replayReport(const Model& model, const ReplayResult& resu
                 ++perRegion[g][static_cast<std::size_t>(r.regionStates[g])];
         }
         json regions = json::array();
-        for (const auto& g : perRegion) regions.push_back({{"hits", g[0]}, {"blends", g[1]}, {"misses", g[2]}});
+        for (const auto& g : perRegion)
+            regions.push_back({{"hits", g[0]}, {"blends", g[1]}, {"misses", g[2]}});
         summary["regions"] = regionCount;
         summary["local_fail_through"] = result.localFailThrough;
         summary["local_frames"] = local;

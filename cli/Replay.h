@@ -27,8 +27,8 @@ struct ReplayFrame {
     double pmMaxPointError = 0;    ///< largest point error of the PM reconstruction alone
     double softMaxPointError = 0;  ///< largest point error of the soft-cached output
     // Models with regions (issue 9):
-    bool local = false;                    ///< routed region by region
-    double pointsEvaluatedFraction = 0;    ///< fraction of the points evaluated fully (read from the recording)
+    bool local = false;                  ///< routed region by region
+    double pointsEvaluatedFraction = 0;  ///< fraction of the points evaluated fully (read from the recording)
     std::vector<CacheState> regionStates;  ///< per region
 };
 

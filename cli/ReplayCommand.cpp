@@ -1,13 +1,13 @@
 // `pmsc replay`: recorded frames through a model's soft cache, with a report of what it did.
 #include "cli/Args.h"
 #include "cli/Commands.h"
+#include "cli/CrossReplay.h"
 #include "cli/ExitCodes.h"
 #include "cli/Interrupt.h"
 #include "cli/Progress.h"
 #include "cli/Replay.h"
-#include "evaluators/ReplayEvaluator.h"
 #include "cli/ReplaySummary.h"
-#include "cli/CrossReplay.h"
+#include "evaluators/ReplayEvaluator.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
@@ -46,20 +46,23 @@ int runReplay(const std::vector<std::string>& args) {
                       options.threads = static_cast<int>(parseIndex("--threads", v, 1, 4096));
                   });
     bool wholeFrame = false;
-    parser.flag("--whole-frame-fail-through",
-                "models with regions: a frame that does not hit fails through whole (as version-1 models do)\n"
-                "instead of only its regions that blend or miss",
-                wholeFrame);
+    parser.flag(
+        "--whole-frame-fail-through",
+        "models with regions: a frame that does not hit fails through whole (as version-1 models do)\n"
+        "instead of only its regions that blend or miss",
+        wholeFrame);
     std::string keepPath;
-    parser.option("--keep-misses", "FILE.npy",
-                  "append the frames that blended or missed (their recorded values) to FILE.npy, frame numbers "
-                  "to FILE.npy.frames: training for `pmsc learn`",
-                  keepPath);
+    parser.option(
+        "--keep-misses", "FILE.npy",
+        "append the frames that blended or missed (their recorded values) to FILE.npy, frame numbers "
+        "to FILE.npy.frames: training for `pmsc learn`",
+        keepPath);
     std::string targetsPath;
-    parser.option("--targets", "TRUE.npy",
-                  "cross models (train --targets): the true target frames, to measure each frame's error and the "
-                  "bound's coverage",
-                  targetsPath);
+    parser.option(
+        "--targets", "TRUE.npy",
+        "cross models (train --targets): the true target frames, to measure each frame's error and the "
+        "bound's coverage",
+        targetsPath);
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
     options.localFailThrough = !wholeFrame;
@@ -67,26 +70,31 @@ int runReplay(const std::vector<std::string>& args) {
     const Model model = readModel(modelPath);
     if (model.cross) {
         // Cross point multiplication (issue 10): control frames in, target frames out, no fail-through.
-        if (options.eps) parser.fail("--eps: " + modelPath + " is a cross model, which has no fail-through to threshold");
-        if (!keepPath.empty()) parser.fail("--keep-misses: " + modelPath + " is a cross model, which has no misses");
-        if (wholeFrame) parser.fail("--whole-frame-fail-through: " + modelPath + " is a cross model, which cannot fail through");
+        if (options.eps)
+            parser.fail("--eps: " + modelPath + " is a cross model, which has no fail-through to threshold");
+        if (!keepPath.empty())
+            parser.fail("--keep-misses: " + modelPath + " is a cross model, which has no misses");
+        if (wholeFrame)
+            parser.fail("--whole-frame-fail-through: " + modelPath +
+                        " is a cross model, which cannot fail through");
         const Index nc = model.cross->controlPoints, nt = model.points - nc;
         const evaluators::ReplayEvaluator control(framesPath);
         if (control.pointCount() != nc || control.channelCount() != model.channels)
-            throw InputError(framesPath + ": control frames have " + std::to_string(control.pointCount()) + " points x " +
-                             std::to_string(control.channelCount()) + " channels, but the cross model " + modelPath +
-                             " takes " + std::to_string(nc) + " control points x " + std::to_string(model.channels) +
-                             " channels");
+            throw InputError(framesPath + ": control frames have " + std::to_string(control.pointCount()) +
+                             " points x " + std::to_string(control.channelCount()) +
+                             " channels, but the cross model " + modelPath + " takes " + std::to_string(nc) +
+                             " control points x " + std::to_string(model.channels) + " channels");
         std::optional<evaluators::ReplayEvaluator> truth;
         if (!targetsPath.empty()) {
             truth.emplace(targetsPath);
             if (truth->pointCount() != nt || truth->channelCount() != model.channels ||
                 truth->frameCount() != control.frameCount())
-                throw InputError(targetsPath + ": targets have " + std::to_string(truth->frameCount()) + " frames x " +
-                                 std::to_string(truth->pointCount()) + " points x " +
+                throw InputError(targetsPath + ": targets have " + std::to_string(truth->frameCount()) +
+                                 " frames x " + std::to_string(truth->pointCount()) + " points x " +
                                  std::to_string(truth->channelCount()) + " channels, expected " +
                                  std::to_string(control.frameCount()) + " x " + std::to_string(nt) + " x " +
-                                 std::to_string(model.channels) + " (the control frames' count, the model's target)");
+                                 std::to_string(model.channels) +
+                                 " (the control frames' count, the model's target)");
         }
         AtomicFile report(reportPath);
         std::optional<NpyFrameWriter> out;
@@ -98,17 +106,20 @@ int runReplay(const std::vector<std::string>& args) {
         co.progress = [&](Index done, Index total) {
             progress.update("frames", static_cast<double>(done), static_cast<double>(total));
         };
-        const CrossReplayResult result = crossReplay(model, control, truth ? &*truth : nullptr, co, out ? &*out : nullptr);
+        const CrossReplayResult result =
+            crossReplay(model, control, truth ? &*truth : nullptr, co, out ? &*out : nullptr);
         progress.finish();
         const std::string text = crossReplayReport(model, result).dump(2) + "\n";
         report.write(text.data(), text.size());
         if (out) out->commit();
         report.commit();
         printCrossReplaySummary(std::cout, model, result);
-        std::cout << "  report      " << reportPath << (outPath.empty() ? "" : "\n  output      " + outPath) << "\n";
+        std::cout << "  report      " << reportPath << (outPath.empty() ? "" : "\n  output      " + outPath)
+                  << "\n";
         return kExitOk;
     }
-    if (!targetsPath.empty()) parser.fail("--targets: " + modelPath + " is not a cross model (pmsc train --targets)");
+    if (!targetsPath.empty())
+        parser.fail("--targets: " + modelPath + " is not a cross model (pmsc train --targets)");
     const evaluators::ReplayEvaluator recorded(framesPath);
     if (recorded.pointCount() != model.points || recorded.channelCount() != model.channels)
         throw InputError(framesPath + ": frames have " + std::to_string(recorded.pointCount()) +
@@ -146,8 +157,8 @@ int runReplay(const std::vector<std::string>& args) {
     report.commit();
     printReplaySummary(std::cout, model, result, options.eps.has_value());
     if (keep)
-        std::cout << "  kept        " << keep->count() << " blended or missed frames -> " << keepPath << " (now "
-                  << keep->countBefore() + keep->count() << " frames)\n";
+        std::cout << "  kept        " << keep->count() << " blended or missed frames -> " << keepPath
+                  << " (now " << keep->countBefore() + keep->count() << " frames)\n";
     std::cout << "  report      " << reportPath << (outPath.empty() ? "" : "\n  output      " + outPath)
               << "\n";
     return kExitOk;

@@ -4,6 +4,7 @@
 
 #include "cli/Args.h"
 #include "cli/Commands.h"
+#include "cli/CrossRun.h"
 #include "cli/EvaluatorRegistry.h"
 #include "cli/ExitCodes.h"
 #include "cli/Interrupt.h"
@@ -11,7 +12,6 @@
 #include "engine/Engine.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
-#include "cli/CrossRun.h"
 #include "pmsc/KeptFrames.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/Training.h"  // pmsc::Cancelled
@@ -275,7 +275,8 @@ nlohmann::json statsJson(const Model& model, const RunOptions& options, const Fr
     j["hits"] = report.hits;
     j["blends"] = report.blends;
     j["misses"] = report.misses;
-    if (!options.keepMisses.empty()) j["kept_misses"] = {{"path", options.keepMisses}, {"frames", report.kept}};
+    if (!options.keepMisses.empty())
+        j["kept_misses"] = {{"path", options.keepMisses}, {"frames", report.kept}};
     j["hit_rate"] =
         report.evaluated > 0 ? static_cast<double>(report.hits) / static_cast<double>(report.evaluated) : 0.0;
     j["seconds"] = {{"wall", report.seconds},
@@ -371,8 +372,8 @@ int runRun(const std::vector<std::string>& args) {
         "DIR/pmsc-run.A-B.json. Exit codes: 0 ok, 2 bad input, 3 evaluator failure, 4 cannot write\n"
         "output, 130 interrupted (SIGINT/SIGTERM: finished frames are kept).");
     parser.option("--model", "MODEL.pmsc", "model from pmsc train", o.modelPath, true);
-    parser.option("--evaluator", "NAME[:ARGS]", "replay:FILE.npy, skin:ASSET, face:DIR, cornell, volume:FILE.vdb",
-                  o.evaluatorSpec, true);
+    parser.option("--evaluator", "NAME[:ARGS]",
+                  "replay:FILE.npy, skin:ASSET, face:DIR, cornell, volume:FILE.vdb", o.evaluatorSpec, true);
     parser.option("--frames", "A-B[:STEP]", "the frames of this task", framesText, true);
     parser.option("--out", "DIR", "output folder (created if missing)", o.outDir, true);
     parser.option(
@@ -385,16 +386,18 @@ int runRun(const std::vector<std::string>& args) {
     parser.option("--log-every", "SECONDS",
                   "progress line interval when stderr is not a terminal (default 10; 0 = every update)",
                   [&](const std::string& v) { o.logSeconds = parseDouble("--log-every", v, 0.0, 1e6); });
-    parser.option("--keep-misses", "FILE.npy",
-                  "append the frames that blended or missed (full values, --dtype) to FILE.npy, frame numbers to "
-                  "FILE.npy.frames: training for `pmsc learn`",
-                  o.keepMisses);
+    parser.option(
+        "--keep-misses", "FILE.npy",
+        "append the frames that blended or missed (full values, --dtype) to FILE.npy, frame numbers to "
+        "FILE.npy.frames: training for `pmsc learn`",
+        o.keepMisses);
     parser.flag("--force", "redo frames whose output already exists", o.force);
     parser.flag("--quiet", "no progress display", o.quiet);
-    parser.flag("--whole-frame-fail-through",
-                "models with regions: a frame that does not hit fails through whole (as version-1 models do)\n"
-                "instead of only its regions that blend or miss",
-                o.wholeFrameFailThrough);
+    parser.flag(
+        "--whole-frame-fail-through",
+        "models with regions: a frame that does not hit fails through whole (as version-1 models do)\n"
+        "instead of only its regions that blend or miss",
+        o.wholeFrameFailThrough);
     if (!parser.parse(args)) return kExitOk;
     try {
         o.frames = parseFrameSpan("--frames", framesText);
@@ -415,9 +418,9 @@ int runRun(const std::vector<std::string>& args) {
     if (model.cross) {
         // Cross point multiplication (issue 10): the evaluator is the control's; targets are written.
         const RunReport r = runCrossFrames(model, *evaluator, o);
-        std::cout << "pmsc run (cross model, no fail-through): frames " << o.frames.text() << " -> " << o.outDir << ": "
-                  << r.evaluated << " target frames written, " << r.skipped << " skipped as done\n  stats "
-                  << r.statsPath << "\n";
+        std::cout << "pmsc run (cross model, no fail-through): frames " << o.frames.text() << " -> "
+                  << o.outDir << ": " << r.evaluated << " target frames written, " << r.skipped
+                  << " skipped as done\n  stats " << r.statsPath << "\n";
         return kExitOk;
     }
     const RunReport r = runFrames(model, *evaluator, o);
@@ -429,7 +432,8 @@ int runRun(const std::vector<std::string>& args) {
     char seconds[32];
     std::snprintf(seconds, sizeof seconds, "%.2f", r.seconds);
     std::cout << ", " << seconds << " s\n  stats " << r.statsPath << "\n";
-    if (!o.keepMisses.empty()) std::cout << "  kept  " << r.kept << " blended or missed frames -> " << o.keepMisses << "\n";
+    if (!o.keepMisses.empty())
+        std::cout << "  kept  " << r.kept << " blended or missed frames -> " << o.keepMisses << "\n";
     return kExitOk;
 }
 

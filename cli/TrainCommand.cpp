@@ -1,27 +1,27 @@
 // `pmsc train`: frames (.npy) -> model (.pmsc). Sections 3-5 of the paper, plus calibration.
 #include "cli/Args.h"
 #include "cli/Commands.h"
+#include "cli/CrossTrain.h"
 #include "cli/ExitCodes.h"
 #include "cli/Format.h"
 #include "cli/Interrupt.h"
 #include "cli/Progress.h"
 #include "cli/TrainSummary.h"
-#include "cli/CrossTrain.h"
+#include "cli/mpi/MpiLaunch.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/NpyIO.h"
 #include "pmsc/RowBlocks.h"
 #include "pmsc/Training.h"
-#include "cli/mpi/MpiLaunch.h"
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <fstream>
 #include <iostream>
-#include <ctime>
 #include <memory>
 
 #include <sys/resource.h>
@@ -44,20 +44,29 @@ std::uint64_t parseBytes(const std::string& option, const std::string& text) {
     if (unit.size() > 1 && (unit.back() == 'B' || unit.back() == 'b')) unit.pop_back();
     if (unit.size() > 1 && unit.back() == 'i') unit.pop_back();
     double scale = 1;
-    if (unit.empty()) scale = 1;
-    else if (unit == "K" || unit == "k") scale = 1024.0;
-    else if (unit == "M" || unit == "m") scale = 1024.0 * 1024;
-    else if (unit == "G" || unit == "g") scale = 1024.0 * 1024 * 1024;
-    else if (unit == "T" || unit == "t") scale = 1024.0 * 1024 * 1024 * 1024;
-    else throw UsageError(option + ": unknown unit in '" + text + "' (use K, M, G or T)");
-    if (!(value > 0) || !std::isfinite(value * scale)) throw UsageError(option + ": must be a positive size, got '" + text + "'");
+    if (unit.empty())
+        scale = 1;
+    else if (unit == "K" || unit == "k")
+        scale = 1024.0;
+    else if (unit == "M" || unit == "m")
+        scale = 1024.0 * 1024;
+    else if (unit == "G" || unit == "g")
+        scale = 1024.0 * 1024 * 1024;
+    else if (unit == "T" || unit == "t")
+        scale = 1024.0 * 1024 * 1024 * 1024;
+    else
+        throw UsageError(option + ": unknown unit in '" + text + "' (use K, M, G or T)");
+    if (!(value > 0) || !std::isfinite(value * scale))
+        throw UsageError(option + ": must be a positive size, got '" + text + "'");
     return static_cast<std::uint64_t>(value * scale);
 }
 
 std::string bytesText(double bytes) {
     char buf[64];
-    if (bytes >= 1024.0 * 1024 * 1024) std::snprintf(buf, sizeof buf, "%.2f GiB", bytes / (1024.0 * 1024 * 1024));
-    else std::snprintf(buf, sizeof buf, "%.1f MiB", bytes / (1024.0 * 1024));
+    if (bytes >= 1024.0 * 1024 * 1024)
+        std::snprintf(buf, sizeof buf, "%.2f GiB", bytes / (1024.0 * 1024 * 1024));
+    else
+        std::snprintf(buf, sizeof buf, "%.1f MiB", bytes / (1024.0 * 1024));
     return buf;
 }
 
@@ -96,24 +105,26 @@ int runTrain(const std::vector<std::string>& args) {
     bool outOfCore = false;
     TrainingOptions options;
     bool quiet = false;
-    ArgParser parser("train", "--frames TRAIN.npy [--frames SHOT2.npy ...] --out MODEL.pmsc [options]",
-                     "Trains a point-multiplication model: mean removal, a truncated SVD basis (section 3),\n"
-                     "key points by Varimax + teleconnection or Q-DEIM (section 4), the least-squares\n"
-                     "projector, and the soft-cache thresholds eps (section 5). With --tolerance, eps is\n"
-                     "calibrated by leave-one-slice-out so that a hit's largest point error stays under it.\n"
-                     "\n"
-                     "Larger than memory: several --frames files (shots, same points and channels) are one\n"
-                     "training set. When it does not fit (--memory-limit, the address-space limit, or half\n"
-                     "the machine's memory) or with --out-of-core, the frames are streamed from disk in\n"
-                     "blocks of points, and memory is bounded by, in doubles (F frames, r = min(max(max\n"
-                     "basis, block), F), B = --block, K = --max-keys, R = N*C/P rows per rank, b = block rows):\n"
-                     "  5 F^2 + 3 r F + 2 R r + 4 R B + K C (F + r) + 3 b F, plus 3 N C (r + 1) on rank 0,\n"
-                     "never N*C*F. --memory-limit fails at once when even one point per block cannot fit.\n"
-                     "Under MPI (mpirun -n P pmsc train ..., or srun --mpi=pmix) each of the P ranks reads\n"
-                     "only its share of the points; rank 0 writes the model. Started plainly, one process.");
-    parser.option("--frames", "FILE.npy",
-                  "training frames, shape (frames, points, channels), float32/64; repeat for several shots",
-                  [&](const std::string& v) { framePaths.push_back(v); }, true);
+    ArgParser parser(
+        "train", "--frames TRAIN.npy [--frames SHOT2.npy ...] --out MODEL.pmsc [options]",
+        "Trains a point-multiplication model: mean removal, a truncated SVD basis (section 3),\n"
+        "key points by Varimax + teleconnection or Q-DEIM (section 4), the least-squares\n"
+        "projector, and the soft-cache thresholds eps (section 5). With --tolerance, eps is\n"
+        "calibrated by leave-one-slice-out so that a hit's largest point error stays under it.\n"
+        "\n"
+        "Larger than memory: several --frames files (shots, same points and channels) are one\n"
+        "training set. When it does not fit (--memory-limit, the address-space limit, or half\n"
+        "the machine's memory) or with --out-of-core, the frames are streamed from disk in\n"
+        "blocks of points, and memory is bounded by, in doubles (F frames, r = min(max(max\n"
+        "basis, block), F), B = --block, K = --max-keys, R = N*C/P rows per rank, b = block rows):\n"
+        "  5 F^2 + 3 r F + 2 R r + 4 R B + K C (F + r) + 3 b F, plus 3 N C (r + 1) on rank 0,\n"
+        "never N*C*F. --memory-limit fails at once when even one point per block cannot fit.\n"
+        "Under MPI (mpirun -n P pmsc train ..., or srun --mpi=pmix) each of the P ranks reads\n"
+        "only its share of the points; rank 0 writes the model. Started plainly, one process.");
+    parser.option(
+        "--frames", "FILE.npy",
+        "training frames, shape (frames, points, channels), float32/64; repeat for several shots",
+        [&](const std::string& v) { framePaths.push_back(v); }, true);
     parser.repeatable("--frames");
     parser.option("--out", "MODEL.pmsc", "model file to write (atomically)", outPath, true);
     parser.option("--basis", "M", "basis size M",
@@ -161,10 +172,11 @@ int runTrain(const std::vector<std::string>& args) {
                       if (!(options.calibrationCoverage > 0 && options.calibrationCoverage < 1))
                           throw UsageError("--coverage: must be in (0, 1), got " + v);
                   });
-    parser.option("--learn-rank", "R",
-                  "store what `pmsc learn` needs: R singular vectors (>= M; 2M is a good start), the key "
-                  "selection settings and the calibration scores (the model file grows by (R - M)/M of its basis)",
-                  [&](const std::string& v) { options.learnRank = parseIndex("--learn-rank", v, 1); });
+    parser.option(
+        "--learn-rank", "R",
+        "store what `pmsc learn` needs: R singular vectors (>= M; 2M is a good start), the key "
+        "selection settings and the calibration scores (the model file grows by (R - M)/M of its basis)",
+        [&](const std::string& v) { options.learnRank = parseIndex("--learn-rank", v, 1); });
     parser.option("--seed", "S", "seed of the randomized SVD (training is deterministic for a seed)",
                   [&](const std::string& v) {
                       options.seed = static_cast<unsigned>(parseIndex("--seed", v, 0, 0xffffffffll));
@@ -179,7 +191,8 @@ int runTrain(const std::vector<std::string>& args) {
                   "fails before any work when even that cannot fit",
                   [&](const std::string& v) { memoryLimit = parseBytes("--memory-limit", v); });
     parser.flag("--out-of-core", "stream the frames from disk even when they would fit in memory", outOfCore);
-    parser.option("--block-points", "P", "points per block read when streaming (default: ~64 MiB blocks, "
+    parser.option("--block-points", "P",
+                  "points per block read when streaming (default: ~64 MiB blocks, "
                   "fewer under --memory-limit)",
                   [&](const std::string& v) { blockPoints = parseIndex("--block-points", v, 1); });
     parser.option("--regions", "R",
@@ -189,42 +202,52 @@ int runTrain(const std::vector<std::string>& args) {
     parser.option("--feather", "F",
                   "feather width of region borders, fraction of the bounding-box diagonal (default " +
                       std::to_string(options.regions.featherFraction) + ")",
-                  [&](const std::string& v) { options.regions.featherFraction = parseDouble("--feather", v, 0.0, 0.5); });
-    parser.option("--region-keys", "N",
-                  "keys of its own every region gets: a region holding fewer of the model's keys gets region\n"
-                  "keys among its points, evaluated only for frames that miss as a whole (default " +
-                      std::to_string(options.regions.ownKeys) + "; 0 = none)",
-                  [&](const std::string& v) { options.regions.ownKeys = parseIndex("--region-keys", v, 0, 1000); });
+                  [&](const std::string& v) {
+                      options.regions.featherFraction = parseDouble("--feather", v, 0.0, 0.5);
+                  });
+    parser.option(
+        "--region-keys", "N",
+        "keys of its own every region gets: a region holding fewer of the model's keys gets region\n"
+        "keys among its points, evaluated only for frames that miss as a whole (default " +
+            std::to_string(options.regions.ownKeys) + "; 0 = none)",
+        [&](const std::string& v) { options.regions.ownKeys = parseIndex("--region-keys", v, 0, 1000); });
     std::string targetsPath;
-    parser.option("--targets", "TARGET.npy",
-                  "cross point multiplication (paper section 7): frame f of --frames (the control) and frame f of\n"
-                  "TARGET.npy are a pair; learns their joint subspace with keys among the control's points, and an\n"
-                  "error bound on the target from held-out pairs (--coverage, default 0.9; --slices folds)",
-                  targetsPath);
+    parser.option(
+        "--targets", "TARGET.npy",
+        "cross point multiplication (paper section 7): frame f of --frames (the control) and frame f of\n"
+        "TARGET.npy are a pair; learns their joint subspace with keys among the control's points, and an\n"
+        "error bound on the target from held-out pairs (--coverage, default 0.9; --slices folds)",
+        targetsPath);
     bool sharedChannels = false;
-    parser.flag("--shared-channels",
-                "the channels share one basis over the points (issue 11; for light: RGB share their spatial\n"
-                "modes, a light's colour is reproduced exactly and reconstruction reads a third of the basis)",
-                sharedChannels);
+    parser.flag(
+        "--shared-channels",
+        "the channels share one basis over the points (issue 11; for light: RGB share their spatial\n"
+        "modes, a light's colour is reproduced exactly and reconstruction reads a third of the basis)",
+        sharedChannels);
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
     if (sharedChannels) {
-        for (const char* o : {"--targets", "--regions", "--feather", "--region-keys", "--learn-rank", "--memory-limit",
-                              "--out-of-core", "--block-points"})
+        for (const char* o : {"--targets", "--regions", "--feather", "--region-keys", "--learn-rank",
+                              "--memory-limit", "--out-of-core", "--block-points"})
             if (parser.given(o))
-                parser.fail(std::string(o) + " does not combine with --shared-channels in this version (shared-channel "
-                            "models are trained in memory on one process, without regions, learning or cross targets)");
+                parser.fail(std::string(o) +
+                            " does not combine with --shared-channels in this version (shared-channel "
+                            "models are trained in memory on one process, without regions, learning or cross "
+                            "targets)");
         options.sharedChannels = true;
     }
     if (!targetsPath.empty()) {
         if (framePaths.size() != 1) parser.fail("--targets takes exactly one --frames file (the control)");
-        for (const char* o : {"--regions", "--feather", "--region-keys", "--learn-rank", "--calibration", "--memory-limit",
-                              "--out-of-core", "--block-points"})
+        for (const char* o : {"--regions", "--feather", "--region-keys", "--learn-rank", "--calibration",
+                              "--memory-limit", "--out-of-core", "--block-points"})
             if (parser.given(o))
-                parser.fail(std::string(o) + " does not apply to a cross model (--targets): it has no fail-through, "
+                parser.fail(std::string(o) +
+                            " does not apply to a cross model (--targets): it has no fail-through, "
                             "and is trained in memory on one process");
-        if (selector == "qdeim") options.selector = Selector::QDeim;
-        else if (selector != "teleconnection") parser.fail("--selector: '" + selector + "' is not teleconnection or qdeim");
+        if (selector == "qdeim")
+            options.selector = Selector::QDeim;
+        else if (selector != "teleconnection")
+            parser.fail("--selector: '" + selector + "' is not teleconnection or qdeim");
         return runTrainCross(framePaths.front(), targetsPath, outPath, options, options.calibrationCoverage,
                              options.calibrationSlices, quiet);
     }
@@ -284,10 +307,12 @@ int runTrain(const std::vector<std::string>& args) {
                 return trainingMemoryBound(n, 1, f * c, options.maxBasis, options.block, options.maxKeys, bp,
                                            comm.size(), /*rootRank=*/true) +
                        static_cast<std::uint64_t>(8) * static_cast<std::uint64_t>(n * c * f);
-            return trainingMemoryBound(n, c, f, options.maxBasis, options.block, options.maxKeys, bp, comm.size(),
+            return trainingMemoryBound(n, c, f, options.maxBasis, options.block, options.maxKeys, bp,
+                                       comm.size(),
                                        /*rootRank=*/true);
         };
-        const double physical = static_cast<double>(sysconf(_SC_PHYS_PAGES)) * static_cast<double>(sysconf(_SC_PAGESIZE));
+        const double physical =
+            static_cast<double>(sysconf(_SC_PHYS_PAGES)) * static_cast<double>(sysconf(_SC_PAGESIZE));
         const std::uint64_t inMemoryBytes = bound(0);
         const bool stream = comm.size() > 1 || outOfCore || (limit > 0 && inMemoryBytes > limit) ||
                             (limit == 0 && static_cast<double>(inMemoryBytes) > physical / 2);
@@ -304,14 +329,16 @@ int runTrain(const std::vector<std::string>& args) {
                 const double fixed = static_cast<double>(bound(1)) - perPoint;
                 if (fixed + perPoint > static_cast<double>(limit)) {
                     throw InputError("train: " + limitSource + " " + bytesText(static_cast<double>(limit)) +
-                                     " cannot be met: streaming training of " + std::to_string(f) + " frames x " +
-                                     std::to_string(n) + " points x " + std::to_string(c) + " channels needs at least " +
-                                     bytesText(fixed + perPoint) + " (lower --max-basis/--max-keys, or use more MPI ranks)");
+                                     " cannot be met: streaming training of " + std::to_string(f) +
+                                     " frames x " + std::to_string(n) + " points x " + std::to_string(c) +
+                                     " channels needs at least " + bytesText(fixed + perPoint) +
+                                     " (lower --max-basis/--max-keys, or use more MPI ranks)");
                 }
                 const Index fits = static_cast<Index>((static_cast<double>(limit) - fixed) / perPoint);
                 if (blockPoints > 0 && blockPoints > fits) {
-                    throw InputError("train: --block-points " + std::to_string(blockPoints) + " does not fit in " +
-                                     limitSource + " " + bytesText(static_cast<double>(limit)) + " (at most " +
+                    throw InputError("train: --block-points " + std::to_string(blockPoints) +
+                                     " does not fit in " + limitSource + " " +
+                                     bytesText(static_cast<double>(limit)) + " (at most " +
                                      std::to_string(fits) + ")");
                 }
                 bp = std::min(bp, fits);
@@ -343,22 +370,27 @@ int runTrain(const std::vector<std::string>& args) {
         if (!root) return kExitOk;
         writeModel(outPath, model);
         progress.finish();
-        const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        const double seconds =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         FrameSet sizes;
         sizes.frames = f;
         sizes.points = n;
         sizes.channels = c;
         printTrainSummary(std::cout, outPath, sizes, model, report, seconds);
         std::cout << "  cpu         ";
-        for (std::size_t r = 0; r < cpuPerRank.size(); ++r) std::cout << (r ? ", " : "") << fmt("%.2f", cpuPerRank[r]);
+        for (std::size_t r = 0; r < cpuPerRank.size(); ++r)
+            std::cout << (r ? ", " : "") << fmt("%.2f", cpuPerRank[r]);
         std::cout << " s of CPU" << (cpuPerRank.size() > 1 ? " per rank" : "") << "\n";
-        if (shots.size() > 1) std::cout << "  shots       " << shots.size() << " --frames files, " << f << " frames in all\n";
+        if (shots.size() > 1)
+            std::cout << "  shots       " << shots.size() << " --frames files, " << f << " frames in all\n";
         if (stream) {
             std::cout << "  memory      streamed from disk in blocks of " << bp << " points; bound "
                       << bytesText(static_cast<double>(bound(bp))) << " (rank 0)"
-                      << (limit > 0 ? ", limit " + bytesText(static_cast<double>(limit)) : std::string()) << "\n";
+                      << (limit > 0 ? ", limit " + bytesText(static_cast<double>(limit)) : std::string())
+                      << "\n";
         } else {
-            std::cout << "  memory      in memory; bound " << bytesText(static_cast<double>(inMemoryBytes)) << "\n";
+            std::cout << "  memory      in memory; bound " << bytesText(static_cast<double>(inMemoryBytes))
+                      << "\n";
         }
         return kExitOk;
     } catch (...) {

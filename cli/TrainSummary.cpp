@@ -11,7 +11,8 @@ void printTrainSummary(std::ostream& out, const std::string& modelPath, const Fr
         << " points x " << frames.channels << " channels in " << fmt("%.2f", seconds) << " s (training "
         << fmt("%.2f", report.seconds) << " s)\n";
     out << "  ranks       " << report.ranks
-        << (report.ranks > 1 ? " MPI processes, each reading only its share of the points\n" : " (one process)\n");
+        << (report.ranks > 1 ? " MPI processes, each reading only its share of the points\n"
+                             : " (one process)\n");
     out << "  basis       M = " << model.basisSize() << ", captures "
         << fmt("%.4f", 100.0 * model.energyCaptured()) << "% of the training energy\n";
     out << "  key points  K = " << model.keyCount() << " ("

@@ -19,19 +19,21 @@ int runDemoVolume(const std::vector<std::string>& args) {
     long spiral = -1, colours = -1, gridKeys = -1;
     long voxels = -1, samples = -1, threads = -1, basis = -1, keys = -1, azimuths = -1;
     std::vector<double> elevations, kelvin;
-    ArgParser parser("demo volume", "--out DIR [--mesh FILE | --density FILE.vdb [--grid NAME]] [options]",
-                     "Issue 11: smoke made from a mesh with OpenVDB (meshToLevelSet, fog volume, noise), lit\n"
-                     "by a spherical light moving around and over it with a changing colour temperature.\n"
-                     "The light scattered at every active voxel (soft shadows through the heterogeneous\n"
-                     "density, multiple scattering) is the expensive calculation; 96 training frames, a\n"
-                     "basis and key voxels, validation between the training lights and on a path through\n"
-                     "the soft-cache engine, renders from three moving cameras (one inside the smoke).\n"
-                     "Writes DIR/report.json, DIR/density.vdb, DIR/cache_*.vdb (grid 'inscatter'), DIR/*.png.");
+    ArgParser parser(
+        "demo volume", "--out DIR [--mesh FILE | --density FILE.vdb [--grid NAME]] [options]",
+        "Issue 11: smoke made from a mesh with OpenVDB (meshToLevelSet, fog volume, noise), lit\n"
+        "by a spherical light moving around and over it with a changing colour temperature.\n"
+        "The light scattered at every active voxel (soft shadows through the heterogeneous\n"
+        "density, multiple scattering) is the expensive calculation; 96 training frames, a\n"
+        "basis and key voxels, validation between the training lights and on a path through\n"
+        "the soft-cache engine, renders from three moving cameras (one inside the smoke).\n"
+        "Writes DIR/report.json, DIR/density.vdb, DIR/cache_*.vdb (grid 'inscatter'), DIR/*.png.");
     parser.option("--out", "DIR", "output folder (created if missing)", out, true);
     parser.option("--mesh", "FILE", "mesh to make smoke of (default " + defaults.mesh + ")", mesh);
     parser.option("--density", "FILE.vdb", "a density grid of your own instead of the mesh", density);
     parser.option("--grid", "NAME", "its float grid (default 'density', else the first float grid)", grid);
-    parser.option("--voxels", "N", "active voxels of the smoke made from the mesh (default 260000; --quick 12000)",
+    parser.option("--voxels", "N",
+                  "active voxels of the smoke made from the mesh (default 260000; --quick 12000)",
                   [&](const std::string& v) { voxels = parseIndex("--voxels", v, 1000, 8000000); });
     parser.option("--samples", "S", "shadow rays per voxel to the light (default 6; --quick 4)",
                   [&](const std::string& v) { samples = parseIndex("--samples", v, 1, 4096); });
@@ -39,36 +41,47 @@ int runDemoVolume(const std::vector<std::string>& args) {
                   [&](const std::string& v) { basis = parseIndex("--basis", v, 1, 512); });
     parser.option("--keys", "K", "key voxels (default " + std::to_string(defaults.keys) + ")",
                   [&](const std::string& v) { keys = parseIndex("--keys", v, 1, 100000); });
-    parser.option("--azimuths", "A", "training light azimuths per elevation (default " + std::to_string(defaults.rig.azimuths) + ")",
-                  [&](const std::string& v) { azimuths = parseIndex("--azimuths", v, 2, 360); });
+    parser.option(
+        "--azimuths", "A",
+        "training light azimuths per elevation (default " + std::to_string(defaults.rig.azimuths) + ")",
+        [&](const std::string& v) { azimuths = parseIndex("--azimuths", v, 2, 360); });
     parser.option("--elevations", "E1,E2,..", "training light elevations in degrees, each in [0, 89]",
                   [&](const std::string& v) {
                       elevations.clear();
                       for (Index e : parseIndexList("--elevations", v)) {
-                          if (e > 89) throw UsageError("--elevations: " + std::to_string(e) + " is out of range (must be in [0, 89])");
+                          if (e > 89)
+                              throw UsageError("--elevations: " + std::to_string(e) +
+                                               " is out of range (must be in [0, 89])");
                           elevations.push_back(static_cast<double>(e));
                       }
                   });
-    parser.option("--spiral", "P", "training light positions on a spiral over the band of elevations (0 = the azimuth x elevation grid)",
-                  [&](const std::string& v) { spiral = parseIndex("--spiral", v, 0, 4096); });
+    parser.option(
+        "--spiral", "P",
+        "training light positions on a spiral over the band of elevations (0 = the azimuth x elevation grid)",
+        [&](const std::string& v) { spiral = parseIndex("--spiral", v, 0, 4096); });
     parser.option("--colours", "C", "training colour temperatures along the spiral (2 or 3)",
                   [&](const std::string& v) { colours = parseIndex("--colours", v, 1, 8); });
-    parser.option("--kelvin", "LOW,HIGH", "the light's colour temperatures: training from LOW to HIGH, validation between (default "
-                  + std::to_string(static_cast<int>(defaults.rig.kelvinLow)) + "," + std::to_string(static_cast<int>(defaults.rig.kelvinHigh))
-                  + "; LOW = HIGH: one colour)",
+    parser.option("--kelvin", "LOW,HIGH",
+                  "the light's colour temperatures: training from LOW to HIGH, validation between (default " +
+                      std::to_string(static_cast<int>(defaults.rig.kelvinLow)) + "," +
+                      std::to_string(static_cast<int>(defaults.rig.kelvinHigh)) + "; LOW = HIGH: one colour)",
                   [&](const std::string& v) {
                       kelvin.clear();
                       for (Index k : parseIndexList("--kelvin", v)) {
-                          if (k < 1000 || k > 40000) throw UsageError("--kelvin: " + std::to_string(k) + " K is out of range (must be in [1000, 40000])");
+                          if (k < 1000 || k > 40000)
+                              throw UsageError("--kelvin: " + std::to_string(k) +
+                                               " K is out of range (must be in [1000, 40000])");
                           kelvin.push_back(static_cast<double>(k));
                       }
-                      if (kelvin.size() != 2 || kelvin[0] > kelvin[1]) throw UsageError("--kelvin: give LOW,HIGH with LOW <= HIGH, not '" + v + "'");
+                      if (kelvin.size() != 2 || kelvin[0] > kelvin[1])
+                          throw UsageError("--kelvin: give LOW,HIGH with LOW <= HIGH, not '" + v + "'");
                   });
     parser.option("--grid-keys", "G", "key voxels seeded from a sparse spatial grid (at most K)",
                   [&](const std::string& v) { gridKeys = parseIndex("--grid-keys", v, 0, 100000); });
     parser.option("--threads", "T", "worker threads (default: every core)",
                   [&](const std::string& v) { threads = parseIndex("--threads", v, 0, 1024); });
-    parser.flag("--separate-channels", "a basis over (voxel, channel) rows instead of one shared by red, green and blue",
+    parser.flag("--separate-channels",
+                "a basis over (voxel, channel) rows instead of one shared by red, green and blue",
                 separateChannels);
     parser.flag("--no-vdb-render", "skip OpenVDB's vdb_render view of the density", noVdbRender);
     parser.flag("--quick", "small settings, a smoke test of the whole pipeline (under 30 s)", quick);
@@ -101,34 +114,50 @@ int runDemoVolume(const std::vector<std::string>& args) {
     if (separateChannels) options.sharedChannels = false;
 
     Progress progress("demo volume", !quiet);
-    options.progress = [&](std::string_view stage, double done, double total) { return progress.update(stage, done, total); };
+    options.progress = [&](std::string_view stage, double done, double total) {
+        return progress.update(stage, done, total);
+    };
     const nlohmann::json r = volume::runVolumeDemo(options);
     progress.finish();
 
     auto num = [&](const char* key) { return r.at(key).get<double>(); };
-    std::printf("Volume lighting cache (issue 11): %ld active voxels (voxel %.4f m, sigma_t %.3g/m), %ld key voxels, "
-                "%ld basis vectors (%s), %d shadow rays/voxel, %d scattering octaves\n",
-                r.at("points").get<long>(), num("voxel_size_m"), num("sigma_t_per_m"), r.at("key_points").get<long>(),
-                r.at("basis").get<long>(), r.at("shared_channels").get<bool>() ? "shared by R, G, B" : "over voxel-channel rows", r.at("light_samples").get<int>(), r.at("multiple_scattering_octaves").get<int>());
-    std::printf("  training  %ld frames, validation %ld frames through the engine (hit rate %.1f%%: %ld hit, %ld blend, %ld miss)\n",
-                r.at("train_frames").get<long>(), r.at("test_frames").get<long>(), 100.0 * num("hit_rate"),
-                r.at("hits").get<long>(), r.at("blends").get<long>(), r.at("misses").get<long>());
+    std::printf(
+        "Volume lighting cache (issue 11): %ld active voxels (voxel %.4f m, sigma_t %.3g/m), %ld key voxels, "
+        "%ld basis vectors (%s), %d shadow rays/voxel, %d scattering octaves\n",
+        r.at("points").get<long>(), num("voxel_size_m"), num("sigma_t_per_m"), r.at("key_points").get<long>(),
+        r.at("basis").get<long>(),
+        r.at("shared_channels").get<bool>() ? "shared by R, G, B" : "over voxel-channel rows",
+        r.at("light_samples").get<int>(), r.at("multiple_scattering_octaves").get<int>());
+    std::printf(
+        "  training  %ld frames, validation %ld frames through the engine (hit rate %.1f%%: %ld hit, %ld "
+        "blend, %ld miss)\n",
+        r.at("train_frames").get<long>(), r.at("test_frames").get<long>(), 100.0 * num("hit_rate"),
+        r.at("hits").get<long>(), r.at("blends").get<long>(), r.at("misses").get<long>());
     std::printf("  speed     full calculation %.3f s/frame, PMSC %.4f s/frame: speedup %.0fx (%d threads)\n",
-                num("full_seconds_per_frame"), num("pmsc_seconds_per_frame"), num("speedup"), r.at("threads").get<int>());
-    std::printf("  error     PM vs full calculation: %.2f%% RMS (between %.2f%%, path %.2f%%; soft-cached output %.2f%%)\n",
-                100.0 * num("rms_rel_error"), 100.0 * num("rms_rel_error_between"), 100.0 * num("rms_rel_error_path"),
-                100.0 * num("soft_rms_rel_error"));
-    std::printf("  basis     distance of frames from the basis (best possible with every voxel known): training %.2f%%, validation %.2f%%\n",
-                100.0 * num("train_projection_rel_error"), 100.0 * num("projection_rel_error"));
-    std::printf("  converged reference (%ld shadow rays, step %.2g voxel, %ld voxels; %.2f%% from one with 2x the rays and half the step):\n"
-                "            full %.2f%%, PMSC %.2f%% (ratio %.2f)\n",
-                r.at("reference_light_samples").get<long>(), num("reference_step_voxels"), r.at("reference_points").get<long>(),
-                100.0 * num("reference_self_rel_error"),
-                100.0 * num("reference_rms_rel_error_full"), 100.0 * num("reference_rms_rel_error_pm"),
-                num("reference_ratio_pm_to_full"));
-    std::printf("  wrote     %s/report.json, density.vdb, %zu caches, %zu images (full | PMSC | |diff| x 10)  [%.0f s, peak %.0f MB]\n",
-                out.c_str(), r.at("vdb_files").size(), r.at("images").size(), r.at("seconds").at("total").get<double>(),
-                num("peak_rss_mb"));
+                num("full_seconds_per_frame"), num("pmsc_seconds_per_frame"), num("speedup"),
+                r.at("threads").get<int>());
+    std::printf(
+        "  error     PM vs full calculation: %.2f%% RMS (between %.2f%%, path %.2f%%; soft-cached output "
+        "%.2f%%)\n",
+        100.0 * num("rms_rel_error"), 100.0 * num("rms_rel_error_between"), 100.0 * num("rms_rel_error_path"),
+        100.0 * num("soft_rms_rel_error"));
+    std::printf(
+        "  basis     distance of frames from the basis (best possible with every voxel known): training "
+        "%.2f%%, validation %.2f%%\n",
+        100.0 * num("train_projection_rel_error"), 100.0 * num("projection_rel_error"));
+    std::printf(
+        "  converged reference (%ld shadow rays, step %.2g voxel, %ld voxels; %.2f%% from one with 2x the "
+        "rays and half the step):\n"
+        "            full %.2f%%, PMSC %.2f%% (ratio %.2f)\n",
+        r.at("reference_light_samples").get<long>(), num("reference_step_voxels"),
+        r.at("reference_points").get<long>(), 100.0 * num("reference_self_rel_error"),
+        100.0 * num("reference_rms_rel_error_full"), 100.0 * num("reference_rms_rel_error_pm"),
+        num("reference_ratio_pm_to_full"));
+    std::printf(
+        "  wrote     %s/report.json, density.vdb, %zu caches, %zu images (full | PMSC | |diff| x 10)  [%.0f "
+        "s, peak %.0f MB]\n",
+        out.c_str(), r.at("vdb_files").size(), r.at("images").size(),
+        r.at("seconds").at("total").get<double>(), num("peak_rss_mb"));
     return kExitOk;
 }
 

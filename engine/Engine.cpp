@@ -41,7 +41,18 @@ using Clock = std::chrono::steady_clock;
 namespace {
 
 /// Node kinds whose body time the stats report, in graph order.
-enum NodeId : int { kKeys, kProject, kMonitor, kReconstruct, kFailThrough, kBlend, kLocal, kFeather, kSink, kNodeCount };
+enum NodeId : int {
+    kKeys,
+    kProject,
+    kMonitor,
+    kReconstruct,
+    kFailThrough,
+    kBlend,
+    kLocal,
+    kFeather,
+    kSink,
+    kNodeCount
+};
 constexpr std::array<const char*, kNodeCount> kNodeNames = {nodes::KeyPointEvaluator::kName,
                                                             nodes::Projector::kName,
                                                             nodes::ErrorMonitor::kName,
@@ -119,12 +130,14 @@ struct Engine::Impl {
           shape(e.failThroughShape()),
           pm(checked(m, e, options)),
           policy(options.policy ? *options.policy : SoftCachePolicy(m.epsMin, m.epsMax)),
-          chunkPoints(options.chunkPoints > 0  ? options.chunkPoints
-                      : shape.chunkPoints > 0 ? shape.chunkPoints
-                                              : automaticChunkPoints(options.pointsWanted.empty()
-                                                                         ? m.points
-                                                                         : Index(options.pointsWanted.size()))),
-          plan(FramePlan::make(m, options.pointsWanted, chunkPoints, options.wholeFrameFailThrough || shape.wholeFrame)),
+          chunkPoints(options.chunkPoints > 0 ? options.chunkPoints
+                      : shape.chunkPoints > 0
+                          ? shape.chunkPoints
+                          : automaticChunkPoints(options.pointsWanted.empty()
+                                                     ? m.points
+                                                     : Index(options.pointsWanted.size()))),
+          plan(FramePlan::make(m, options.pointsWanted, chunkPoints,
+                               options.wholeFrameFailThrough || shape.wholeFrame)),
           threads(options.threads > 0 ? options.threads : tbb::info::default_concurrency()),
           maxInFlight(options.maxFramesInFlight > 0 ? options.maxFramesInFlight : 2 * Index(threads)),
           arena(threads) {
@@ -198,7 +211,8 @@ std::span<const std::unique_ptr<FrameSlot>> Engine::Impl::takeSlots(Index frames
     return {pool.data(), size_t(slotCount)};
 }
 
-void Engine::Impl::collectStats(const nodes::RunControl& control, const Clocks& clocks, Clock::time_point start) {
+void Engine::Impl::collectStats(const nodes::RunControl& control, const Clocks& clocks,
+                                Clock::time_point start) {
     last.wallSeconds = std::chrono::duration<double>(Clock::now() - start).count();
     last.framesDelivered = control.delivered.load();
     last.hits = control.hits.load();
@@ -263,8 +277,8 @@ void Engine::Impl::runGraph(FrameRange range, FrameSink& sink, nodes::RunControl
     const auto seconds = [](Clock::duration d) { return std::chrono::duration<double>(d).count(); };
     const nodes::KeyPointEvaluator keysBody(model, evaluator);
     const nodes::Projector projectBody(pm);
-    const nodes::ErrorMonitor monitorBody(pm, policy, options.keepPointMultiplication, regions ? &*regions : nullptr,
-                                          &evaluator);
+    const nodes::ErrorMonitor monitorBody(pm, policy, options.keepPointMultiplication,
+                                          regions ? &*regions : nullptr, &evaluator);
     const nodes::Reconstructor reconstructBody(pm, plan);
     const nodes::FailThroughEvaluator failThroughBody(evaluator, plan);
     const nodes::Blender blendBody(pm, plan);
@@ -306,8 +320,8 @@ void Engine::Impl::runGraph(FrameRange range, FrameSink& sink, nodes::RunControl
     // number with a free slot, and the slot comes back only after the sink, so at most
     // maxInFlight frames are anywhere in the graph.
     using Token = FrameSlot*;
-    using MonitorNode =
-        flow::multifunction_node<Token, std::tuple<Token, ChunkMsg, Token, ChunkMsg>, flow::queueing_lightweight>;
+    using MonitorNode = flow::multifunction_node<Token, std::tuple<Token, ChunkMsg, Token, ChunkMsg>,
+                                                 flow::queueing_lightweight>;
     using ReconstructNode = flow::multifunction_node<Token, std::tuple<Token, ChunkMsg>>;
     using GatherNode = flow::multifunction_node<ChunkMsg, std::tuple<Token>, flow::queueing_lightweight>;
 
@@ -390,21 +404,20 @@ void Engine::Impl::runGraph(FrameRange range, FrameSink& sink, nodes::RunControl
             send(slot, std::get<2>(out), slot);
         }
     });
-    ReconstructNode reconstruct(
-        g, flow::unlimited, [&](Token slot, ReconstructNode::output_ports_type& out) {
-            PMSC_NODE_BODY(&runDone);
-            takeOver(slot);
-            if (control.cancelled()) {
-                send(slot, std::get<0>(out), slot);
-                return;
-            }
-            const bool done = timed(clocks[kReconstruct], [&] { return reconstructBody(*slot); });
-            if (done) {
-                send(slot, std::get<0>(out), slot);
-            } else {
-                sendChunks(slot, std::get<1>(out));
-            }
-        });
+    ReconstructNode reconstruct(g, flow::unlimited, [&](Token slot, ReconstructNode::output_ports_type& out) {
+        PMSC_NODE_BODY(&runDone);
+        takeOver(slot);
+        if (control.cancelled()) {
+            send(slot, std::get<0>(out), slot);
+            return;
+        }
+        const bool done = timed(clocks[kReconstruct], [&] { return reconstructBody(*slot); });
+        if (done) {
+            send(slot, std::get<0>(out), slot);
+        } else {
+            sendChunks(slot, std::get<1>(out));
+        }
+    });
     flow::function_node<ChunkMsg, ChunkMsg> failThrough(g, flow::unlimited, [&](ChunkMsg m) {
         PMSC_NODE_BODY(&runDone);
         takeOver(m.slot);

@@ -1,12 +1,12 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-#include "engine/RunStats.h"
 #include "engine/FrameRange.h"
 #include "engine/FrameSink.h"
+#include "engine/RunStats.h"
+#include "pmsc/Errors.h"  // pmsc::Cancelled
 #include "pmsc/Model.h"
 #include "pmsc/PointEvaluator.h"
-#include "pmsc/Errors.h"  // pmsc::Cancelled
 
 #include <atomic>
 #include <functional>

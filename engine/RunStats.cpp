@@ -24,7 +24,8 @@ std::string RunStats::toJson(int indent) const {
         j["local_frames"] = localFrames;
         j["points_evaluated_fraction"] = pointsEvaluatedFraction;
         nlohmann::json r = nlohmann::json::array();
-        for (const RegionCounts& c : regions) r.push_back({{"hits", c.hits}, {"blends", c.blends}, {"misses", c.misses}});
+        for (const RegionCounts& c : regions)
+            r.push_back({{"hits", c.hits}, {"blends", c.blends}, {"misses", c.misses}});
         j["regions"] = std::move(r);
     }
     nlohmann::json list = nlohmann::json::array();

@@ -25,10 +25,12 @@ EvaluatorRegistry EvaluatorRegistry::withBuiltins() {
 
 void EvaluatorRegistry::add(EvaluatorKind kind) {
     if (kind.name.empty() || kind.name.find(':') != std::string::npos)
-        throw std::invalid_argument("evaluator kind name '" + kind.name + "' must be non-empty and contain no ':'");
+        throw std::invalid_argument("evaluator kind name '" + kind.name +
+                                    "' must be non-empty and contain no ':'");
     if (!kind.make) throw std::invalid_argument("evaluator kind '" + kind.name + "' has no factory");
     for (const auto& k : kinds_)
-        if (k.name == kind.name) throw std::invalid_argument("evaluator kind '" + kind.name + "' is already registered");
+        if (k.name == kind.name)
+            throw std::invalid_argument("evaluator kind '" + kind.name + "' is already registered");
     kinds_.push_back(std::move(kind));
 }
 

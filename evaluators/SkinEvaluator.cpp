@@ -527,12 +527,14 @@ void SkinEvaluator::Data::Loader::readMorphChannels() {
                 for (unsigned i = 0; i < key.mNumValuesAndWeights; ++i) {
                     if (key.mValues[i] >= T)
                         throw InputError(where + "morph channel '" + ma->mName.C_Str() + "' names target " +
-                                         std::to_string(key.mValues[i]) + " of a mesh with " + std::to_string(T));
+                                         std::to_string(key.mValues[i]) + " of a mesh with " +
+                                         std::to_string(T));
                     mo.keyWeights[k * T + key.mValues[i]] = key.mWeights[i];
                 }
             }
             if (!std::is_sorted(mo.keyTimes.begin(), mo.keyTimes.end()))
-                throw InputError(where + "morph channel '" + ma->mName.C_Str() + "' keys are not in time order");
+                throw InputError(where + "morph channel '" + ma->mName.C_Str() +
+                                 "' keys are not in time order");
         }
     }
 }

@@ -37,8 +37,8 @@ public:
     /// The region keys (LocalRegions::extraKeyPoints) are evaluated here, through `evaluator`,
     /// only for such frames: a hit costs what it cost without regions. An evaluator failure
     /// there fails the frame.
-    ErrorMonitor(const PointMultiplier& pm, SoftCachePolicy policy, bool keepPm, const RegionMultiplier* regions,
-                 const PointEvaluator* evaluator)
+    ErrorMonitor(const PointMultiplier& pm, SoftCachePolicy policy, bool keepPm,
+                 const RegionMultiplier* regions, const PointEvaluator* evaluator)
         : pm_(pm), policy_(policy), keepPm_(keepPm), regions_(regions), evaluator_(evaluator) {}
 
     Route operator()(FrameSlot& slot) const;

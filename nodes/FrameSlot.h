@@ -60,17 +60,17 @@ struct FrameSlot {
     // --- local fail-through (issue 9); sized by enableRegions(), empty otherwise ---
     /// Sizes the local buffers for `regions` (once, before the slot's first run).
     void enableRegions(const RegionMultiplier& regions, Index points, Index channels);
-    bool local = false;                       ///< this frame is routed region by region
-    std::vector<double> regionKeyValues;      ///< E*C values of the region keys (frames that do not hit)
-    std::vector<double> regionCoords;         ///< every region's coordinates (RegionMultiplier::coordsOffset)
-    std::vector<double> regionKeyErrors;      ///< R key RMS errors (empty entries 0 on a global hit)
-    std::vector<CacheState> regionStates;     ///< R decisions (all Hit on a global hit)
-    std::vector<double> regionWeights;        ///< R weights of the full result
-    std::vector<double> pointWeights;         ///< N feathered weights w_p (local frames)
-    std::vector<Index> localPoints;           ///< N: the points evaluated fully, ascending (first localCount)
-    Index localCount = 0;                     ///< how many of localPoints this frame uses
-    std::vector<double> localFull;            ///< N*C: full values of localPoints[i] at i*C
-    bool regionsEvaluated = false;            ///< the region decisions above belong to this frame
+    bool local = false;                    ///< this frame is routed region by region
+    std::vector<double> regionKeyValues;   ///< E*C values of the region keys (frames that do not hit)
+    std::vector<double> regionCoords;      ///< every region's coordinates (RegionMultiplier::coordsOffset)
+    std::vector<double> regionKeyErrors;   ///< R key RMS errors (empty entries 0 on a global hit)
+    std::vector<CacheState> regionStates;  ///< R decisions (all Hit on a global hit)
+    std::vector<double> regionWeights;     ///< R weights of the full result
+    std::vector<double> pointWeights;      ///< N feathered weights w_p (local frames)
+    std::vector<Index> localPoints;        ///< N: the points evaluated fully, ascending (first localCount)
+    Index localCount = 0;                  ///< how many of localPoints this frame uses
+    std::vector<double> localFull;         ///< N*C: full values of localPoints[i] at i*C
+    bool regionsEvaluated = false;         ///< the region decisions above belong to this frame
     /// Points whose full value this frame computed in its fail-through (0 for a hit, N for a
     /// whole-frame fail-through, the points with w_p > 0 for a local frame).
     Index pointsEvaluated = 0;

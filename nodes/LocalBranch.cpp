@@ -8,9 +8,9 @@
 namespace pmsc::nodes {
 
 Index LocalBranch::messages(const FrameSlot& slot) const {
-    const Index pieces = slot.localCount == 0   ? 0
-                         : piecePoints_ <= 0 ? 1
-                                             : (slot.localCount + piecePoints_ - 1) / piecePoints_;
+    const Index pieces = slot.localCount == 0 ? 0
+                         : piecePoints_ <= 0  ? 1
+                                              : (slot.localCount + piecePoints_ - 1) / piecePoints_;
     return regions_.regionCount() + pieces;
 }
 
@@ -22,7 +22,8 @@ void LocalBranch::operator()(FrameSlot& slot, Index message) const {
         return;
     }
     if (slot.regionWeights[size_t(message)] < 1)
-        regions_.reconstruct(message, slot.regionCoords.data() + regions_.coordsOffset(message), slot.values.data());
+        regions_.reconstruct(message, slot.regionCoords.data() + regions_.coordsOffset(message),
+                             slot.values.data());
 }
 
 void LocalBranch::evaluatePiece(FrameSlot& slot, Index piece) const {
@@ -44,8 +45,9 @@ void LocalBranch::evaluatePiece(FrameSlot& slot, Index piece) const {
     for (Index i = 0; i < n; ++i) {
         if (!std::isfinite(out[i])) {
             slot.fail(kName,
-                      "evaluator '" + evaluator_.name() + "' returned " + std::to_string(out[i]) + " at point " +
-                          std::to_string(set[size_t(i / channels_)]) + " channel " + std::to_string(i % channels_),
+                      "evaluator '" + evaluator_.name() + "' returned " + std::to_string(out[i]) +
+                          " at point " + std::to_string(set[size_t(i / channels_)]) + " channel " +
+                          std::to_string(i % channels_),
                       order);
             return;
         }

@@ -29,7 +29,8 @@ public:
     static constexpr const char* kName = "local";
 
     /// @param piecePoints points per piece of the full evaluation; 0 = one piece
-    LocalBranch(const PointEvaluator& evaluator, const RegionMultiplier& regions, Index channels, Index piecePoints)
+    LocalBranch(const PointEvaluator& evaluator, const RegionMultiplier& regions, Index channels,
+                Index piecePoints)
         : evaluator_(evaluator), regions_(regions), channels_(channels), piecePoints_(piecePoints) {}
 
     /// How many branch messages the local frame in `slot` takes (regions, then pieces).

@@ -49,7 +49,8 @@ void OrderedSink::operator()(FrameSlot& slot) {
         if (slot.local) {
             result.pointWeights = slot.pointWeights;
             result.fullPoints = std::span<const Index>(slot.localPoints.data(), size_t(slot.localCount));
-            result.fullValues = std::span<const double>(slot.localFull.data(), size_t(slot.localCount * plan_.channels));
+            result.fullValues =
+                std::span<const double>(slot.localFull.data(), size_t(slot.localCount * plan_.channels));
         }
         if (slot.pmValid) {
             result.pmValues = slot.pmValues;
@@ -82,7 +83,8 @@ void OrderedSink::operator()(FrameSlot& slot) {
         control_.pointsEvaluatedFractionSum += double(slot.pointsEvaluated) / double(plan_.outputCount());
     if (!result.regionStates.empty()) {
         control_.regionStates.resize(result.regionStates.size(), {0, 0, 0});
-        for (size_t r = 0; r < result.regionStates.size(); ++r) ++control_.regionStates[r][size_t(result.regionStates[r])];
+        for (size_t r = 0; r < result.regionStates.size(); ++r)
+            ++control_.regionStates[r][size_t(result.regionStates[r])];
     }
 }
 

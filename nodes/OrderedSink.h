@@ -1,8 +1,8 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-#include "nodes/FrameSlot.h"
 #include "engine/FrameSink.h"
+#include "nodes/FrameSlot.h"
 #include "nodes/RunControl.h"
 #include "pmsc/SoftCache.h"
 

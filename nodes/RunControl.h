@@ -5,12 +5,12 @@
 
 #include <array>
 #include <atomic>
-#include <vector>
 #include <exception>
 #include <functional>
 #include <limits>
 #include <mutex>
 #include <string>
+#include <vector>
 
 namespace pmsc::nodes {
 

@@ -66,14 +66,16 @@ public:
     /// A finite double.
     double finite(std::string_view what) {
         const double v = f64(what);
-        if (!std::isfinite(v)) fail(std::string(what) + " is " + std::to_string(v) + ", expected a finite number");
+        if (!std::isfinite(v))
+            fail(std::string(what) + " is " + std::to_string(v) + ", expected a finite number");
         return v;
     }
     /// A u64 in [0, bound), as an Index.
     Index index(std::string_view what, std::uint64_t bound) {
         const std::uint64_t v = u64(what);
         if (v >= bound)
-            fail(std::string(what) + " " + std::to_string(v) + " is outside [0, " + std::to_string(bound) + ")");
+            fail(std::string(what) + " " + std::to_string(v) + " is outside [0, " + std::to_string(bound) +
+                 ")");
         return static_cast<Index>(v);
     }
     /// A u64 count of elements of `elementBytes` bytes each that must still fit in what is left.
@@ -110,7 +112,9 @@ public:
     }
     /// Fails unless `count` elements of `size` bytes are still left to read (checked before a
     /// caller allocates for them).
-    void require(std::uint64_t count, std::uint64_t size, std::string_view what) const { need(count, size, what); }
+    void require(std::uint64_t count, std::uint64_t size, std::string_view what) const {
+        need(count, size, what);
+    }
 
     std::size_t remaining() const { return bytes_.size() - at_; }
     std::size_t offset() const { return at_; }
@@ -124,8 +128,9 @@ public:
 private:
     void need(std::uint64_t count, std::uint64_t size, std::string_view what) const {
         if (count > remaining() / size)
-            fail("truncated: " + std::string(what) + " needs " + std::to_string(count) + " x " + std::to_string(size) +
-                 " bytes at offset " + std::to_string(at_) + ", only " + std::to_string(remaining()) + " left");
+            fail("truncated: " + std::string(what) + " needs " + std::to_string(count) + " x " +
+                 std::to_string(size) + " bytes at offset " + std::to_string(at_) + ", only " +
+                 std::to_string(remaining()) + " left");
     }
     template <class T>
     T get(std::string_view what) {

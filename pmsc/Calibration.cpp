@@ -29,8 +29,8 @@ Eigen::VectorXd keyRmsFromKeyRows(const Eigen::MatrixXd& qk, const Eigen::Matrix
 CalibrationStats thresholdsFromTraining(const Eigen::Ref<const Eigen::MatrixXd>& q,
                                         const Eigen::MatrixXd& basis, Index channels,
                                         const std::vector<Index>& keys, const Eigen::MatrixXd& projector) {
-    return thresholdsFromKeyRows(gatherKeyRows(q, channels, keys), gatherKeyRows(basis, channels, keys), channels,
-                                 projector);
+    return thresholdsFromKeyRows(gatherKeyRows(q, channels, keys), gatherKeyRows(basis, channels, keys),
+                                 channels, projector);
 }
 
 CalibrationStats thresholdsFromKeyRows(const Eigen::MatrixXd& qk, const Eigen::MatrixXd& bk, Index channels,
@@ -44,13 +44,14 @@ CalibrationStats thresholdsFromKeyRows(const Eigen::MatrixXd& qk, const Eigen::M
 }
 
 CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index channels,
-                           const std::vector<Index>& keys, Index basisSize, double tolerance,
-                           Index slices, const SvdOptions&, const Eigen::MatrixXd* gram,
-                           CalibrationRule rule, double coverage) {
+                           const std::vector<Index>& keys, Index basisSize, double tolerance, Index slices,
+                           const SvdOptions&, const Eigen::MatrixXd* gram, CalibrationRule rule,
+                           double coverage) {
     if (gram && (gram->rows() != q.cols() || gram->cols() != q.cols())) {
         throw std::invalid_argument("calibrate: Gram matrix is not F x F");
     }
-    if (channels < 1 || q.rows() % channels != 0) throw std::invalid_argument("calibrate: rows are not whole points");
+    if (channels < 1 || q.rows() % channels != 0)
+        throw std::invalid_argument("calibrate: rows are not whole points");
     MatrixBlocks blocks(q, channels, /*centre=*/false);
     SingleProcess one;
     return calibrate(blocks, one, gatherKeyRows(q, channels, keys), keys, basisSize, tolerance, slices,
@@ -76,9 +77,11 @@ CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::Matrix
     }
     if (basisSize < 1) throw std::invalid_argument("calibration: basis size must be >= 1");
     if (rule == CalibrationRule::Conformal && !(coverage > 0 && coverage < 1)) {
-        throw std::invalid_argument("calibration coverage must be in (0, 1), got " + std::to_string(coverage));
+        throw std::invalid_argument("calibration coverage must be in (0, 1), got " +
+                                    std::to_string(coverage));
     }
-    if (gram.rows() != f || gram.cols() != f) throw std::invalid_argument("calibrate: Gram matrix is not F x F");
+    if (gram.rows() != f || gram.cols() != f)
+        throw std::invalid_argument("calibrate: Gram matrix is not F x F");
     CalibrationStats s;
     s.tolerance = tolerance;
     s.slices = slices;
@@ -229,7 +232,8 @@ void setThresholds(CalibrationStats& s, double tolerance, CalibrationRule rule, 
                                     std::to_string(tolerance));
     }
     if (rule == CalibrationRule::Conformal && !(coverage > 0 && coverage < 1)) {
-        throw std::invalid_argument("calibration coverage must be in (0, 1), got " + std::to_string(coverage));
+        throw std::invalid_argument("calibration coverage must be in (0, 1), got " +
+                                    std::to_string(coverage));
     }
     if (s.keyRms.size() != s.maxPointError.size()) {
         throw std::invalid_argument("calibration: key errors and point errors differ in count");
@@ -270,15 +274,17 @@ void setThresholds(CalibrationStats& s, double tolerance, CalibrationRule rule, 
             // Every held-out frame was reconstructed exactly: any key error seen is harmless.
             s.epsMin = largestKeyRms;
             s.epsMax = 2 * s.epsMin;
-            s.notes.push_back("calibration: PM was exact on every held-out frame; eps_min set to the "
-                              "largest held-out key error");
+            s.notes.push_back(
+                "calibration: PM was exact on every held-out frame; eps_min set to the "
+                "largest held-out key error");
         } else {
             // Errors exist but the key error never moves: no threshold separates good from bad.
             s.epsMin = 0;
             s.epsMax = 0;
-            s.notes.push_back("calibration: the key error is identically zero on held-out frames, so no "
-                              "threshold can bound the point error; every frame with any key error fails "
-                              "through");
+            s.notes.push_back(
+                "calibration: the key error is identically zero on held-out frames, so no "
+                "threshold can bound the point error; every frame with any key error fails "
+                "through");
         }
         return;
     }

@@ -40,16 +40,16 @@ struct CalibrationStats {
     double ratio = 0;
     Index slices = 0;
     CalibrationRule rule = CalibrationRule::MaxRatio;
-    double coverage = 0;       ///< 1 - alpha of the conformal rule; 0 for MaxRatio
-    double maxRatio = 0;       ///< max_f E_f / e_f, whatever the rule (the MaxRatio answer)
-    Index usableFrames = 0;    ///< n: held-out frames whose ratio entered the rule
+    double coverage = 0;                ///< 1 - alpha of the conformal rule; 0 for MaxRatio
+    double maxRatio = 0;                ///< max_f E_f / e_f, whatever the rule (the MaxRatio answer)
+    Index usableFrames = 0;             ///< n: held-out frames whose ratio entered the rule
     std::vector<Index> frames;          ///< held-out frame indices, ascending
     std::vector<double> keyRms;         ///< e_f: key RMS error of each held-out frame
     std::vector<double> maxPointError;  ///< E_f: largest point error of PM on it
     /// Held-out frames whose key error is rounding noise (e_f <= 1e-9 max E) while E_f is not:
     /// errors the key monitor cannot see (typically K*C == M).
     Index blindFrames = 0;
-    std::vector<std::string> notes;     ///< decisions worth a warning
+    std::vector<std::string> notes;  ///< decisions worth a warning
 };
 
 /// Calibrates the soft-cache thresholds for a largest point error `tolerance` T (beyond the
@@ -76,8 +76,8 @@ struct CalibrationStats {
 /// @param gram Q^T Q of exactly this q, or null
 /// @throws std::invalid_argument unless tolerance > 0, 2 <= slices <= F and 0 < coverage < 1.
 CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index channels,
-                           const std::vector<Index>& keys, Index basisSize, double tolerance,
-                           Index slices, const SvdOptions& svd = {}, const Eigen::MatrixXd* gram = nullptr,
+                           const std::vector<Index>& keys, Index basisSize, double tolerance, Index slices,
+                           const SvdOptions& svd = {}, const Eigen::MatrixXd* gram = nullptr,
                            CalibrationRule rule = CalibrationRule::MaxRatio, double coverage = 0.9);
 
 /// Sets s.ratio, s.epsMin, s.epsMax (and s.rule, s.coverage, s.tolerance, s.maxRatio,

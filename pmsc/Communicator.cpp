@@ -27,7 +27,8 @@ ValueIndex argMaxOverRanks(Communicator& comm, ValueIndex local) {
         const ValueIndex c{all[2 * static_cast<std::size_t>(r)],
                            static_cast<long long>(all[2 * static_cast<std::size_t>(r) + 1])};
         if (c.index < 0) continue;
-        if (best.index < 0 || c.value > best.value || (c.value == best.value && c.index < best.index)) best = c;
+        if (best.index < 0 || c.value > best.value || (c.value == best.value && c.index < best.index))
+            best = c;
     }
     return best;
 }

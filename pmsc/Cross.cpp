@@ -25,7 +25,9 @@ public:
         : RowBlocks(joint.rows() / channels - controlPoints, channels, joint.cols(), 0,
                     joint.rows() / channels - controlPoints, joint.rows() / channels - controlPoints),
           q_(joint.bottomRows(joint.rows() - controlPoints * channels)) {}
-    Eigen::Ref<const Eigen::MatrixXd> block(Index b) override { return q_.middleRows(blockFirstRow(b), blockRows(b)); }
+    Eigen::Ref<const Eigen::MatrixXd> block(Index b) override {
+        return q_.middleRows(blockFirstRow(b), blockRows(b));
+    }
     void pointRows(Index point, Eigen::Ref<Eigen::MatrixXd> out) override {
         out = q_.middleRows(point * channels(), channels());
     }
@@ -39,8 +41,8 @@ void checkFinite(const FrameSet& s, const char* what) {
     for (size_t i = 0; i < s.values.size(); ++i) {
         if (!std::isfinite(s.values[i])) {
             const Index at = static_cast<Index>(i);
-            throw InputError(std::string("train: ") + what + " frame " + std::to_string(at / s.rows()) + ", point " +
-                             std::to_string((at % s.rows()) / s.channels) + ", channel " +
+            throw InputError(std::string("train: ") + what + " frame " + std::to_string(at / s.rows()) +
+                             ", point " + std::to_string((at % s.rows()) / s.channels) + ", channel " +
                              std::to_string(at % s.channels) + " is not finite");
         }
     }
@@ -51,37 +53,45 @@ double median(std::vector<double> v) {
     const size_t mid = v.size() / 2;
     std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid), v.end());
     double m = v[mid];
-    if (v.size() % 2 == 0) m = 0.5 * (m + *std::max_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid)));
+    if (v.size() % 2 == 0)
+        m = 0.5 * (m + *std::max_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid)));
     return m;
 }
 
 }  // namespace
 
-Model trainCross(const FrameSet& control, const FrameSet& target, const CrossOptions& options, CrossReport* reportOut) {
+Model trainCross(const FrameSet& control, const FrameSet& target, const CrossOptions& options,
+                 CrossReport* reportOut) {
     const auto start = std::chrono::steady_clock::now();
     CrossReport local;
     CrossReport& report = reportOut ? *reportOut : local;
     report = CrossReport{};
     if (control.frames != target.frames) {
-        throw InputError("train: the control has " + std::to_string(control.frames) + " frames and the targets " +
-                         std::to_string(target.frames) + ": cross training needs one target frame per control frame");
+        throw InputError("train: the control has " + std::to_string(control.frames) +
+                         " frames and the targets " + std::to_string(target.frames) +
+                         ": cross training needs one target frame per control frame");
     }
     if (control.channels != target.channels) {
-        throw InputError("train: the control has " + std::to_string(control.channels) + " channels and the targets " +
-                         std::to_string(target.channels) + ": cross training needs the same channels");
+        throw InputError("train: the control has " + std::to_string(control.channels) +
+                         " channels and the targets " + std::to_string(target.channels) +
+                         ": cross training needs the same channels");
     }
-    if (control.frames < 2) throw InputError("train: need at least 2 training pairs, got " + std::to_string(control.frames));
+    if (control.frames < 2)
+        throw InputError("train: need at least 2 training pairs, got " + std::to_string(control.frames));
     if (control.points < 1 || target.points < 1 || control.channels < 1)
         throw InputError("train: control and targets need at least one point and one channel");
     if (!(options.coverage > 0 && options.coverage < 1))
-        throw std::invalid_argument("train: cross coverage must be in (0, 1), got " + std::to_string(options.coverage));
+        throw std::invalid_argument("train: cross coverage must be in (0, 1), got " +
+                                    std::to_string(options.coverage));
     if (options.slices < 2 || options.slices > control.frames)
-        throw std::invalid_argument("train: cross slices must be in [2, " + std::to_string(control.frames) + "], got " +
-                                    std::to_string(options.slices));
+        throw std::invalid_argument("train: cross slices must be in [2, " + std::to_string(control.frames) +
+                                    "], got " + std::to_string(options.slices));
     if (options.training.regions.count > 0)
-        throw std::invalid_argument("train: regions (local fail-through) do not apply to a cross model: it cannot fail through");
+        throw std::invalid_argument(
+            "train: regions (local fail-through) do not apply to a cross model: it cannot fail through");
     if (options.training.learnRank > 0)
-        throw std::invalid_argument("train: --learn-rank does not apply to a cross model (pmsc learn updates plain models)");
+        throw std::invalid_argument(
+            "train: --learn-rank does not apply to a cross model (pmsc learn updates plain models)");
     if (options.training.keyCandidates != 0)
         throw std::invalid_argument("train: key candidates are set by cross training (the control's points)");
     checkFinite(control, "control");
@@ -129,7 +139,8 @@ Model trainCross(const FrameSet& control, const FrameSet& target, const CrossOpt
         // keys the basis holds): fall back to a scale from the target errors so scores exist.
         st.scale = std::max(1e-300, median(st.targetError));
         report.training.warnings.push_back(
-            "cross: every held-out control key error is 0; the bound's scale is the median held-out target error");
+            "cross: every held-out control key error is 0; the bound's scale is the median held-out target "
+            "error");
     }
     std::vector<double> scores(st.keyRms.size());
     for (size_t i = 0; i < scores.size(); ++i) scores[i] = st.targetError[i] / (st.keyRms[i] + st.scale);
@@ -138,7 +149,8 @@ Model trainCross(const FrameSet& control, const FrameSet& target, const CrossOpt
     if ((n + 1) * st.coverage > n * (1 + 1e-9)) {
         report.training.warnings.push_back("cross: " + std::to_string(scores.size()) +
                                            " held-out pairs are too few for the quantile at coverage " +
-                                           std::to_string(st.coverage) + "; the bound uses the largest score");
+                                           std::to_string(st.coverage) +
+                                           "; the bound uses the largest score");
     }
     Index inside = 0;
     for (size_t i = 0; i < scores.size(); ++i) inside += st.targetError[i] <= st.bound(st.keyRms[i]);
@@ -156,7 +168,8 @@ Model trainCross(const FrameSet& control, const FrameSet& target, const CrossOpt
 CrossMultiplier::CrossMultiplier(const Model& model)
     : model_(model),
       state_(model.cross ? *model.cross
-                         : throw std::invalid_argument("not a cross point-multiplication model (no CROSSPM section)")),
+                         : throw std::invalid_argument(
+                               "not a cross point-multiplication model (no CROSSPM section)")),
       pm_(model) {}
 
 CrossMultiplier::Result CrossMultiplier::apply(const double* keyValues, double* target) const {

@@ -27,13 +27,13 @@ struct CrossOptions {
 };
 
 struct CrossReport {
-    TrainingReport training;     ///< the joint training (its calibration field is unused)
+    TrainingReport training;  ///< the joint training (its calibration field is unused)
     Index controlPoints = 0, targetPoints = 0;
     /// Fraction of the held-out training pairs inside their bound (>= coverage by construction
     /// up to ties; the honest check is on frames training never saw).
     double heldOutCoverage = 0;
-    double seconds = 0;          ///< training + scoring
-    double scoringSeconds = 0;   ///< the leave-one-slice-out scoring alone
+    double seconds = 0;         ///< training + scoring
+    double scoringSeconds = 0;  ///< the leave-one-slice-out scoring alone
 };
 
 /// Learns a cross model from (control, target) pairs: frame f of `control` and frame f of

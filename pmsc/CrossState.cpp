@@ -18,20 +18,23 @@ namespace pmsc {
 
 void CrossState::validate(Index points, const std::vector<Index>& keys) const {
     if (controlPoints < 1 || controlPoints >= points)
-        throw std::invalid_argument("cross: control points " + std::to_string(controlPoints) + " must be in [1, " +
-                                    std::to_string(points) + ") (the joint point count)");
+        throw std::invalid_argument("cross: control points " + std::to_string(controlPoints) +
+                                    " must be in [1, " + std::to_string(points) +
+                                    ") (the joint point count)");
     for (Index k : keys)
         if (k >= controlPoints)
-            throw std::invalid_argument("cross: key point " + std::to_string(k) + " is not a control point (< " +
-                                        std::to_string(controlPoints) + ")");
+            throw std::invalid_argument("cross: key point " + std::to_string(k) +
+                                        " is not a control point (< " + std::to_string(controlPoints) + ")");
     if (!(coverage > 0 && coverage < 1)) throw std::invalid_argument("cross: coverage must be in (0, 1)");
     if (!(quantile >= 0) || !std::isfinite(quantile)) throw std::invalid_argument("cross: bad quantile");
     if (!(scale >= 0) || !std::isfinite(scale)) throw std::invalid_argument("cross: bad scale");
     if (keyRms.size() != targetError.size())
         throw std::invalid_argument("cross: held-out key RMS and target error counts differ");
     for (size_t i = 0; i < keyRms.size(); ++i)
-        if (!(keyRms[i] >= 0) || !(targetError[i] >= 0) || !std::isfinite(keyRms[i]) || !std::isfinite(targetError[i]))
-            throw std::invalid_argument("cross: held-out score " + std::to_string(i) + " is not a finite number >= 0");
+        if (!(keyRms[i] >= 0) || !(targetError[i] >= 0) || !std::isfinite(keyRms[i]) ||
+            !std::isfinite(targetError[i]))
+            throw std::invalid_argument("cross: held-out score " + std::to_string(i) +
+                                        " is not a finite number >= 0");
 }
 
 namespace {

@@ -19,11 +19,11 @@ namespace pmsc {
 /// training pairs (leave-one-slice-out): `quantile` is the split-conformal quantile at `coverage`
 /// of the held-out scores E_f / (e_f + scale), `scale` the median held-out key RMS.
 struct CrossState {
-    Index controlPoints = 0;  ///< Nc; the target has model.points - Nc points
-    double coverage = 0;      ///< 1 - alpha of the bound
-    double quantile = 0;      ///< conformal quantile of E / (e + scale)
-    double scale = 0;         ///< median held-out key RMS (data units); keeps the bound > 0 at e = 0
-    Index slices = 0;         ///< leave-one-slice-out folds the scores came from
+    Index controlPoints = 0;          ///< Nc; the target has model.points - Nc points
+    double coverage = 0;              ///< 1 - alpha of the bound
+    double quantile = 0;              ///< conformal quantile of E / (e + scale)
+    double scale = 0;                 ///< median held-out key RMS (data units); keeps the bound > 0 at e = 0
+    Index slices = 0;                 ///< leave-one-slice-out folds the scores came from
     std::vector<double> keyRms;       ///< e_f: control key RMS of each held-out training pair
     std::vector<double> targetError;  ///< E_f: the target's largest point error on it
 

@@ -30,9 +30,7 @@ struct FrameSet {
     Index rows() const { return points * channels; }
 
     /// The (N*C) x F training matrix, a view on `values`.
-    Eigen::Map<const Eigen::MatrixXd> matrix() const {
-        return {values.data(), rows(), frames};
-    }
+    Eigen::Map<const Eigen::MatrixXd> matrix() const { return {values.data(), rows(), frames}; }
     Eigen::Map<Eigen::MatrixXd> matrix() { return {values.data(), rows(), frames}; }
 
     /// One frame's N*C values (point-major, channel-minor).

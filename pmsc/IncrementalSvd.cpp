@@ -1,7 +1,7 @@
 #include "pmsc/IncrementalSvd.h"
 
-#include <Eigen/Eigenvalues>
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 
 #include <algorithm>
@@ -16,16 +16,24 @@ double IncrementalSubspace::tailNorm() const {
 }
 
 void IncrementalSubspace::validate() const {
-    const auto bad = [](const std::string& what) { throw std::invalid_argument("incremental subspace: " + what); };
+    const auto bad = [](const std::string& what) {
+        throw std::invalid_argument("incremental subspace: " + what);
+    };
     if (frames < 1) bad("no frames absorbed");
-    if (u.rows() != mean.size()) bad("basis has " + std::to_string(u.rows()) + " rows, mean " + std::to_string(mean.size()));
-    if (u.cols() != sigma.size()) bad("basis has " + std::to_string(u.cols()) + " columns, " + std::to_string(sigma.size()) + " singular values");
+    if (u.rows() != mean.size())
+        bad("basis has " + std::to_string(u.rows()) + " rows, mean " + std::to_string(mean.size()));
+    if (u.cols() != sigma.size())
+        bad("basis has " + std::to_string(u.cols()) + " columns, " + std::to_string(sigma.size()) +
+            " singular values");
     for (Index i = 0; i < sigma.size(); ++i) {
-        if (!(sigma[i] > 0) || !std::isfinite(sigma[i])) bad("singular value " + std::to_string(i) + " is not positive");
-        if (i > 0 && sigma[i] > sigma[i - 1]) bad("singular values are not descending at " + std::to_string(i));
+        if (!(sigma[i] > 0) || !std::isfinite(sigma[i]))
+            bad("singular value " + std::to_string(i) + " is not positive");
+        if (i > 0 && sigma[i] > sigma[i - 1])
+            bad("singular values are not descending at " + std::to_string(i));
     }
     if (!std::isfinite(totalEnergy) || totalEnergy < 0) bad("total energy is not a non-negative number");
-    if (!std::isfinite(discardedEnergy) || discardedEnergy < 0) bad("discarded energy is not a non-negative number");
+    if (!std::isfinite(discardedEnergy) || discardedEnergy < 0)
+        bad("discarded energy is not a non-negative number");
     if (!mean.allFinite() || !u.allFinite()) bad("mean or basis holds NaN or Inf");
 }
 
@@ -129,7 +137,8 @@ void updateSubspace(IncrementalSubspace& s, const Eigen::Ref<const Eigen::Matrix
     s.discardedEnergy += discarded;
 }
 
-double largestPrincipalAngle(const Eigen::Ref<const Eigen::MatrixXd>& a, const Eigen::Ref<const Eigen::MatrixXd>& b) {
+double largestPrincipalAngle(const Eigen::Ref<const Eigen::MatrixXd>& a,
+                             const Eigen::Ref<const Eigen::MatrixXd>& b) {
     if (a.rows() != b.rows()) throw std::invalid_argument("principal angles: row counts differ");
     if (b.cols() == 0) return 0;
     // sin(theta_max) = ||(I - A A^T) B||_2, from the small Gram matrix of the residual: accurate

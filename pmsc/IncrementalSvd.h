@@ -17,11 +17,11 @@ namespace pmsc {
 /// that mean-removed matrix, so totalEnergy - ||sigma||^2 is the energy the rank-r state does not
 /// hold (its tail), whatever truncations happened on the way.
 struct IncrementalSubspace {
-    Index frames = 0;          ///< n: frames absorbed (training frames plus every update)
-    Eigen::VectorXd mean;      ///< N*C, exact mean of the n frames
-    Eigen::MatrixXd u;         ///< (N*C) x r, orthonormal columns
-    Eigen::VectorXd sigma;     ///< r, descending, > 0
-    double totalEnergy = 0;    ///< exact ||Q - mu 1^T||_F^2 of all n frames
+    Index frames = 0;        ///< n: frames absorbed (training frames plus every update)
+    Eigen::VectorXd mean;    ///< N*C, exact mean of the n frames
+    Eigen::MatrixXd u;       ///< (N*C) x r, orthonormal columns
+    Eigen::VectorXd sigma;   ///< r, descending, > 0
+    double totalEnergy = 0;  ///< exact ||Q - mu 1^T||_F^2 of all n frames
     /// Sum of sigma^2 dropped by the updates' truncations to `maxRank` (the training's own tail,
     /// beyond the rank it stored, is totalEnergy - ||sigma||^2 - discardedEnergy).
     double discardedEnergy = 0;

@@ -16,7 +16,8 @@ constexpr const char* kHeader = "# pmsc kept frames: frame\tstate\tkey_rms\tsour
 
 std::string readText(const std::string& path) {
     std::ifstream in(path, std::ios::binary);
-    if (!in) throw InputError(path + ": cannot read the kept-frames sidecar (it must exist next to its .npy)");
+    if (!in)
+        throw InputError(path + ": cannot read the kept-frames sidecar (it must exist next to its .npy)");
     std::stringstream s;
     s << in.rdbuf();
     return s.str();
@@ -37,7 +38,8 @@ std::vector<Index> readKeptFrameNumbers(const std::string& npyPath) {
         char state[16] = {};
         double keyRms = 0;
         if (std::sscanf(line.c_str(), "%lld\t%15[a-z]\t%lf", &frame, state, &keyRms) != 3 || frame < 0) {
-            throw InputError(side + ": line " + std::to_string(lineNumber) + " is not 'frame<TAB>state<TAB>key_rms<TAB>source'");
+            throw InputError(side + ": line " + std::to_string(lineNumber) +
+                             " is not 'frame<TAB>state<TAB>key_rms<TAB>source'");
         }
         frames.push_back(static_cast<Index>(frame));
     }
@@ -45,7 +47,11 @@ std::vector<Index> readKeptFrameNumbers(const std::string& npyPath) {
 }
 
 KeptFrames::KeptFrames(std::string path, Index points, Index channels, NpyDtype dtype, std::string source)
-    : path_(std::move(path)), points_(points), channels_(channels), dtype_(dtype), source_(std::move(source)) {
+    : path_(std::move(path)),
+      points_(points),
+      channels_(channels),
+      dtype_(dtype),
+      source_(std::move(source)) {
     for (char& c : source_)
         if (c == '\t' || c == '\n' || c == '\r') c = ' ';
     std::error_code ec;
@@ -59,18 +65,20 @@ KeptFrames::KeptFrames(std::string path, Index points, Index channels, NpyDtype 
     const NpyInfo info = readNpyInfo(path_);
     if (static_cast<Index>(info.points) != points_ || static_cast<Index>(info.channels) != channels_) {
         throw InputError(path_ + ": kept frames have " + std::to_string(info.points) + " points x " +
-                         std::to_string(info.channels) + " channels, these frames " + std::to_string(points_) + " x " +
-                         std::to_string(channels_) + "; keep them in another file");
+                         std::to_string(info.channels) + " channels, these frames " +
+                         std::to_string(points_) + " x " + std::to_string(channels_) +
+                         "; keep them in another file");
     }
     if (info.dtype != dtype_) {
-        throw InputError(path_ + ": kept frames are " + std::string(toString(info.dtype)) + ", this run writes " +
-                         std::string(toString(dtype_)) + "; keep them in another file");
+        throw InputError(path_ + ": kept frames are " + std::string(toString(info.dtype)) +
+                         ", this run writes " + std::string(toString(dtype_)) +
+                         "; keep them in another file");
     }
     before_ = static_cast<Index>(info.frames);
     const Index listed = static_cast<Index>(readKeptFrameNumbers(path_).size());
     if (listed != before_) {
-        throw InputError(sidecarPath(path_) + ": lists " + std::to_string(listed) + " frames, " + path_ + " holds " +
-                         std::to_string(before_));
+        throw InputError(sidecarPath(path_) + ": lists " + std::to_string(listed) + " frames, " + path_ +
+                         " holds " + std::to_string(before_));
     }
 }
 

@@ -60,7 +60,8 @@ Index addTeleconnectionPair(const Eigen::Ref<const Eigen::VectorXd>& v, Index ch
     // The first point's loading, from the rank that owns it.
     std::vector<double> loading(static_cast<std::size_t>(channels), 0.0);
     if (first.index >= firstPoint && first.index < firstPoint + owned) {
-        for (Index c = 0; c < channels; ++c) loading[static_cast<std::size_t>(c)] = data[(first.index - firstPoint) * channels + c];
+        for (Index c = 0; c < channels; ++c)
+            loading[static_cast<std::size_t>(c)] = data[(first.index - firstPoint) * channels + c];
     }
     comm.sum(loading.data(), loading.size());
     keys.add(first.index);
@@ -91,9 +92,8 @@ Index addTeleconnectionPair(const Eigen::Ref<const Eigen::VectorXd>& v, Index ch
     return added;
 }
 
-double pmResidual(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::MatrixXd& basis,
-                  Index channels, const std::vector<Index>& keys, Eigen::MatrixXd& residual,
-                  Eigen::MatrixXd* coordsOut) {
+double pmResidual(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::MatrixXd& basis, Index channels,
+                  const std::vector<Index>& keys, Eigen::MatrixXd& residual, Eigen::MatrixXd* coordsOut) {
     const Eigen::MatrixXd projector = makeProjector(basis, channels, keys);
     const Eigen::MatrixXd qk = gatherKeyRows(q, channels, keys);
     Eigen::MatrixXd coords = projector * qk;  // M x F
@@ -120,14 +120,17 @@ Index determinedBasisSize(const Eigen::MatrixXd& basis, Index channels, const st
     // Invariant: lo determined (or 0), hi not determined.
     while (hi - lo > 1) {
         const Index mid = (lo + hi) / 2;
-        if (determined(mid)) lo = mid;
-        else hi = mid;
+        if (determined(mid))
+            lo = mid;
+        else
+            hi = mid;
     }
     return lo;
 }
 
-double maxPointResidual(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::Ref<const Eigen::MatrixXd>& basis,
-                        const Eigen::MatrixXd& coords, Index channels) {
+double maxPointResidual(const Eigen::Ref<const Eigen::MatrixXd>& q,
+                        const Eigen::Ref<const Eigen::MatrixXd>& basis, const Eigen::MatrixXd& coords,
+                        Index channels) {
     // 96 points per block: 288 x F doubles (~1.4 MB at F = 600) stays in L2 while the GEMM writes
     // it and the norms read it back.
     const Index rowsPerBlock = 96 * channels;
@@ -172,8 +175,8 @@ KeySelection selectKeysTeleconnection(RowBlocks& q, Communicator& comm, const Ei
     const Index n = q.points();
     const Index channels = q.channels();
     if (options.maxKeys < 1 || options.maxKeys > n) {
-        throw std::invalid_argument("key budget " + std::to_string(options.maxKeys) +
-                                    " must be in [1, " + std::to_string(n) + "]");
+        throw std::invalid_argument("key budget " + std::to_string(options.maxKeys) + " must be in [1, " +
+                                    std::to_string(n) + "]");
     }
     if (gram.rows() != q.frames() || gram.cols() != q.frames()) {
         throw std::invalid_argument("selectKeysTeleconnection: Gram matrix is not F x F");
@@ -211,7 +214,8 @@ KeySelection selectKeysTeleconnection(RowBlocks& q, Communicator& comm, const Ei
                              [&](Index a, Index c) { return variance[a] > variance[c]; });
             for (Index j : order) {
                 if (keys.size() >= options.maxKeys) break;
-                addTeleconnectionPair(rotated.rotated.col(j), channels, keys, options.maxKeys, comm, q.firstPoint());
+                addTeleconnectionPair(rotated.rotated.col(j), channels, keys, options.maxKeys, comm,
+                                      q.firstPoint());
             }
         }
         {

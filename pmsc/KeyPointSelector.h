@@ -75,8 +75,8 @@ Index addTeleconnectionPair(const Eigen::Ref<const Eigen::VectorXd>& v, Index ch
 /// residual: residual = q - basis * coords. Returns the largest point residual (max over points
 /// and frames of the Euclidean norm over channels).
 /// @param coords if not null, receives the coordinates (M x F).
-double pmResidual(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::MatrixXd& basis,
-                  Index channels, const std::vector<Index>& keys, Eigen::MatrixXd& residual,
+double pmResidual(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::MatrixXd& basis, Index channels,
+                  const std::vector<Index>& keys, Eigen::MatrixXd& residual,
                   Eigen::MatrixXd* coords = nullptr);
 
 /// The largest leading basis size M' <= basis.cols() that the keys determine well: K*C >= M' and
@@ -89,20 +89,21 @@ Index determinedBasisSize(const Eigen::MatrixXd& basis, Index channels, const st
 /// The largest point residual of q - basis * coords (max over points and frames of the Euclidean
 /// norm over channels) without materialising the residual: rows are processed in cache-sized
 /// blocks, so the training matrix is read once and nothing of its size is written.
-double maxPointResidual(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::Ref<const Eigen::MatrixXd>& basis,
-                        const Eigen::MatrixXd& coords, Index channels);
+double maxPointResidual(const Eigen::Ref<const Eigen::MatrixXd>& q,
+                        const Eigen::Ref<const Eigen::MatrixXd>& basis, const Eigen::MatrixXd& coords,
+                        Index channels);
 
 /// Options of the teleconnection key selection (section 4).
 struct TeleconnectionOptions {
-    Index maxKeys = 200;   ///< key budget K
-    double maxError = 0;   ///< stop when the largest point residual <= this; 0 = off
-    Index block = 16;      ///< basis vectors per Varimax block
+    Index maxKeys = 200;  ///< key budget K
+    double maxError = 0;  ///< stop when the largest point residual <= this; 0 = off
+    Index block = 16;     ///< basis vectors per Varimax block
     std::vector<Index> fiducials;
     std::vector<Index> gridPoints;
     /// Only points [0, candidates) may be keys (cross point multiplication); 0 = every point.
     Index candidates = 0;
     VarimaxOptions varimax;
-    SvdOptions svd;        ///< for the residual's leading vectors in rounds 2, 3, ...
+    SvdOptions svd;  ///< for the residual's leading vectors in rounds 2, 3, ...
     /// Called after each round with (round, keys so far, largest point residual); may throw to
     /// cancel.
     std::function<void(Index round, Index keys, double residual)> onRound;
@@ -110,10 +111,10 @@ struct TeleconnectionOptions {
 
 /// Result of a key selection.
 struct KeySelection {
-    std::vector<Index> keys;              ///< in selection order, no duplicates
-    std::vector<double> residualPerRound; ///< largest point residual after each round
+    std::vector<Index> keys;               ///< in selection order, no duplicates
+    std::vector<double> residualPerRound;  ///< largest point residual after each round
     Index rounds = 0;
-    Eigen::MatrixXd keyRows;              ///< Q's rows at the keys (K*C x F), key order
+    Eigen::MatrixXd keyRows;  ///< Q's rows at the keys (K*C x F), key order
 };
 
 /// The paper's iterative key selection (section 4).
@@ -131,11 +132,11 @@ struct KeySelection {
 /// the residual's leading vectors are found in frame space: with W = B^T Q (once) and the round's
 /// coordinates C, R^T R = G - W^T C - C^T W + C^T C (B orthonormal), an F x F eigenproblem, and
 /// U_R = R V_R S_R^-1 = Q (V_R S_R^-1) - B (C V_R S_R^-1) is two skinny products: the residual
-/// is never formed (its largest point error comes from maxPointResidual, block by block). That replaces the six (N*C) x F x (B+10) products and
-/// three tall QRs of the randomized SVD per round (a third of the key-selection time at the face
-/// scale). Since issue 12 it is always used (see the RowBlocks overload below for why and for what
-/// replaces it when the residual is too small for the subtraction, sigma_R <= 1e-6 sigma_1(Q)).
-/// This overload wraps q in MatrixBlocks on one process and computes Q^T Q when `gram` is null.
+/// is never formed (its largest point error comes from maxPointResidual, block by block). That replaces the
+/// six (N*C) x F x (B+10) products and three tall QRs of the randomized SVD per round (a third of the
+/// key-selection time at the face scale). Since issue 12 it is always used (see the RowBlocks overload below
+/// for why and for what replaces it when the residual is too small for the subtraction, sigma_R <= 1e-6
+/// sigma_1(Q)). This overload wraps q in MatrixBlocks on one process and computes Q^T Q when `gram` is null.
 /// @param q the mean-removed training matrix, (N*C) x F
 /// @param basis the runtime basis (N*C) x M computed from q, orthonormal columns
 /// @param gram Q^T Q or null

@@ -24,8 +24,8 @@ void checkFrames(const Model& model, const FrameSet& frames) {
     if (frames.frames < 1) throw InputError("learn: no new frames");
     if (frames.points != model.points || frames.channels != model.channels) {
         throw InputError("learn: new frames have " + std::to_string(frames.points) + " points x " +
-                         std::to_string(frames.channels) + " channels, the model " + std::to_string(model.points) +
-                         " x " + std::to_string(model.channels));
+                         std::to_string(frames.channels) + " channels, the model " +
+                         std::to_string(model.points) + " x " + std::to_string(model.channels));
     }
     if (static_cast<Index>(frames.values.size()) != frames.frames * frames.rows()) {
         throw InputError("learn: frame storage does not hold F*N*C values");
@@ -77,7 +77,8 @@ IncrementalSubspace subspaceOf(const Model& model) {
     return s;
 }
 
-Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& options, LearnReport* reportOut) {
+Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& options,
+            LearnReport* reportOut) {
     const Clock::time_point start = Clock::now();
     LearnReport localReport;
     LearnReport& report = reportOut ? *reportOut : localReport;
@@ -89,10 +90,12 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
     };
     model.validate();
     if (model.sharedChannels)
-        throw InputError("learn: the model's channels share one basis (train --shared-channels); pmsc learn updates "
-                         "models with a basis per channel in this version: retrain on all frames");
+        throw InputError(
+            "learn: the model's channels share one basis (train --shared-channels); pmsc learn updates "
+            "models with a basis per channel in this version: retrain on all frames");
     checkFrames(model, newFrames);
-    if (options.basis < 0 || options.maxRank < 0) throw std::invalid_argument("learn: basis and rank must be >= 0");
+    if (options.basis < 0 || options.maxRank < 0)
+        throw std::invalid_argument("learn: basis and rank must be >= 0");
     if (options.slices < 2) throw std::invalid_argument("learn: slices must be >= 2");
     const Index channels = model.channels;
     const Index m = newFrames.frames;
@@ -114,13 +117,15 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
     const IncrementalSubspace before = subspaceOf(model);
     report.rankBefore = before.rank();
     if (model.regions) {
-        report.warnings.push_back("the model's local fail-through regions are not updated by learn (the keys "
-                                  "change): the learned model has none; train again to get them");
+        report.warnings.push_back(
+            "the model's local fail-through regions are not updated by learn (the keys "
+            "change): the learned model has none; train again to get them");
     }
     if (!model.learning) {
-        report.warnings.push_back("the model has no learning state (train with --learn-rank): the old frames "
-                                  "are represented by the model's " + std::to_string(model.basisSize()) +
-                                  " basis vectors only");
+        report.warnings.push_back(
+            "the model has no learning state (train with --learn-rank): the old frames "
+            "are represented by the model's " +
+            std::to_string(model.basisSize()) + " basis vectors only");
     }
     IncrementalSvdOptions svdOptions;
     svdOptions.maxRank = options.maxRank > 0 ? options.maxRank
@@ -136,8 +141,8 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
     report.tailNorm = state.tailNorm();
     Index basisSize = std::min(wantedM, state.rank());
     if (basisSize < wantedM) {
-        report.warnings.push_back("basis " + std::to_string(wantedM) + " reduced to " + std::to_string(basisSize) +
-                                  ": the state holds only that many directions");
+        report.warnings.push_back("basis " + std::to_string(wantedM) + " reduced to " +
+                                  std::to_string(basisSize) + ": the state holds only that many directions");
     }
     Eigen::MatrixXd basis = state.u.leftCols(basisSize);
     report.secondsSubspace = since(t);
@@ -168,7 +173,8 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
         to.block = settings.block;
         to.fiducials = settings.fiducials;
         to.gridPoints = settings.gridPoints;
-        KeySelection sel = selectKeysTeleconnection(surrogate, basis, state.u, state.sigma, channels, to, &gram);
+        KeySelection sel =
+            selectKeysTeleconnection(surrogate, basis, state.u, state.sigma, channels, to, &gram);
         keys = std::move(sel.keys);
     } else {
         KeySet check(model.points);
@@ -201,7 +207,8 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
     out.projector = makeProjector(out.basis, channels, keys);
     out.tolerance = model.tolerance;
     report.basisAfter = basisSize;
-    report.largestAngle = largestPrincipalAngle(basis, model.basis.leftCols(std::min(basisSize, model.basisSize())));
+    report.largestAngle =
+        largestPrincipalAngle(basis, model.basis.leftCols(std::min(basisSize, model.basisSize())));
     report.secondsKeys = since(t);
     progress("keys", 1, 1);
 
@@ -215,10 +222,11 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
     // Decision: the training residual field becomes the largest point error on the frames of
     // this update (the old frames are gone; the README says so).
     out.trainMaxPointResidual = report.newFramesMaxPointError;
-    const CalibrationRule rule = options.rule.value_or(
-        model.calibrationRecord ? model.calibrationRecord->rule : CalibrationRule::MaxRatio);
+    const CalibrationRule rule = options.rule.value_or(model.calibrationRecord ? model.calibrationRecord->rule
+                                                                               : CalibrationRule::MaxRatio);
     const double coverage = options.coverage.value_or(
-        model.calibrationRecord && model.calibrationRecord->coverage > 0 ? model.calibrationRecord->coverage : 0.9);
+        model.calibrationRecord && model.calibrationRecord->coverage > 0 ? model.calibrationRecord->coverage
+                                                                         : 0.9);
     CalibrationRecord record;
     if (model.calibrationRecord) record = *model.calibrationRecord;
     record.rule = rule;
@@ -242,7 +250,8 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
                 const Eigen::MatrixXd foldBasis = fold.u.leftCols(foldM);
                 const Eigen::MatrixXd foldProjector = makeProjector(foldBasis, channels, keys);
                 const Eigen::MatrixXd heldOut = fresh.middleCols(first, last - first).colwise() - fold.mean;
-                scoreFrames(heldOut, foldBasis, foldProjector, channels, keys, scores.keyRms, scores.maxPointError);
+                scoreFrames(heldOut, foldBasis, foldProjector, channels, keys, scores.keyRms,
+                            scores.maxPointError);
                 for (Index j = first; j < last; ++j) scores.frames.push_back(j);
                 progress("calibration", static_cast<double>(slice + 1), static_cast<double>(slices));
             }
@@ -250,7 +259,8 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
             setThresholds(scores, model.tolerance, rule, coverage);
             report.calibrationRatioNew = scores.ratio;
         } else {
-            report.warnings.push_back("one new frame cannot be cross-fitted: eps from the stored scores only");
+            report.warnings.push_back(
+                "one new frame cannot be cross-fitted: eps from the stored scores only");
         }
         double ratio = report.calibrationRatioNew;
         if (!record.keyRms.empty()) {
@@ -261,8 +271,9 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
             report.calibrationRatioOld = stored.ratio;
             ratio = std::max(ratio, stored.ratio);
         } else {
-            report.warnings.push_back("the model stores no calibration scores (train with --learn-rank): eps from "
-                                      "the new frames' scores only");
+            report.warnings.push_back(
+                "the model stores no calibration scores (train with --learn-rank): eps from "
+                "the new frames' scores only");
         }
         for (const auto& note : scores.notes) report.warnings.push_back(note);
         if (ratio > 0) {

@@ -19,12 +19,12 @@ IncrementalSubspace subspaceOf(const Model& model);
 
 /// Options of learn(). Unset values keep what the model stored.
 struct LearnOptions {
-    Index basis = 0;       ///< M after the update; 0 = the model's M
-    Index maxRank = 0;     ///< rank r kept by the state; 0 = the model's (LearningState::maxRank, else M)
+    Index basis = 0;    ///< M after the update; 0 = the model's M
+    Index maxRank = 0;  ///< rank r kept by the state; 0 = the model's (LearningState::maxRank, else M)
     std::optional<CalibrationRule> rule;  ///< default: the model's CalibrationRecord's, else MaxRatio
     std::optional<double> coverage;       ///< default: the model's, else 0.95
-    Index slices = 5;      ///< cross-fitting folds over the new frames for the calibration
-    ProgressFn progress;   ///< optional; returning false cancels (pmsc::Cancelled)
+    Index slices = 5;                     ///< cross-fitting folds over the new frames for the calibration
+    ProgressFn progress;                  ///< optional; returning false cancels (pmsc::Cancelled)
 };
 
 /// What learn() did.
@@ -32,14 +32,14 @@ struct LearnReport {
     Index newFrames = 0;
     Index rankBefore = 0, rankAfter = 0;
     Index basisBefore = 0, basisAfter = 0;
-    Index keysKept = 0;             ///< keys of the old model that are keys again
-    double largestAngle = 0;        ///< largest principal angle between the old and the new M-basis
-    double tailNorm = 0;            ///< IncrementalSubspace::tailNorm() after the update
-    double newFramesMaxPointError = 0;  ///< largest point error of the NEW model's PM on the new frames
+    Index keysKept = 0;                     ///< keys of the old model that are keys again
+    double largestAngle = 0;                ///< largest principal angle between the old and the new M-basis
+    double tailNorm = 0;                    ///< IncrementalSubspace::tailNorm() after the update
+    double newFramesMaxPointError = 0;      ///< largest point error of the NEW model's PM on the new frames
     double oldModelNewFramesKeyRmsMax = 0;  ///< largest key RMS of the new frames under the OLD model
-    CalibrationStats calibration;   ///< the new frames' cross-fitted scores and the thresholds
-    double calibrationRatioOld = 0; ///< the rule's ratio on the stored scores (0: none stored)
-    double calibrationRatioNew = 0; ///< the rule's ratio on the new frames' scores (0: too few)
+    CalibrationStats calibration;           ///< the new frames' cross-fitted scores and the thresholds
+    double calibrationRatioOld = 0;         ///< the rule's ratio on the stored scores (0: none stored)
+    double calibrationRatioNew = 0;         ///< the rule's ratio on the new frames' scores (0: too few)
     std::vector<std::string> warnings;
     double secondsSubspace = 0, secondsKeys = 0, secondsCalibration = 0, seconds = 0;
 };

@@ -107,7 +107,10 @@ ModelSectionCodec learningSectionCodec() {
 }
 
 ModelSectionCodec calibrationSectionCodec() {
-    return {{'C', 'A', 'L', 'I', 'B', 'R', 'A', 'T'}, &calibrationPresent, &encodeCalibration, &decodeCalibration};
+    return {{'C', 'A', 'L', 'I', 'B', 'R', 'A', 'T'},
+            &calibrationPresent,
+            &encodeCalibration,
+            &decodeCalibration};
 }
 
 }  // namespace pmsc

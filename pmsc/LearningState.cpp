@@ -18,27 +18,31 @@ void LearningState::validate(Index rows, Index basisSize, Index points) const {
                 std::to_string(basisSize));
     }
     if (extraBasis.rows() != rows && extraBasis.cols() > 0) {
-        invalid("learning state basis has " + std::to_string(extraBasis.rows()) + " rows, expected N*C = " +
-                std::to_string(rows));
+        invalid("learning state basis has " + std::to_string(extraBasis.rows()) +
+                " rows, expected N*C = " + std::to_string(rows));
     }
-    if (extraBasis.cols() != extraSigma.size()) invalid("learning state: basis and singular values differ in count");
+    if (extraBasis.cols() != extraSigma.size())
+        invalid("learning state: basis and singular values differ in count");
     if (basisSize + extraBasis.cols() > maxRank) {
         invalid("learning state holds " + std::to_string(basisSize + extraBasis.cols()) +
                 " directions, more than its rank " + std::to_string(maxRank));
     }
     for (Index i = 0; i < extraSigma.size(); ++i) {
-        if (!(extraSigma[i] > 0) || !std::isfinite(extraSigma[i]) || (i > 0 && extraSigma[i] > extraSigma[i - 1]))
+        if (!(extraSigma[i] > 0) || !std::isfinite(extraSigma[i]) ||
+            (i > 0 && extraSigma[i] > extraSigma[i - 1]))
             invalid("learning state singular values must be positive and descending");
     }
     if (!extraBasis.allFinite()) invalid("learning state basis contains NaN or Inf");
-    if (!(discardedEnergy >= 0) || !std::isfinite(discardedEnergy)) invalid("learning state: bad discarded energy");
+    if (!(discardedEnergy >= 0) || !std::isfinite(discardedEnergy))
+        invalid("learning state: bad discarded energy");
     if (updates < 0) invalid("learning state: negative update count");
     if (maxKeys < 1 || maxKeys > points) invalid("learning state: key budget outside [1, N]");
     if (block < 1) invalid("learning state: block must be >= 1");
     if (!(maxError >= 0) || !std::isfinite(maxError)) invalid("learning state: bad max error");
     for (const auto* list : {&fiducials, &gridPoints})
         for (Index p : *list)
-            if (p < 0 || p >= points) invalid("learning state: seeded point " + std::to_string(p) + " outside [0, N)");
+            if (p < 0 || p >= points)
+                invalid("learning state: seeded point " + std::to_string(p) + " outside [0, N)");
 }
 
 CalibrationRecord CalibrationRecord::from(const CalibrationStats& s) {
@@ -59,7 +63,8 @@ void CalibrationRecord::validate() const {
     if (slices < 0) invalid("calibration record: negative slice count");
     if (keyRms.size() != maxPointError.size()) invalid("calibration record: score arrays differ in length");
     for (size_t i = 0; i < keyRms.size(); ++i)
-        if (!(keyRms[i] >= 0) || !(maxPointError[i] >= 0) || !std::isfinite(keyRms[i]) || !std::isfinite(maxPointError[i]))
+        if (!(keyRms[i] >= 0) || !(maxPointError[i] >= 0) || !std::isfinite(keyRms[i]) ||
+            !std::isfinite(maxPointError[i]))
             invalid("calibration record: score " + std::to_string(i) + " is not a finite number >= 0");
 }
 

@@ -19,11 +19,11 @@ namespace pmsc {
 /// beyond rank r instead of everything beyond M, and the settings to select keys again the same
 /// way.
 struct LearningState {
-    Index maxRank = 0;              ///< r: the rank the state is kept at (>= M)
-    Eigen::MatrixXd extraBasis;     ///< (N*C) x (r' - M), r' <= r: left singular vectors M+1 .. r'
-    Eigen::VectorXd extraSigma;     ///< their singular values, descending, below the model's last
-    double discardedEnergy = 0;     ///< sum of sigma^2 dropped by updates' truncations to r
-    Index updates = 0;              ///< how many `pmsc learn` updates the model has had
+    Index maxRank = 0;           ///< r: the rank the state is kept at (>= M)
+    Eigen::MatrixXd extraBasis;  ///< (N*C) x (r' - M), r' <= r: left singular vectors M+1 .. r'
+    Eigen::VectorXd extraSigma;  ///< their singular values, descending, below the model's last
+    double discardedEnergy = 0;  ///< sum of sigma^2 dropped by updates' truncations to r
+    Index updates = 0;           ///< how many `pmsc learn` updates the model has had
 
     // --- key selection settings (TrainingOptions; the selector is Model::selector) ---
     Index maxKeys = 0;
@@ -41,8 +41,8 @@ struct LearningState {
 /// `pmsc inspect` can show them.
 struct CalibrationRecord {
     CalibrationRule rule = CalibrationRule::MaxRatio;
-    double coverage = 0;   ///< Conformal only
-    Index slices = 0;      ///< leave-one-slice-out folds of the training (0 = none)
+    double coverage = 0;                ///< Conformal only
+    Index slices = 0;                   ///< leave-one-slice-out folds of the training (0 = none)
     std::vector<double> keyRms;         ///< e_f of each held-out frame
     std::vector<double> maxPointError;  ///< E_f of each held-out frame
 

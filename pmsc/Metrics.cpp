@@ -37,7 +37,8 @@ double rankOf(const std::vector<double>& sorted, double q) {
 }  // namespace
 
 double percentile(std::vector<double> values, double q) {
-    if (!(q >= 0 && q <= 1)) throw std::invalid_argument("percentile: q = " + std::to_string(q) + " outside [0, 1]");
+    if (!(q >= 0 && q <= 1))
+        throw std::invalid_argument("percentile: q = " + std::to_string(q) + " outside [0, 1]");
     if (values.empty()) return 0;
     std::sort(values.begin(), values.end());
     return rankOf(values, q);

@@ -13,7 +13,8 @@ namespace pmsc {
 /// Largest Euclidean distance between the same point of two frames (N points x C channels,
 /// point-major, channel-minor): the paper's "largest point error" of a reconstruction.
 /// @param[out] where if not null, the point where it is reached (0 when every distance is 0).
-double maxPointError(const double* a, const double* b, Index points, Index channels = 3, Index* where = nullptr);
+double maxPointError(const double* a, const double* b, Index points, Index channels = 3,
+                     Index* where = nullptr);
 
 /// The q-percentile (q in [0, 1]) of a sample, by nearest rank: the ceil(q n)-th smallest of the
 /// n values (the smallest for q = 0, the largest for q = 1); 0 for an empty sample.

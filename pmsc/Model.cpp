@@ -10,9 +10,7 @@ namespace pmsc {
 
 namespace {
 
-[[noreturn]] void invalid(const std::string& what) {
-    throw std::invalid_argument("model: " + what);
-}
+[[noreturn]] void invalid(const std::string& what) { throw std::invalid_argument("model: " + what); }
 
 bool allFinite(const Eigen::Ref<const Eigen::MatrixXd>& m) { return m.allFinite(); }
 
@@ -31,8 +29,8 @@ void Model::validate() const {
     if (trainFrames < 0) invalid("negative training frame count " + std::to_string(trainFrames));
     const Index rows = points * channels;
     if (mean.size() != rows) {
-        invalid("mean has " + std::to_string(mean.size()) + " values, expected N*C = " +
-                std::to_string(rows));
+        invalid("mean has " + std::to_string(mean.size()) +
+                " values, expected N*C = " + std::to_string(rows));
     }
     const Index basisRows = points * basisChannels();
     if (basis.rows() != basisRows) {
@@ -53,8 +51,8 @@ void Model::validate() const {
     for (size_t i = 0; i < keyPoints.size(); ++i) {
         const Index p = keyPoints[i];
         if (p < 0 || p >= points) {
-            invalid("key point #" + std::to_string(i) + " = " + std::to_string(p) +
-                    " is outside [0, " + std::to_string(points) + ")");
+            invalid("key point #" + std::to_string(i) + " = " + std::to_string(p) + " is outside [0, " +
+                    std::to_string(points) + ")");
         }
         if (seen[static_cast<size_t>(p)]) invalid("key point " + std::to_string(p) + " repeated");
         seen[static_cast<size_t>(p)] = 1;
@@ -62,20 +60,23 @@ void Model::validate() const {
     const Index kc = keyCount() * basisChannels();
     if (projector.rows() != m || projector.cols() != kc) {
         invalid("projector is " + std::to_string(projector.rows()) + " x " +
-                std::to_string(projector.cols()) + ", expected " + (sharedChannels ? "M x K = " : "M x K*C = ") +
-                std::to_string(m) + " x " + std::to_string(kc));
+                std::to_string(projector.cols()) + ", expected " +
+                (sharedChannels ? "M x K = " : "M x K*C = ") + std::to_string(m) + " x " +
+                std::to_string(kc));
     }
     if (sharedChannels && (regions || learning || cross)) {
         invalid(std::string("a model whose channels share the basis has no ") +
-                (regions ? "regions (local fail-through)" : learning ? "learning state (pmsc learn)" : "cross section") +
+                (regions    ? "regions (local fail-through)"
+                 : learning ? "learning state (pmsc learn)"
+                            : "cross section") +
                 " in this version");
     }
     if (selector != Selector::Teleconnection && selector != Selector::QDeim) {
         invalid("unknown selector " + std::to_string(static_cast<int>(selector)));
     }
     if (!std::isfinite(epsMin) || !std::isfinite(epsMax) || epsMin < 0 || epsMax < epsMin) {
-        invalid("soft-cache thresholds must satisfy 0 <= eps_min <= eps_max, got [" +
-                std::to_string(epsMin) + ", " + std::to_string(epsMax) + "]");
+        invalid("soft-cache thresholds must satisfy 0 <= eps_min <= eps_max, got [" + std::to_string(epsMin) +
+                ", " + std::to_string(epsMax) + "]");
     }
     if (!std::isfinite(tolerance) || tolerance < 0) {
         invalid("tolerance must be finite and >= 0, got " + std::to_string(tolerance));

@@ -1,10 +1,10 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-#include "pmsc/FrameSet.h"
-#include "pmsc/Regions.h"
-#include "pmsc/LearningState.h"
 #include "pmsc/CrossState.h"
+#include "pmsc/FrameSet.h"
+#include "pmsc/LearningState.h"
+#include "pmsc/Regions.h"
 
 #include <Eigen/Core>
 
@@ -30,7 +30,7 @@ struct Model {
     Index channels = 0;     ///< C
     Index trainFrames = 0;  ///< F used for training
 
-    Eigen::VectorXd mean;            ///< N*C training mean (paper footnote 1)
+    Eigen::VectorXd mean;  ///< N*C training mean (paper footnote 1)
     /// (N*C) x M, orthonormal columns a_i[x] (section 3); N x M when sharedChannels.
     Eigen::MatrixXd basis;
     /// The channels share one basis over the points (issue 11; `TrainingOptions::sharedChannels`):

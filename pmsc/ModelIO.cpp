@@ -73,16 +73,15 @@ void decodeSections(std::string_view bytes, const std::string& name, Model& mode
         for (const ModelSectionCodec& c : modelSectionCodecs())
             if (std::memcmp(c.tag.data(), tag, 8) == 0) codec = &c;
         if (!codec)
-            table.fail("unknown section '" + text + "' (written by a newer pmsc? this build knows " +
-                       [] {
-                           std::string known;
-                           for (const ModelSectionCodec& c : modelSectionCodecs())
-                               known += (known.empty() ? "'" : ", '") + tagText(c.tag.data()) + "'";
-                           return known;
-                       }() +
-                       ")");
+            table.fail("unknown section '" + text + "' (written by a newer pmsc? this build knows " + [] {
+                std::string known;
+                for (const ModelSectionCodec& c : modelSectionCodecs())
+                    known += (known.empty() ? "'" : ", '") + tagText(c.tag.data()) + "'";
+                return known;
+            }() + ")");
         if (!seen.insert(std::string(tag, 8)).second) table.fail("section '" + text + "' appears twice");
-        ByteReader reader(table.take(payload, "section '" + text + "' payload"), name + ": section '" + text + "'");
+        ByteReader reader(table.take(payload, "section '" + text + "' payload"),
+                          name + ": section '" + text + "'");
         codec->decode(reader, model);
         reader.expectEnd();
     }
@@ -169,8 +168,9 @@ Model decodeModel(std::string_view bytes, const std::string& name) {
     }
     const auto version = get<std::uint32_t>(bytes, 8);
     if (version < kModelFormatVersionCore || version > kModelFormatVersion)
-        bad(name, "unsupported model format version " + std::to_string(version) + " (this build reads versions " +
-                      std::to_string(kModelFormatVersionCore) + " to " + std::to_string(kModelFormatVersion) + ")");
+        bad(name, "unsupported model format version " + std::to_string(version) +
+                      " (this build reads versions " + std::to_string(kModelFormatVersionCore) + " to " +
+                      std::to_string(kModelFormatVersion) + ")");
     const bool hasSections = version >= 2;
 
     const auto n = get<std::uint64_t>(bytes, 16);
@@ -186,10 +186,11 @@ Model decodeModel(std::string_view bytes, const std::string& name) {
         bad(name, "inconsistent sizes in the header (" + sizes + "): all must be positive");
 
     if (version < kModelFormatVersionFlags && flags != 0)
-        bad(name, "the header's reserved word (offset 60) is " + std::to_string(flags) + ", not 0, in a version-" +
-                      std::to_string(version) + " file");
+        bad(name, "the header's reserved word (offset 60) is " + std::to_string(flags) +
+                      ", not 0, in a version-" + std::to_string(version) + " file");
     if ((flags & ~kModelFlagSharedChannels) != 0)
-        bad(name, "unknown model flags " + std::to_string(flags) + " (this build knows only 1: shared channels)");
+        bad(name,
+            "unknown model flags " + std::to_string(flags) + " (this build knows only 1: shared channels)");
     const bool shared = (flags & kModelFlagSharedChannels) != 0;
     // Expected length = header + 8*(N*C + N*B*M + M + K + M*K*B) + checksum, B = C (or 1 when
     // the channels share the basis), all computed without wrapping; only a file that is exactly
@@ -197,9 +198,9 @@ Model decodeModel(std::string_view bytes, const std::string& name) {
     // allocation below is bounded by the real file length.
     const std::uint64_t b = shared ? 1 : c;
     std::uint64_t nc = 0, nb = 0, ncm = 0, kc = 0, mkc = 0, values = 0, expected = 0;
-    const bool ok = mulOk(n, c, nc) && mulOk(n, b, nb) && mulOk(nb, m, ncm) && mulOk(k, b, kc) && mulOk(m, kc, mkc) &&
-                    addOk(nc, ncm, values) && addOk(values, m, values) && addOk(values, k, values) &&
-                    addOk(values, mkc, values) && mulOk(values, 8, expected) &&
+    const bool ok = mulOk(n, c, nc) && mulOk(n, b, nb) && mulOk(nb, m, ncm) && mulOk(k, b, kc) &&
+                    mulOk(m, kc, mkc) && addOk(nc, ncm, values) && addOk(values, m, values) &&
+                    addOk(values, k, values) && addOk(values, mkc, values) && mulOk(values, 8, expected) &&
                     addOk(expected, kModelHeaderBytes + 8, expected);
     if (!ok)
         bad(name, "inconsistent sizes in the header (" + sizes + "): the arrays would not fit in any file");

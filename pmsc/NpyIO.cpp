@@ -297,7 +297,8 @@ NpyInfo parseInfo(const std::string& path, const ReadFile& file) {
 /// values [first, first + count) of the file (the message gives frame, point and channel).
 void checkFinite(const std::string& path, const NpyInfo& info, std::uint64_t first, const double* values,
                  std::uint64_t count) {
-    const double* bad_value = std::find_if(values, values + count, [](double v) { return !std::isfinite(v); });
+    const double* bad_value =
+        std::find_if(values, values + count, [](double v) { return !std::isfinite(v); });
     if (bad_value == values + count) return;
     const std::uint64_t i = first + static_cast<std::uint64_t>(bad_value - values);
     const std::uint64_t c = static_cast<std::uint64_t>(info.channels);

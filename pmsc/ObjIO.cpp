@@ -65,7 +65,8 @@ ObjMesh readObj(const std::string& path, ObjContent content, Index* polygonLines
                 q = skipBlanks(q, lineEnd);
                 double value = 0;
                 const auto [next, ec] = std::from_chars(q, lineEnd, value);
-                if (ec != std::errc{}) malformed(path, lineNumber, "malformed vertex line (expected 'v x y z')");
+                if (ec != std::errc{})
+                    malformed(path, lineNumber, "malformed vertex line (expected 'v x y z')");
                 if (!std::isfinite(value)) malformed(path, lineNumber, "non-finite vertex coordinate");
                 mesh.positions.push_back(value);
                 q = next;
@@ -109,14 +110,16 @@ ObjMesh triangleMesh(std::span<const std::int64_t> triangles) {
     mesh.polygonStart.reserve(triangles.size() / 3 + 1);
     for (std::size_t i = 0; i < triangles.size(); ++i) {
         if (triangles[i] < 0 || triangles[i] > std::numeric_limits<std::int32_t>::max())
-            throw std::invalid_argument("triangleMesh: index " + std::to_string(triangles[i]) + " outside int32");
+            throw std::invalid_argument("triangleMesh: index " + std::to_string(triangles[i]) +
+                                        " outside int32");
         mesh.polygonVertices.push_back(static_cast<std::int32_t>(triangles[i]));
         if (i % 3 == 2) mesh.polygonStart.push_back(static_cast<std::int32_t>(i + 1));
     }
     return mesh;
 }
 
-std::string formatObj(const ObjMesh& topology, std::span<const double> positions, const std::string& comment) {
+std::string formatObj(const ObjMesh& topology, std::span<const double> positions,
+                      const std::string& comment) {
     std::string text;
     text.reserve(positions.size() * 20 + topology.polygonVertices.size() * 8 + comment.size() + 4);
     if (!comment.empty()) text += "# " + comment + "\n";

@@ -58,7 +58,8 @@ ObjMesh triangleMesh(std::span<const std::int64_t> triangles);
 /// for bit; the face demo's former "%.6g" lost everything below a micro-unit and made
 /// `--format obj` lossy for one evaluator and exact for the other. Identical values give
 /// identical bytes, which lets a farm compare the outputs of two runs.
-std::string formatObj(const ObjMesh& topology, std::span<const double> positions, const std::string& comment = "");
+std::string formatObj(const ObjMesh& topology, std::span<const double> positions,
+                      const std::string& comment = "");
 
 /// Writes formatObj() to `path` atomically (temporary file + fsync + rename).
 /// @throws IoError naming the path.

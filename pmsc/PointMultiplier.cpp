@@ -35,8 +35,8 @@ Eigen::VectorXd panelsOf(const Eigen::MatrixXd& basis) {
 /// Points [first, first+count) of a model whose channels share the basis, from its panels.
 /// kC > 0 fixes C at compile time.
 template <int kC>
-void sharedReconstruct(const Model& model, const double* panels, const double* coords, Index first, Index count,
-                       double* out) {
+void sharedReconstruct(const Model& model, const double* panels, const double* coords, Index first,
+                       Index count, double* out) {
     const Index c = kC > 0 ? kC : model.channels;
     const Index m = model.basisSize();
     // One accumulator row per channel (structure of arrays), so the inner loop over points is a
@@ -164,18 +164,27 @@ void PointMultiplier::reconstruct(const double* coords, double* out) const {
     o.noalias() += model_.basis * b;
 }
 
-void PointMultiplier::reconstructRange(const double* coords, Index first, Index count,
-                                       double* out) const {
+void PointMultiplier::reconstructRange(const double* coords, Index first, Index count, double* out) const {
     const Index c = model_.channels;
     if (model_.sharedChannels) {
         // out (count x C) = mean + basis rows (count x M) * coords (M x C): one pass over the
         // N x M basis for all channels, a third of the (N*C) x M one's memory traffic at C = 3.
         switch (c) {
-        case 1: sharedReconstruct<1>(model_, panels_.data(), coords, first, count, out); break;
-        case 2: sharedReconstruct<2>(model_, panels_.data(), coords, first, count, out); break;
-        case 3: sharedReconstruct<3>(model_, panels_.data(), coords, first, count, out); break;
-        case 4: sharedReconstruct<4>(model_, panels_.data(), coords, first, count, out); break;
-        default: sharedReconstruct<0>(model_, panels_.data(), coords, first, count, out); break;
+            case 1:
+                sharedReconstruct<1>(model_, panels_.data(), coords, first, count, out);
+                break;
+            case 2:
+                sharedReconstruct<2>(model_, panels_.data(), coords, first, count, out);
+                break;
+            case 3:
+                sharedReconstruct<3>(model_, panels_.data(), coords, first, count, out);
+                break;
+            case 4:
+                sharedReconstruct<4>(model_, panels_.data(), coords, first, count, out);
+                break;
+            default:
+                sharedReconstruct<0>(model_, panels_.data(), coords, first, count, out);
+                break;
         }
         return;
     }

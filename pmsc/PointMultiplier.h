@@ -41,10 +41,10 @@ public:
 
 private:
     const Model& model_;
-    Eigen::VectorXd keyMean_;   // K*C
-    Eigen::MatrixXd keyBasis_;  // (K*C) x M; K x M when the channels share the basis
+    Eigen::VectorXd keyMean_;           // K*C
+    Eigen::MatrixXd keyBasis_;          // (K*C) x M; K x M when the channels share the basis
     Eigen::VectorXd projectedKeyMean_;  // M (or M x C): P mean_K, so project() needs no temporary
-    Eigen::VectorXd panels_;  // shared channels: the basis in panels of rows (PointMultiplier.cpp)
+    Eigen::VectorXd panels_;            // shared channels: the basis in panels of rows (PointMultiplier.cpp)
 };
 
 }  // namespace pmsc

@@ -17,7 +17,9 @@ namespace pmsc {
 
 namespace {
 
-[[noreturn]] void badOption(const std::string& what) { throw std::invalid_argument("train: regions: " + what); }
+[[noreturn]] void badOption(const std::string& what) {
+    throw std::invalid_argument("train: regions: " + what);
+}
 
 /// Step 1: each point's loading pattern on the Varimax-rotated leading factors (N x J).
 Eigen::MatrixXd loadingPatterns(const Model& model) {
@@ -103,7 +105,9 @@ void featherEntries(const Eigen::MatrixXd& pos, const std::vector<Index>& region
     out.featherFactor.clear();
     if (!(width > 0)) return;
     const Eigen::RowVector3d lo = pos.colwise().minCoeff();
-    auto cellOf = [&](Index p, int axis) { return static_cast<std::int64_t>(std::floor((pos(p, axis) - lo[axis]) / width)); };
+    auto cellOf = [&](Index p, int axis) {
+        return static_cast<std::int64_t>(std::floor((pos(p, axis) - lo[axis]) / width));
+    };
     auto key = [](std::int64_t x, std::int64_t y, std::int64_t z) { return (x * 1048576 + y) * 1048576 + z; };
     std::vector<std::pair<std::int64_t, Index>> cells(static_cast<size_t>(n));
     for (Index p = 0; p < n; ++p) cells[size_t(p)] = {key(cellOf(p, 0), cellOf(p, 1), cellOf(p, 2)), p};
@@ -123,7 +127,8 @@ void featherEntries(const Eigen::MatrixXd& pos, const std::vector<Index>& region
                         if (r == regionOf[size_t(p)]) continue;
                         const double d = (pos.row(p) - pos.row(it->second)).norm();
                         if (d < width) {
-                            if (best[size_t(r)] == std::numeric_limits<double>::infinity()) touched.push_back(r);
+                            if (best[size_t(r)] == std::numeric_limits<double>::infinity())
+                                touched.push_back(r);
                             best[size_t(r)] = std::min(best[size_t(r)], d);
                         }
                     }
@@ -152,14 +157,16 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
     if (!(options.featherFraction >= 0 && options.featherFraction < 1))
         badOption("feather fraction must be in [0, 1), got " + std::to_string(options.featherFraction));
     if (!(options.maxLocalFraction > 0 && options.maxLocalFraction <= 1))
-        badOption("largest local fraction must be in (0, 1], got " + std::to_string(options.maxLocalFraction));
+        badOption("largest local fraction must be in (0, 1], got " +
+                  std::to_string(options.maxLocalFraction));
     if (!(options.energy > 0 && options.energy <= 1)) badOption("energy must be in (0, 1]");
     if (options.minKeys < 1) badOption("min keys must be >= 1");
     if (!(options.keyRadius >= 0)) badOption("key radius must be >= 0");
     if (!(options.basisShare > 0 && options.basisShare <= 1)) badOption("basis share must be in (0, 1]");
     if (!(options.ratioMargin >= 1)) badOption("ratio margin must be >= 1");
     if (model.sharedChannels)  // its basis has N rows, not N*C; Model::validate refuses the pair too
-        throw std::invalid_argument("learnRegions: a model whose channels share the basis has no regions in this version");
+        throw std::invalid_argument(
+            "learnRegions: a model whose channels share the basis has no regions in this version");
     if (q.rows() != n * c) throw std::invalid_argument("learnRegions: q has the wrong row count");
 
     Eigen::MatrixXd pos;
@@ -212,7 +219,8 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
             for (Index j = 0; j < need; ++j) {
                 out.extraKeyPoints.push_back(pts[size_t(next)]);
                 for (size_t i = 0; i < pts.size(); ++i)
-                    nearest[i] = std::min(nearest[i], (pos.row(pts[i]) - pos.row(pts[size_t(next)])).squaredNorm());
+                    nearest[i] =
+                        std::min(nearest[i], (pos.row(pts[i]) - pos.row(pts[size_t(next)])).squaredNorm());
                 next = Index(std::max_element(nearest.begin(), nearest.end()) - nearest.begin());
             }
         }
@@ -224,20 +232,23 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
     Index smallBases = 0;
     for (Index ri = 0; ri < r; ++ri) {
         Region& g = out.regions[size_t(ri)];
-        std::vector<std::pair<double, Index>> outside;  // (distance to the region's nearest point, key number)
+        std::vector<std::pair<double, Index>>
+            outside;  // (distance to the region's nearest point, key number)
         for (Index key = 0; key < k; ++key) {
             const Index p = keyPoint(key);
             if (regionOf[size_t(p)] == ri) {
                 g.keys.push_back(key);
             } else {
                 double d = std::numeric_limits<double>::infinity();
-                for (const Index other : g.points) d = std::min(d, (pos.row(p) - pos.row(other)).squaredNorm());
+                for (const Index other : g.points)
+                    d = std::min(d, (pos.row(p) - pos.row(other)).squaredNorm());
                 outside.push_back({std::sqrt(d), key});
             }
         }
         std::sort(outside.begin(), outside.end());
         for (size_t i = 0; i < outside.size() && (Index(g.keys.size()) < options.minKeys ||
-                                                  outside[i].first <= options.keyRadius * diagonal); ++i)
+                                                  outside[i].first <= options.keyRadius * diagonal);
+             ++i)
             g.keys.push_back(outside[i].second);
         std::sort(g.keys.begin(), g.keys.end());
 
@@ -255,10 +266,12 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
             }
         }
         Eigen::MatrixXd qr(Index(local.size()) * c, f);
-        for (size_t i = 0; i < local.size(); ++i) qr.middleRows(Index(i) * c, c) = q.middleRows(local[i] * c, c);
+        for (size_t i = 0; i < local.size(); ++i)
+            qr.middleRows(Index(i) * c, c) = q.middleRows(local[i] * c, c);
 
         const Index kc = Index(g.keys.size()) * c;
-        const Index cap = std::max<Index>(1, std::min({model.basisSize(), Index(options.basisShare * double(kc)), f - 1}));
+        const Index cap =
+            std::max<Index>(1, std::min({model.basisSize(), Index(options.basisShare * double(kc)), f - 1}));
         SvdOptions o = svd;
         o.seed = svd.seed + 7919u * static_cast<unsigned>(ri + 1);
         const TruncatedSvd local_svd = truncatedSvd(qr, cap, o);

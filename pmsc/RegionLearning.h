@@ -89,7 +89,7 @@ struct RegionOptions {
 /// @param notes decisions worth a warning are appended
 /// @throws std::invalid_argument for bad options or when positions are needed and unknown.
 LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Model& model,
-                          const RegionOptions& options, double tolerance, Index slices,
-                          const SvdOptions& svd, std::vector<std::string>* notes = nullptr);
+                          const RegionOptions& options, double tolerance, Index slices, const SvdOptions& svd,
+                          std::vector<std::string>* notes = nullptr);
 
 }  // namespace pmsc

@@ -35,7 +35,8 @@ RegionMultiplier::RegionMultiplier(const Model& model)
     }
 }
 
-double RegionMultiplier::project(Index r, const double* keyValues, const double* regionKeyValues, double* coords) const {
+double RegionMultiplier::project(Index r, const double* keyValues, const double* regionKeyValues,
+                                 double* coords) const {
     const Region& g = regions_.regions[size_t(r)];
     const Index c = model_.channels;
     const Index kc = Index(g.keys.size()) * c;
@@ -49,7 +50,8 @@ double RegionMultiplier::project(Index r, const double* keyValues, const double*
     for (size_t i = 0; i < g.keys.size(); ++i) {
         for (Index ch = 0; ch < c; ++ch) {
             const Index key = g.keys[i];
-            const double v = key < modelKeys_ ? keyValues[key * c + ch] : regionKeyValues[(key - modelKeys_) * c + ch];
+            const double v =
+                key < modelKeys_ ? keyValues[key * c + ch] : regionKeyValues[(key - modelKeys_) * c + ch];
             if (!std::isfinite(v)) return std::numeric_limits<double>::quiet_NaN();
             k[Index(i) * c + ch] = v;
         }
@@ -73,7 +75,8 @@ void RegionMultiplier::pointWeights(std::span<const double> regionWeights, doubl
     for (Index p = 0; p < n; ++p) {
         double w = regionWeights[size_t(regionOf_[size_t(p)])];
         for (Index e = regions_.featherStart[size_t(p)]; e < regions_.featherStart[size_t(p) + 1]; ++e)
-            w = std::max(w, regionWeights[size_t(regions_.featherRegion[size_t(e)])] * regions_.featherFactor[size_t(e)]);
+            w = std::max(w, regionWeights[size_t(regions_.featherRegion[size_t(e)])] *
+                                regions_.featherFactor[size_t(e)]);
         weights[p] = w;
     }
 }

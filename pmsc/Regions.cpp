@@ -51,7 +51,8 @@ void LocalRegions::validate(const Model& model) const {
     const Index k = model.keyCount() + static_cast<Index>(extraKeyPoints.size());
     if (regions.empty()) invalid("no regions");
     for (const Index p : extraKeyPoints)
-        if (p < 0 || p >= n) invalid("region key point " + std::to_string(p) + " outside [0, " + std::to_string(n) + ")");
+        if (p < 0 || p >= n)
+            invalid("region key point " + std::to_string(p) + " outside [0, " + std::to_string(n) + ")");
     if (!std::isfinite(featherWidth) || featherWidth < 0)
         invalid("feather width must be finite and >= 0, got " + std::to_string(featherWidth));
     if (!(maxLocalFraction > 0 && maxLocalFraction <= 1))
@@ -64,7 +65,8 @@ void LocalRegions::validate(const Model& model) const {
         if (g.points.empty()) invalid(name + "no points");
         if (!ascendingUnique(g.points)) invalid(name + "points not ascending and unique");
         for (const Index p : g.points) {
-            if (p < 0 || p >= n) invalid(name + "point " + std::to_string(p) + " outside [0, " + std::to_string(n) + ")");
+            if (p < 0 || p >= n)
+                invalid(name + "point " + std::to_string(p) + " outside [0, " + std::to_string(n) + ")");
             if (seen[size_t(p)]++) invalid(name + "point " + std::to_string(p) + " is in two regions");
             ++covered;
         }
@@ -77,7 +79,8 @@ void LocalRegions::validate(const Model& model) const {
         const Index kc = static_cast<Index>(g.keys.size()) * c;
         if (m < 1) invalid(name + "empty basis");
         if (g.basis.rows() != rows)
-            invalid(name + "basis has " + std::to_string(g.basis.rows()) + " rows, expected " + std::to_string(rows));
+            invalid(name + "basis has " + std::to_string(g.basis.rows()) + " rows, expected " +
+                    std::to_string(rows));
         if (g.keyBasis.rows() != kc || g.keyBasis.cols() != m)
             invalid(name + "key basis is not " + std::to_string(kc) + " x " + std::to_string(m));
         if (g.projector.rows() != m || g.projector.cols() != kc)
@@ -85,15 +88,16 @@ void LocalRegions::validate(const Model& model) const {
         if (!g.basis.allFinite() || !g.keyBasis.allFinite() || !g.projector.allFinite())
             invalid(name + "NaN or Inf in its basis or projector");
         if (!std::isfinite(g.epsMin) || !std::isfinite(g.epsMax) || g.epsMin < 0 || g.epsMax < g.epsMin)
-            invalid(name + "thresholds must satisfy 0 <= eps_min <= eps_max, got [" + std::to_string(g.epsMin) +
-                    ", " + std::to_string(g.epsMax) + "]");
-        if (!std::isfinite(g.ratio) || g.ratio < 0) invalid(name + "calibration ratio must be finite and >= 0");
+            invalid(name + "thresholds must satisfy 0 <= eps_min <= eps_max, got [" +
+                    std::to_string(g.epsMin) + ", " + std::to_string(g.epsMax) + "]");
+        if (!std::isfinite(g.ratio) || g.ratio < 0)
+            invalid(name + "calibration ratio must be finite and >= 0");
     }
     if (covered != n)
         invalid("the regions cover " + std::to_string(covered) + " of the " + std::to_string(n) + " points");
     if (static_cast<Index>(featherStart.size()) != n + 1)
-        invalid("feather index has " + std::to_string(featherStart.size()) + " entries, expected N+1 = " +
-                std::to_string(n + 1));
+        invalid("feather index has " + std::to_string(featherStart.size()) +
+                " entries, expected N+1 = " + std::to_string(n + 1));
     if (featherStart.front() != 0 || featherStart.back() != static_cast<Index>(featherRegion.size()) ||
         featherRegion.size() != featherFactor.size())
         invalid("feather index does not match its " + std::to_string(featherRegion.size()) + " entries");
@@ -104,9 +108,11 @@ void LocalRegions::validate(const Model& model) const {
             const Index r = featherRegion[size_t(e)];
             const double f = featherFactor[size_t(e)];
             if (r < 0 || r >= regionCount() || r == of[size_t(p)])
-                invalid("point " + std::to_string(p) + " has a feather entry for region " + std::to_string(r));
+                invalid("point " + std::to_string(p) + " has a feather entry for region " +
+                        std::to_string(r));
             if (!(f > 0 && f <= 1))
-                invalid("point " + std::to_string(p) + " has feather factor " + std::to_string(f) + " outside (0, 1]");
+                invalid("point " + std::to_string(p) + " has feather factor " + std::to_string(f) +
+                        " outside (0, 1]");
         }
     }
 }
@@ -172,8 +178,8 @@ void decodeRegions(ByteReader& in, Model& model) {
         const std::uint64_t keys = in.count(name + " key count", 8);
         const std::uint64_t m = in.u64(name + " basis size");
         if (points > n || keys > k + n || m == 0 || m > points * c)
-            in.fail(name + ": sizes out of range (points " + std::to_string(points) + ", keys " + std::to_string(keys) +
-                    ", basis " + std::to_string(m) + ")");
+            in.fail(name + ": sizes out of range (points " + std::to_string(points) + ", keys " +
+                    std::to_string(keys) + ", basis " + std::to_string(m) + ")");
         g.epsMin = in.finite(name + " eps_min");
         g.epsMax = in.finite(name + " eps_max");
         g.ratio = in.finite(name + " ratio");

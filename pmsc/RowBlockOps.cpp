@@ -11,7 +11,8 @@ namespace pmsc {
 Eigen::MatrixXd gramOf(RowBlocks& q, Communicator& comm) {
     const Index f = q.frames();
     Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(f, f);
-    for (Index b = 0; b < q.blockCount(); ++b) gram.selfadjointView<Eigen::Lower>().rankUpdate(q.block(b).transpose());
+    for (Index b = 0; b < q.blockCount(); ++b)
+        gram.selfadjointView<Eigen::Lower>().rankUpdate(q.block(b).transpose());
     comm.sum(gram.data(), static_cast<std::size_t>(gram.size()));
     gram.triangularView<Eigen::StrictlyUpper>() = gram.transpose();
     return gram;
@@ -38,8 +39,8 @@ double maxPointResidualOf(RowBlocks& q, Communicator& comm, const Eigen::MatrixX
                           const Eigen::MatrixXd& coords) {
     double worst = 0;
     for (Index b = 0; b < q.blockCount(); ++b) {
-        const double w = maxPointResidual(q.block(b), localB.middleRows(q.blockFirstRow(b), q.blockRows(b)), coords,
-                                          q.channels());
+        const double w = maxPointResidual(q.block(b), localB.middleRows(q.blockFirstRow(b), q.blockRows(b)),
+                                          coords, q.channels());
         if (!(w <= worst)) worst = w;  // NaN wins
     }
     maxOverRanks(comm, &worst, 1);
@@ -62,7 +63,8 @@ Eigen::MatrixXd keyRowsOf(const RowBlocks& layout, Communicator& comm, const Eig
     Eigen::MatrixXd out = Eigen::MatrixXd::Zero(static_cast<Index>(keys.size()) * c, local.cols());
     for (std::size_t i = 0; i < keys.size(); ++i) {
         if (!layout.owns(keys[i])) continue;
-        out.middleRows(static_cast<Index>(i) * c, c) = local.middleRows((keys[i] - layout.firstPoint()) * c, c);
+        out.middleRows(static_cast<Index>(i) * c, c) =
+            local.middleRows((keys[i] - layout.firstPoint()) * c, c);
     }
     comm.sum(out.data(), static_cast<std::size_t>(out.size()));
     return out;
@@ -77,8 +79,8 @@ Eigen::MatrixXd gatherRowsTo(Communicator& comm, const Eigen::MatrixXd& local, I
         comm.gather(local.col(j).data(), static_cast<std::size_t>(local.rows()), column, root);
         if (comm.rank() == root) {
             if (static_cast<Index>(column.size()) != totalRows) {
-                throw std::logic_error("gatherRowsTo: ranks hold " + std::to_string(column.size()) + " rows, expected " +
-                                       std::to_string(totalRows));
+                throw std::logic_error("gatherRowsTo: ranks hold " + std::to_string(column.size()) +
+                                       " rows, expected " + std::to_string(totalRows));
             }
             full.col(j) = Eigen::Map<const Eigen::VectorXd>(column.data(), totalRows);
         }

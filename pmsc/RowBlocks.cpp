@@ -17,7 +17,11 @@ namespace pmsc {
 
 RowBlocks::RowBlocks(Index points, Index channels, Index frames, Index firstPoint, Index ownedPoints,
                      Index blockPoints)
-    : points_(points), channels_(channels), frames_(frames), firstPoint_(firstPoint), ownedPoints_(ownedPoints),
+    : points_(points),
+      channels_(channels),
+      frames_(frames),
+      firstPoint_(firstPoint),
+      ownedPoints_(ownedPoints),
       blockPoints_(std::max<Index>(1, blockPoints)) {
     if (points < 1 || channels < 1 || frames < 1 || firstPoint < 0 || ownedPoints < 0 ||
         firstPoint + ownedPoints > points) {
@@ -42,7 +46,8 @@ MatrixBlocks::MatrixBlocks(const FrameSet& frames, Index blockPoints)
 
 MatrixBlocks::MatrixBlocks(const Eigen::Ref<const Eigen::MatrixXd>& q, Index channels, bool centre,
                            Index blockPoints)
-    : RowBlocks(q.rows() / std::max<Index>(channels, 1), channels, q.cols(), 0, q.rows() / std::max<Index>(channels, 1),
+    : RowBlocks(q.rows() / std::max<Index>(channels, 1), channels, q.cols(), 0,
+                q.rows() / std::max<Index>(channels, 1),
                 blockPoints > 0 ? blockPoints : q.rows() / std::max<Index>(channels, 1)) {
     if (centre) {
         mean_ = q.rowwise().mean();
@@ -71,9 +76,10 @@ std::vector<Shot> openShots(const std::vector<std::string>& paths) {
         if (!shots.empty()) {
             const NpyInfo& a = shots.front().info;
             if (s.info.points != a.points || s.info.channels != a.channels) {
-                throw InputError("train: shot " + path + " has " + std::to_string(s.info.points) + " points x " +
-                                 std::to_string(s.info.channels) + " channels, but " + shots.front().path +
-                                 " has " + std::to_string(a.points) + " x " + std::to_string(a.channels) +
+                throw InputError("train: shot " + path + " has " + std::to_string(s.info.points) +
+                                 " points x " + std::to_string(s.info.channels) + " channels, but " +
+                                 shots.front().path + " has " + std::to_string(a.points) + " x " +
+                                 std::to_string(a.channels) +
                                  " (every --frames file of a training set needs the same N and C)");
             }
         }
@@ -90,7 +96,8 @@ Index totalFrames(const std::vector<Shot>& shots) {
     return f;
 }
 
-void readExactly(int fd, const std::string& path, std::uint64_t offset, unsigned char* out, std::size_t bytes) {
+void readExactly(int fd, const std::string& path, std::uint64_t offset, unsigned char* out,
+                 std::size_t bytes) {
     while (bytes > 0) {
         const ssize_t n = ::pread(fd, out, bytes, static_cast<off_t>(offset));
         if (n < 0) {
@@ -113,8 +120,9 @@ std::string num(double v) {
 }  // namespace
 
 NpyBlocks::NpyBlocks(std::vector<Shot> shots, PointRange owned, Index blockPoints)
-    : RowBlocks(shots.empty() ? 1 : shots.front().info.points, shots.empty() ? 1 : shots.front().info.channels,
-                std::max<Index>(1, totalFrames(shots)), owned.first, owned.count,
+    : RowBlocks(shots.empty() ? 1 : shots.front().info.points,
+                shots.empty() ? 1 : shots.front().info.channels, std::max<Index>(1, totalFrames(shots)),
+                owned.first, owned.count,
                 std::min(std::max<Index>(1, blockPoints), std::max<Index>(1, owned.count))),
       shots_(std::move(shots)) {
     if (shots_.empty()) throw InputError("train: no --frames file given");
@@ -161,9 +169,9 @@ void NpyBlocks::readPoints(Index point, Index count, double* meanOut) {
             }
             for (Index i = 0; i < rows; ++i) {
                 if (!std::isfinite(out[i])) {
-                    throw InputError("train: " + shots_[s].path + ": frame " + std::to_string(f) + ", point " +
-                                     std::to_string(point + i / c) + ", channel " + std::to_string(i % c) +
-                                     " is " + num(out[i]));
+                    throw InputError("train: " + shots_[s].path + ": frame " + std::to_string(f) +
+                                     ", point " + std::to_string(point + i / c) + ", channel " +
+                                     std::to_string(i % c) + " is " + num(out[i]));
                 }
             }
         }
@@ -177,7 +185,8 @@ void NpyBlocks::readPoints(Index point, Index count, double* meanOut) {
 Eigen::Ref<const Eigen::MatrixXd> NpyBlocks::block(Index b) {
     if (b != current_) {
         current_ = -1;
-        readPoints(firstPoint() + b * blockPoints(), blockRows(b) / channels(), mean_.data() + blockFirstRow(b));
+        readPoints(firstPoint() + b * blockPoints(), blockRows(b) / channels(),
+                   mean_.data() + blockFirstRow(b));
         meanKnown_[static_cast<std::size_t>(b)] = 1;
         current_ = b;
     }

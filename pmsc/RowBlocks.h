@@ -27,16 +27,18 @@ class RowBlocks {
 public:
     virtual ~RowBlocks() = default;
 
-    Index points() const { return points_; }         ///< N of the whole training set
-    Index channels() const { return channels_; }     ///< C
-    Index frames() const { return frames_; }         ///< F (all shots)
-    Index firstPoint() const { return firstPoint_; } ///< first owned point
+    Index points() const { return points_; }          ///< N of the whole training set
+    Index channels() const { return channels_; }      ///< C
+    Index frames() const { return frames_; }          ///< F (all shots)
+    Index firstPoint() const { return firstPoint_; }  ///< first owned point
     Index ownedPoints() const { return ownedPoints_; }
     Index ownedRows() const { return ownedPoints_ * channels_; }
     bool owns(Index point) const { return point >= firstPoint_ && point < firstPoint_ + ownedPoints_; }
 
     Index blockPoints() const { return blockPoints_; }  ///< points per block (the last may be shorter)
-    Index blockCount() const { return ownedPoints_ == 0 ? 0 : (ownedPoints_ + blockPoints_ - 1) / blockPoints_; }
+    Index blockCount() const {
+        return ownedPoints_ == 0 ? 0 : (ownedPoints_ + blockPoints_ - 1) / blockPoints_;
+    }
     /// First row of block b among the owned rows (0 = the row of firstPoint()).
     Index blockFirstRow(Index b) const { return b * blockPoints_ * channels_; }
     Index blockRows(Index b) const {
@@ -52,7 +54,8 @@ public:
     virtual Eigen::VectorXd mean() = 0;
 
 protected:
-    RowBlocks(Index points, Index channels, Index frames, Index firstPoint, Index ownedPoints, Index blockPoints);
+    RowBlocks(Index points, Index channels, Index frames, Index firstPoint, Index ownedPoints,
+              Index blockPoints);
 
 private:
     Index points_, channels_, frames_, firstPoint_, ownedPoints_, blockPoints_;
@@ -74,7 +77,8 @@ public:
     /// An already prepared matrix (rows x = p*C + c); with `centre` false it is used as it is
     /// (mean() is then zero), which is what the per-function entry points (Calibration,
     /// KeyPointSelector) need.
-    MatrixBlocks(const Eigen::Ref<const Eigen::MatrixXd>& q, Index channels, bool centre, Index blockPoints = 0);
+    MatrixBlocks(const Eigen::Ref<const Eigen::MatrixXd>& q, Index channels, bool centre,
+                 Index blockPoints = 0);
 
     Eigen::Ref<const Eigen::MatrixXd> block(Index b) override;
     void pointRows(Index point, Eigen::Ref<Eigen::MatrixXd> out) override;
@@ -122,9 +126,9 @@ private:
     std::vector<int> fds_;
     Eigen::MatrixXd buffer_;
     std::vector<unsigned char> bytes_;
-    Eigen::VectorXd mean_;          ///< owned rows' means, filled as blocks are read
-    std::vector<char> meanKnown_;   ///< per block: mean_ filled
-    Index current_ = -1;  ///< block in buffer_, -1 none
+    Eigen::VectorXd mean_;         ///< owned rows' means, filled as blocks are read
+    std::vector<char> meanKnown_;  ///< per block: mean_ filled
+    Index current_ = -1;           ///< block in buffer_, -1 none
 };
 
 /// Bytes the shared training algorithm holds at its peak for one rank, beyond the program itself

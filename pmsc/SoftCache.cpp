@@ -8,9 +8,12 @@ namespace pmsc {
 
 std::string_view toString(CacheState state) {
     switch (state) {
-        case CacheState::Hit: return "hit";
-        case CacheState::Blend: return "blend";
-        case CacheState::Miss: return "miss";
+        case CacheState::Hit:
+            return "hit";
+        case CacheState::Blend:
+            return "blend";
+        case CacheState::Miss:
+            return "miss";
     }
     return "unknown";
 }

@@ -11,16 +11,19 @@ namespace pmsc {
 
 std::vector<Index> sparseGridPoints(const Eigen::Ref<const Eigen::MatrixXd>& positions, Index cellsPerAxis) {
     if (cellsPerAxis < 1) {
-        throw std::invalid_argument("spatial grid: cells per axis must be >= 1, got " + std::to_string(cellsPerAxis));
+        throw std::invalid_argument("spatial grid: cells per axis must be >= 1, got " +
+                                    std::to_string(cellsPerAxis));
     }
     if (positions.cols() != 3) {
-        throw std::invalid_argument("spatial grid: positions need 3 columns, got " + std::to_string(positions.cols()));
+        throw std::invalid_argument("spatial grid: positions need 3 columns, got " +
+                                    std::to_string(positions.cols()));
     }
     const Index n = positions.rows();
     if (n == 0) return {};
     for (Index i = 0; i < n; ++i) {
         if (!positions.row(i).allFinite()) {
-            throw std::invalid_argument("spatial grid: position of point " + std::to_string(i) + " is not finite");
+            throw std::invalid_argument("spatial grid: position of point " + std::to_string(i) +
+                                        " is not finite");
         }
     }
     const Eigen::RowVector3d lo = positions.colwise().minCoeff();
@@ -55,7 +58,8 @@ std::vector<Index> sparseGridPoints(const Eigen::Ref<const Eigen::MatrixXd>& pos
 }
 
 std::vector<Index> sparseGridPointsByCount(const Eigen::Ref<const Eigen::MatrixXd>& positions, Index count) {
-    if (count < 1) throw std::invalid_argument("spatial grid: point count must be >= 1, got " + std::to_string(count));
+    if (count < 1)
+        throw std::invalid_argument("spatial grid: point count must be >= 1, got " + std::to_string(count));
     // cellsPerAxis = 1 gives one point; the occupied count is at most min(N, cells^3).
     std::vector<Index> best = sparseGridPoints(positions, 1);
     Index lo = 1;
@@ -66,7 +70,9 @@ std::vector<Index> sparseGridPointsByCount(const Eigen::Ref<const Eigen::MatrixX
         if (static_cast<Index>(g.size()) > count) break;
         best = std::move(g);
         lo = hi;
-        if (static_cast<Index>(best.size()) >= std::min<Index>(count, positions.rows()) || hi > (Index{1} << 20)) return best;
+        if (static_cast<Index>(best.size()) >= std::min<Index>(count, positions.rows()) ||
+            hi > (Index{1} << 20))
+            return best;
         hi *= 2;
     }
     while (hi - lo > 1) {

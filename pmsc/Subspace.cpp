@@ -74,8 +74,7 @@ TruncatedSvd randomizedSvd(const Eigen::Ref<const Eigen::MatrixXd>& q, Index ran
 
 }  // namespace
 
-TruncatedSvd truncatedSvd(const Eigen::Ref<const Eigen::MatrixXd>& q, Index rank,
-                          const SvdOptions& options) {
+TruncatedSvd truncatedSvd(const Eigen::Ref<const Eigen::MatrixXd>& q, Index rank, const SvdOptions& options) {
     if (rank < 1) throw std::invalid_argument("truncatedSvd: rank must be >= 1, got " + std::to_string(rank));
     if (q.rows() < 1 || q.cols() < 1) throw std::invalid_argument("truncatedSvd: empty matrix");
     if (options.oversampling < 0) throw std::invalid_argument("truncatedSvd: negative oversampling");
@@ -152,7 +151,8 @@ TruncatedSvd svdFromGram(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen
         s.sigma[i] = std::sqrt(std::max(0.0, eig.eigenvalues()[j]));
         s.v.col(i) = eig.eigenvectors().col(j);
     }
-    const double largest = eig.eigenvalues().size() > 0 ? std::sqrt(std::max(0.0, eig.eigenvalues()[n - 1])) : 0.0;
+    const double largest =
+        eig.eigenvalues().size() > 0 ? std::sqrt(std::max(0.0, eig.eigenvalues()[n - 1])) : 0.0;
     truncate(s, rank, std::max(dropBelow, largest * 1e-7));
     s.u.resize(q.rows(), 0);
     formLeftVectors(q, s, leftVectors < 0 ? s.sigma.size() : leftVectors);
@@ -169,8 +169,7 @@ double maxPointNorm(const Eigen::Ref<const Eigen::MatrixXd>& residual, Index cha
     return residual.cols() == 0 ? 0.0 : maxPointNormPerColumn(residual, channels).maxCoeff();
 }
 
-Eigen::VectorXd maxPointNormPerColumn(const Eigen::Ref<const Eigen::MatrixXd>& residual,
-                                      Index channels) {
+Eigen::VectorXd maxPointNormPerColumn(const Eigen::Ref<const Eigen::MatrixXd>& residual, Index channels) {
     const Index points = residual.rows() / channels;
     Eigen::VectorXd out(residual.cols());
     for (Index t = 0; t < residual.cols(); ++t) {

@@ -14,10 +14,10 @@ namespace pmsc {
 struct SvdOptions {
     /// Which algorithm computes the SVD (see truncatedSvd).
     enum class Route : int { Auto = 0, Gram = 1, Randomized = 2 };
-    Index oversampling = 10;   ///< extra test vectors p: the sketch has l = rank + p columns
-    int powerIterations = 2;   ///< subspace iterations q (each one a Q^T and a Q product)
-    unsigned seed = 20070101;  ///< seed of the Gaussian test matrix (std::mt19937_64): deterministic
-    Route route = Route::Auto; ///< Auto picks the cheaper route by flop count; tests force one
+    Index oversampling = 10;    ///< extra test vectors p: the sketch has l = rank + p columns
+    int powerIterations = 2;    ///< subspace iterations q (each one a Q^T and a Q product)
+    unsigned seed = 20070101;   ///< seed of the Gaussian test matrix (std::mt19937_64): deterministic
+    Route route = Route::Auto;  ///< Auto picks the cheaper route by flop count; tests force one
     /// Gram route only: left singular vectors to form, -1 = all `rank`. U = Q V S^-1 costs a
     /// rows x cols product per column, so a caller that needs only the leading ones (or learns how
     /// many later: formLeftVectors) saves it. sigma and V are always complete; the randomized
@@ -27,10 +27,10 @@ struct SvdOptions {
 
 /// A truncated SVD Q ~= U diag(sigma) V^T with sigma descending.
 struct TruncatedSvd {
-    Eigen::MatrixXd u;      ///< rows x r, orthonormal columns: the basis vectors a_i[x]
-    Eigen::VectorXd sigma;  ///< r singular values, descending, all > the drop threshold
-    Eigen::MatrixXd v;      ///< cols x r, orthonormal columns: b_i[t] / sigma_i
-    bool gramRoute = false; ///< true if computed from Q^T Q (see truncatedSvd)
+    Eigen::MatrixXd u;       ///< rows x r, orthonormal columns: the basis vectors a_i[x]
+    Eigen::VectorXd sigma;   ///< r singular values, descending, all > the drop threshold
+    Eigen::MatrixXd v;       ///< cols x r, orthonormal columns: b_i[t] / sigma_i
+    bool gramRoute = false;  ///< true if computed from Q^T Q (see truncatedSvd)
     /// Q^T Q (cols x cols) when the Gram route ran, else empty. Training reuses it: the residual
     /// blocks of key selection and the calibration folds are then solved in frame space.
     Eigen::MatrixXd gram;
@@ -70,9 +70,9 @@ TruncatedSvd svdFromGram(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen
 /// randomized route is cheaper only for l below ~50, not below n/2 = 300: at l = 266 (the default
 /// basis cap) it measured 8 s of CPU against under 1 s for the Gram route on 80,157 x 600. The
 /// randomized route keeps its place for narrow sketches (residual blocks of B ~ 16 vectors) and for
-/// matrices with many more columns than the rank. Gram is only used for tall matrices (n <= m). Columns whose singular value is at
-/// or below a drop threshold are removed (Gram route: 1e-7 sigma_max, because squaring Q leaves
-/// only ~sqrt(machine eps) relative accuracy on sigma and U = Q V / sigma amplifies the error;
+/// matrices with many more columns than the rank. Gram is only used for tall matrices (n <= m). Columns whose
+/// singular value is at or below a drop threshold are removed (Gram route: 1e-7 sigma_max, because squaring Q
+/// leaves only ~sqrt(machine eps) relative accuracy on sigma and U = Q V / sigma amplifies the error;
 /// randomized route: 1e-12 sigma_max, numerical zero), so r <= rank and exactly rank-deficient
 /// data gives exactly its rank.
 /// @pre rank >= 1. Deterministic for a given options.seed.
@@ -87,8 +87,7 @@ Eigen::VectorXd removeRowMean(const Eigen::Ref<const Eigen::MatrixXd>& raw, Eige
 double maxPointNorm(const Eigen::Ref<const Eigen::MatrixXd>& residual, Index channels);
 
 /// Per column (frame) largest point norm, as maxPointNorm but one value per column.
-Eigen::VectorXd maxPointNormPerColumn(const Eigen::Ref<const Eigen::MatrixXd>& residual,
-                                      Index channels);
+Eigen::VectorXd maxPointNormPerColumn(const Eigen::Ref<const Eigen::MatrixXd>& residual, Index channels);
 
 /// Smallest M with sum_{i<M} sigma_i^2 >= energy * totalEnergy, capped by sigma.size().
 /// @pre 0 < energy <= 1.

@@ -50,7 +50,8 @@ void validateOptions(const TrainingOptions& o, Index points, Index frames) {
                   std::to_string(o.maxKeys));
     }
     if (o.block < 1) badOption("block must be >= 1, got " + std::to_string(o.block));
-    if (!(o.varimaxTolerance >= 0)) badOption("varimax tolerance must be >= 0, got " + num(o.varimaxTolerance));
+    if (!(o.varimaxTolerance >= 0))
+        badOption("varimax tolerance must be >= 0, got " + num(o.varimaxTolerance));
     if (o.varimaxMaxIterations < 1) {
         badOption("varimax iteration cap must be >= 1, got " + std::to_string(o.varimaxMaxIterations));
     }
@@ -122,7 +123,6 @@ void validateFrames(const FrameSet& frames) {
     }
 }
 
-
 /// Makes sure svd.u (owned rows) has at least `count` left singular vectors: U = Q V S^-1 for
 /// the missing columns, one pass over q.
 void formLeftVectors(RowBlocks& q, TruncatedSvd& svd, Index count) {
@@ -140,9 +140,10 @@ void formLeftVectors(RowBlocks& q, TruncatedSvd& svd, Index count) {
 /// C channels sharing its basis.
 Model trainSharedChannels(const FrameSet& frames, const TrainingOptions& options, TrainingReport* reportOut) {
     if (options.regions.count > 0 || options.learnRank > 0)
-        throw std::invalid_argument(std::string("train: channels sharing the basis do not combine with ") +
-                                    (options.regions.count > 0 ? "regions (local fail-through)" : "a learning rank (pmsc learn)") +
-                                    " in this version");
+        throw std::invalid_argument(
+            std::string("train: channels sharing the basis do not combine with ") +
+            (options.regions.count > 0 ? "regions (local fail-through)" : "a learning rank (pmsc learn)") +
+            " in this version");
     const Index n = frames.points, c = frames.channels, f = frames.frames;
     // Each point-channel's mean over the frames, removed before the channels become frames, so
     // the C=1 training (whose mean is then zero) learns the variation alone and the model keeps
@@ -176,21 +177,23 @@ Model trainSharedChannels(const FrameSet& frames, const TrainingOptions& options
     // everywhere else (the C=1 training measured it per channel).
     PointMultiplier pm(model);
     const Index k = model.keyCount();
-    std::vector<double> keys(static_cast<std::size_t>(k * c)), coords(static_cast<std::size_t>(model.coordCount())),
-        values(static_cast<std::size_t>(n * c));
+    std::vector<double> keys(static_cast<std::size_t>(k * c)),
+        coords(static_cast<std::size_t>(model.coordCount())), values(static_cast<std::size_t>(n * c));
     double worst = 0;
     std::vector<double> keyErrors(static_cast<std::size_t>(f));
     for (Index t = 0; t < f; ++t) {
         const double* in = frames.frame(t);
         for (Index i = 0; i < k; ++i)
             for (Index ch = 0; ch < c; ++ch)
-                keys[static_cast<std::size_t>(i * c + ch)] = in[model.keyPoints[static_cast<std::size_t>(i)] * c + ch];
+                keys[static_cast<std::size_t>(i * c + ch)] =
+                    in[model.keyPoints[static_cast<std::size_t>(i)] * c + ch];
         pm.project(keys.data(), coords.data());
         keyErrors[static_cast<std::size_t>(t)] = pm.keyRmsError(keys.data(), coords.data());
         pm.reconstruct(coords.data(), values.data());
         for (Index p = 0; p < n; ++p) {
             double e = 0;
-            for (Index ch = 0; ch < c; ++ch) e += (values[p * c + ch] - in[p * c + ch]) * (values[p * c + ch] - in[p * c + ch]);
+            for (Index ch = 0; ch < c; ++ch)
+                e += (values[p * c + ch] - in[p * c + ch]) * (values[p * c + ch] - in[p * c + ch]);
             worst = std::max(worst, e);
         }
     }
@@ -296,7 +299,8 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
         m = std::min(options.basis, available);
         if (m < std::min(options.basis, cap)) {
             report.warnings.push_back("basis " + std::to_string(options.basis) + " reduced to " +
-                                      std::to_string(m) + ": the training data has only that many "
+                                      std::to_string(m) +
+                                      ": the training data has only that many "
                                       "non-negligible singular values");
         }
     } else if (options.energy > 0 || options.basisMaxError <= 0) {
@@ -312,16 +316,16 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
         formLeftVectors(q, svd, available);
         std::vector<double> errors(static_cast<std::size_t>(available), 0.0);
         for (Index b = 0; b < q.blockCount(); ++b) {
-            accumulateBasisErrors(q.block(b), svd.u.middleRows(q.blockFirstRow(b), q.blockRows(b)), svd, channels,
-                                  errors);
+            accumulateBasisErrors(q.block(b), svd.u.middleRows(q.blockFirstRow(b), q.blockRows(b)), svd,
+                                  channels, errors);
         }
         maxOverRanks(comm, errors.data(), errors.size());
         m = basisSizeFromErrors(errors, options.basisMaxError);
         if (m > available) {
             m = available;
-            report.warnings.push_back("basis max error " + num(options.basisMaxError) + " not reached within " +
-                                      std::to_string(m) + " basis vectors (largest point error " +
-                                      num(errors.empty() ? 0.0 : errors.back()) + ")");
+            report.warnings.push_back(
+                "basis max error " + num(options.basisMaxError) + " not reached within " + std::to_string(m) +
+                " basis vectors (largest point error " + num(errors.empty() ? 0.0 : errors.back()) + ")");
         }
         progress("basis-error", 1, 1);
     }
@@ -363,7 +367,8 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
         if (comm.rank() == 0) {
             KeySet check(n);
             seedKeys(check, options.fiducials, options.gridPoints);
-            QDeimSelection sel = selectKeysQDeim(full, channels, options.maxKeys, check.keys(), options.keyCandidates);
+            QDeimSelection sel =
+                selectKeysQDeim(full, channels, options.maxKeys, check.keys(), options.keyCandidates);
             picked.assign(sel.keys.begin(), sel.keys.end());
             passes = static_cast<double>(sel.passes);
         }
@@ -378,7 +383,8 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
     }
     if (static_cast<Index>(keys.size()) < options.maxKeys && options.maxError <= 0) {
         report.warnings.push_back("selected " + std::to_string(keys.size()) + " keys of the budget " +
-                                  std::to_string(options.maxKeys) + ": no further candidate improved the basis");
+                                  std::to_string(options.maxKeys) +
+                                  ": no further candidate improved the basis");
     }
 
     // --- Determinacy: never leave the key system unable to determine the basis (issue 2).
@@ -395,12 +401,12 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
     const bool reportedResidualIsFinal =
         options.selector == Selector::Teleconnection && determined >= m && !report.residualPerRound.empty();
     if (determined < m) {
-        const std::string why = kc < m ? "the " + std::to_string(keys.size()) + " keys give only K*C = " +
-                                             std::to_string(kc) + " values"
+        const std::string why = kc < m ? "the " + std::to_string(keys.size()) +
+                                             " keys give only K*C = " + std::to_string(kc) + " values"
                                        : "the key system B_K is rank deficient or ill-conditioned "
                                          "(condition number > 1e8)";
-        report.warnings.push_back("reduced M from " + std::to_string(m) + " to " + std::to_string(determined) +
-                                  ": " + why);
+        report.warnings.push_back("reduced M from " + std::to_string(m) + " to " +
+                                  std::to_string(determined) + ": " + why);
         m = determined;
         basis.conservativeResize(Eigen::NoChange, m);
         basisKeyRows.conservativeResize(Eigen::NoChange, m);
@@ -444,8 +450,8 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
         LearningState learning;
         learning.maxRank = std::max(options.learnRank, m);
         if (options.learnRank < m) {
-            report.warnings.push_back("learn rank " + std::to_string(options.learnRank) + " raised to M = " +
-                                      std::to_string(m));
+            report.warnings.push_back("learn rank " + std::to_string(options.learnRank) +
+                                      " raised to M = " + std::to_string(m));
         }
         const Index stored = std::min<Index>(learning.maxRank, svd.sigma.size());
         formLeftVectors(q, svd, stored);

@@ -2,12 +2,12 @@
 #pragma once
 
 #include "pmsc/Calibration.h"
-#include "pmsc/Errors.h"  // Cancelled
 #include "pmsc/Communicator.h"
-#include "pmsc/RowBlocks.h"
+#include "pmsc/Errors.h"  // Cancelled
 #include "pmsc/FrameSet.h"
 #include "pmsc/Model.h"
 #include "pmsc/RegionLearning.h"
+#include "pmsc/RowBlocks.h"
 
 #include <functional>
 #include <stdexcept>
@@ -24,17 +24,17 @@ using ProgressFn = std::function<bool(std::string_view stage, double done, doubl
 /// Everything `pmsc train` can set. Zero means "not set" where noted.
 struct TrainingOptions {
     // --- subspace size M (section 3): the first of these that is set wins ---
-    Index basis = 0;            ///< M explicitly
-    double energy = 0;          ///< smallest M capturing this fraction of the energy, in (0, 1]
-    double basisMaxError = 0;   ///< smallest M whose largest point projection error <= this (data units)
-    Index maxBasis = 256;       ///< cap on M, whatever the rule (and the SVD's target rank)
+    Index basis = 0;                ///< M explicitly
+    double energy = 0;              ///< smallest M capturing this fraction of the energy, in (0, 1]
+    double basisMaxError = 0;       ///< smallest M whose largest point projection error <= this (data units)
+    Index maxBasis = 256;           ///< cap on M, whatever the rule (and the SVD's target rank)
     double defaultEnergy = 0.9999;  ///< used when none of the three above is set
 
     // --- key points (section 4) ---
     Selector selector = Selector::Teleconnection;
-    double maxError = 0;        ///< stop when the largest point residual on the training set <= this; 0 = off
-    Index maxKeys = 200;        ///< key budget K
-    Index block = 16;           ///< basis vectors per Varimax block (paper: 10 to 20)
+    double maxError = 0;  ///< stop when the largest point residual on the training set <= this; 0 = off
+    Index maxKeys = 200;  ///< key budget K
+    Index block = 16;     ///< basis vectors per Varimax block (paper: 10 to 20)
     std::vector<Index> fiducials;   ///< designer points, seeded into the first batch
     std::vector<Index> gridPoints;  ///< sparse spatial grid of points (rendering), seeded too
     /// Only points [0, keyCandidates) may be keys; 0 = every point. Cross point multiplication
@@ -46,7 +46,7 @@ struct TrainingOptions {
     int varimaxMaxIterations = 200;
 
     // --- calibration of eps (beyond the paper) ---
-    double tolerance = 0;       ///< largest point error a hit may have (data units); 0 = no calibration
+    double tolerance = 0;         ///< largest point error a hit may have (data units); 0 = no calibration
     Index calibrationSlices = 5;  ///< leave-one-slice-out folds
     /// How the held-out ratios E/e become eps (Calibration.h; issue 10 compares the two).
     CalibrationRule calibrationRule = CalibrationRule::MaxRatio;
@@ -82,10 +82,10 @@ struct TrainingOptions {
     RegionOptions regions;
 
     // --- SVD ---
-    unsigned seed = 20070101;   ///< randomized SVD test matrices; training is deterministic for a seed
+    unsigned seed = 20070101;  ///< randomized SVD test matrices; training is deterministic for a seed
     int powerIterations = 2;
 
-    ProgressFn progress;        ///< optional
+    ProgressFn progress;  ///< optional
 };
 
 /// What training did besides the model: decisions a user must hear about.
@@ -99,8 +99,8 @@ struct TrainingReport {
     /// How eps was set: the calibration's ratio r and per-frame key RMS / largest point error on
     /// held-out frames (options.tolerance > 0), or the training frames' key RMS otherwise.
     CalibrationStats calibration;
-    int ranks = 1;           ///< processes the rows of Q were split across (MPI ranks)
-    Index blockPoints = 0;   ///< points per block of Q read at a time (this rank)
+    int ranks = 1;          ///< processes the rows of Q were split across (MPI ranks)
+    Index blockPoints = 0;  ///< points per block of Q read at a time (this rank)
 };
 
 /// Trains a model from frames: mean removal, truncated SVD, key-point selection,
@@ -132,6 +132,7 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
 ///
 /// The returned model is complete on rank 0 only: the other ranks' model has no mean and basis
 /// (they are gathered to rank 0).
-Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, TrainingReport* report = nullptr);
+Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options,
+            TrainingReport* report = nullptr);
 
 }  // namespace pmsc

@@ -23,11 +23,11 @@ struct VarimaxOptions {
 
 /// Result of a varimax rotation: rotated = loadings * rotation.
 struct VarimaxResult {
-    Eigen::MatrixXd rotation;        ///< B x B orthogonal
-    Eigen::MatrixXd rotated;         ///< rows x B, the rotated block
-    int iterations = 0;              ///< SVD steps taken
-    bool converged = false;          ///< false if the iteration cap stopped it
-    std::vector<double> objective;   ///< varimax criterion after 0, 1, ... steps (instrumentation)
+    Eigen::MatrixXd rotation;       ///< B x B orthogonal
+    Eigen::MatrixXd rotated;        ///< rows x B, the rotated block
+    int iterations = 0;             ///< SVD steps taken
+    bool converged = false;         ///< false if the iteration cap stopped it
+    std::vector<double> objective;  ///< varimax criterion after 0, 1, ... steps (instrumentation)
 };
 
 /// The varimax criterion of a block Z (rows p, columns j), on the rows as given:

@@ -30,7 +30,8 @@ void checkFinite(const T* values, std::size_t count, const std::string& name, In
     const std::size_t c = static_cast<std::size_t>(channels), n = static_cast<std::size_t>(points);
     const std::string what = std::isnan(*bad) ? "NaN" : (*bad > 0 ? "+Inf" : "-Inf");
     throw InputError(name + ": " + what + " at frame " + std::to_string(i / (n * c)) + ", point " +
-                     std::to_string((i / c) % n) + ", channel " + std::to_string(i % c) + " (frames must be finite)");
+                     std::to_string((i / c) % n) + ", channel " + std::to_string(i % c) +
+                     " (frames must be finite)");
 }
 
 }  // namespace
@@ -82,12 +83,14 @@ FrameArray::FrameArray(py::handle object, std::string name) : name_(std::move(na
 
 void FrameArray::read(Index frame, std::span<const Index> points, double* out) const {
     if (frame < 0 || frame >= frames_)
-        throw std::out_of_range(name_ + ": frame " + std::to_string(frame) + " outside [0, " + std::to_string(frames_) + ")");
+        throw std::out_of_range(name_ + ": frame " + std::to_string(frame) + " outside [0, " +
+                                std::to_string(frames_) + ")");
     const std::size_t base = static_cast<std::size_t>(frame * points_ * channels_);
     for (std::size_t i = 0; i < points.size(); ++i) {
         const Index p = points[i];
         if (p < 0 || p >= points_)
-            throw std::out_of_range(name_ + ": point " + std::to_string(p) + " outside [0, " + std::to_string(points_) + ")");
+            throw std::out_of_range(name_ + ": point " + std::to_string(p) + " outside [0, " +
+                                    std::to_string(points_) + ")");
         const std::size_t at = base + static_cast<std::size_t>(p * channels_);
         for (Index c = 0; c < channels_; ++c) {
             out[i * static_cast<std::size_t>(channels_) + static_cast<std::size_t>(c)] =
@@ -99,7 +102,8 @@ void FrameArray::read(Index frame, std::span<const Index> points, double* out) c
 
 void FrameArray::readFrame(Index frame, double* out) const {
     if (frame < 0 || frame >= frames_)
-        throw std::out_of_range(name_ + ": frame " + std::to_string(frame) + " outside [0, " + std::to_string(frames_) + ")");
+        throw std::out_of_range(name_ + ": frame " + std::to_string(frame) + " outside [0, " +
+                                std::to_string(frames_) + ")");
     const std::size_t n = static_cast<std::size_t>(points_ * channels_);
     const std::size_t base = static_cast<std::size_t>(frame) * n;
     if (dtype_ == NpyDtype::Float32) {
@@ -123,14 +127,15 @@ py::array newArray(NpyDtype dtype, const std::vector<py::ssize_t>& shape) {
 
 void storeValues(void* data, NpyDtype dtype, std::size_t offset, const double* values, std::size_t n) {
     if (dtype == NpyDtype::Float32) {
-        std::transform(values, values + n, static_cast<float*>(data) + offset, [](double v) { return static_cast<float>(v); });
+        std::transform(values, values + n, static_cast<float*>(data) + offset,
+                       [](double v) { return static_cast<float>(v); });
     } else {
         std::copy_n(values, n, static_cast<double*>(data) + offset);
     }
 }
 
-py::array readOnlyView(const double* data, std::vector<py::ssize_t> shape, std::vector<py::ssize_t> stridesInValues,
-                       py::handle owner) {
+py::array readOnlyView(const double* data, std::vector<py::ssize_t> shape,
+                       std::vector<py::ssize_t> stridesInValues, py::handle owner) {
     for (auto& s : stridesInValues) s *= static_cast<py::ssize_t>(sizeof(double));
     py::array view(py::dtype::of<double>(), std::move(shape), std::move(stridesInValues), data, owner);
     py::detail::array_proxy(view.ptr())->flags &= ~py::detail::npy_api::NPY_ARRAY_WRITEABLE_;

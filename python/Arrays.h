@@ -35,7 +35,9 @@ public:
     /// The array itself (kept alive as long as this object).
     const py::array& array() const { return array_; }
     /// The values of float64 arrays (nullptr for float32).
-    const double* doubles() const { return dtype_ == NpyDtype::Float64 ? static_cast<const double*>(data_) : nullptr; }
+    const double* doubles() const {
+        return dtype_ == NpyDtype::Float64 ? static_cast<const double*>(data_) : nullptr;
+    }
 
     /// The C values of each of `points` in `frame`, point after point. Thread-safe, GIL not needed.
     void read(Index frame, std::span<const Index> points, double* out) const;
@@ -67,7 +69,7 @@ void storeValues(void* data, NpyDtype dtype, std::size_t offset, const double* v
 NpyDtype floatDtype(const py::array& a, const std::string& name);
 
 /// A read-only NumPy view of memory owned by `owner` (kept alive by the view).
-py::array readOnlyView(const double* data, std::vector<py::ssize_t> shape, std::vector<py::ssize_t> stridesInValues,
-                       py::handle owner);
+py::array readOnlyView(const double* data, std::vector<py::ssize_t> shape,
+                       std::vector<py::ssize_t> stridesInValues, py::handle owner);
 
 }  // namespace pmsc::python

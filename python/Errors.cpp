@@ -46,11 +46,20 @@ void setPythonError(std::exception_ptr error, py::object cause) {
     const cli::ExitReason reason = cli::exitReason(error);
     const char* name = "Error";
     switch (reason.code) {
-        case cli::kExitBadInput: name = "InputError"; break;
-        case cli::kExitEvaluator: name = "EvaluatorError"; break;
-        case cli::kExitIo: name = "IoError"; break;
-        case cli::kExitInterrupted: name = "Cancelled"; break;
-        default: break;
+        case cli::kExitBadInput:
+            name = "InputError";
+            break;
+        case cli::kExitEvaluator:
+            name = "EvaluatorError";
+            break;
+        case cli::kExitIo:
+            name = "IoError";
+            break;
+        case cli::kExitInterrupted:
+            name = "Cancelled";
+            break;
+        default:
+            break;
     }
     py::object type = exceptionClass(name);
     py::object value = type(reason.message);

@@ -11,13 +11,12 @@ CallableEvaluator::CallableEvaluator(py::object function, Index points, Index ch
 
 CallableEvaluator::~CallableEvaluator() = default;
 
-py::object CallableEvaluator::firstError() const {
-    return firstError_ ? firstError_ : py::none();
-}
+py::object CallableEvaluator::firstError() const { return firstError_ ? firstError_ : py::none(); }
 
 void CallableEvaluator::evaluate(Index frame, std::span<const Index> points, double* out) const {
     if (frame < 0 || frame >= frames_)
-        throw std::out_of_range("frame " + std::to_string(frame) + " outside [0, " + std::to_string(frames_) + ")");
+        throw std::out_of_range("frame " + std::to_string(frame) + " outside [0, " + std::to_string(frames_) +
+                                ")");
     const std::size_t count = points.size() * static_cast<std::size_t>(channels_);
     std::string error;
     {
@@ -38,7 +37,8 @@ void CallableEvaluator::evaluate(Index frame, std::span<const Index> points, dou
             if (!values) throw py::error_already_set();
             if (static_cast<std::size_t>(values.size()) != count) {
                 std::string shape = "(";
-                for (py::ssize_t d = 0; d < values.ndim(); ++d) shape += (d ? ", " : "") + std::to_string(values.shape(d));
+                for (py::ssize_t d = 0; d < values.ndim(); ++d)
+                    shape += (d ? ", " : "") + std::to_string(values.shape(d));
                 shape += values.ndim() == 1 ? ",)" : ")";
                 throw std::runtime_error("returned shape " + shape + " for " + std::to_string(points.size()) +
                                          " points x " + std::to_string(channels_) + " channels");
@@ -46,7 +46,8 @@ void CallableEvaluator::evaluate(Index frame, std::span<const Index> points, dou
             std::copy_n(values.data(), count, out);
             return;
         } catch (py::error_already_set& e) {
-            error = py::str(e.type().attr("__name__")).cast<std::string>() + ": " + py::str(e.value()).cast<std::string>();
+            error = py::str(e.type().attr("__name__")).cast<std::string>() + ": " +
+                    py::str(e.value()).cast<std::string>();
             if (!firstError_) firstError_ = e.value();  // the GIL orders the engine's threads here
         }
     }

@@ -36,17 +36,18 @@ private:
 
 /// A Python callable `f(frame, point_indices) -> values` as the expensive calculation: `point_indices`
 /// is an int64 array of P point indices (its own copy), `values` anything NumPy reads as P x C numbers
-/// (shape (P, C) or (P*C,); a C-order float64 array is read in place, anything else converted). The engine calls it from its
-/// worker threads; each call takes the GIL for the call only, so the engine's own work (projection,
-/// reconstruction, blending, other frames' bookkeeping) and any NumPy work that releases the GIL run
-/// in parallel with it.
+/// (shape (P, C) or (P*C,); a C-order float64 array is read in place, anything else converted). The engine
+/// calls it from its worker threads; each call takes the GIL for the call only, so the engine's own work
+/// (projection, reconstruction, blending, other frames' bookkeeping) and any NumPy work that releases the GIL
+/// run in parallel with it.
 ///
 /// A Python exception becomes a std::runtime_error "TypeName: message" (the engine then names the
 /// frame and the node); the first one is kept so the module can chain it as the cause.
 class CallableEvaluator final : public PointEvaluator {
 public:
     /// @pre the GIL is held.
-    CallableEvaluator(py::object function, Index points, Index channels, Index frames, FailThroughShape shape);
+    CallableEvaluator(py::object function, Index points, Index channels, Index frames,
+                      FailThroughShape shape);
     /// @pre the GIL is held (drops the references).
     ~CallableEvaluator() override;
 

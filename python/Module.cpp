@@ -16,9 +16,10 @@ void bindRuns(py::module_& m);
 
 PYBIND11_MODULE(pmsc, m) {
     using namespace pmsc::python;
-    m.doc() = "Point Multiplication and Soft Caching (Meyer & Anderson, Pixar): train a model from NumPy frames, "
-              "replay recorded frames through its soft cache, and run the evaluation engine with a C++ or a "
-              "Python evaluator. Frames are arrays of shape (frames, points, channels), float32 or float64.";
+    m.doc() =
+        "Point Multiplication and Soft Caching (Meyer & Anderson, Pixar): train a model from NumPy frames, "
+        "replay recorded frames through its soft cache, and run the evaluation engine with a C++ or a "
+        "Python evaluator. Frames are arrays of shape (frames, points, channels), float32 or float64.";
     registerErrors(m);
     m.attr("__version__") = "0.1.0";
     bindModel(m);

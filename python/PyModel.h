@@ -20,7 +20,8 @@ struct PyModel {
     std::unique_ptr<PointMultiplier> multiplier;
     py::dict trainingReport;
 
-    explicit PyModel(Model m) : model(std::make_shared<const Model>(std::move(m))), multiplier(new PointMultiplier(*model)) {}
+    explicit PyModel(Model m)
+        : model(std::make_shared<const Model>(std::move(m))), multiplier(new PointMultiplier(*model)) {}
     const Model& get() const { return *model; }
 };
 

@@ -33,7 +33,8 @@ std::optional<std::pair<double, double>> epsOf(py::object eps) {
     if (eps.is_none()) return std::nullopt;
     const auto e = eps.cast<std::pair<double, double>>();
     if (!(e.first >= 0 && e.first <= e.second && std::isfinite(e.second)))
-        throw InputError("eps: need 0 <= MIN <= MAX, got (" + std::to_string(e.first) + ", " + std::to_string(e.second) + ")");
+        throw InputError("eps: need 0 <= MIN <= MAX, got (" + std::to_string(e.first) + ", " +
+                         std::to_string(e.second) + ")");
     return e;
 }
 
@@ -46,7 +47,8 @@ void checkMatches(const Model& m, const PointEvaluator& e, const std::string& wh
 
 py::tuple replayFrames(const PyModel& self, py::handle frames, py::object eps, int threads, bool wholeFrame) {
     const Model& m = self.get();
-    if (threads < 0) throw InputError("threads: must be >= 0 (0 = every core), got " + std::to_string(threads));
+    if (threads < 0)
+        throw InputError("threads: must be >= 0 (0 = every core), got " + std::to_string(threads));
     std::unique_ptr<PointEvaluator> recorded;
     NpyDtype dtype = NpyDtype::Float64;
     std::string what = "frames";
@@ -171,8 +173,9 @@ RunEvaluator makeRunEvaluator(const Model& m, py::object evaluator, py::object f
         return r;
     }
     if (!PyCallable_Check(evaluator.ptr()))
-        throw InputError("evaluator: expected a callable f(frame, point_indices) -> values or a spec 'NAME:ARGS' "
-                         "(replay:FILE.npy, skin:ASSET)");
+        throw InputError(
+            "evaluator: expected a callable f(frame, point_indices) -> values or a spec 'NAME:ARGS' "
+            "(replay:FILE.npy, skin:ASSET)");
     r.range = frameRange(frames, 0);
     const Index needed = r.range.last() + 1;
     if (frameCount > 0 && frameCount < needed)
@@ -185,7 +188,8 @@ RunEvaluator makeRunEvaluator(const Model& m, py::object evaluator, py::object f
     // fewer, larger calls, and still work for every thread with 2 x threads frames in flight.
     const Index outputPoints = points.is_none() ? m.points : static_cast<Index>(py::len(points));
     shape.chunkPoints = std::max<Index>(256, (outputPoints + 7) / 8);
-    auto c = std::make_unique<CallableEvaluator>(evaluator, m.points, m.channels, std::max(frameCount, needed), shape);
+    auto c = std::make_unique<CallableEvaluator>(evaluator, m.points, m.channels,
+                                                 std::max(frameCount, needed), shape);
     r.callable = c.get();
     r.evaluator = std::move(c);
     return r;
@@ -211,11 +215,12 @@ py::list reportRows(const ArraySink& sink) {
     return rows;
 }
 
-py::tuple runEngine(const PyModel& self, py::object evaluator, py::object frames, int threads, py::object points,
-                    py::object eps, const std::string& failure, bool wholeFrame, Index chunkPoints, py::object dtypeArg,
-                    Index maxFramesInFlight, Index frameCount) {
+py::tuple runEngine(const PyModel& self, py::object evaluator, py::object frames, int threads,
+                    py::object points, py::object eps, const std::string& failure, bool wholeFrame,
+                    Index chunkPoints, py::object dtypeArg, Index maxFramesInFlight, Index frameCount) {
     const Model& m = self.get();
-    if (threads < 0) throw InputError("threads: must be >= 0 (0 = every core), got " + std::to_string(threads));
+    if (threads < 0)
+        throw InputError("threads: must be >= 0 (0 = every core), got " + std::to_string(threads));
     RunEvaluator run = makeRunEvaluator(m, evaluator, frames, points, wholeFrame, frameCount);
 
     engine::EngineOptions o;
@@ -241,7 +246,8 @@ py::tuple runEngine(const PyModel& self, py::object evaluator, py::object frames
     }
     const Index outPoints = static_cast<Index>(engine->outputPoints().size());
     py::array out = newArray(dtype, {run.range.count, outPoints, m.channels});
-    ArraySink sink(out.mutable_data(), dtype, static_cast<std::size_t>(outPoints * m.channels), run.range.count);
+    ArraySink sink(out.mutable_data(), dtype, static_cast<std::size_t>(outPoints * m.channels),
+                   run.range.count);
     engine::RunStats stats;
     try {
         runReleased(cancel, [&] { stats = engine->run(run.range, sink); });
@@ -262,17 +268,21 @@ py::tuple runEngine(const PyModel& self, py::object evaluator, py::object frames
 }  // namespace
 
 void bindRuns(py::module_& m) {
-    m.def("replay", &replayFrames, "model"_a, "frames"_a, py::kw_only(), "eps"_a = py::none(), "threads"_a = 0,
-          "whole_frame_fail_through"_a = false,
+    m.def("replay", &replayFrames, "model"_a, "frames"_a, py::kw_only(), "eps"_a = py::none(),
+          "threads"_a = 0, "whole_frame_fail_through"_a = false,
           "Replays recorded frames (an array (F, N, C) or a .npy path) through the model's soft cache, as "
-          "`pmsc replay` does: returns (out, report), out in the frames' dtype (bit for bit `pmsc replay --out`), "
+          "`pmsc replay` does: returns (out, report), out in the frames' dtype (bit for bit `pmsc replay "
+          "--out`), "
           "report the REPORT.json as a dict.");
-    m.def("run", &runEngine, "model"_a, "evaluator"_a, "frames"_a = py::none(), py::kw_only(), "threads"_a = 0,
-          "points"_a = py::none(), "eps"_a = py::none(), "failure"_a = "stop", "whole_frame_fail_through"_a = false,
-          "chunk_points"_a = 0, "dtype"_a = py::none(), "max_frames_in_flight"_a = 0, "frame_count"_a = 0,
-          "Runs the evaluation engine over `frames` (a range, a count, or None = every frame of a spec evaluator). "
-          "evaluator: a spec 'replay:FILE.npy' / 'skin:ASSET', or a Python callable f(frame, point_indices) -> "
-          "values (P, C). Returns (out (frames, points, C), report {'summary': run stats, 'frames': rows}).");
+    m.def(
+        "run", &runEngine, "model"_a, "evaluator"_a, "frames"_a = py::none(), py::kw_only(), "threads"_a = 0,
+        "points"_a = py::none(), "eps"_a = py::none(), "failure"_a = "stop",
+        "whole_frame_fail_through"_a = false, "chunk_points"_a = 0, "dtype"_a = py::none(),
+        "max_frames_in_flight"_a = 0, "frame_count"_a = 0,
+        "Runs the evaluation engine over `frames` (a range, a count, or None = every frame of a spec "
+        "evaluator). "
+        "evaluator: a spec 'replay:FILE.npy' / 'skin:ASSET', or a Python callable f(frame, point_indices) -> "
+        "values (P, C). Returns (out (frames, points, C), report {'summary': run stats, 'frames': rows}).");
 }
 
 }  // namespace pmsc::python

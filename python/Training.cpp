@@ -28,16 +28,15 @@ struct TrainingFrames {
     FrameSet copy;                   ///< otherwise the frames as doubles
 };
 
-
 void appendShot(FrameSet& all, const FrameSet& shot, const std::string& name, const std::string& firstName) {
     if (all.frames == 0) {
         all = shot;
         return;
     }
     if (shot.points != all.points || shot.channels != all.channels)
-        throw InputError(name + ": " + std::to_string(shot.points) + " points x " + std::to_string(shot.channels) +
-                         " channels, but " + firstName + " has " + std::to_string(all.points) + " x " +
-                         std::to_string(all.channels));
+        throw InputError(name + ": " + std::to_string(shot.points) + " points x " +
+                         std::to_string(shot.channels) + " channels, but " + firstName + " has " +
+                         std::to_string(all.points) + " x " + std::to_string(all.channels));
     all.values.insert(all.values.end(), shot.values.begin(), shot.values.end());
     all.frames += shot.frames;
 }
@@ -53,7 +52,9 @@ TrainingFrames trainingFrames(py::handle frames) {
     }
     std::string firstName;
     for (std::size_t i = 0; i < shots.size(); ++i) {
-        const std::string name = isPath(shots[i]) ? pathOf(shots[i]) : shots.size() == 1 ? "frames" : "frames[" + std::to_string(i) + "]";
+        const std::string name = isPath(shots[i])    ? pathOf(shots[i])
+                                 : shots.size() == 1 ? "frames"
+                                                     : "frames[" + std::to_string(i) + "]";
         if (i == 0) firstName = name;
         if (isPath(shots[i])) {
             FrameFile f;
@@ -91,10 +92,11 @@ CalibrationRule ruleOf(const std::string& s) {
     throw InputError("calibration: '" + s + "' is not max or conformal");
 }
 
-std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energy, double basisError, Index maxBasis,
-                                    double maxError, Index maxKeys, Index block, std::vector<Index> fiducials,
-                                    std::vector<Index> gridPoints, const std::string& selector, double tolerance,
-                                    Index slices, const std::string& calibration, double coverage, Index learnRank,
+std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energy, double basisError,
+                                    Index maxBasis, double maxError, Index maxKeys, Index block,
+                                    std::vector<Index> fiducials, std::vector<Index> gridPoints,
+                                    const std::string& selector, double tolerance, Index slices,
+                                    const std::string& calibration, double coverage, Index learnRank,
                                     unsigned seed, int powerIterations, Index regions, double feather,
                                     Index regionKeys, bool sharedChannels, py::object progress) {
     TrainingOptions o;
@@ -119,10 +121,13 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     o.regions.featherFraction = feather;
     o.regions.ownKeys = regionKeys;
     o.sharedChannels = sharedChannels;
-    if (regionKeys < 0) throw InputError("region_keys: must be >= 0 (0 = none), got " + std::to_string(regionKeys));
+    if (regionKeys < 0)
+        throw InputError("region_keys: must be >= 0 (0 = none), got " + std::to_string(regionKeys));
     if (regions < 0) throw InputError("regions: must be >= 0 (0 = none), got " + std::to_string(regions));
-    if (!(feather >= 0 && feather <= 0.5)) throw InputError("feather: must be in [0, 0.5], got " + std::to_string(feather));
-    if (calibration != "max" && !(tolerance > 0)) throw InputError("calibration and coverage need a tolerance");
+    if (!(feather >= 0 && feather <= 0.5))
+        throw InputError("feather: must be in [0, 0.5], got " + std::to_string(feather));
+    if (calibration != "max" && !(tolerance > 0))
+        throw InputError("calibration and coverage need a tolerance");
 
     TrainingFrames t = trainingFrames(frames);
     // Training runs on this thread (its progress hook is where Ctrl-C is noticed); the hook takes the
@@ -156,7 +161,8 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
             // A float64 C-order array is the training matrix Q as it lies ((N*C) x F, column-major):
             // centred straight from it, the one copy training makes anyway.
             const FrameArray& a = *t.view;
-            if (a.frames() < 2) throw InputError("train: need at least 2 training frames, got " + std::to_string(a.frames()));
+            if (a.frames() < 2)
+                throw InputError("train: need at least 2 training frames, got " + std::to_string(a.frames()));
             const Eigen::Map<const Eigen::MatrixXd> q(a.doubles(), a.points() * a.channels(), a.frames());
             MatrixBlocks blocks(q, a.channels(), /*centre=*/true);
             SingleProcess one;
@@ -183,14 +189,16 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
 }  // namespace
 
 void bindTraining(py::module_& m) {
-    m.def("train", &trainModel, "frames"_a, py::kw_only(), "basis"_a = 0, "energy"_a = 0.0, "basis_error"_a = 0.0,
-          "max_basis"_a = 256, "max_error"_a = 0.0, "max_keys"_a = 200, "block"_a = 16,
-          "fiducials"_a = std::vector<Index>{}, "grid_points"_a = std::vector<Index>{},
-          "selector"_a = "teleconnection", "tolerance"_a = 0.0, "slices"_a = 5, "calibration"_a = "max",
-          "coverage"_a = 0.9, "learn_rank"_a = 0, "seed"_a = 20070101u, "power_iterations"_a = 2,
-          "regions"_a = 0, "feather"_a = 0.03, "region_keys"_a = 4, "shared_channels"_a = false, "progress"_a = py::none(),
-          "Trains a model as `pmsc train` does (same options, same model bytes). frames: an array (F, N, C), a "
-          ".npy path, or a list of them (shots). progress(stage, done, total) may return False to cancel.");
+    m.def(
+        "train", &trainModel, "frames"_a, py::kw_only(), "basis"_a = 0, "energy"_a = 0.0,
+        "basis_error"_a = 0.0, "max_basis"_a = 256, "max_error"_a = 0.0, "max_keys"_a = 200, "block"_a = 16,
+        "fiducials"_a = std::vector<Index>{}, "grid_points"_a = std::vector<Index>{},
+        "selector"_a = "teleconnection", "tolerance"_a = 0.0, "slices"_a = 5, "calibration"_a = "max",
+        "coverage"_a = 0.9, "learn_rank"_a = 0, "seed"_a = 20070101u, "power_iterations"_a = 2,
+        "regions"_a = 0, "feather"_a = 0.03, "region_keys"_a = 4, "shared_channels"_a = false,
+        "progress"_a = py::none(),
+        "Trains a model as `pmsc train` does (same options, same model bytes). frames: an array (F, N, C), a "
+        ".npy path, or a list of them (shots). progress(stage, done, total) may return False to cancel.");
 }
 
 }  // namespace pmsc::python

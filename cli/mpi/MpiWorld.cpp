@@ -21,12 +21,14 @@ void check(int status, const char* what) {
         char text[MPI_MAX_ERROR_STRING];
         int length = 0;
         MPI_Error_string(status, text, &length);
-        throw std::runtime_error(std::string("MPI: ") + what + " failed: " + std::string(text, static_cast<std::size_t>(length)));
+        throw std::runtime_error(std::string("MPI: ") + what +
+                                 " failed: " + std::string(text, static_cast<std::size_t>(length)));
     }
 }
 
 int asInt(std::size_t count) {
-    if (count > static_cast<std::size_t>(INT32_MAX)) throw std::runtime_error("MPI: message of more than 2^31 values");
+    if (count > static_cast<std::size_t>(INT32_MAX))
+        throw std::runtime_error("MPI: message of more than 2^31 values");
     return static_cast<int>(count);
 }
 
@@ -54,7 +56,8 @@ public:
     }
     void allGather(const double* local, std::size_t count, std::vector<double>& all) override {
         all.resize(count * static_cast<std::size_t>(size_));
-        check(MPI_Allgather(local, asInt(count), MPI_DOUBLE, all.data(), asInt(count), MPI_DOUBLE, MPI_COMM_WORLD),
+        check(MPI_Allgather(local, asInt(count), MPI_DOUBLE, all.data(), asInt(count), MPI_DOUBLE,
+                            MPI_COMM_WORLD),
               "MPI_Allgather");
     }
     void broadcast(double* values, std::size_t count, int root) override {
@@ -72,8 +75,8 @@ public:
             total += static_cast<std::size_t>(counts[r]);
         }
         all.assign(rank_ == root ? total : 0, 0.0);
-        check(MPI_Gatherv(local, mine, MPI_DOUBLE, all.data(), counts.data(), offsets.data(), MPI_DOUBLE, root,
-                          MPI_COMM_WORLD),
+        check(MPI_Gatherv(local, mine, MPI_DOUBLE, all.data(), counts.data(), offsets.data(), MPI_DOUBLE,
+                          root, MPI_COMM_WORLD),
               "MPI_Gatherv");
     }
     [[noreturn]] void abort(int code) override {

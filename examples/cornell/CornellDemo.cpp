@@ -76,8 +76,9 @@ void checkOptions(const CornellDemoOptions& o) {
     if (o.samples < 2 || o.samples > 65536)
         throw InputError("demo cornell: --samples " + std::to_string(o.samples) + " outside [2, 65536]");
     if (o.basis < 1 || o.keys < 1 || o.gridKeys < 0 || o.gridKeys > o.keys || o.scatteredLights < 1 ||
-        o.pathFrames < 1 || o.pathFullEvery < 1 || o.referenceMultiplier < 1 || o.referencePoints < 1 || o.referenceFrames < 1 ||
-        o.imageSize < 8 || o.renderFrames < 0 || o.threads < 0 || !(o.toleranceFraction > 0))
+        o.pathFrames < 1 || o.pathFullEvery < 1 || o.referenceMultiplier < 1 || o.referencePoints < 1 ||
+        o.referenceFrames < 1 || o.imageSize < 8 || o.renderFrames < 0 || o.threads < 0 ||
+        !(o.toleranceFraction > 0))
         throw InputError("demo cornell: an option is out of range");
     if (o.regions < 0 || o.regions > 1024)
         throw InputError("demo cornell: --regions " + std::to_string(o.regions) + " outside [0, 1024]");
@@ -287,8 +288,8 @@ ReferenceErrors measureAgainstConvergedReference(const DemoRun& run,
                                                  ValidationSink& sink) {
     const CornellDemoOptions& o = run.o;
     const std::vector<Index>& subset = reference.points;
-    const CornellEvaluator refEval(world, rig.scatteredLights(o.scatteredLights), o.samples * o.referenceMultiplier,
-                                   "cornell-reference");
+    const CornellEvaluator refEval(world, rig.scatteredLights(o.scatteredLights),
+                                   o.samples * o.referenceMultiplier, "cornell-reference");
     ReferenceErrors errors;
     const auto t = Clock::now();
     for (Index f = 0; f < reference.frames; ++f) {
@@ -296,12 +297,14 @@ ReferenceErrors measureAgainstConvergedReference(const DemoRun& run,
         std::vector<double> ref(3 * subset.size());
         run.arena.execute([&] {
             tbb::parallel_for(tbb::blocked_range<std::size_t>(0, subset.size(), 16), [&](const auto& r) {
-                refEval.evaluate(f, std::span<const Index>(subset.data() + r.begin(), r.size()), ref.data() + 3 * r.begin());
+                refEval.evaluate(f, std::span<const Index>(subset.data() + r.begin(), r.size()),
+                                 ref.data() + 3 * r.begin());
             });
         });
         std::vector<double> fullAt(3 * subset.size());
         for (std::size_t i = 0; i < subset.size(); ++i)
-            for (int c = 0; c < 3; ++c) fullAt[3 * i + c] = full[f][static_cast<std::size_t>(3 * subset[i] + c)];
+            for (int c = 0; c < 3; ++c)
+                fullAt[3 * i + c] = full[f][static_cast<std::size_t>(3 * subset[i] + c)];
         errors.full.add(fullAt.data(), ref.data(), ref.size());
         errors.pm.add(sink.pmAtSubset[f].data(), ref.data(), ref.size());
     }
@@ -350,7 +353,8 @@ WrittenFiles writeGridsAndRenders(const DemoRun& run, const CornellWorld& world,
     Index rendered = 0;
     for (Index f : frames.renderFrames) {
         const Index pathFrame = f - frames.scattered;
-        const auto rec = std::find_if(sink.records.begin(), sink.records.end(), [&](const auto& r) { return r.frame == f; });
+        const auto rec = std::find_if(sink.records.begin(), sink.records.end(),
+                                      [&](const auto& r) { return r.frame == f; });
         CacheMetadata meta{static_cast<std::int32_t>(f), frames.lights[static_cast<std::size_t>(f)].position,
                            std::string(toString(rec->state)), rec->weight, rec->keyRms};
         const LightingCacheGrid pmGrid(world.voxels, sink.soft[f], meta);

@@ -12,15 +12,15 @@ namespace pmsc::cornell {
 
 /// The settings of section 8's experiment as `pmsc demo cornell` runs it.
 struct CornellDemoOptions {
-    std::string outDir;            ///< created if missing; receives *.vdb, *.png, *.pfm, report.json
-    std::size_t points = 160000;   ///< active voxels of the lighting cache (the paper's 160,000 points)
+    std::string outDir;           ///< created if missing; receives *.vdb, *.png, *.pfm, report.json
+    std::size_t points = 160000;  ///< active voxels of the lighting cache (the paper's 160,000 points)
     /// Paths per point per frame (half cosine gathers, half light paths). 160 keeps the gather's
     /// own noise (about 1.5% RMS, which 32 basis vectors cannot represent) well under the 2%
     /// error goal; at 128 the measured error was 1.91% (path frames 2.02%), too close.
     int samples = 160;
-    int basis = 32;                ///< M (paper: 32 illumination basis functions)
-    int keys = 200;                ///< K (paper: 200 control points), including the spatial grid
-    int gridKeys = 48;             ///< about this many of the K from a sparse spatial grid (section 4)
+    int basis = 32;     ///< M (paper: 32 illumination basis functions)
+    int keys = 200;     ///< K (paper: 200 control points), including the spatial grid
+    int gridKeys = 48;  ///< about this many of the K from a sparse spatial grid (section 4)
     /// Largest point error a hit may have, as a fraction of the largest indirect irradiance
     /// (Euclidean over RGB) seen in training. 0.1: a hit never misses by more than a tenth of
     /// the brightest indirect light; where indirect light is that bright (next to the light)
@@ -34,13 +34,13 @@ struct CornellDemoOptions {
     int referencePoints = 2000;    ///< random subset of points for the reference
     int referenceFrames = 8;       ///< the first this many scattered lights get a reference
     int imageSize = 256;
-    int renderFrames = 2;          ///< path frames rendered per camera (spread over the path)
-    int threads = 0;               ///< 0 = every core; full gathers and the engine use the same
+    int renderFrames = 2;  ///< path frames rendered per camera (spread over the path)
+    int threads = 0;       ///< 0 = every core; full gathers and the engine use the same
     /// Regions of local fail-through (issue 9) learned in training, from the voxels' positions;
     /// 0 = none (a version-1 model; no "local_fail_through" in the report). 48, measured at --quick
-    /// on a 100 mm cube against the back wall at x 150-250 (its 2 frames that miss as a whole): 16 regions gathered 54% of the
-    /// points of those frames, 32 sent one of them whole (77% on average), 48 routed both locally
-    /// at 42% (speedup over full gathers 6.5x, whole-frame 3.5x), 64 gained nothing (41%, 6.2x).
+    /// on a 100 mm cube against the back wall at x 150-250 (its 2 frames that miss as a whole): 16 regions
+    /// gathered 54% of the points of those frames, 32 sent one of them whole (77% on average), 48 routed both
+    /// locally at 42% (speedup over full gathers 6.5x, whole-frame 3.5x), 64 gained nothing (41%, 6.2x).
     int regions = 48;
     /// Feather width of the regions' borders, % of the box's diagonal (965 mm): 29 mm, 1.6 voxels
     /// at --quick and 8 at the default size. 1.5% is under one --quick voxel (no feathering at
@@ -49,8 +49,8 @@ struct CornellDemoOptions {
     /// Edge (mm) of issue 9's local change (LocalChangeBox: a cube on the floor against the back
     /// wall, never seen in training); 0 = no local-change set. Needs regions > 0.
     double localChangeMm = 100;
-    int localChangeLights = 8;     ///< the local-change set: the first this many scattered lights
-    bool quick = false;            ///< small settings for a smoke test (set by quickOptions)
+    int localChangeLights = 8;  ///< the local-change set: the first this many scattered lights
+    bool quick = false;         ///< small settings for a smoke test (set by quickOptions)
     /// Progress hook: (stage, done, total); return false to cancel (throws pmsc::Cancelled).
     std::function<bool(std::string_view, double, double)> progress;
 

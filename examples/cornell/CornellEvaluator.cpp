@@ -90,10 +90,15 @@ void directIrradiance(const RayTracer& tracer, const PointLight& light, std::spa
 
 CornellEvaluator::CornellEvaluator(std::shared_ptr<const CornellWorld> world, std::vector<PointLight> lights,
                                    int samplesPerPoint, std::string name)
-    : world_(std::move(world)), lights_(std::move(lights)), samples_(samplesPerPoint), name_(std::move(name)) {
+    : world_(std::move(world)),
+      lights_(std::move(lights)),
+      samples_(samplesPerPoint),
+      name_(std::move(name)) {
     if (!world_) throw std::invalid_argument("CornellEvaluator: no world");
     if (lights_.empty()) throw std::invalid_argument("CornellEvaluator: no lights (frames)");
-    if (samples_ < 1) throw std::invalid_argument("CornellEvaluator: samples per point must be >= 1, got " + std::to_string(samples_));
+    if (samples_ < 1)
+        throw std::invalid_argument("CornellEvaluator: samples per point must be >= 1, got " +
+                                    std::to_string(samples_));
 }
 
 /// The light paths of one frame: kPoolSets shifted Hammersley sets of sB directions from the
@@ -128,7 +133,8 @@ std::shared_ptr<const CornellEvaluator::LightPool> CornellEvaluator::lightPool(I
             double u, v;
             hammersleyShifted(set ^ 0x5bd1e995U, i, pool->perSet, u, v);
             const double z = 1.0 - 2.0 * u, r = std::sqrt(std::max(0.0, 1.0 - z * z)), phi = 2.0 * M_PI * v;
-            rays[set * pool->perSet + i] = makeRay(light.position, {r * std::cos(phi), r * std::sin(phi), z}, 1e30);
+            rays[set * pool->perSet + i] =
+                makeRay(light.position, {r * std::cos(phi), r * std::sin(phi), z}, 1e30);
         }
     // Traced in fixed batches of one set, so the pool never depends on how it was scheduled.
     for (std::uint32_t set = 0; set < pool->sets && pool->perSet > 0; ++set)
@@ -153,7 +159,8 @@ std::shared_ptr<const CornellEvaluator::LightPool> CornellEvaluator::lightPool(I
     return pool;
 }
 
-void CornellEvaluator::gather(const PointLight& light, const LightPool& pool, Index point, double* rgb) const {
+void CornellEvaluator::gather(const PointLight& light, const LightPool& pool, Index point,
+                              double* rgb) const {
     const SurfaceVoxels& vox = world_->voxels;
     const auto& quads = world_->scene.quads();
     const Vec3 x = vox.position[static_cast<size_t>(point)];
@@ -242,25 +249,29 @@ void CornellEvaluator::gather(const PointLight& light, const LightPool& pool, In
 
 void CornellEvaluator::evaluate(Index frame, std::span<const Index> points, double* out) const {
     if (frame < 0 || frame >= frameCount())
-        throw std::out_of_range("cornell: frame " + std::to_string(frame) + " outside [0, " + std::to_string(frameCount()) + ")");
+        throw std::out_of_range("cornell: frame " + std::to_string(frame) + " outside [0, " +
+                                std::to_string(frameCount()) + ")");
     const Index n = pointCount();
     const PointLight& light = lights_[static_cast<size_t>(frame)];
     const auto pool = lightPool(frame);
     for (size_t i = 0; i < points.size(); ++i) {
         if (points[i] < 0 || points[i] >= n)
-            throw std::out_of_range("cornell: point " + std::to_string(points[i]) + " outside [0, " + std::to_string(n) + ")");
+            throw std::out_of_range("cornell: point " + std::to_string(points[i]) + " outside [0, " +
+                                    std::to_string(n) + ")");
         gather(light, *pool, points[i], out + 3 * i);
     }
 }
 
 void CornellEvaluator::evaluateAll(Index frame, double* out) const {
     if (frame < 0 || frame >= frameCount())
-        throw std::out_of_range("cornell: frame " + std::to_string(frame) + " outside [0, " + std::to_string(frameCount()) + ")");
+        throw std::out_of_range("cornell: frame " + std::to_string(frame) + " outside [0, " +
+                                std::to_string(frameCount()) + ")");
     const PointLight& light = lights_[static_cast<size_t>(frame)];
     const auto pool = lightPool(frame);
-    tbb::parallel_for(tbb::blocked_range<Index>(0, pointCount(), 256), [&](const tbb::blocked_range<Index>& r) {
-        for (Index p = r.begin(); p != r.end(); ++p) gather(light, *pool, p, out + 3 * p);
-    });
+    tbb::parallel_for(tbb::blocked_range<Index>(0, pointCount(), 256),
+                      [&](const tbb::blocked_range<Index>& r) {
+                          for (Index p = r.begin(); p != r.end(); ++p) gather(light, *pool, p, out + 3 * p);
+                      });
 }
 
 namespace {
@@ -280,7 +291,8 @@ public:
     bool isValid(const std::string& path) const override {
         try {
             return std::filesystem::is_regular_file(path) &&
-                   LightingCacheGrid::read(path).activeVoxelCount() == static_cast<std::int64_t>(ev_.world().voxels.size());
+                   LightingCacheGrid::read(path).activeVoxelCount() ==
+                       static_cast<std::int64_t>(ev_.world().voxels.size());
         } catch (...) {
             return false;
         }
@@ -305,7 +317,8 @@ std::unique_ptr<CornellEvaluator> makeCornellEvaluator(const std::string& option
     while (std::getline(in, item, ',')) {
         if (item.empty()) continue;
         const auto eq = item.find('=');
-        const std::string key = item.substr(0, eq), value = eq == std::string::npos ? "" : item.substr(eq + 1);
+        const std::string key = item.substr(0, eq),
+                          value = eq == std::string::npos ? "" : item.substr(eq + 1);
         auto number = [&](long lo, long hi) {
             std::size_t used = 0;
             long v = 0;
@@ -325,10 +338,12 @@ std::unique_ptr<CornellEvaluator> makeCornellEvaluator(const std::string& option
             samples = static_cast<int>(number(2, 65536));
         } else if (key == "lights") {
             if (value != "all" && value != "training" && value != "scattered" && value != "path")
-                throw InputError("evaluator 'cornell': lights='" + value + "' is not all, training, scattered or path");
+                throw InputError("evaluator 'cornell': lights='" + value +
+                                 "' is not all, training, scattered or path");
             lights = value;
         } else {
-            throw InputError("evaluator 'cornell': unknown option '" + key + "' (points=N, samples=S, lights=SET)");
+            throw InputError("evaluator 'cornell': unknown option '" + key +
+                             "' (points=N, samples=S, lights=SET)");
         }
     }
     const LightRig rig;
@@ -337,7 +352,8 @@ std::unique_ptr<CornellEvaluator> makeCornellEvaluator(const std::string& option
     if (lights == "all" || lights == "training") add(rig.trainingLights());
     if (lights == "all" || lights == "scattered") add(rig.scatteredLights(16));
     if (lights == "all" || lights == "path") add(rig.animationPath(60));
-    return std::make_unique<CornellEvaluator>(CornellWorld::create(points), std::move(set), samples, "cornell");
+    return std::make_unique<CornellEvaluator>(CornellWorld::create(points), std::move(set), samples,
+                                              "cornell");
 }
 
 }  // namespace pmsc::cornell

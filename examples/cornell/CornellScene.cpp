@@ -91,10 +91,8 @@ CornellScene CornellScene::standard() {
         s.quads_.push_back(makeQuad(std::move(n), c, a, roomCentre, true));
     };
     wall("floor", {v(552.8, 0, 0), v(0, 0, 0), v(0, 0, 559.2), v(549.6, 0, 559.2)}, kWhite);
-    wall("ceiling", {v(556, 548.8, 0), v(556, 548.8, 559.2), v(0, 548.8, 559.2), v(0, 548.8, 0)},
-         kWhite);
-    wall("back", {v(549.6, 0, 559.2), v(0, 0, 559.2), v(0, 548.8, 559.2), v(556, 548.8, 559.2)},
-         kWhite);
+    wall("ceiling", {v(556, 548.8, 0), v(556, 548.8, 559.2), v(0, 548.8, 559.2), v(0, 548.8, 0)}, kWhite);
+    wall("back", {v(549.6, 0, 559.2), v(0, 0, 559.2), v(0, 548.8, 559.2), v(556, 548.8, 559.2)}, kWhite);
     wall("left", {v(552.8, 0, 0), v(549.6, 0, 559.2), v(556, 548.8, 559.2), v(556, 548.8, 0)}, kRed);
     wall("right", {v(0, 0, 559.2), v(0, 0, 0), v(0, 548.8, 0), v(0, 548.8, 559.2)}, kGreen);
 
@@ -195,9 +193,9 @@ std::vector<PointLight> LightRig::animationPath(int frames) const {
     const double y = 548.8 - belowCeilingMm;
     for (int f = 0; f < frames; ++f) {
         const double t = 2.0 * M_PI * f / frames;
-        lights.push_back({v(278.0 + half * std::sin(t), y + 4.0 * std::sin(3 * t),
-                            279.6 + half * std::sin(2 * t + 0.5)),
-                          intensity});
+        lights.push_back(
+            {v(278.0 + half * std::sin(t), y + 4.0 * std::sin(3 * t), 279.6 + half * std::sin(2 * t + 0.5)),
+             intensity});
     }
     return lights;
 }
@@ -208,8 +206,8 @@ std::vector<Camera> demoCameras(double t) {
     cams.push_back({"standard", v(278, 273, -800 + 200 * t), v(278, 273, 0), v(0, 1, 0), 39.3077});
     // An orbit around the opening, looking at the blocks.
     const double a = -0.35 + 0.7 * t;
-    cams.push_back({"orbit", v(278 + 700 * std::sin(a), 380, 279.6 - 700 * std::cos(a)),
-                    v(278, 180, 300), v(0, 1, 0), 50.0});
+    cams.push_back({"orbit", v(278 + 700 * std::sin(a), 380, 279.6 - 700 * std::cos(a)), v(278, 180, 300),
+                    v(0, 1, 0), 50.0});
     // Inside the box, near the front left corner, panning across the back wall and blocks.
     const double b = 0.25 + 0.5 * t;
     cams.push_back({"inside", v(480, 420, 60),

@@ -91,9 +91,9 @@ struct PointLight {
 
 /// The light positions of the experiment (section 8). Distances in millimetres.
 struct LightRig {
-    int gridSide = 12;            ///< 12 x 12 = 144 training lights
-    double spacingMm = 36.0;      ///< grid pitch in x and z
-    double belowCeilingMm = 60.0; ///< lights at y = 548.8 - this
+    int gridSide = 12;                     ///< 12 x 12 = 144 training lights
+    double spacingMm = 36.0;               ///< grid pitch in x and z
+    double belowCeilingMm = 60.0;          ///< lights at y = 548.8 - this
     Rgb intensity{1.6e5, 1.36e5, 1.12e5};  ///< warm white, gives irradiance of order 1
 
     /// The 12 x 12 training grid, row-major in (z, x), centred on the ceiling.

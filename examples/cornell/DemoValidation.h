@@ -43,12 +43,18 @@ public:
         double pmRelError = -1, softRelError = -1;  // -1: no full gather for this frame
     };
 
-    ValidationSink(std::string name, const std::map<Index, std::vector<double>>& full, const std::set<Index>& keepFrames,
-                   const std::vector<Index>& subset, const std::set<Index>& subsetFrames)
-        : name_(std::move(name)), full_(full), keepFrames_(keepFrames), subset_(subset), subsetFrames_(subsetFrames) {}
+    ValidationSink(std::string name, const std::map<Index, std::vector<double>>& full,
+                   const std::set<Index>& keepFrames, const std::vector<Index>& subset,
+                   const std::set<Index>& subsetFrames)
+        : name_(std::move(name)),
+          full_(full),
+          keepFrames_(keepFrames),
+          subset_(subset),
+          subsetFrames_(subsetFrames) {}
 
     void write(const engine::FrameResult& r) override {
-        if (r.failed) throw EvaluatorError(name_ + ": frame " + std::to_string(r.frame) + " failed: " + r.error);
+        if (r.failed)
+            throw EvaluatorError(name_ + ": frame " + std::to_string(r.frame) + " failed: " + r.error);
         FrameRecord rec{r.frame, r.state, r.weight, r.keyRmsError};
         // Point multiplication proper (what a hit delivers), even on frames the soft cache
         // sent to the full gather: the error of the model itself, not flattered by misses.

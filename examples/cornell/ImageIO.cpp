@@ -43,7 +43,8 @@ Image sideBySide(const std::vector<const Image*>& panels) {
 }
 
 Image absDifference(const Image& a, const Image& b, float scale) {
-    if (a.width != b.width || a.height != b.height) throw std::invalid_argument("absDifference: sizes differ");
+    if (a.width != b.width || a.height != b.height)
+        throw std::invalid_argument("absDifference: sizes differ");
     Image out(a.width, a.height);
     for (size_t i = 0; i < a.rgb.size(); ++i) out.rgb[i] = std::abs(a.rgb[i] - b.rgb[i]) * scale;
     return out;
@@ -56,7 +57,8 @@ void writePng(const std::string& path, const Image& image, float exposure) {
 }
 
 void writePfm(const std::string& path, const Image& image) {
-    std::string bytes = "PF\n" + std::to_string(image.width) + " " + std::to_string(image.height) + "\n-1.0\n";
+    std::string bytes =
+        "PF\n" + std::to_string(image.width) + " " + std::to_string(image.height) + "\n-1.0\n";
     const size_t rowBytes = sizeof(float) * 3 * static_cast<size_t>(image.width);
     for (int y = image.height - 1; y >= 0; --y)
         bytes.append(reinterpret_cast<const char*>(image.pixel(0, y)), rowBytes);
@@ -71,10 +73,12 @@ Image readPfm(const std::string& path) {
     double scale = 0;
     f >> magic >> w >> h >> scale;
     f.get();
-    if (magic != "PF" || w <= 0 || h <= 0 || scale >= 0) throw InputError(path + ": not a little-endian colour PFM");
+    if (magic != "PF" || w <= 0 || h <= 0 || scale >= 0)
+        throw InputError(path + ": not a little-endian colour PFM");
     Image img(w, h);
     for (int y = h - 1; y >= 0; --y)
-        f.read(reinterpret_cast<char*>(img.pixel(0, y)), static_cast<std::streamsize>(sizeof(float) * 3 * static_cast<size_t>(w)));
+        f.read(reinterpret_cast<char*>(img.pixel(0, y)),
+               static_cast<std::streamsize>(sizeof(float) * 3 * static_cast<size_t>(w)));
     if (!f) throw InputError(path + ": truncated");
     return img;
 }

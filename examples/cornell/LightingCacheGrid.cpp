@@ -60,13 +60,15 @@ LightingCacheGrid::LightingCacheGrid(const SurfaceVoxels& voxels, std::span<cons
         a.setValue(c, openvdb::Vec3s(static_cast<float>(values[3 * v]), static_cast<float>(values[3 * v + 1]),
                                      static_cast<float>(values[3 * v + 2])));
         const Vec3 n = voxels.normal[v], p = voxels.position[v];
-        an.setValue(c, openvdb::Vec3s(static_cast<float>(n.x), static_cast<float>(n.y), static_cast<float>(n.z)));
-        ap.setValue(c, openvdb::Vec3s(static_cast<float>(p.x), static_cast<float>(p.y), static_cast<float>(p.z)));
+        an.setValue(
+            c, openvdb::Vec3s(static_cast<float>(n.x), static_cast<float>(n.y), static_cast<float>(n.z)));
+        ap.setValue(
+            c, openvdb::Vec3s(static_cast<float>(p.x), static_cast<float>(p.y), static_cast<float>(p.z)));
     }
     auto& g = *impl_->indirect;
     g.insertMeta("frame", openvdb::Int32Metadata(meta.frame));
-    g.insertMeta("light_position_mm",
-                 openvdb::Vec3DMetadata(openvdb::Vec3d(meta.lightPosition.x, meta.lightPosition.y, meta.lightPosition.z)));
+    g.insertMeta("light_position_mm", openvdb::Vec3DMetadata(openvdb::Vec3d(
+                                          meta.lightPosition.x, meta.lightPosition.y, meta.lightPosition.z)));
     g.insertMeta("cache_state", openvdb::StringMetadata(meta.state));
     g.insertMeta("full_weight", openvdb::DoubleMetadata(meta.weight));
     g.insertMeta("key_rms_error", openvdb::DoubleMetadata(meta.keyRmsError));
@@ -156,14 +158,16 @@ void LightingCacheGrid::sample(std::span<const Vec3> p, std::span<const Vec3> n,
         const openvdb::Coord base(static_cast<int>(std::floor(x.x())), static_cast<int>(std::floor(x.y())),
                                   static_cast<int>(std::floor(x.z())));
         const double fx = x.x() - base.x(), fy = x.y() - base.y(), fz = x.z() - base.z();
-        const openvdb::Vec3s nn(static_cast<float>(n[i].x), static_cast<float>(n[i].y), static_cast<float>(n[i].z));
+        const openvdb::Vec3s nn(static_cast<float>(n[i].x), static_cast<float>(n[i].y),
+                                static_cast<float>(n[i].z));
         double sum[3] = {0, 0, 0}, wsum = 0;
         for (int c = 0; c < 8; ++c) {
             const openvdb::Coord q = base.offsetBy(c & 1, (c >> 1) & 1, (c >> 2) & 1);
             openvdb::Vec3s nv, v;
             if (!an.probeValue(q, nv) || nv.dot(nn) < 0.5f) continue;
             a.probeValue(q, v);
-            const double w = ((c & 1) ? fx : 1 - fx) * (((c >> 1) & 1) ? fy : 1 - fy) * (((c >> 2) & 1) ? fz : 1 - fz);
+            const double w =
+                ((c & 1) ? fx : 1 - fx) * (((c >> 1) & 1) ? fy : 1 - fy) * (((c >> 2) & 1) ? fz : 1 - fz);
             sum[0] += w * v.x();
             sum[1] += w * v.y();
             sum[2] += w * v.z();
@@ -172,7 +176,8 @@ void LightingCacheGrid::sample(std::span<const Vec3> p, std::span<const Vec3> n,
         if (wsum <= 1e-12) {
             // Nearest matching voxel within 2 voxels (thin features, stencils that only
             // touched the other side of a corner).
-            const openvdb::Coord near(static_cast<int>(std::lround(x.x())), static_cast<int>(std::lround(x.y())),
+            const openvdb::Coord near(static_cast<int>(std::lround(x.x())),
+                                      static_cast<int>(std::lround(x.y())),
                                       static_cast<int>(std::lround(x.z())));
             double best = 1e30;
             for (int dz = -2; dz <= 2; ++dz)
@@ -181,7 +186,8 @@ void LightingCacheGrid::sample(std::span<const Vec3> p, std::span<const Vec3> n,
                         const openvdb::Coord q = near.offsetBy(dx, dy, dz);
                         openvdb::Vec3s nv, v;
                         if (!an.probeValue(q, nv) || nv.dot(nn) < 0.5f) continue;
-                        const double d2 = (q.x() - x.x()) * (q.x() - x.x()) + (q.y() - x.y()) * (q.y() - x.y()) +
+                        const double d2 = (q.x() - x.x()) * (q.x() - x.x()) +
+                                          (q.y() - x.y()) * (q.y() - x.y()) +
                                           (q.z() - x.z()) * (q.z() - x.z());
                         if (d2 < best) {
                             best = d2;

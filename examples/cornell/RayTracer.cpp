@@ -76,7 +76,8 @@ Hit toHit(float tfar, unsigned geomID, unsigned primID) {
 
 }  // namespace
 
-RayTracer::RayTracer(const CornellScene& scene, TraceMode mode) : impl_(std::make_unique<Impl>()), mode_(mode) {
+RayTracer::RayTracer(const CornellScene& scene, TraceMode mode)
+    : impl_(std::make_unique<Impl>()), mode_(mode) {
     // No "threads=N" in the configuration: Debian's Embree 3 runs on oneTBB, and a thread count
     // makes it install tbb::global_control(max_allowed_parallelism, N) for the whole process while
     // the device lives. "threads=1" once did exactly that and silently ran every parallel_for and
@@ -144,7 +145,8 @@ void RayTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) const 
             packRays8(rays, first, m, p.ray, valid);
             for (size_t i = 0; i < 8; ++i) p.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
             rtcIntersect8(valid, impl_->scene, &ctx, &p);
-            for (size_t i = 0; i < m; ++i) hits[first + i] = toHit(p.ray.tfar[i], p.hit.geomID[i], p.hit.primID[i]);
+            for (size_t i = 0; i < m; ++i)
+                hits[first + i] = toHit(p.ray.tfar[i], p.hit.geomID[i], p.hit.primID[i]);
         }
     }
 }

@@ -63,7 +63,9 @@ std::vector<Image> renderWithCaches(const CornellWorld& world, const Camera& cam
                     for (int k = 0; k < 3; ++k)
                         // A PM reconstruction may undershoot a dark voxel slightly below zero; light
                         // is never negative, so the lookup is clamped (the cache keeps the raw values).
-                        px[k] += w * static_cast<float>(albedo[k] / M_PI * (direct[3 * j + k] + std::max(0.0, indirect[3 * j + k])));
+                        px[k] +=
+                            w * static_cast<float>(albedo[k] / M_PI *
+                                                   (direct[3 * j + k] + std::max(0.0, indirect[3 * j + k])));
                 }
             }
         }

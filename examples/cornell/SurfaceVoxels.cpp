@@ -66,7 +66,8 @@ std::size_t countVoxels(const std::vector<std::uint64_t>& pairs) {
 }
 
 void checkVoxelSize(double h) {
-    if (!(h > 0.05 && h < 1000)) throw std::invalid_argument("SurfaceVoxels: voxel size " + std::to_string(h) + " mm out of range");
+    if (!(h > 0.05 && h < 1000))
+        throw std::invalid_argument("SurfaceVoxels: voxel size " + std::to_string(h) + " mm out of range");
 }
 
 /// The voxels of samplePairs(scene, h).
@@ -111,7 +112,9 @@ SurfaceVoxels SurfaceVoxels::voxelize(const CornellScene& scene, double h) {
 }
 
 SurfaceVoxels SurfaceVoxels::voxelizeToCount(const CornellScene& scene, std::size_t targetCount) {
-    if (targetCount < 8) throw std::invalid_argument("SurfaceVoxels: need at least 8 points, got " + std::to_string(targetCount));
+    if (targetCount < 8)
+        throw std::invalid_argument("SurfaceVoxels: need at least 8 points, got " +
+                                    std::to_string(targetCount));
     double h = std::sqrt(scene.totalArea() / static_cast<double>(targetCount));
     for (int round = 0; round < 6; ++round) {
         std::vector<std::uint64_t> pairs = samplePairs(scene, h);

@@ -21,8 +21,8 @@ namespace pmsc::cornell {
 struct SurfaceVoxels {
     double voxelSizeMm = 0;
     std::vector<std::array<std::int32_t, 3>> ijk;  ///< active voxel coordinates
-    std::vector<Vec3> position;  ///< nearest surface point to the voxel centre (the gather point)
-    std::vector<Vec3> normal;    ///< unit normal of that surface (its lit side)
+    std::vector<Vec3> position;      ///< nearest surface point to the voxel centre (the gather point)
+    std::vector<Vec3> normal;        ///< unit normal of that surface (its lit side)
     std::vector<std::int32_t> quad;  ///< index of that surface in CornellScene::quads()
 
     std::size_t size() const { return ijk.size(); }

@@ -29,8 +29,9 @@ void FaceControlEvaluator::evaluate(Index frame, std::span<const Index> points, 
 
 std::unique_ptr<FaceControlEvaluator> makeFaceControlEvaluator(const std::string& folder) {
     const IctFace face = loadIctFace(folder);
-    return std::make_unique<FaceControlEvaluator>(std::make_shared<const FaceRig>(face),
-                                                  std::make_shared<const FaceAnimation>(FaceAnimation::generate({})));
+    return std::make_unique<FaceControlEvaluator>(
+        std::make_shared<const FaceRig>(face),
+        std::make_shared<const FaceAnimation>(FaceAnimation::generate({})));
 }
 
 CrossDemoOptions CrossDemoOptions::quickOptions() {
@@ -70,7 +71,8 @@ double percentile(std::vector<double> v, double q) {
 double maxPointDistance(const double* a, const double* b, Index points) {
     double worst = 0;
     for (Index p = 0; p < points; ++p) {
-        const double dx = a[3 * p] - b[3 * p], dy = a[3 * p + 1] - b[3 * p + 1], dz = a[3 * p + 2] - b[3 * p + 2];
+        const double dx = a[3 * p] - b[3 * p], dy = a[3 * p + 1] - b[3 * p + 1],
+                     dz = a[3 * p + 2] - b[3 * p + 2];
         worst = std::max(worst, dx * dx + dy * dy + dz * dz);
     }
     return std::sqrt(worst);
@@ -78,10 +80,10 @@ double maxPointDistance(const double* a, const double* b, Index points) {
 
 struct FrameScore {
     Index frame = 0;
-    double keyRms = 0;       // the control's key RMS
-    double bound = 0;        // the learned bound on the target's largest point error
-    double error = 0;        // the target's largest point error against the full rig
-    double controlGap = 0;   // the control face's own largest distance to the full rig
+    double keyRms = 0;      // the control's key RMS
+    double bound = 0;       // the learned bound on the target's largest point error
+    double error = 0;       // the target's largest point error against the full rig
+    double controlGap = 0;  // the control face's own largest distance to the full rig
 };
 
 nlohmann::json summarize(const std::vector<FrameScore>& s, double percent) {
@@ -95,16 +97,19 @@ nlohmann::json summarize(const std::vector<FrameScore>& s, double percent) {
         inside += f.error <= f.bound;
     }
     auto pct = [](const std::vector<double>& v) {
-        return nlohmann::json{{"p50", percentile(v, 0.5)}, {"p95", percentile(v, 0.95)}, {"p99", percentile(v, 0.99)},
+        return nlohmann::json{{"p50", percentile(v, 0.5)},
+                              {"p95", percentile(v, 0.95)},
+                              {"p99", percentile(v, 0.99)},
                               {"max", percentile(v, 1.0)}};
     };
-    return {{"frames", s.size()},
-            {"error_pct_bbox", pct(e)},
-            {"bound_pct_bbox", pct(b)},
-            {"inside_bound", inside},
-            {"inside_bound_rate", s.empty() ? 0.0 : static_cast<double>(inside) / static_cast<double>(s.size())},
-            {"key_rms", pct(k)},
-            {"control_vs_full_pct_bbox", pct(gap)}};
+    return {
+        {"frames", s.size()},
+        {"error_pct_bbox", pct(e)},
+        {"bound_pct_bbox", pct(b)},
+        {"inside_bound", inside},
+        {"inside_bound_rate", s.empty() ? 0.0 : static_cast<double>(inside) / static_cast<double>(s.size())},
+        {"key_rms", pct(k)},
+        {"control_vs_full_pct_bbox", pct(gap)}};
 }
 
 }  // namespace
@@ -115,12 +120,14 @@ nlohmann::json runCrossDemo(const CrossDemoOptions& options) {
     if (options.outDir.empty()) throw InputError("demo cross: --out is required");
     if (options.dataDir.empty()) throw InputError("demo cross: --data is required");
     if (options.sequences < 2 || options.novelSequences < 1 || options.minFrames < 8 ||
-        options.maxFrames < options.minFrames || !(options.trainingFraction > 0 && options.trainingFraction < 1) ||
-        options.basis < 1 || options.maxKeys < 68 || options.maxKeys > 170 ||
-        !(options.coverage > 0 && options.coverage < 1) || options.timingFrames < 1 || options.threads < 0) {
-        throw InputError("demo cross: options out of range (sequences >= 2, novel >= 1, 8 <= minFrames <= maxFrames, "
-                         "0 < training fraction < 1, basis >= 1, 68 <= keys <= 170, 0 < coverage < 1, timing frames >= 1, "
-                         "threads >= 0)");
+        options.maxFrames < options.minFrames ||
+        !(options.trainingFraction > 0 && options.trainingFraction < 1) || options.basis < 1 ||
+        options.maxKeys < 68 || options.maxKeys > 170 || !(options.coverage > 0 && options.coverage < 1) ||
+        options.timingFrames < 1 || options.threads < 0) {
+        throw InputError(
+            "demo cross: options out of range (sequences >= 2, novel >= 1, 8 <= minFrames <= maxFrames, "
+            "0 < training fraction < 1, basis >= 1, 68 <= keys <= 170, 0 < coverage < 1, timing frames >= 1, "
+            "threads >= 0)");
     }
     auto step = [&](std::string_view stage, double done, double total) {
         if (options.progress && !options.progress(stage, done, total)) throw Cancelled("demo cross");
@@ -145,7 +152,8 @@ nlohmann::json runCrossDemo(const CrossDemoOptions& options) {
     std::error_code ec;
     fs::create_directories(options.outDir, ec);
     if (ec || !fs::is_directory(options.outDir))
-        throw IoError(options.outDir + ": cannot create the output folder: " + (ec ? ec.message() : "not a folder"));
+        throw IoError(options.outDir +
+                      ": cannot create the output folder: " + (ec ? ec.message() : "not a folder"));
     const std::string out = options.outDir + "/";
     std::vector<Index> trainingSeqs, validationSeqs, novelSeqs;
     animation.splitOrdinary(options.trainingFraction, options.seed + 4, trainingSeqs, validationSeqs);
@@ -202,8 +210,9 @@ nlohmann::json runCrossDemo(const CrossDemoOptions& options) {
         arena.execute([&] {
             tbb::parallel_for(size_t{0}, frames.size(), [&](size_t i) {
                 const ControlVector& c = animation.frame(frames[i]);
-                std::vector<double> keys(static_cast<size_t>(3 * model.keyCount())), rec(static_cast<size_t>(3 * n)),
-                    full(static_cast<size_t>(3 * n)), ctl(static_cast<size_t>(3 * n));
+                std::vector<double> keys(static_cast<size_t>(3 * model.keyCount())),
+                    rec(static_cast<size_t>(3 * n)), full(static_cast<size_t>(3 * n)),
+                    ctl(static_cast<size_t>(3 * n));
                 rig->evaluateControl(c, cross.keyPoints(), keys.data());
                 const CrossMultiplier::Result res = cross.apply(keys.data(), rec.data());
                 rig->evaluateAll(c, full.data());
@@ -233,8 +242,8 @@ nlohmann::json runCrossDemo(const CrossDemoOptions& options) {
         Eigen::VectorXd coords(model.coordCount());
         const PointMultiplier pm(model);
         for (Index i = 0; i < timed; ++i) {
-            const ControlVector& c =
-                animation.frame(validationFrames[static_cast<size_t>(i * static_cast<Index>(validationFrames.size()) / timed)]);
+            const ControlVector& c = animation.frame(validationFrames[static_cast<size_t>(
+                i * static_cast<Index>(validationFrames.size()) / timed)]);
             double c0 = threadCpuSeconds();
             Clock::time_point w0 = Clock::now();
             rig->evaluateAll(c, full.data());
@@ -266,8 +275,9 @@ nlohmann::json runCrossDemo(const CrossDemoOptions& options) {
         csv << "set,frame,key_rms,bound_pct_bbox,error_pct_bbox,control_vs_full_pct_bbox\n";
         for (const auto* set : {&validation, &novel})
             for (const FrameScore& s : *set)
-                csv << (set == &validation ? "validation" : "novel") << ',' << s.frame << ',' << s.keyRms << ','
-                    << s.bound / percent << ',' << s.error / percent << ',' << s.controlGap / percent << '\n';
+                csv << (set == &validation ? "validation" : "novel") << ',' << s.frame << ',' << s.keyRms
+                    << ',' << s.bound / percent << ',' << s.error / percent << ',' << s.controlGap / percent
+                    << '\n';
         AtomicFile file(out + "frames.csv");
         const std::string text = csv.str();
         file.write(text.data(), text.size());

@@ -33,11 +33,11 @@ struct CrossDemoOptions {
     double trainingFraction = 0.3;
 
     // --- the cross model ---
-    long basis = 48;          ///< M of the joint subspace (as `pmsc demo face`)
-    long maxKeys = 170;       ///< K control keys, Multi-PIE 68 fiducials included
-    double coverage = 0.9;    ///< of the bound
-    long timingFrames = 40;   ///< validation frames timed one by one, full rig vs cross PM, same run
-    int threads = 0;          ///< 0 = every core
+    long basis = 48;         ///< M of the joint subspace (as `pmsc demo face`)
+    long maxKeys = 170;      ///< K control keys, Multi-PIE 68 fiducials included
+    double coverage = 0.9;   ///< of the bound
+    long timingFrames = 40;  ///< validation frames timed one by one, full rig vs cross PM, same run
+    int threads = 0;         ///< 0 = every core
     bool quick = false;
 
     std::function<bool(std::string_view, double, double)> progress;

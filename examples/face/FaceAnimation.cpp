@@ -331,7 +331,8 @@ void generateSequence(Random& rng, Index frames, const std::vector<int>& novelPo
         const double hold = rng.uniform(24, 72);
         const double start = rng.uniform(6, std::max(7.0, end - hold - 12));
         for (Index i = 0; i < count; ++i) {
-            const int c = novelPool[static_cast<size_t>(rng.integer(0, static_cast<Index>(novelPool.size()) - 1))];
+            const int c =
+                novelPool[static_cast<size_t>(rng.integer(0, static_cast<Index>(novelPool.size()) - 1))];
             if (std::find(novelUsed.begin(), novelUsed.end(), c) != novelUsed.end() ||
                 std::find(novelUsed.begin(), novelUsed.end(), mirror(c)) != novelUsed.end()) {
                 continue;
@@ -377,9 +378,11 @@ FaceAnimation FaceAnimation::generate(const FaceAnimationOptions& options) {
         throw std::invalid_argument("FaceAnimation: novel sequences need novel controls");
     }
     FaceAnimation animation;
-    if (options.mixedSequences < 0 || (options.mixedSequences > 0 && (options.mixedMinFrames < 96 ||
-                                                                     options.mixedMaxFrames < options.mixedMinFrames))) {
-        throw std::invalid_argument("FaceAnimation: mixed sequences need 96 <= mixedMinFrames <= mixedMaxFrames");
+    if (options.mixedSequences < 0 ||
+        (options.mixedSequences > 0 &&
+         (options.mixedMinFrames < 96 || options.mixedMaxFrames < options.mixedMinFrames))) {
+        throw std::invalid_argument(
+            "FaceAnimation: mixed sequences need 96 <= mixedMinFrames <= mixedMaxFrames");
     }
     if (options.mixedSequences > 0 && options.novelControls.empty()) {
         throw std::invalid_argument("FaceAnimation: mixed sequences need novel controls");

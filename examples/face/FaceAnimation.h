@@ -13,7 +13,7 @@ struct FaceSequence {
     std::string name;      ///< "seq017", "novel002"
     Index firstFrame = 0;  ///< in the whole animation
     Index frameCount = 0;
-    bool novel = false;              ///< moves controls the ordinary sequences never move
+    bool novel = false;  ///< moves controls the ordinary sequences never move
     /// A "mixed" sequence (issue 9): ordinary, with novel controls moved for a few seconds only
     /// (novel stays false: it is neither a training candidate nor part of the novel set).
     bool mixed = false;

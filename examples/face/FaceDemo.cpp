@@ -89,7 +89,8 @@ void checkOptions(const FaceDemoOptions& options) {
         options.maxFrames < options.minFrames ||
         !(options.trainingFraction > 0 && options.trainingFraction < 1) || options.basis < 1 ||
         options.maxKeys < 1 || options.maxKeys > 170 || !(options.tolerancePercent > 0) ||
-        options.timingFrames < 1 || options.threads < 0 || !(options.featherPercent >= 0 && options.featherPercent < 50) ||
+        options.timingFrames < 1 || options.threads < 0 ||
+        !(options.featherPercent >= 0 && options.featherPercent < 50) ||
         !(options.maxLocalFraction > 0 && options.maxLocalFraction <= 1) || options.mixedSequences < 0) {
         throw InputError(
             "demo face: options out of range (sequences >= 2, novel >= 1, 8 <= minFrames <= maxFrames, "

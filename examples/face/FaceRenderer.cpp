@@ -5,7 +5,6 @@
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 
-
 #include <algorithm>
 #include <cmath>
 #include <numbers>

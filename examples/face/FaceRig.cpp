@@ -365,13 +365,15 @@ void FaceRig::evaluateAll(const ControlVector& controls, double* out) const {
     run(*fullPlan_, prepare(controls), all, out);
 }
 
-void FaceRig::evaluateControl(const ControlVector& controls, std::span<const Index> points, double* out) const {
+void FaceRig::evaluateControl(const ControlVector& controls, std::span<const Index> points,
+                              double* out) const {
     const Pose pose = prepareControl(controls);  // the control does not use the flesh's pose
     const Index n = pointCount();
     for (size_t i = 0; i < points.size(); ++i) {
         const Index p = points[i];
         if (p < 0 || p >= n)
-            throw std::out_of_range("face rig: point " + std::to_string(p) + " outside [0, " + std::to_string(n) + ")");
+            throw std::out_of_range("face rig: point " + std::to_string(p) + " outside [0, " +
+                                    std::to_string(n) + ")");
         const Eigen::Vector3d q = stageA(p, pose);
         out[3 * i] = q[0];
         out[3 * i + 1] = q[1];

@@ -56,10 +56,11 @@ public:
     explicit Probe(const Model& model) : model_(model), pm_(model) {}
     Score score(const double* full) const {
         const Index n = model_.points, k = model_.keyCount();
-        std::vector<double> keys(static_cast<size_t>(3 * k)), coords(static_cast<size_t>(model_.coordCount())),
-            rec(static_cast<size_t>(3 * n));
+        std::vector<double> keys(static_cast<size_t>(3 * k)),
+            coords(static_cast<size_t>(model_.coordCount())), rec(static_cast<size_t>(3 * n));
         for (Index i = 0; i < k; ++i)
-            for (int c = 0; c < 3; ++c) keys[static_cast<size_t>(3 * i + c)] = full[3 * model_.keyPoints[static_cast<size_t>(i)] + c];
+            for (int c = 0; c < 3; ++c)
+                keys[static_cast<size_t>(3 * i + c)] = full[3 * model_.keyPoints[static_cast<size_t>(i)] + c];
         pm_.project(keys.data(), coords.data());
         Score s;
         s.keyRms = pm_.keyRmsError(keys.data(), coords.data());
@@ -136,7 +137,8 @@ nlohmann::json summarize(const std::vector<Score>& scores, const Model& model, d
             {"soft_max_error_pct_bbox", o.softMax / percent},
             {"key_rms_mean", meanKey},
             {"key_rms_max", e.empty() ? 0.0 : *std::max_element(e.begin(), e.end())},
-            {"pm_max_error_pct_bbox", {{"p50", percentile(big, 0.5)}, {"p95", percentile(big, 0.95)}, {"max", percentile(big, 1.0)}}}};
+            {"pm_max_error_pct_bbox",
+             {{"p50", percentile(big, 0.5)}, {"p95", percentile(big, 0.95)}, {"max", percentile(big, 1.0)}}}};
 }
 
 }  // namespace
@@ -147,12 +149,15 @@ nlohmann::json runLearnDemo(const LearnDemoOptions& options) {
     if (options.outDir.empty()) throw InputError("demo learn: --out is required");
     if (options.dataDir.empty()) throw InputError("demo learn: --data is required");
     if (options.sequences < 2 || options.novelSequences < 2 || options.minFrames < 8 ||
-        options.maxFrames < options.minFrames || !(options.trainingFraction > 0 && options.trainingFraction < 1) ||
-        options.basis < 1 || options.maxKeys < 1 || options.maxKeys > 170 || !(options.tolerancePercent > 0) ||
-        options.learnRank < options.basis || !(options.coverage > 0 && options.coverage < 1) || options.threads < 0) {
-        throw InputError("demo learn: options out of range (sequences >= 2, novel >= 2, 8 <= minFrames <= maxFrames, "
-                         "0 < training fraction < 1, 1 <= keys <= 170, tolerance > 0, learn rank >= basis, "
-                         "0 < coverage < 1, threads >= 0)");
+        options.maxFrames < options.minFrames ||
+        !(options.trainingFraction > 0 && options.trainingFraction < 1) || options.basis < 1 ||
+        options.maxKeys < 1 || options.maxKeys > 170 || !(options.tolerancePercent > 0) ||
+        options.learnRank < options.basis || !(options.coverage > 0 && options.coverage < 1) ||
+        options.threads < 0) {
+        throw InputError(
+            "demo learn: options out of range (sequences >= 2, novel >= 2, 8 <= minFrames <= maxFrames, "
+            "0 < training fraction < 1, 1 <= keys <= 170, tolerance > 0, learn rank >= basis, "
+            "0 < coverage < 1, threads >= 0)");
     }
     auto step = [&](std::string_view stage, double done, double total) {
         if (options.progress && !options.progress(stage, done, total)) throw Cancelled("demo learn");
@@ -180,7 +185,8 @@ nlohmann::json runLearnDemo(const LearnDemoOptions& options) {
     std::error_code ec;
     fs::create_directories(options.outDir, ec);
     if (ec || !fs::is_directory(options.outDir))
-        throw IoError(options.outDir + ": cannot create the output folder: " + (ec ? ec.message() : "not a folder"));
+        throw IoError(options.outDir +
+                      ": cannot create the output folder: " + (ec ? ec.message() : "not a folder"));
     const std::string out = options.outDir + "/";
 
     std::vector<Index> trainingSeqs, validationSeqs, day1Seqs, day2Seqs;
@@ -248,7 +254,8 @@ nlohmann::json runLearnDemo(const LearnDemoOptions& options) {
             std::vector<double> full(static_cast<size_t>(3 * n));
             evaluator.evaluateAll(day1Frames[i], full.data());
             day1Scores[i] = day1Probe.score(full.data());
-            if (day1Policy.decide(day1Scores[i].keyRms).state != CacheState::Hit) keptValues[i] = std::move(full);
+            if (day1Policy.decide(day1Scores[i].keyRms).state != CacheState::Hit)
+                keptValues[i] = std::move(full);
         });
     });
     const std::string keptPath = out + "day1-misses.npy";
@@ -337,17 +344,21 @@ nlohmann::json runLearnDemo(const LearnDemoOptions& options) {
     for (const auto* set : {&day1Seqs, &day2Seqs})
         for (Index s : *set) {
             nlohmann::json controls = nlohmann::json::array();
-            for (int c : animation->sequences()[s].novelControls) controls.push_back(std::string(controlName(c)));
-            novel.push_back({{"sequence", animation->sequences()[s].name}, {"day", set == &day1Seqs ? 1 : 2},
-                             {"frames", animation->sequences()[s].frameCount}, {"novel_controls", controls}});
+            for (int c : animation->sequences()[s].novelControls)
+                controls.push_back(std::string(controlName(c)));
+            novel.push_back({{"sequence", animation->sequences()[s].name},
+                             {"day", set == &day1Seqs ? 1 : 2},
+                             {"frames", animation->sequences()[s].frameCount},
+                             {"novel_controls", controls}});
         }
     report["novel_sequences"] = novel;
     auto modelJson = [&](const Model& m) {
-        return nlohmann::json{{"basis", m.basisSize()},   {"key_points", m.keyCount()}, {"train_frames", m.trainFrames},
-                              {"eps_min", m.epsMin},      {"eps_max", m.epsMax},
-                              {"energy_captured", m.energyCaptured()}};
+        return nlohmann::json{{"basis", m.basisSize()},        {"key_points", m.keyCount()},
+                              {"train_frames", m.trainFrames}, {"eps_min", m.epsMin},
+                              {"eps_max", m.epsMax},           {"energy_captured", m.energyCaptured()}};
     };
-    report["models"] = {{"day1", modelJson(day1)}, {"day2_learned", modelJson(day2)}, {"scratch", modelJson(scratch)}};
+    report["models"] = {
+        {"day1", modelJson(day1)}, {"day2_learned", modelJson(day2)}, {"scratch", modelJson(scratch)}};
     report["day1"] = summarize(day1Scores, day1, percent);
     report["day2"] = {{"day1_model", summarize(day2Scores.day1, day1, percent)},
                       {"learned_model", summarize(day2Scores.day2, day2, percent)},
@@ -358,17 +369,22 @@ nlohmann::json runLearnDemo(const LearnDemoOptions& options) {
     const Index commonM = std::min(day2.basisSize(), scratch.basisSize());
     report["learn_vs_scratch"] = {
         {"largest_principal_angle_deg",
-         largestPrincipalAngle(scratch.basis.leftCols(commonM), day2.basis.leftCols(commonM)) * 180.0 / 3.141592653589793},
-        {"keys_shared", [&] {
+         largestPrincipalAngle(scratch.basis.leftCols(commonM), day2.basis.leftCols(commonM)) * 180.0 /
+             3.141592653589793},
+        {"keys_shared",
+         [&] {
              Index shared = 0;
              for (Index k : day2.keyPoints)
-                 shared += std::find(scratch.keyPoints.begin(), scratch.keyPoints.end(), k) != scratch.keyPoints.end();
+                 shared += std::find(scratch.keyPoints.begin(), scratch.keyPoints.end(), k) !=
+                           scratch.keyPoints.end();
              return shared;
          }()},
         {"learn_seconds", learnSeconds},
         {"scratch_train_seconds", scratchSeconds},
-        {"learn_stage_seconds", {{"subspace", learnReport.secondsSubspace}, {"keys", learnReport.secondsKeys},
-                                 {"calibration", learnReport.secondsCalibration}}},
+        {"learn_stage_seconds",
+         {{"subspace", learnReport.secondsSubspace},
+          {"keys", learnReport.secondsKeys},
+          {"calibration", learnReport.secondsCalibration}}},
         {"state_rank", learnReport.rankAfter},
         {"state_tail_norm", learnReport.tailNorm},
         {"calibration_ratio_new_frames", learnReport.calibrationRatioNew},
@@ -381,21 +397,25 @@ nlohmann::json runLearnDemo(const LearnDemoOptions& options) {
         const double count = static_cast<double>(scores.size());
         auto rule = [&](const CalibrationStats& c) {
             const Outcome o = outcome(scores, c.epsMin, c.epsMax, tolerance);
-            nlohmann::json j = {{"eps_min", c.epsMin},
-                                {"ratio", c.ratio},
-                                {"hits", o.hits},
-                                {"hit_rate", static_cast<double>(o.hits) / count},
-                                {"share_of_best", bestHits > 0 ? static_cast<double>(o.hits) / static_cast<double>(bestHits) : 0.0},
-                                {"frames_over_tolerance", o.overTolerance},
-                                {"soft_max_error_pct_bbox", o.softMax / percent}};
+            nlohmann::json j = {
+                {"eps_min", c.epsMin},
+                {"ratio", c.ratio},
+                {"hits", o.hits},
+                {"hit_rate", static_cast<double>(o.hits) / count},
+                {"share_of_best",
+                 bestHits > 0 ? static_cast<double>(o.hits) / static_cast<double>(bestHits) : 0.0},
+                {"frames_over_tolerance", o.overTolerance},
+                {"soft_max_error_pct_bbox", o.softMax / percent}};
             if (c.rule == CalibrationRule::Conformal) j["coverage"] = c.coverage;
             return j;
         };
         nlohmann::json conformal = nlohmann::json::array();
         for (const auto& c : conformalRules) conformal.push_back(rule(c));
         return nlohmann::json{{"frames", scores.size()},
-                              {"best_single_threshold", {{"threshold", threshold}, {"hits", bestHits},
-                                                         {"hit_rate", static_cast<double>(bestHits) / count}}},
+                              {"best_single_threshold",
+                               {{"threshold", threshold},
+                                {"hits", bestHits},
+                                {"hit_rate", static_cast<double>(bestHits) / count}}},
                               {"max_rule", rule(oldRule)},
                               {"conformal_rule", conformal}};
     };
@@ -403,7 +423,8 @@ nlohmann::json runLearnDemo(const LearnDemoOptions& options) {
                              {"validation", compare(validation.day1)},
                              {"day1_shot", compare(day1Scores)},
                              {"day2_shot", compare(day2Scores.day1)}};
-    report["day1"]["frames_over_tolerance"] = outcome(day1Scores, day1.epsMin, day1.epsMax, tolerance).overTolerance;
+    report["day1"]["frames_over_tolerance"] =
+        outcome(day1Scores, day1.epsMin, day1.epsMax, tolerance).overTolerance;
     report["day2"]["learned_model"]["frames_over_tolerance"] =
         outcome(day2Scores.day2, day2.epsMin, day2.epsMax, tolerance).overTolerance;
     report["validation"]["learned_model"]["frames_over_tolerance"] =
@@ -413,7 +434,8 @@ nlohmann::json runLearnDemo(const LearnDemoOptions& options) {
 
     // frames.csv: one row per frame of day 1, day 2 and validation.
     std::ostringstream csv;
-    csv << "set,frame,day1_key_rms,day1_pm_max_pct,day2_key_rms,day2_pm_max_pct,scratch_key_rms,scratch_pm_max_pct\n";
+    csv << "set,frame,day1_key_rms,day1_pm_max_pct,day2_key_rms,day2_pm_max_pct,scratch_key_rms,scratch_pm_"
+           "max_pct\n";
     char line[256];
     for (size_t i = 0; i < day1Frames.size(); ++i) {
         std::snprintf(line, sizeof line, "day1,%ld,%.6g,%.6g,,,,\n", static_cast<long>(day1Frames[i]),
@@ -423,8 +445,9 @@ nlohmann::json runLearnDemo(const LearnDemoOptions& options) {
     auto rows = [&](const char* name, const std::vector<Index>& frames, const Three& s) {
         for (size_t i = 0; i < frames.size(); ++i) {
             std::snprintf(line, sizeof line, "%s,%ld,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g\n", name,
-                          static_cast<long>(frames[i]), s.day1[i].keyRms, s.day1[i].pmMax / percent, s.day2[i].keyRms,
-                          s.day2[i].pmMax / percent, s.scratch[i].keyRms, s.scratch[i].pmMax / percent);
+                          static_cast<long>(frames[i]), s.day1[i].keyRms, s.day1[i].pmMax / percent,
+                          s.day2[i].keyRms, s.day2[i].pmMax / percent, s.scratch[i].keyRms,
+                          s.scratch[i].pmMax / percent);
             csv << line;
         }
     };

@@ -34,7 +34,7 @@ struct LearnDemoOptions {
     /// default: day 1's shot moves controls training never saw, whose error ratios lie beyond any
     /// quantile of the held-out training frames, and the loop must keep every frame under T.
     bool conformal = false;
-    double coverage = 0.9;          ///< of the conformal rule, when chosen
+    double coverage = 0.9;  ///< of the conformal rule, when chosen
     int threads = 0;
     bool quick = false;
 

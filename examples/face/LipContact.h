@@ -72,17 +72,15 @@ public:
     Eigen::Vector3d apply(Index v, const Eigen::Vector3d& x, double lipStick, const Posed& posed) const;
 
     /// The stickiness of zone vertex v in [0, 1] (1 mid-mouth, 0 at the corners).
-    double stickiness(Index v) const {
-        return stickiness_[static_cast<size_t>(zone_.index(v))];
-    }
+    double stickiness(Index v) const { return stickiness_[static_cast<size_t>(zone_.index(v))]; }
 
 private:
     const std::vector<std::array<std::int32_t, 3>>& triangles_;
-    std::vector<std::int8_t> side_;        // per vertex: 0 upper lip, 1 lower lip, -1 outside the mouth box
+    std::vector<std::int8_t> side_;  // per vertex: 0 upper lip, 1 lower lip, -1 outside the mouth box
     ContactZone zone_;
     std::vector<double> stickiness_;  // per zone vertex
     std::vector<double> allowance_;   // per zone vertex: min(0, signed distance at rest)
-    double orientation_ = 1.0;  // +1 if triangle winding gives outward normals, else -1
+    double orientation_ = 1.0;        // +1 if triangle winding gives outward normals, else -1
 };
 
 /// Closest point of triangle (a, b, c) to p (Ericson, Real-Time Collision Detection, 5.1.5).

@@ -4,12 +4,12 @@
 #include "examples/volume/DensityVolumeImpl.h"
 #include "pmsc/Errors.h"
 
-#include <assimp/Importer.hpp>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 #include <openvdb/tools/LevelSetUtil.h>
 #include <openvdb/tools/MeshToVolume.h>
 #include <openvdb/tools/Prune.h>
+#include <assimp/Importer.hpp>
 
 #include <cmath>
 #include <filesystem>
@@ -21,21 +21,24 @@ namespace {
 /// Lattice value in [-1, 1] (integer hash of the cell and the seed).
 double lattice(std::int64_t x, std::int64_t y, std::int64_t z, std::uint32_t seed) {
     using cornell::hash32;
-    const std::uint32_t h = hash32(static_cast<std::uint32_t>(x) ^ hash32(static_cast<std::uint32_t>(y) ^
-                                                                          hash32(static_cast<std::uint32_t>(z) ^ seed)));
+    const std::uint32_t h =
+        hash32(static_cast<std::uint32_t>(x) ^
+               hash32(static_cast<std::uint32_t>(y) ^ hash32(static_cast<std::uint32_t>(z) ^ seed)));
     return h * (2.0 / 4294967296.0) - 1.0;
 }
 
 /// Value noise: the lattice values interpolated with a quintic fade, in [-1, 1].
 double valueNoise(double x, double y, double z, std::uint32_t seed) {
     const double fx = std::floor(x), fy = std::floor(y), fz = std::floor(z);
-    const auto ix = static_cast<std::int64_t>(fx), iy = static_cast<std::int64_t>(fy), iz = static_cast<std::int64_t>(fz);
+    const auto ix = static_cast<std::int64_t>(fx), iy = static_cast<std::int64_t>(fy),
+               iz = static_cast<std::int64_t>(fz);
     auto fade = [](double t) { return t * t * t * (t * (t * 6 - 15) + 10); };
     const double u = fade(x - fx), v = fade(y - fy), w = fade(z - fz);
     double r = 0;
     for (int c = 0; c < 8; ++c) {
         const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-        r += (dx ? u : 1 - u) * (dy ? v : 1 - v) * (dz ? w : 1 - w) * lattice(ix + dx, iy + dy, iz + dz, seed);
+        r +=
+            (dx ? u : 1 - u) * (dy ? v : 1 - v) * (dz ? w : 1 - w) * lattice(ix + dx, iy + dy, iz + dz, seed);
     }
     return r;
 }
@@ -65,7 +68,8 @@ Mesh readMesh(const std::string& path, double sizeMetres) {
     Assimp::Importer importer;
     const aiScene* scene = importer.ReadFile(
         path, aiProcess_Triangulate | aiProcess_PreTransformVertices | aiProcess_JoinIdenticalVertices);
-    if (!scene || !scene->mRootNode) throw InputError(where + ": Assimp cannot read it: " + importer.GetErrorString());
+    if (!scene || !scene->mRootNode)
+        throw InputError(where + ": Assimp cannot read it: " + importer.GetErrorString());
     Mesh m;
     for (unsigned i = 0; i < scene->mNumMeshes; ++i) {
         const aiMesh* mesh = scene->mMeshes[i];
@@ -74,7 +78,8 @@ Mesh readMesh(const std::string& path, double sizeMetres) {
             m.points.emplace_back(mesh->mVertices[v].x, mesh->mVertices[v].y, mesh->mVertices[v].z);
         for (unsigned f = 0; f < mesh->mNumFaces; ++f)
             if (mesh->mFaces[f].mNumIndices == 3)
-                m.triangles.emplace_back(base + mesh->mFaces[f].mIndices[0], base + mesh->mFaces[f].mIndices[1],
+                m.triangles.emplace_back(base + mesh->mFaces[f].mIndices[0],
+                                         base + mesh->mFaces[f].mIndices[1],
                                          base + mesh->mFaces[f].mIndices[2]);
     }
     if (m.triangles.empty()) throw InputError(where + ": has no triangles");
@@ -126,7 +131,8 @@ DensityVolume DensityVolume::fromMesh(const std::string& meshPath, const FogOpti
     for (auto leaf = grid->tree().beginLeaf(); leaf; ++leaf) {
         for (auto v = leaf->beginValueOn(); v; ++v) {
             const openvdb::Vec3d w = grid->indexToWorld(v.getCoord());
-            const double n = std::clamp(0.5 + 0.5 * fractalNoise(w.x() * f, w.y() * f, w.z() * f, o.noiseSeed), 0.0, 1.0);
+            const double n =
+                std::clamp(0.5 + 0.5 * fractalNoise(w.x() * f, w.y() * f, w.z() * f, o.noiseSeed), 0.0, 1.0);
             const float d = static_cast<float>(*v * (0.15 + 0.85 * n * n));
             if (d <= 1e-4f) {
                 v.setValue(0.0f);

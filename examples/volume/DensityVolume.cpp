@@ -25,7 +25,8 @@ DensityVolume makeDensityVolume(std::shared_ptr<DensityVolume::Impl> impl) {
 }
 
 void DensityVolume::Impl::index(const std::string& where) {
-    if (!grid->hasUniformVoxels()) throw InputError(where + ": the grid's voxels are not cubes (non-uniform scale)");
+    if (!grid->hasUniformVoxels())
+        throw InputError(where + ": the grid's voxels are not cubes (non-uniform scale)");
     grid->tree().voxelizeActiveTiles();
     if (grid->tree().activeVoxelCount() == 0) throw InputError(where + ": the grid has no active voxels");
     positions.clear();
@@ -64,12 +65,14 @@ DensityVolume DensityVolume::read(const std::string& path, const std::string& gr
         if (!gridName.empty()) {
             if (!file.hasGrid(gridName)) {
                 std::string names;
-                for (auto it = file.beginName(); it != file.endName(); ++it) names += (names.empty() ? "" : ", ") + *it;
+                for (auto it = file.beginName(); it != file.endName(); ++it)
+                    names += (names.empty() ? "" : ", ") + *it;
                 throw InputError(where + ": no grid named '" + gridName + "' (grids: " + names + ")");
             }
             base = file.readGrid(gridName);
             if (!openvdb::gridPtrCast<openvdb::FloatGrid>(base))
-                throw InputError(where + ": grid '" + gridName + "' is a " + base->valueType() + " grid, not a float grid");
+                throw InputError(where + ": grid '" + gridName + "' is a " + base->valueType() +
+                                 " grid, not a float grid");
         } else {
             if (file.hasGrid("density")) base = file.readGrid("density");
             if (!base || !openvdb::gridPtrCast<openvdb::FloatGrid>(base)) {
@@ -165,7 +168,8 @@ double DensityVolume::Tracer::density(Vec3 p) {
     return openvdb::tools::BoxSampler::sample(m.acc, m.grid.worldToIndex(openvdb::Vec3d(p.x, p.y, p.z)));
 }
 
-void DensityVolume::Tracer::spans(Vec3 origin, Vec3 dir, double tMax, std::vector<std::pair<double, double>>& out) {
+void DensityVolume::Tracer::spans(Vec3 origin, Vec3 dir, double tMax,
+                                  std::vector<std::pair<double, double>>& out) {
     auto& m = *impl_;
     out.clear();
     const openvdb::Vec3d a = m.grid.worldToIndex(openvdb::Vec3d(origin.x, origin.y, origin.z));
@@ -194,7 +198,8 @@ ScatterCache::~ScatterCache() = default;
 ScatterCache::ScatterCache(ScatterCache&&) noexcept = default;
 ScatterCache& ScatterCache::operator=(ScatterCache&&) noexcept = default;
 
-ScatterCache::ScatterCache(const DensityVolume& density, std::span<const double> values, const ScatterCacheInfo& info)
+ScatterCache::ScatterCache(const DensityVolume& density, std::span<const double> values,
+                           const ScatterCacheInfo& info)
     : ScatterCache() {
     const auto& d = density.impl();
     if (values.size() != 3 * d.positions.size())
@@ -202,11 +207,13 @@ ScatterCache::ScatterCache(const DensityVolume& density, std::span<const double>
                                     std::to_string(d.positions.size()) + " voxels x 3 channels");
     // Same topology as the density (active voxels are the cache's points), values in point order:
     // the leaves of a topology copy are visited in the same order as the density's.
-    auto tree = std::make_shared<openvdb::Vec3STree>(d.grid->tree(), openvdb::Vec3s(0.0f), openvdb::TopologyCopy());
+    auto tree =
+        std::make_shared<openvdb::Vec3STree>(d.grid->tree(), openvdb::Vec3s(0.0f), openvdb::TopologyCopy());
     std::size_t i = 0;
     for (auto leaf = tree->beginLeaf(); leaf; ++leaf)
         for (auto v = leaf->beginValueOn(); v; ++v, ++i)
-            v.setValue(openvdb::Vec3s(static_cast<float>(values[3 * i]), static_cast<float>(values[3 * i + 1]),
+            v.setValue(openvdb::Vec3s(static_cast<float>(values[3 * i]),
+                                      static_cast<float>(values[3 * i + 1]),
                                       static_cast<float>(values[3 * i + 2])));
     auto g = openvdb::Vec3SGrid::create(tree);
     g->setTransform(d.grid->transform().copy());
@@ -214,15 +221,18 @@ ScatterCache::ScatterCache(const DensityVolume& density, std::span<const double>
     g->setGridClass(openvdb::GRID_UNKNOWN);
     g->setVectorType(openvdb::VEC_INVARIANT);
     g->insertMeta("frame", openvdb::Int32Metadata(info.frame));
-    g->insertMeta("light_position", openvdb::Vec3DMetadata(openvdb::Vec3d(info.lightPosition.x, info.lightPosition.y,
-                                                                          info.lightPosition.z)));
+    g->insertMeta("light_position", openvdb::Vec3DMetadata(openvdb::Vec3d(
+                                        info.lightPosition.x, info.lightPosition.y, info.lightPosition.z)));
     g->insertMeta("light_kelvin", openvdb::DoubleMetadata(info.lightKelvin));
     g->insertMeta("cache_state", openvdb::StringMetadata(info.state));
     g->insertMeta("sigma_t_per_density", openvdb::DoubleMetadata(info.sigmaT));
-    g->insertMeta("albedo", openvdb::Vec3DMetadata(openvdb::Vec3d(info.albedo[0], info.albedo[1], info.albedo[2])));
+    g->insertMeta("albedo",
+                  openvdb::Vec3DMetadata(openvdb::Vec3d(info.albedo[0], info.albedo[1], info.albedo[2])));
     g->insertMeta("density_grid", openvdb::StringMetadata(d.grid->getName()));
-    g->insertMeta("quantity", openvdb::StringMetadata(
-                                  "in-scattered radiance RGB, isotropic phase; emission = density * sigma_t * albedo * inscatter"));
+    g->insertMeta(
+        "quantity",
+        openvdb::StringMetadata(
+            "in-scattered radiance RGB, isotropic phase; emission = density * sigma_t * albedo * inscatter"));
     impl_->grid = g;
 }
 
@@ -262,7 +272,9 @@ ScatterCache ScatterCache::read(const std::string& path) {
     return out;
 }
 
-std::int64_t ScatterCache::activeVoxelCount() const { return static_cast<std::int64_t>(impl_->grid->activeVoxelCount()); }
+std::int64_t ScatterCache::activeVoxelCount() const {
+    return static_cast<std::int64_t>(impl_->grid->activeVoxelCount());
+}
 std::uint64_t ScatterCache::memoryBytes() const { return impl_->grid->memUsage(); }
 
 ScatterCacheInfo ScatterCache::info() const {
@@ -278,7 +290,8 @@ ScatterCacheInfo ScatterCache::info() const {
         const auto a = g.metaValue<openvdb::Vec3d>("albedo");
         i.albedo = {a.x(), a.y(), a.z()};
     } catch (const std::exception& e) {
-        throw InputError(std::string("volume lighting cache: metadata missing or of the wrong type: ") + e.what());
+        throw InputError(std::string("volume lighting cache: metadata missing or of the wrong type: ") +
+                         e.what());
     }
     return i;
 }
@@ -289,7 +302,8 @@ struct ScatterCache::Sampler::Impl {
     openvdb::tree::ValueAccessor<const openvdb::Vec3STree, false> acc;
 };
 
-ScatterCache::Sampler::Sampler(const ScatterCache& cache) : impl_(std::make_unique<Impl>(*cache.impl_->grid)) {}
+ScatterCache::Sampler::Sampler(const ScatterCache& cache)
+    : impl_(std::make_unique<Impl>(*cache.impl_->grid)) {}
 ScatterCache::Sampler::~Sampler() = default;
 
 Rgb ScatterCache::Sampler::at(Vec3 p) {
@@ -302,7 +316,8 @@ Rgb ScatterCache::Sampler::at(Vec3 p) {
     for (int c = 0; c < 8; ++c) {
         openvdb::Vec3s v;
         if (!m.acc.probeValue(base.offsetBy(c & 1, (c >> 1) & 1, (c >> 2) & 1), v)) continue;
-        const double w = ((c & 1) ? fx : 1 - fx) * (((c >> 1) & 1) ? fy : 1 - fy) * (((c >> 2) & 1) ? fz : 1 - fz);
+        const double w =
+            ((c & 1) ? fx : 1 - fx) * (((c >> 1) & 1) ? fy : 1 - fy) * (((c >> 2) & 1) ? fz : 1 - fz);
         sum[0] += w * v.x();
         sum[1] += w * v.y();
         sum[2] += w * v.z();

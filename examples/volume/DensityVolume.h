@@ -53,11 +53,11 @@ public:
 
     std::size_t voxelCount() const;
     const std::vector<Vec3>& voxelPositions() const;  ///< world space, point order
-    double voxelSize() const;                          ///< world units
+    double voxelSize() const;                         ///< world units
     std::string gridName() const;
-    std::pair<Vec3, Vec3> worldBounds() const;          ///< of the active voxels' centres
+    std::pair<Vec3, Vec3> worldBounds() const;  ///< of the active voxels' centres
     double maxDensity() const;
-    double densityAt(std::size_t point) const;          ///< the stored value of active voxel `point`
+    double densityAt(std::size_t point) const;  ///< the stored value of active voxel `point`
     /// Bytes of the density tree (OpenVDB's memUsage).
     std::uint64_t memoryBytes() const;
 

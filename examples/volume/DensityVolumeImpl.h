@@ -15,8 +15,8 @@ using Intersector = openvdb::tools::VolumeRayIntersector<openvdb::FloatGrid, 0>;
 
 struct DensityVolume::Impl {
     openvdb::FloatGrid::Ptr grid;
-    std::vector<Vec3> positions;  // world centres of the active voxels, point order
-    std::vector<float> values;    // their densities
+    std::vector<Vec3> positions;          // world centres of the active voxels, point order
+    std::vector<float> values;            // their densities
     std::unique_ptr<Intersector> master;  // owns the dilated topology; Tracers copy it shallowly
     double maxDensity = 0;
     Vec3 lo, hi;

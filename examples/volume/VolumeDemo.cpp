@@ -129,10 +129,10 @@ VolumeDemoOptions VolumeDemoOptions::quickOptions() {
 nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
     const auto start = Clock::now();
     if (o.outDir.empty()) throw InputError("demo volume: --out DIR is required");
-    if (o.basis < 1 || o.keys < 1 || o.gridKeys < 0 || o.gridKeys > o.keys || o.betweenLights < 1 || o.pathFrames < 1 ||
-        o.pathFullEvery < 1 || o.referenceMultiplier < 1 || o.referencePoints < 1 || o.referenceFrames < 1 ||
-        o.imageSize < 8 || o.renderFrames < 0 || o.threads < 0 || !(o.toleranceFraction > 0) || o.rig.azimuths < 1 ||
-        o.rig.elevations.empty())
+    if (o.basis < 1 || o.keys < 1 || o.gridKeys < 0 || o.gridKeys > o.keys || o.betweenLights < 1 ||
+        o.pathFrames < 1 || o.pathFullEvery < 1 || o.referenceMultiplier < 1 || o.referencePoints < 1 ||
+        o.referenceFrames < 1 || o.imageSize < 8 || o.renderFrames < 0 || o.threads < 0 ||
+        !(o.toleranceFraction > 0) || o.rig.azimuths < 1 || o.rig.elevations.empty())
         throw InputError("demo volume: an option is out of range");
     {
         std::error_code ec;
@@ -171,7 +171,8 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
         progress("training frames", static_cast<double>(f), static_cast<double>(trainFrames));
         const auto& l = trainEval.lights();
         const auto same = [&](const VolumeLight& a, const VolumeLight& b) {
-            return a.position.x == b.position.x && a.position.y == b.position.y && a.position.z == b.position.z;
+            return a.position.x == b.position.x && a.position.y == b.position.y &&
+                   a.position.z == b.position.z;
         };
         if (f > 0 && same(l[static_cast<std::size_t>(f - 1)], l[static_cast<std::size_t>(f)])) {
             std::copy(q.frame(f - 1), q.frame(f - 1) + 3 * n, q.frame(f));
@@ -237,7 +238,8 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
     t = Clock::now();
     Index done = 0;
     for (Index f : fullFrames) {
-        progress("validation full calculations", static_cast<double>(done++), static_cast<double>(fullFrames.size()));
+        progress("validation full calculations", static_cast<double>(done++),
+                 static_cast<double>(fullFrames.size()));
         auto& v = full[f];
         v.resize(static_cast<std::size_t>(3 * n));
         arena.execute([&] { valEval.evaluateAll(f, v.data()); });
@@ -262,7 +264,8 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
     eopt.threads = threads;
     eopt.keepPointMultiplication = true;
     eopt.progress = [&](const engine::Progress& p) {
-        progress("validation through the engine", static_cast<double>(p.framesDone), static_cast<double>(p.framesTotal));
+        progress("validation through the engine", static_cast<double>(p.framesDone),
+                 static_cast<double>(p.framesTotal));
     };
     engine::Engine eng(model, valEval, eopt);
     const engine::RunStats stats = eng.run(engine::FrameRange{0, testFrames, 1}, sink);
@@ -285,12 +288,14 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
         std::vector<double> ref(3 * subset.size());
         arena.execute([&] {
             tbb::parallel_for(tbb::blocked_range<std::size_t>(0, subset.size(), 16), [&](const auto& r) {
-                refEval.evaluate(f, std::span<const Index>(subset.data() + r.begin(), r.size()), ref.data() + 3 * r.begin());
+                refEval.evaluate(f, std::span<const Index>(subset.data() + r.begin(), r.size()),
+                                 ref.data() + 3 * r.begin());
             });
         });
         std::vector<double> fullAt(3 * subset.size());
         for (std::size_t i = 0; i < subset.size(); ++i)
-            for (int c = 0; c < 3; ++c) fullAt[3 * i + c] = full[f][static_cast<std::size_t>(3 * subset[i] + c)];
+            for (int c = 0; c < 3; ++c)
+                fullAt[3 * i + c] = full[f][static_cast<std::size_t>(3 * subset[i] + c)];
         refFull.add(fullAt.data(), ref.data(), ref.size());
         refPm.add(sink.pmAtSubset[f].data(), ref.data(), ref.size());
         if (f == 0) {
@@ -305,7 +310,8 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
             std::vector<double> fine(3 * subset.size());
             arena.execute([&] {
                 tbb::parallel_for(tbb::blocked_range<std::size_t>(0, subset.size(), 16), [&](const auto& r) {
-                    fineEval.evaluate(0, std::span<const Index>(subset.data() + r.begin(), r.size()), fine.data() + 3 * r.begin());
+                    fineEval.evaluate(0, std::span<const Index>(subset.data() + r.begin(), r.size()),
+                                      fine.data() + 3 * r.begin());
                 });
             });
             refSelf.add(ref.data(), fine.data(), fine.size());
@@ -321,8 +327,10 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
     Index rendered = 0;
     for (Index f : renderFrames) {
         const Index pathFrame = f - between;
-        const auto rec = std::find_if(sink.records.begin(), sink.records.end(), [&](const auto& r) { return r.frame == f; });
-        const ScatterCache pmCache(world->density, sink.soft[f], valEval.info(f, std::string(toString(rec->state))));
+        const auto rec = std::find_if(sink.records.begin(), sink.records.end(),
+                                      [&](const auto& r) { return r.frame == f; });
+        const ScatterCache pmCache(world->density, sink.soft[f],
+                                   valEval.info(f, std::string(toString(rec->state))));
         const ScatterCache fullCache(world->density, full[f], valEval.info(f, "full"));
         cacheBytes = pmCache.memoryBytes();
         const std::string tag = frameTag(pathFrame);
@@ -333,7 +341,8 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
         }
         const double camT = o.pathFrames > 1 ? static_cast<double>(pathFrame) / (o.pathFrames - 1) : 0.0;
         for (const cornell::Camera& cam : volumeCameras(*world, camT)) {
-            progress("renders", static_cast<double>(rendered++), static_cast<double>(renderFrames.size() * cameraCount));
+            progress("renders", static_cast<double>(rendered++),
+                     static_cast<double>(renderFrames.size() * cameraCount));
             std::vector<Image> imgs;
             arena.execute([&] { imgs = renderVolume(*world, cam, {&fullCache, &pmCache}, o.imageSize); });
             const Image diff = cornell::absDifference(imgs[0], imgs[1], 10.0f);
@@ -341,10 +350,14 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
             const std::string name = cam.name + "_" + tag + ".png";
             cornell::writePng(o.outDir + "/" + name, panel, mediumExposure(imgs[0]));
             RelError imgErr;
-            std::vector<double> a(imgs[1].rgb.begin(), imgs[1].rgb.end()), b(imgs[0].rgb.begin(), imgs[0].rgb.end());
+            std::vector<double> a(imgs[1].rgb.begin(), imgs[1].rgb.end()),
+                b(imgs[0].rgb.begin(), imgs[0].rgb.end());
             imgErr.add(a.data(), b.data(), a.size());
-            images.push_back({{"camera", cam.name}, {"path_frame", pathFrame}, {"png", name},
-                              {"state", toString(rec->state)}, {"image_rms_rel_error", imgErr.value()}});
+            images.push_back({{"camera", cam.name},
+                              {"path_frame", pathFrame},
+                              {"png", name},
+                              {"state", toString(rec->state)},
+                              {"image_rms_rel_error", imgErr.value()}});
         }
     }
     timings["caches_and_renders"] = secondsSince(t);
@@ -356,31 +369,49 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
         t = Clock::now();
         progress("vdb_render", 0, 1);
         const cornell::Camera cam = volumeCameras(*world, 0.5)[0];
-        const VolumeLight& l = lights[static_cast<std::size_t>(renderFrames.empty() ? 0 : *renderFrames.begin())];
+        const VolumeLight& l =
+            lights[static_cast<std::size_t>(renderFrames.empty() ? 0 : *renderFrames.begin())];
         const Vec3 dir = cornell::normalize(l.position - world->centre);
         const double s = world->medium.sigmaT;
         const Rgb& a = world->medium.albedo;
         const std::string png = o.outDir + "/vdb_render_density.png";
-        std::vector<std::string> argv{"vdb_render", o.outDir + "/density.vdb", png, "-res",
+        std::vector<std::string> argv{"vdb_render",
+                                      o.outDir + "/density.vdb",
+                                      png,
+                                      "-res",
                                       std::to_string(o.imageSize) + "x" + std::to_string(o.imageSize),
-                                      "-translate", triple(cam.eye.x, cam.eye.y, cam.eye.z), "-lookat",
-                                      triple(cam.target.x, cam.target.y, cam.target.z), "-fov", "45",
-                                      "-scatter", triple(s * a[0], s * a[1], s * a[2]), "-absorb",
-                                      triple(s * (1 - a[0]), s * (1 - a[1]), s * (1 - a[2])), "-light",
-                                      triple(dir.x, dir.y, dir.z) + ",1,1,1", "-step", "0.5", "-shadowstep", "1",
-                                      "-cpus", std::to_string(threads)};
+                                      "-translate",
+                                      triple(cam.eye.x, cam.eye.y, cam.eye.z),
+                                      "-lookat",
+                                      triple(cam.target.x, cam.target.y, cam.target.z),
+                                      "-fov",
+                                      "45",
+                                      "-scatter",
+                                      triple(s * a[0], s * a[1], s * a[2]),
+                                      "-absorb",
+                                      triple(s * (1 - a[0]), s * (1 - a[1]), s * (1 - a[2])),
+                                      "-light",
+                                      triple(dir.x, dir.y, dir.z) + ",1,1,1",
+                                      "-step",
+                                      "0.5",
+                                      "-shadowstep",
+                                      "1",
+                                      "-cpus",
+                                      std::to_string(threads)};
         const int rc = runProgram(argv);
         vdbRender = {{"png", rc == 0 ? nlohmann::json("vdb_render_density.png") : nlohmann::json(nullptr)},
-                     {"exit_status", rc}, {"command", argv}};
+                     {"exit_status", rc},
+                     {"command", argv}};
         timings["vdb_render"] = secondsSince(t);
     }
 
     // 9. The report.
     nlohmann::json frames = nlohmann::json::array();
     for (const auto& r : sink.records) {
-        nlohmann::json fr{{"frame", r.frame}, {"kind", r.frame < between ? "between" : "path"},
-                          {"state", toString(r.state)}, {"weight", r.weight}, {"key_rms", r.keyRms},
-                          {"kelvin", lights[static_cast<std::size_t>(r.frame)].kelvin}};
+        nlohmann::json fr{
+            {"frame", r.frame},           {"kind", r.frame < between ? "between" : "path"},
+            {"state", toString(r.state)}, {"weight", r.weight},
+            {"key_rms", r.keyRms},        {"kelvin", lights[static_cast<std::size_t>(r.frame)].kelvin}};
         if (r.pmRelError >= 0) {
             fr["pm_rel_error"] = r.pmRelError;
             fr["soft_rel_error"] = r.softRelError;
@@ -423,7 +454,8 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
             double best = 1e9;
             for (const Vec3& t : dirs) {
                 if (skip && t.x == skip->x && t.y == skip->y && t.z == skip->z) continue;
-                best = std::min(best, std::acos(std::clamp(d.x * t.x + d.y * t.y + d.z * t.z, -1.0, 1.0)) * 180 / M_PI);
+                best = std::min(
+                    best, std::acos(std::clamp(d.x * t.x + d.y * t.y + d.z * t.z, -1.0, 1.0)) * 180 / M_PI);
             }
             return best;
         };
@@ -433,7 +465,8 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
         report["training_spacing_deg_median"] = spacing[spacing.size() / 2];
         report["training_spacing_deg_max"] = spacing.back();
         nlohmann::json gaps = nlohmann::json::array();
-        for (Index f = 0; f < between; ++f) gaps.push_back(nearestDeg(dirOf(lights[static_cast<std::size_t>(f)]), nullptr));
+        for (Index f = 0; f < between; ++f)
+            gaps.push_back(nearestDeg(dirOf(lights[static_cast<std::size_t>(f)]), nullptr));
         report["between_nearest_training_deg"] = gaps;
     }
     report["hit_rate"] = static_cast<double>(stats.hits) / static_cast<double>(testFrames);

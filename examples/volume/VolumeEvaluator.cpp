@@ -16,7 +16,8 @@ namespace pmsc::volume {
 
 Rgb kelvinToRgb(double kelvin) {
     if (!(kelvin >= 1000 && kelvin <= 40000))
-        throw std::invalid_argument("colour temperature " + std::to_string(kelvin) + " K outside [1000, 40000]");
+        throw std::invalid_argument("colour temperature " + std::to_string(kelvin) +
+                                    " K outside [1000, 40000]");
     constexpr double c2 = 1.4387769e-2;  // second radiation constant hc/k, m K
     auto planck = [&](double nm) {
         const double l = nm * 1e-9;
@@ -28,7 +29,8 @@ Rgb kelvinToRgb(double kelvin) {
     return c;
 }
 
-std::shared_ptr<const VolumeWorld> VolumeWorld::create(DensityVolume density, MediumSettings medium, std::string source) {
+std::shared_ptr<const VolumeWorld> VolumeWorld::create(DensityVolume density, MediumSettings medium,
+                                                       std::string source) {
     auto w = std::make_shared<VolumeWorld>(VolumeWorld{std::move(density), medium, {}, 0, std::move(source)});
     const auto [lo, hi] = w->density.worldBounds();
     w->centre = (lo + hi) * 0.5;
@@ -41,7 +43,8 @@ std::shared_ptr<const VolumeWorld> VolumeWorld::create(DensityVolume density, Me
     return w;
 }
 
-VolumeLight VolumeRig::light(const VolumeWorld& world, double azimuthDeg, double elevationDeg, double kelvin) const {
+VolumeLight VolumeRig::light(const VolumeWorld& world, double azimuthDeg, double elevationDeg,
+                             double kelvin) const {
     const double a = azimuthDeg * M_PI / 180, e = elevationDeg * M_PI / 180;
     const double d = distance * world.radius;
     VolumeLight l;
@@ -88,7 +91,8 @@ std::vector<Vec3> VolumeRig::trainingDirections() const {
     }
     for (std::size_t e = 0; e < elevations.size(); ++e)
         for (int a = 0; a < azimuths; ++a)
-            for (int c = 0; c < (colourPairs ? 2 : 1); ++c) out.push_back(direction(360.0 * a / azimuths, elevations[e]));
+            for (int c = 0; c < (colourPairs ? 2 : 1); ++c)
+                out.push_back(direction(360.0 * a / azimuths, elevations[e]));
     return out;
 }
 
@@ -98,7 +102,8 @@ std::vector<VolumeLight> VolumeRig::training(const VolumeWorld& world) const {
         const int k = std::max(1, colours);
         for (int i = 0; i < spiral; ++i) {
             const auto [a, e] = spiralPosition(i, spiral, elevations.front(), elevations.back());
-            const double kelvin = k == 1 ? kelvinLow : kelvinLow + (kelvinHigh - kelvinLow) * (i % k) / (k - 1);
+            const double kelvin =
+                k == 1 ? kelvinLow : kelvinLow + (kelvinHigh - kelvinLow) * (i % k) / (k - 1);
             out.push_back(light(world, a, e, kelvin));
         }
         return out;
@@ -106,9 +111,11 @@ std::vector<VolumeLight> VolumeRig::training(const VolumeWorld& world) const {
     for (std::size_t e = 0; e < elevations.size(); ++e)
         for (int a = 0; a < azimuths; ++a)
             if (colourPairs) {
-                for (double k : {kelvinLow, kelvinHigh}) out.push_back(light(world, 360.0 * a / azimuths, elevations[e], k));
+                for (double k : {kelvinLow, kelvinHigh})
+                    out.push_back(light(world, 360.0 * a / azimuths, elevations[e], k));
             } else {
-                out.push_back(light(world, 360.0 * a / azimuths, elevations[e], (a + e) % 2 ? kelvinHigh : kelvinLow));
+                out.push_back(
+                    light(world, 360.0 * a / azimuths, elevations[e], (a + e) % 2 ? kelvinHigh : kelvinLow));
             }
     return out;
 }
@@ -130,12 +137,14 @@ std::vector<VolumeLight> VolumeRig::between(const VolumeWorld& world, int count)
         std::vector<double> nearest(candidates.size(), 1e9);
         auto update = [&](const Vec3& d) {
             for (std::size_t c = 0; c < candidates.size(); ++c)
-                nearest[c] = std::min(nearest[c], angleBetween(d, direction(candidates[c].first, candidates[c].second)));
+                nearest[c] = std::min(nearest[c],
+                                      angleBetween(d, direction(candidates[c].first, candidates[c].second)));
         };
         for (const Vec3& d : taken) update(d);
         std::uniform_real_distribution<double> k(0.25, 0.75);
         for (int i = 0; i < count; ++i) {
-            const auto best = static_cast<std::size_t>(std::max_element(nearest.begin(), nearest.end()) - nearest.begin());
+            const auto best =
+                static_cast<std::size_t>(std::max_element(nearest.begin(), nearest.end()) - nearest.begin());
             const auto [a, e] = candidates[best];
             out.push_back(light(world, a, e, kelvinLow + k(rng) * (kelvinHigh - kelvinLow)));
             update(direction(a, e));
@@ -161,26 +170,30 @@ std::vector<VolumeLight> VolumeRig::path(const VolumeWorld& world, int frames) c
         const double t = frames > 1 ? static_cast<double>(f) / frames : 0.0;
         const double a = 20.0 + 360.0 * t;
         const double e = eLo + (eHi - eLo) * (0.5 - 0.45 * std::cos(2 * M_PI * 1.5 * t));
-        const double k = 0.5 * (kelvinLow + kelvinHigh) + 0.45 * (kelvinHigh - kelvinLow) * std::sin(2 * M_PI * 2 * t);
+        const double k =
+            0.5 * (kelvinLow + kelvinHigh) + 0.45 * (kelvinHigh - kelvinLow) * std::sin(2 * M_PI * 2 * t);
         out.push_back(light(world, a, e, k));
     }
     return out;
 }
 
 void recolour(const VolumeLight& from, const VolumeLight& to, double* values, Index points) {
-    if (from.position.x != to.position.x || from.position.y != to.position.y || from.position.z != to.position.z ||
-        from.radius != to.radius)
+    if (from.position.x != to.position.x || from.position.y != to.position.y ||
+        from.position.z != to.position.z || from.radius != to.radius)
         throw std::invalid_argument("recolour: the lights differ in more than their colour");
     double s[3];
-    for (int c = 0; c < 3; ++c) s[c] = to.intensity[static_cast<std::size_t>(c)] / from.intensity[static_cast<std::size_t>(c)];
+    for (int c = 0; c < 3; ++c)
+        s[c] = to.intensity[static_cast<std::size_t>(c)] / from.intensity[static_cast<std::size_t>(c)];
     for (Index i = 0; i < points; ++i)
         for (int c = 0; c < 3; ++c) values[3 * i + c] *= s[c];
 }
 
-VolumeEvaluator::VolumeEvaluator(std::shared_ptr<const VolumeWorld> world, std::vector<VolumeLight> lights, std::string name)
+VolumeEvaluator::VolumeEvaluator(std::shared_ptr<const VolumeWorld> world, std::vector<VolumeLight> lights,
+                                 std::string name)
     : world_(std::move(world)), lights_(std::move(lights)), name_(std::move(name)) {}
 
-void VolumeEvaluator::scatter(const VolumeLight& light, Index point, DensityVolume::Tracer& tracer, double* rgb) const {
+void VolumeEvaluator::scatter(const VolumeLight& light, Index point, DensityVolume::Tracer& tracer,
+                              double* rgb) const {
     const MediumSettings& m = world_->medium;
     const Vec3 p = world_->density.voxelPositions()[static_cast<std::size_t>(point)];
     const Vec3 toLight = light.position - p;
@@ -219,30 +232,39 @@ void VolumeEvaluator::scatter(const VolumeLight& light, Index point, DensityVolu
 
 void VolumeEvaluator::evaluate(Index frame, std::span<const Index> points, double* out) const {
     if (frame < 0 || frame >= frameCount())
-        throw std::out_of_range(name_ + ": frame " + std::to_string(frame) + " outside [0, " + std::to_string(frameCount()) + ")");
+        throw std::out_of_range(name_ + ": frame " + std::to_string(frame) + " outside [0, " +
+                                std::to_string(frameCount()) + ")");
     const Index n = pointCount();
     DensityVolume::Tracer tracer(world_->density);
     const VolumeLight& light = lights_[static_cast<std::size_t>(frame)];
     for (std::size_t i = 0; i < points.size(); ++i) {
         if (points[i] < 0 || points[i] >= n)
-            throw std::out_of_range(name_ + ": point " + std::to_string(points[i]) + " outside [0, " + std::to_string(n) + ")");
+            throw std::out_of_range(name_ + ": point " + std::to_string(points[i]) + " outside [0, " +
+                                    std::to_string(n) + ")");
         scatter(light, points[i], tracer, out + 3 * i);
     }
 }
 
 void VolumeEvaluator::evaluateAll(Index frame, double* out) const {
     if (frame < 0 || frame >= frameCount())
-        throw std::out_of_range(name_ + ": frame " + std::to_string(frame) + " outside [0, " + std::to_string(frameCount()) + ")");
+        throw std::out_of_range(name_ + ": frame " + std::to_string(frame) + " outside [0, " +
+                                std::to_string(frameCount()) + ")");
     const VolumeLight& light = lights_[static_cast<std::size_t>(frame)];
-    tbb::parallel_for(tbb::blocked_range<Index>(0, pointCount(), 512), [&](const tbb::blocked_range<Index>& r) {
-        DensityVolume::Tracer tracer(world_->density);
-        for (Index p = r.begin(); p != r.end(); ++p) scatter(light, p, tracer, out + 3 * p);
-    });
+    tbb::parallel_for(tbb::blocked_range<Index>(0, pointCount(), 512),
+                      [&](const tbb::blocked_range<Index>& r) {
+                          DensityVolume::Tracer tracer(world_->density);
+                          for (Index p = r.begin(); p != r.end(); ++p) scatter(light, p, tracer, out + 3 * p);
+                      });
 }
 
 ScatterCacheInfo VolumeEvaluator::info(Index frame, std::string state) const {
     const VolumeLight& l = lights_.at(static_cast<std::size_t>(frame));
-    return {static_cast<std::int32_t>(frame), l.position, l.kelvin, std::move(state), world_->medium.sigmaT, world_->medium.albedo};
+    return {static_cast<std::int32_t>(frame),
+            l.position,
+            l.kelvin,
+            std::move(state),
+            world_->medium.sigmaT,
+            world_->medium.albedo};
 }
 
 namespace {
@@ -254,12 +276,15 @@ public:
     std::string extension() const override { return ".vdb"; }
     void write(const std::string& path, Index frame, const double* values) const override {
         const std::size_t n = ev_.world().density.voxelCount();
-        ScatterCache(ev_.world().density, std::span<const double>(values, 3 * n), ev_.info(frame, "soft-cached")).writeTo(path);
+        ScatterCache(ev_.world().density, std::span<const double>(values, 3 * n),
+                     ev_.info(frame, "soft-cached"))
+            .writeTo(path);
     }
     bool isValid(const std::string& path) const override {
         try {
             return std::filesystem::is_regular_file(path) &&
-                   ScatterCache::read(path).activeVoxelCount() == static_cast<std::int64_t>(ev_.world().density.voxelCount());
+                   ScatterCache::read(path).activeVoxelCount() ==
+                       static_cast<std::int64_t>(ev_.world().density.voxelCount());
         } catch (...) {
             return false;
         }
@@ -303,14 +328,17 @@ std::unique_ptr<VolumeEvaluator> makeVolumeEvaluator(const std::string& args) {
                 used = 0;
             }
             if (value.empty() || used != value.size() || v < 1 || v > 4096)
-                throw InputError("evaluator 'volume': samples='" + value + "' is not an integer in [1, 4096]");
+                throw InputError("evaluator 'volume': samples='" + value +
+                                 "' is not an integer in [1, 4096]");
             medium.lightSamples = static_cast<int>(v);
         } else if (key == "lights") {
             if (value != "all" && value != "training" && value != "between" && value != "path")
-                throw InputError("evaluator 'volume': lights='" + value + "' is not all, training, between or path");
+                throw InputError("evaluator 'volume': lights='" + value +
+                                 "' is not all, training, between or path");
             lights = value;
         } else {
-            throw InputError("evaluator 'volume': unknown option '" + key + "' (grid=NAME, samples=S, lights=SET)");
+            throw InputError("evaluator 'volume': unknown option '" + key +
+                             "' (grid=NAME, samples=S, lights=SET)");
         }
     }
     auto world = VolumeWorld::create(DensityVolume::read(path, grid), medium, path);

@@ -56,14 +56,15 @@ struct VolumeWorld {
     double radius = 0;      ///< half the bounds' diagonal
     std::string source;     ///< file or mesh it came from (for reports)
 
-    static std::shared_ptr<const VolumeWorld> create(DensityVolume density, MediumSettings medium, std::string source);
+    static std::shared_ptr<const VolumeWorld> create(DensityVolume density, MediumSettings medium,
+                                                     std::string source);
 };
 
 /// The light rig: a spherical light on a sphere of radius distance x world.radius around the
 /// medium's centre, moving in azimuth (around) and elevation (over), with its colour temperature
 /// as the second control. Angles in degrees, elevation from the horizontal (y up).
 struct VolumeRig {
-    int azimuths = 16;                              ///< training azimuth steps over 360 degrees
+    int azimuths = 16;  ///< training azimuth steps over 360 degrees
     /// Training elevations: 14 degrees apart (measured at 60,000 voxels, M = 48: with 4 elevations
     /// 24 degrees apart the validation frames were 1.11% from the span of the basis, with these 6
     /// 0.93%; the elevation step, not the azimuth step, limited the old rig).
@@ -86,8 +87,8 @@ struct VolumeRig {
     /// Training colour temperatures of the spiral, evenly from kelvinLow to kelvinHigh: 2 spans the
     /// plane of two black-body RGBs; 3 also holds the locus's curvature between them.
     int colours = 2;
-    double distance = 2.0;                          ///< x world.radius
-    double lightRadius = 0.45;                      ///< x world.radius (a soft light: 13 degrees across from the rig)
+    double distance = 2.0;      ///< x world.radius
+    double lightRadius = 0.45;  ///< x world.radius (a soft light: 13 degrees across from the rig)
 
     VolumeLight light(const VolumeWorld& world, double azimuthDeg, double elevationDeg, double kelvin) const;
     /// azimuths x elevations frames (96 by default; x 2 with colourPairs: kelvinLow then kelvinHigh at each
@@ -134,7 +135,8 @@ void recolour(const VolumeLight& from, const VolumeLight& to, double* values, In
 /// A FrameWriterProvider: `pmsc run --format vdb` writes each frame as a ScatterCache .vdb.
 class VolumeEvaluator : public PointEvaluator, public FrameWriterProvider {
 public:
-    VolumeEvaluator(std::shared_ptr<const VolumeWorld> world, std::vector<VolumeLight> lights, std::string name = "volume");
+    VolumeEvaluator(std::shared_ptr<const VolumeWorld> world, std::vector<VolumeLight> lights,
+                    std::string name = "volume");
 
     std::string name() const override { return name_; }
     Index pointCount() const override { return static_cast<Index>(world_->density.voxelCount()); }

@@ -13,7 +13,8 @@ std::vector<Camera> volumeCameras(const VolumeWorld& w, double t) {
     const double r = w.radius;
     auto orbit = [&](double azDeg, double elDeg, double dist) {
         const double a = azDeg * M_PI / 180, e = elDeg * M_PI / 180;
-        return w.centre + Vec3{std::cos(e) * std::cos(a), std::sin(e), std::cos(e) * std::sin(a)} * (dist * r);
+        return w.centre +
+               Vec3{std::cos(e) * std::cos(a), std::sin(e), std::cos(e) * std::sin(a)} * (dist * r);
     };
     Camera front{"front", orbit(-100 + 40 * t, 8, 1.9), w.centre, {0, 1, 0}, 45};
     Camera above{"above", orbit(-40 + 30 * t, 55, 1.9), w.centre, {0, 1, 0}, 45};
@@ -61,7 +62,8 @@ std::vector<Image> renderVolume(const VolumeWorld& world, const Camera& camera,
                             const Rgb lin = samplers[c]->at(p);
                             // A PM reconstruction may undershoot a dark voxel slightly below zero;
                             // light is never negative, so the lookup is clamped (the cache keeps it).
-                            for (int k = 0; k < 3; ++k) radiance[c][k] += absorbed * albedo[k] * std::max(0.0, lin[k]);
+                            for (int k = 0; k < 3; ++k)
+                                radiance[c][k] += absorbed * albedo[k] * std::max(0.0, lin[k]);
                         }
                         trans *= std::exp(-sigma * h);
                     }

@@ -376,9 +376,11 @@ TEST_F(Cli, UsageMistakes) {
                   {"'best' is not teleconnection or qdeim"});
     expectFailure(runPmsc(dir, {"train", "--frames", shot_->train, "--out", out, "--energy", "1.5"}), 2,
                   {"--energy", "out of range"});
-    expectFailure(runPmsc(dir, {"train", "--frames", shot_->train, "--out", out, "--regions", "2", "--region-keys", "-1"}),
+    expectFailure(runPmsc(dir, {"train", "--frames", shot_->train, "--out", out, "--regions", "2",
+                                "--region-keys", "-1"}),
                   2, {"--region-keys", "out of range"});
-    expectFailure(runPmsc(dir, {"train", "--frames", shot_->train, "--out", out, "--regions", "2", "--region-keys", "2.5"}),
+    expectFailure(runPmsc(dir, {"train", "--frames", shot_->train, "--out", out, "--regions", "2",
+                                "--region-keys", "2.5"}),
                   2, {"--region-keys", "'2.5' is not an integer"});
     expectFailure(runPmsc(dir, {"frobnicate"}), 2, {"unknown command 'frobnicate'"});
     expectFailure(runPmsc(dir, {"inspect"}), 2, {"missing MODEL.pmsc"});
@@ -396,13 +398,16 @@ TEST_F(Cli, DemoNumbersGoThroughArgs) {
         args.insert(args.end(), more);
         return args;
     };
-    expectFailure(runPmsc(dir, with(face, {"--threads", "2.5"})), 2, {"--threads", "'2.5' is not an integer"});
+    expectFailure(runPmsc(dir, with(face, {"--threads", "2.5"})), 2,
+                  {"--threads", "'2.5' is not an integer"});
     expectFailure(runPmsc(dir, with(face, {"--basis", "4.7"})), 2, {"--basis", "'4.7' is not an integer"});
-    expectFailure(runPmsc(dir, with(face, {"--regions", "1e1"})), 2, {"--regions", "'1e1' is not an integer"});
+    expectFailure(runPmsc(dir, with(face, {"--regions", "1e1"})), 2,
+                  {"--regions", "'1e1' is not an integer"});
     expectFailure(runPmsc(dir, with(face, {"--seed", "-3"})), 2, {"--seed", "out of range"});
     expectFailure(runPmsc(dir, with(face, {"--seed", "7x"})), 2, {"--seed", "'7x' is not an integer"});
     expectFailure(runPmsc(dir, with(face, {"--tolerance", "0"})), 2, {"--tolerance", "out of range"});
-    expectFailure(runPmsc(dir, with(face, {"--tolerance", "1%"})), 2, {"--tolerance", "'1%' is not a number"});
+    expectFailure(runPmsc(dir, with(face, {"--tolerance", "1%"})), 2,
+                  {"--tolerance", "'1%' is not a number"});
     const std::vector<std::string> cornell{"demo", "cornell", "--quick", "--out", dir.file("cornell")};
     expectFailure(runPmsc(dir, with(cornell, {"--threads", " 2"})), 2, {"--threads", "is not an integer"});
     expectFailure(runPmsc(dir, with(cornell, {"--points", "10"})), 2, {"--points", "out of range"});

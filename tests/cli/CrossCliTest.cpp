@@ -11,9 +11,9 @@
 
 #include <Eigen/Core>
 
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <cstdio>
 #include <random>
 
 namespace {
@@ -74,9 +74,10 @@ TempDir* CrossCli::dir_ = nullptr;
 
 TEST_F(CrossCli, ReplayWritesTargetsThatFollowAnExactMapToRounding) {
     TempDir work;
-    const RunResult r = runPmsc(work, {"replay", "--model", dir_->file("cross.pmsc"), "--frames",
-                                       dir_->file("test-control.npy"), "--targets", dir_->file("test-target.npy"),
-                                       "--out", work.file("out.npy"), "--report", work.file("r.json"), "--quiet"});
+    const RunResult r =
+        runPmsc(work, {"replay", "--model", dir_->file("cross.pmsc"), "--frames",
+                       dir_->file("test-control.npy"), "--targets", dir_->file("test-target.npy"), "--out",
+                       work.file("out.npy"), "--report", work.file("r.json"), "--quiet"});
     ASSERT_EQ(r.exitCode, 0) << r.err;
     EXPECT_NE(r.out.find("fail-through impossible"), std::string::npos) << r.out;
     const pmsc::FrameFile out = pmsc::readFrames(work.file("out.npy"));
@@ -110,8 +111,8 @@ TEST_F(CrossCli, ReplayWritesTargetsThatFollowAnExactMapToRounding) {
 TEST_F(CrossCli, RunTakesAnEvaluatorOfTheControlAndWritesTargetFrames) {
     TempDir work;
     const RunResult r = runPmsc(work, {"run", "--model", dir_->file("cross.pmsc"), "--evaluator",
-                                       "replay:" + dir_->file("test-control.npy"), "--frames", "0-24:3", "--out",
-                                       work.file("frames"), "--quiet"});
+                                       "replay:" + dir_->file("test-control.npy"), "--frames", "0-24:3",
+                                       "--out", work.file("frames"), "--quiet"});
     ASSERT_EQ(r.exitCode, 0) << r.err;
     const pmsc::FrameFile truth = pmsc::readFrames(dir_->file("test-target.npy"));
     const double scale = truth.frames.matrix().cwiseAbs().maxCoeff();
@@ -120,7 +121,8 @@ TEST_F(CrossCli, RunTakesAnEvaluatorOfTheControlAndWritesTargetFrames) {
         std::snprintf(name, sizeof name, "frame.%06ld.npy", static_cast<long>(f));
         const pmsc::FrameFile out = pmsc::readFrames(work.file("frames/" + std::string(name)));
         ASSERT_EQ(out.frames.points, 30);
-        EXPECT_LT((out.frames.matrix().col(0) - truth.frames.matrix().col(f)).cwiseAbs().maxCoeff(), 1e-9 * scale);
+        EXPECT_LT((out.frames.matrix().col(0) - truth.frames.matrix().col(f)).cwiseAbs().maxCoeff(),
+                  1e-9 * scale);
     }
     std::ifstream in(work.file("frames/pmsc-run.0-24_by3.json"));
     ASSERT_TRUE(in.good());
@@ -148,9 +150,10 @@ TEST_F(CrossCli, BadInputsFailWithOneLineAndNoFile) {
                                  work.file("t1ch.npy"), "--out", model, "--quiet"}),
                   2, {"channels"});
     EXPECT_FALSE(fs::exists(model));
-    expectFailure(runPmsc(work, {"train", "--frames", dir_->file("train-control.npy"), "--targets",
-                                 dir_->file("train-target.npy"), "--out", model, "--regions", "2", "--quiet"}),
-                  2, {"--regions"});
+    expectFailure(
+        runPmsc(work, {"train", "--frames", dir_->file("train-control.npy"), "--targets",
+                       dir_->file("train-target.npy"), "--out", model, "--regions", "2", "--quiet"}),
+        2, {"--regions"});
     EXPECT_FALSE(fs::exists(model));
     // Targets with a plain model; a cross model with frames of the wrong size; options without meaning.
     const RunResult plain = runPmsc(work, {"train", "--frames", dir_->file("train-control.npy"), "--out",
@@ -164,8 +167,8 @@ TEST_F(CrossCli, BadInputsFailWithOneLineAndNoFile) {
                                  dir_->file("test-target.npy"), "--report", work.file("r.json"), "--quiet"}),
                   2, {"50 control points"});
     expectFailure(runPmsc(work, {"replay", "--model", dir_->file("cross.pmsc"), "--frames",
-                                 dir_->file("test-control.npy"), "--eps", "0.1,0.2", "--report", work.file("r.json"),
-                                 "--quiet"}),
+                                 dir_->file("test-control.npy"), "--eps", "0.1,0.2", "--report",
+                                 work.file("r.json"), "--quiet"}),
                   2, {"--eps", "cross"});
     EXPECT_FALSE(fs::exists(work.file("r.json")));
     expectFailure(runPmsc(work, {"learn", "--model", dir_->file("cross.pmsc"), "--frames",

@@ -27,16 +27,19 @@ protected:
         o.grid = 12;
         o.frames = 200;
         o.seed = 1;
-        pmsc::writeFrames(dir_->file("train.npy"), pmsc::evaluateFrames(pmsc::synthetic::SyntheticSurface(o), 0, o.frames),
+        pmsc::writeFrames(dir_->file("train.npy"),
+                          pmsc::evaluateFrames(pmsc::synthetic::SyntheticSurface(o), 0, o.frames),
                           pmsc::NpyDtype::Float64);
         o.frames = 60;
         o.seed = 2;
         o.novelFrames = 30;  // the last 30 frames carry motion training never saw: misses
-        pmsc::writeFrames(dir_->file("test.npy"), pmsc::evaluateFrames(pmsc::synthetic::SyntheticSurface(o), 0, o.frames),
+        pmsc::writeFrames(dir_->file("test.npy"),
+                          pmsc::evaluateFrames(pmsc::synthetic::SyntheticSurface(o), 0, o.frames),
                           pmsc::NpyDtype::Float64);
-        const RunResult r = runPmsc(*dir_, {"train", "--frames", dir_->file("train.npy"), "--out", dir_->file("m.pmsc"),
-                                            "--max-keys", "24", "--tolerance", "0.02", "--calibration", "conformal",
-                                            "--coverage", "0.9", "--learn-rank", "30"});
+        const RunResult r =
+            runPmsc(*dir_, {"train", "--frames", dir_->file("train.npy"), "--out", dir_->file("m.pmsc"),
+                            "--max-keys", "24", "--tolerance", "0.02", "--calibration", "conformal",
+                            "--coverage", "0.9", "--learn-rank", "30"});
         ASSERT_EQ(r.exitCode, 0) << r.err;
         ASSERT_NE(r.out.find("conformal"), std::string::npos) << r.out;
     }
@@ -68,8 +71,9 @@ TempDir* LearnCli::dir_ = nullptr;
 TEST_F(LearnCli, ReplayKeepsMissesAppendsAndLearnUsesThem) {
     TempDir work;
     const std::string kept = work.file("kept.npy");
-    RunResult r = runPmsc(work, {"replay", "--model", dir_->file("m.pmsc"), "--frames", dir_->file("test.npy"),
-                                 "--report", work.file("r.json"), "--keep-misses", kept, "--quiet"});
+    RunResult r =
+        runPmsc(work, {"replay", "--model", dir_->file("m.pmsc"), "--frames", dir_->file("test.npy"),
+                       "--report", work.file("r.json"), "--keep-misses", kept, "--quiet"});
     ASSERT_EQ(r.exitCode, 0) << r.err;
     const std::vector<pmsc::Index> missed = nonHits(readJson(work.file("r.json")));
     ASSERT_GE(missed.size(), 20u);  // the unseen motion at least
@@ -80,46 +84,52 @@ TEST_F(LearnCli, ReplayKeepsMissesAppendsAndLearnUsesThem) {
     // Kept are the recorded (full) values, not the blended output.
     for (size_t i = 0; i < missed.size(); ++i)
         for (pmsc::Index v = 0; v < test.frames.rows(); ++v)
-            ASSERT_EQ(keptFrames.frames.frame(static_cast<pmsc::Index>(i))[v], test.frames.frame(missed[i])[v]);
+            ASSERT_EQ(keptFrames.frames.frame(static_cast<pmsc::Index>(i))[v],
+                      test.frames.frame(missed[i])[v]);
 
     // A second run appends.
-    r = runPmsc(work, {"replay", "--model", dir_->file("m.pmsc"), "--frames", dir_->file("test.npy"), "--report",
-                       work.file("r2.json"), "--keep-misses", kept, "--quiet"});
+    r = runPmsc(work, {"replay", "--model", dir_->file("m.pmsc"), "--frames", dir_->file("test.npy"),
+                       "--report", work.file("r2.json"), "--keep-misses", kept, "--quiet"});
     ASSERT_EQ(r.exitCode, 0) << r.err;
     EXPECT_EQ(pmsc::readFrames(kept).frames.frames, static_cast<pmsc::Index>(2 * missed.size()));
     EXPECT_EQ(pmsc::readKeptFrameNumbers(kept).size(), 2 * missed.size());
 
     // learn, then the learned model replays the unseen motion with fewer misses.
-    r = runPmsc(work, {"learn", "--model", dir_->file("m.pmsc"), "--frames", kept, "--out", work.file("m2.pmsc"), "--quiet"});
+    r = runPmsc(work, {"learn", "--model", dir_->file("m.pmsc"), "--frames", kept, "--out",
+                       work.file("m2.pmsc"), "--quiet"});
     ASSERT_EQ(r.exitCode, 0) << r.err;
     EXPECT_NE(r.out.find("learned"), std::string::npos) << r.out;
     const pmsc::Model m2 = pmsc::readModel(work.file("m2.pmsc"));
     EXPECT_EQ(m2.trainFrames, 200 + static_cast<pmsc::Index>(2 * missed.size()));
-    r = runPmsc(work, {"replay", "--model", work.file("m2.pmsc"), "--frames", dir_->file("test.npy"), "--report",
-                       work.file("r3.json"), "--quiet"});
+    r = runPmsc(work, {"replay", "--model", work.file("m2.pmsc"), "--frames", dir_->file("test.npy"),
+                       "--report", work.file("r3.json"), "--quiet"});
     ASSERT_EQ(r.exitCode, 0) << r.err;
     const auto after = readJson(work.file("r3.json")).at("summary");
-    EXPECT_GT(after.at("hit_rate").get<double>(), readJson(work.file("r.json")).at("summary").at("hit_rate").get<double>());
+    EXPECT_GT(after.at("hit_rate").get<double>(),
+              readJson(work.file("r.json")).at("summary").at("hit_rate").get<double>());
 }
 
 TEST_F(LearnCli, RunKeepsMissesWithTheirFullValues) {
     TempDir work;
     const std::string kept = work.file("kept.npy");
-    const RunResult r = runPmsc(work, {"run", "--model", dir_->file("m.pmsc"), "--evaluator",
-                                       "replay:" + dir_->file("test.npy"), "--frames", "20-59", "--out",
-                                       work.file("frames"), "--keep-misses", kept, "--quiet"});
+    const RunResult r = runPmsc(
+        work, {"run", "--model", dir_->file("m.pmsc"), "--evaluator", "replay:" + dir_->file("test.npy"),
+               "--frames", "20-59", "--out", work.file("frames"), "--keep-misses", kept, "--quiet"});
     ASSERT_EQ(r.exitCode, 0) << r.err;
     const auto stats = readJson(work.file("frames/pmsc-run.20-59.json"));
     std::vector<pmsc::Index> missed;
     for (const auto& f : stats.at("per_frame"))
-        if (f.at("state") == "blend" || f.at("state") == "miss") missed.push_back(f.at("frame").get<pmsc::Index>());
+        if (f.at("state") == "blend" || f.at("state") == "miss")
+            missed.push_back(f.at("frame").get<pmsc::Index>());
     ASSERT_FALSE(missed.empty());
     EXPECT_EQ(stats.at("kept_misses").at("frames").get<size_t>(), missed.size());
     EXPECT_EQ(pmsc::readKeptFrameNumbers(kept), missed);
-    const pmsc::FrameFile keptFrames = pmsc::readFrames(kept), test = pmsc::readFrames(dir_->file("test.npy"));
+    const pmsc::FrameFile keptFrames = pmsc::readFrames(kept),
+                          test = pmsc::readFrames(dir_->file("test.npy"));
     for (size_t i = 0; i < missed.size(); ++i)
         for (pmsc::Index v = 0; v < test.frames.rows(); ++v)
-            ASSERT_EQ(keptFrames.frames.frame(static_cast<pmsc::Index>(i))[v], test.frames.frame(missed[i])[v]);
+            ASSERT_EQ(keptFrames.frames.frame(static_cast<pmsc::Index>(i))[v],
+                      test.frames.frame(missed[i])[v]);
 }
 
 TEST_F(LearnCli, BadInputsFailWithOneLineAndLeaveFilesAlone) {
@@ -132,8 +142,9 @@ TEST_F(LearnCli, BadInputsFailWithOneLineAndLeaveFilesAlone) {
         side << "# pmsc kept frames\n0\tmiss\t1\tx\n1\tmiss\t1\tx\n";
     }
     const auto before = fs::file_size(work.file("other.npy"));
-    RunResult r = runPmsc(work, {"replay", "--model", dir_->file("m.pmsc"), "--frames", dir_->file("test.npy"),
-                                 "--report", work.file("r.json"), "--keep-misses", work.file("other.npy")});
+    RunResult r =
+        runPmsc(work, {"replay", "--model", dir_->file("m.pmsc"), "--frames", dir_->file("test.npy"),
+                       "--report", work.file("r.json"), "--keep-misses", work.file("other.npy")});
     expectFailure(r, 2, {"other.npy", "5 points"});
     // A sidecar that disagrees with its frames is refused too.
     {
@@ -152,11 +163,11 @@ TEST_F(LearnCli, BadInputsFailWithOneLineAndLeaveFilesAlone) {
                        work.file("m2.pmsc")});
     expectFailure(r, 2, {"5 points"});
     EXPECT_FALSE(fs::exists(work.file("m2.pmsc")));
-    r = runPmsc(work, {"learn", "--model", work.file("missing.pmsc"), "--frames", dir_->file("test.npy"), "--out",
-                       work.file("m2.pmsc")});
+    r = runPmsc(work, {"learn", "--model", work.file("missing.pmsc"), "--frames", dir_->file("test.npy"),
+                       "--out", work.file("m2.pmsc")});
     expectFailure(r, 2, {"missing.pmsc"});
-    r = runPmsc(work, {"learn", "--model", dir_->file("m.pmsc"), "--frames", dir_->file("test.npy") + ",", "--out",
-                       work.file("m2.pmsc")});
+    r = runPmsc(work, {"learn", "--model", dir_->file("m.pmsc"), "--frames", dir_->file("test.npy") + ",",
+                       "--out", work.file("m2.pmsc")});
     expectFailure(r, 2, {"--frames"});
     r = runPmsc(work, {"learn", "--model", dir_->file("m.pmsc"), "--frames", dir_->file("test.npy"), "--out",
                        work.file("no/such/dir/m2.pmsc")});
@@ -164,14 +175,14 @@ TEST_F(LearnCli, BadInputsFailWithOneLineAndLeaveFilesAlone) {
     r = runPmsc(work, {"learn", "--model", dir_->file("m.pmsc"), "--frames", dir_->file("test.npy"), "--out",
                        work.file("m2.pmsc"), "--calibration", "median"});
     expectFailure(r, 2, {"--calibration", "median"});
-    r = runPmsc(work, {"train", "--frames", dir_->file("train.npy"), "--out", work.file("t.pmsc"), "--tolerance", "0.02",
-                       "--coverage", "0.9"});
+    r = runPmsc(work, {"train", "--frames", dir_->file("train.npy"), "--out", work.file("t.pmsc"),
+                       "--tolerance", "0.02", "--coverage", "0.9"});
     expectFailure(r, 2, {"--coverage", "conformal"});
-    r = runPmsc(work, {"train", "--frames", dir_->file("train.npy"), "--out", work.file("t.pmsc"), "--tolerance", "0.02",
-                       "--calibration", "conformal", "--coverage", "1"});
+    r = runPmsc(work, {"train", "--frames", dir_->file("train.npy"), "--out", work.file("t.pmsc"),
+                       "--tolerance", "0.02", "--calibration", "conformal", "--coverage", "1"});
     expectFailure(r, 2, {"--coverage"});
-    r = runPmsc(work, {"train", "--frames", dir_->file("train.npy"), "--out", work.file("t.pmsc"), "--calibration",
-                       "conformal"});
+    r = runPmsc(work, {"train", "--frames", dir_->file("train.npy"), "--out", work.file("t.pmsc"),
+                       "--calibration", "conformal"});
     expectFailure(r, 2, {"--tolerance"});
     EXPECT_FALSE(fs::exists(work.file("t.pmsc")));
 }

@@ -144,7 +144,8 @@ TEST(Replay, ModelWithRegionsReportsLocalFramesAndWholeFrameFlagRestoresTheOldRo
     EXPECT_EQ(report["frames"][1]["regions"], "mhhh");
     EXPECT_EQ(report["frames"][1]["local"], true);
     EXPECT_DOUBLE_EQ(report["frames"][1]["points_evaluated_fraction"].get<double>(), 0.25);
-    EXPECT_LT(report["frames"][1]["soft_max_point_error"].get<double>(), 1e-12);  // region 0 read, the rest exact
+    EXPECT_LT(report["frames"][1]["soft_max_point_error"].get<double>(),
+              1e-12);  // region 0 read, the rest exact
     EXPECT_GT(report["frames"][1]["pm_max_point_error"].get<double>(), 0.01);
     EXPECT_EQ(report["summary"]["region_states"][0]["misses"], 1);
     options.localFailThrough = false;  // --whole-frame-fail-through

@@ -23,11 +23,11 @@ inline bool underCi() {
 
 /// Use in a test body or SetUp(): fails under CI, skips elsewhere. `why` is a stream expression:
 /// PMSC_MISSING_DATA("not found in " << folder).
-#define PMSC_MISSING_DATA(why)                                                                   \
-    do {                                                                                         \
-        if (::pmsc::test::underCi()) {                                                           \
+#define PMSC_MISSING_DATA(why)                                                                    \
+    do {                                                                                          \
+        if (::pmsc::test::underCi()) {                                                            \
             GTEST_FAIL() << why << " (CI is set: a test whose data is missing fails, not skips)"; \
-        } else {                                                                                 \
-            GTEST_SKIP() << why;                                                                 \
-        }                                                                                        \
+        } else {                                                                                  \
+            GTEST_SKIP() << why;                                                                  \
+        }                                                                                         \
     } while (0)

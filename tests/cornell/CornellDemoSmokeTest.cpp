@@ -4,13 +4,13 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cctype>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <memory>
-#include <algorithm>
 #include <string>
 
 namespace {
@@ -30,7 +30,8 @@ std::string run(const std::string& command, int& status) {
 }
 
 std::string tempDir(const std::string& tag) {
-    const auto d = std::filesystem::temp_directory_path() / ("pmsc_cornell_" + tag + "_" + std::to_string(::getpid()));
+    const auto d =
+        std::filesystem::temp_directory_path() / ("pmsc_cornell_" + tag + "_" + std::to_string(::getpid()));
     std::filesystem::remove_all(d);
     return d.string();
 }
@@ -39,15 +40,17 @@ std::string tempDir(const std::string& tag) {
 TEST(CornellDemoQuick, WritesAReportWithinBoundsImagesAndVdbFilesThatVdbPrintLists) {
     const std::string dir = tempDir("quick");
     int status = -1;
-    const std::string output = run(std::string(PMSC_BINARY) + " demo cornell --quick --quiet --out " + dir, status);
+    const std::string output =
+        run(std::string(PMSC_BINARY) + " demo cornell --quick --quiet --out " + dir, status);
     ASSERT_EQ(status, 0) << output;
     EXPECT_NE(output.find("speedup"), std::string::npos) << output;
 
     std::ifstream f(dir + "/report.json");
     const nlohmann::json r = nlohmann::json::parse(f);
-    for (const char* key : {"points", "key_points", "basis", "train_frames", "test_frames", "samples_per_point",
-                            "full_seconds_per_frame", "pmsc_seconds_per_frame", "speedup", "rms_rel_error", "hit_rate",
-                            "reference_rms_rel_error_full", "reference_rms_rel_error_pm"})
+    for (const char* key :
+         {"points", "key_points", "basis", "train_frames", "test_frames", "samples_per_point",
+          "full_seconds_per_frame", "pmsc_seconds_per_frame", "speedup", "rms_rel_error", "hit_rate",
+          "reference_rms_rel_error_full", "reference_rms_rel_error_pm"})
         ASSERT_TRUE(r.contains(key)) << key;
     EXPECT_NEAR(r["points"].get<double>(), 6000, 120);
     EXPECT_EQ(r["key_points"].get<int>(), 200);
@@ -75,7 +78,8 @@ TEST(CornellDemoQuick, WritesAReportWithinBoundsImagesAndVdbFilesThatVdbPrintLis
 #ifdef PMSC_VDB_PRINT
     ASSERT_FALSE(r["vdb_files"].empty());
     for (const auto& name : r["vdb_files"]) {
-        const std::string listing = run(std::string(PMSC_VDB_PRINT) + " -l " + dir + "/" + name.get<std::string>(), status);
+        const std::string listing =
+            run(std::string(PMSC_VDB_PRINT) + " -l " + dir + "/" + name.get<std::string>(), status);
         ASSERT_EQ(status, 0) << listing;
         EXPECT_NE(listing.find("Name: indirect"), std::string::npos) << listing;
         EXPECT_NE(listing.find("vec3s"), std::string::npos) << listing;
@@ -100,7 +104,8 @@ TEST(CornellDemoQuick, WritesAReportWithinBoundsImagesAndVdbFilesThatVdbPrintLis
 TEST(CornellDemoQuick, LocalChangeMissesAsAWholeFrameIsRoutedLocallyAndStaysUnderTheTolerance) {
     const std::string dir = tempDir("local");
     int status = -1;
-    const std::string output = run(std::string(PMSC_BINARY) + " demo cornell --quick --quiet --out " + dir, status);
+    const std::string output =
+        run(std::string(PMSC_BINARY) + " demo cornell --quick --quiet --out " + dir, status);
     ASSERT_EQ(status, 0) << output;
     EXPECT_NE(output.find("local_change local"), std::string::npos) << output;
     std::ifstream f(dir + "/report.json");
@@ -148,10 +153,11 @@ TEST(CornellDemoQuick, LocalChangeMissesAsAWholeFrameIsRoutedLocallyAndStaysUnde
 // Each bad value of the local fail-through options is one line and exit code 2, before any work.
 TEST(CornellDemoQuick, BadLocalFailThroughOptionsAreOneLineAndExitCode2) {
     const std::string dir = tempDir("badlocal");
-    for (const std::string bad : {"--local-change 5", "--local-change 151", "--local-change x", "--regions -1",
-                                  "--regions 0 --local-change 50", "--feather 60"}) {
+    for (const std::string bad : {"--local-change 5", "--local-change 151", "--local-change x",
+                                  "--regions -1", "--regions 0 --local-change 50", "--feather 60"}) {
         int status = -1;
-        const std::string out = run(std::string(PMSC_BINARY) + " demo cornell --quick --out " + dir + " " + bad, status);
+        const std::string out =
+            run(std::string(PMSC_BINARY) + " demo cornell --quick --out " + dir + " " + bad, status);
         EXPECT_EQ(WEXITSTATUS(status), 2) << bad << ": " << out;
         EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << bad << ": " << out;
         EXPECT_FALSE(std::filesystem::exists(dir + "/report.json")) << bad;
@@ -162,7 +168,8 @@ TEST(CornellDemoQuick, BadLocalFailThroughOptionsAreOneLineAndExitCode2) {
 TEST(CornellDemoQuick, BadOptionsAreOneLineAndExitCode2) {
     const std::string dir = tempDir("bad");
     int status = -1;
-    const std::string out = run(std::string(PMSC_BINARY) + " demo cornell --quick --out " + dir + " --points ten", status);
+    const std::string out =
+        run(std::string(PMSC_BINARY) + " demo cornell --quick --out " + dir + " --points ten", status);
     EXPECT_EQ(WEXITSTATUS(status), 2) << out;
     EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << out;
     EXPECT_FALSE(std::filesystem::exists(dir + "/report.json"));

@@ -103,10 +103,12 @@ TEST(CornellEvaluator, DirectLightFollowsTheInverseSquareLaw) {
     const double heights[3] = {50, 100, 200};
     for (int i = 0; i < 3; ++i) {
         const PointLight light{{278, heights[i], 100}, {1e4, 2e4, 3e4}};
-        directIrradiance(*world->tracer, light, std::span<const Vec3>(&floorPoint, 1), std::span<const Vec3>(&up, 1), e[i]);
+        directIrradiance(*world->tracer, light, std::span<const Vec3>(&floorPoint, 1),
+                         std::span<const Vec3>(&up, 1), e[i]);
     }
     for (int i = 0; i < 3; ++i)
-        for (int c = 0; c < 3; ++c) EXPECT_NEAR(e[i][c] * heights[i] * heights[i], 1e4 * (c + 1), 1e-6 * 1e4 * (c + 1));
+        for (int c = 0; c < 3; ++c)
+            EXPECT_NEAR(e[i][c] * heights[i] * heights[i], 1e4 * (c + 1), 1e-6 * 1e4 * (c + 1));
 }
 
 TEST(CornellEvaluator, IndirectLightFallsOffWithLightDistance) {
@@ -179,14 +181,17 @@ TEST(CornellEvaluator, GatherPointsSitOnTheSurfaceEmbreeTraces) {
     for (std::size_t i = 0; i < vox.size(); ++i) {
         const Vec3 o = vox.position[i] + vox.normal[i] * 0.01;
         rays[i] = Ray{{float(o.x), float(o.y), float(o.z)},
-                      {float(vox.normal[i].x), float(vox.normal[i].y), float(vox.normal[i].z)}, 0.0f, 1e30f};
+                      {float(vox.normal[i].x), float(vox.normal[i].y), float(vox.normal[i].z)},
+                      0.0f,
+                      1e30f};
     }
     world->tracer->intersect(rays, hits);
     for (std::size_t i = 0; i < vox.size(); ++i) {
         if (hits[i].quad < 0) continue;
         const Quad& q = world->scene.quads()[static_cast<std::size_t>(hits[i].quad)];
-        EXPECT_LT(dot(q.normal, vox.normal[i]), 0.0) << "voxel " << i << " on " << world->scene.quads()[vox.quad[i]].name
-                                                     << " hits the back of " << q.name << " at t = " << hits[i].t;
+        EXPECT_LT(dot(q.normal, vox.normal[i]), 0.0)
+            << "voxel " << i << " on " << world->scene.quads()[vox.quad[i]].name << " hits the back of "
+            << q.name << " at t = " << hits[i].t;
     }
 }
 
@@ -240,8 +245,9 @@ TEST(CornellEvaluator, OffersAVdbFrameWriterForTheRenderFarm) {
     EXPECT_EQ(writers[0]->extension(), ".vdb");
     std::vector<double> v(static_cast<std::size_t>(3 * ev->pointCount()));
     ev->evaluateAll(5, v.data());
-    const std::string path =
-        (std::filesystem::temp_directory_path() / ("pmsc_cornell_writer_" + std::to_string(::getpid()) + ".vdb")).string();
+    const std::string path = (std::filesystem::temp_directory_path() /
+                              ("pmsc_cornell_writer_" + std::to_string(::getpid()) + ".vdb"))
+                                 .string();
     EXPECT_FALSE(writers[0]->isValid(path));
     writers[0]->write(path, 5, v.data());
     EXPECT_TRUE(writers[0]->isValid(path));

@@ -18,7 +18,8 @@ TEST(CornellLocalChange, WithBoxAppendsFiveQuadsOnTheFloorSixAboveItAndKeepsTheO
     const LocalChangeBox box = LocalChangeBox::againstBackWall(100);
     const CornellScene onFloor = base.withBox("cube", box.lo, box.hi);
     ASSERT_EQ(onFloor.quads().size(), base.quads().size() + 5);
-    for (std::size_t q = 0; q < base.quads().size(); ++q) EXPECT_EQ(onFloor.quads()[q].name, base.quads()[q].name);
+    for (std::size_t q = 0; q < base.quads().size(); ++q)
+        EXPECT_EQ(onFloor.quads()[q].name, base.quads()[q].name);
     const Vec3 centre = (box.lo + box.hi) * 0.5;
     for (std::size_t q = base.quads().size(); q < onFloor.quads().size(); ++q) {
         const Quad& quad = onFloor.quads()[q];
@@ -92,7 +93,8 @@ TEST(CornellLocalChange, TheChangedWorldKeepsThePointsAndTheCubeShadowsTheFloorN
         const double dz = std::max(box.lo.z - x.z, 0.0);
         if (inside) {
             ++under;
-            for (int c = 0; c < 3; ++c) EXPECT_EQ(b[static_cast<std::size_t>(3 * p + c)], 0.0) << "point " << p;
+            for (int c = 0; c < 3; ++c)
+                EXPECT_EQ(b[static_cast<std::size_t>(3 * p + c)], 0.0) << "point " << p;
         } else if (std::hypot(dx, dz) < 40) {
             ++near;
             for (int c = 0; c < 3; ++c) {

@@ -5,8 +5,8 @@
 #include <gtest/gtest.h>
 #include <png.h>
 
-#include <filesystem>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <vector>
 
@@ -14,7 +14,9 @@ namespace pmsc::cornell {
 namespace {
 
 std::string tempPath(const std::string& name) {
-    return (std::filesystem::temp_directory_path() / ("pmsc_cornell_img_" + std::to_string(::getpid()) + "_" + name)).string();
+    return (std::filesystem::temp_directory_path() /
+            ("pmsc_cornell_img_" + std::to_string(::getpid()) + "_" + name))
+        .string();
 }
 
 TEST(ImageIO, PfmRoundTripIsExact) {

@@ -14,7 +14,9 @@ namespace pmsc::cornell {
 namespace {
 
 std::string tempPath(const std::string& name) {
-    return (std::filesystem::temp_directory_path() / ("pmsc_cornell_" + std::to_string(::getpid()) + "_" + name)).string();
+    return (std::filesystem::temp_directory_path() /
+            ("pmsc_cornell_" + std::to_string(::getpid()) + "_" + name))
+        .string();
 }
 
 TEST(LightingCacheGrid, RoundTripKeepsVoxelsValuesAndMetadata) {
@@ -43,7 +45,8 @@ TEST(LightingCacheGrid, RoundTripKeepsVoxelsValuesAndMetadata) {
     EXPECT_DOUBLE_EQ(m.lightPosition.z, 200.25);
     for (std::size_t i = 0; i < vox.size(); i += 37) {
         const Rgb v = back.valueAt(vox.ijk[i]);
-        for (int c = 0; c < 3; ++c) EXPECT_FLOAT_EQ(static_cast<float>(v[c]), static_cast<float>(values[3 * i + c]));
+        for (int c = 0; c < 3; ++c)
+            EXPECT_FLOAT_EQ(static_cast<float>(v[c]), static_cast<float>(values[3 * i + c]));
     }
 }
 

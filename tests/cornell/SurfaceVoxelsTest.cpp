@@ -16,7 +16,8 @@ TEST(SurfaceVoxels, VoxelSizeIsDerivedFromTheRequestedCount) {
         const SurfaceVoxels v = SurfaceVoxels::voxelizeToCount(scene, target);
         EXPECT_NEAR(static_cast<double>(v.size()), static_cast<double>(target), 0.02 * target);
         // A one-voxel shell over the surfaces: about one voxel per voxel-size squared of area.
-        const double perArea = static_cast<double>(v.size()) * v.voxelSizeMm * v.voxelSizeMm / scene.totalArea();
+        const double perArea =
+            static_cast<double>(v.size()) * v.voxelSizeMm * v.voxelSizeMm / scene.totalArea();
         EXPECT_GT(perArea, 0.85);
         EXPECT_LT(perArea, 1.3);
     }
@@ -45,13 +46,14 @@ TEST(SurfaceVoxels, NormalsFaceTheLitSide) {
     const CornellScene scene = CornellScene::standard();
     for (const Quad& q : scene.quads()) {
         const Vec3 n = q.normal;
-        const bool ok = q.name == "floor"                         ? n.y > 0.99
-                        : q.name == "ceiling"                     ? n.y < -0.99
-                        : q.name == "left"                        ? n.x < -0.99  // red wall at x = 556 faces -x
-                        : q.name == "right"                       ? n.x > 0.99   // green wall at x = 0 faces +x
-                        : q.name == "back"                        ? n.z < -0.99
-                        : q.name.find("top") != std::string::npos ? n.y > 0.99
-                                                                  : std::abs(n.y) < 1e-9;  // block sides are vertical
+        const bool ok = q.name == "floor"     ? n.y > 0.99
+                        : q.name == "ceiling" ? n.y < -0.99
+                        : q.name == "left"    ? n.x < -0.99  // red wall at x = 556 faces -x
+                        : q.name == "right"   ? n.x > 0.99   // green wall at x = 0 faces +x
+                        : q.name == "back"    ? n.z < -0.99
+                        : q.name.find("top") != std::string::npos
+                            ? n.y > 0.99
+                            : std::abs(n.y) < 1e-9;  // block sides are vertical
         EXPECT_TRUE(ok) << q.name;
     }
 }

@@ -9,9 +9,9 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <cmath>
 #include <numbers>
 #include <stdexcept>
 #include <string>
@@ -48,7 +48,8 @@ public:
             const double cx[4] = {0.25, 0.75, 0.25, 0.75}, cy[4] = {0.25, 0.25, 0.75, 0.75};
             for (int b = 0; b < 4; ++b) {
                 const double amp = 0.15 * std::sin(0.07 * (b + 1) * t + 2 * b);
-                const double bump = std::exp(-((x - cx[b]) * (x - cx[b]) + (y - cy[b]) * (y - cy[b])) / 0.015);
+                const double bump =
+                    std::exp(-((x - cx[b]) * (x - cx[b]) + (y - cy[b]) * (y - cy[b])) / 0.015);
                 d[2] += amp * bump;
                 d[0] += 0.3 * amp * amp * bump;
             }
@@ -116,9 +117,14 @@ class CollectingSink : public pmsc::engine::FrameSink {
 public:
     std::vector<Collected> frames;
     void write(const pmsc::engine::FrameResult& r) override {
-        frames.push_back({r.state, r.local, r.pointsEvaluated, {r.regionStates.begin(), r.regionStates.end()},
-                          {r.values.begin(), r.values.end()}, {r.pointWeights.begin(), r.pointWeights.end()},
-                          {r.fullPoints.begin(), r.fullPoints.end()}, {r.fullValues.begin(), r.fullValues.end()}});
+        frames.push_back({r.state,
+                          r.local,
+                          r.pointsEvaluated,
+                          {r.regionStates.begin(), r.regionStates.end()},
+                          {r.values.begin(), r.values.end()},
+                          {r.pointWeights.begin(), r.pointWeights.end()},
+                          {r.fullPoints.begin(), r.fullPoints.end()},
+                          {r.fullValues.begin(), r.fullValues.end()}});
     }
 };
 
@@ -191,16 +197,20 @@ TEST(LocalFailThrough, RegionKeysBasisShareAndRatioMarginDoWhatTheySay) {
     o.featherFraction = 0.08;
     o.energy = 0.999999;
     o.ratioMargin = 1.5;  // not the default (1): the margin's effect is tested below
-    auto learn = [&](const pmsc::RegionOptions& ro) { return pmsc::learnRegions(q, model, ro, kTolerance, 5, {}); };
+    auto learn = [&](const pmsc::RegionOptions& ro) {
+        return pmsc::learnRegions(q, model, ro, kTolerance, 5, {});
+    };
     const pmsc::LocalRegions base = learn(o);
-    const Eigen::MatrixXd pos = Eigen::Map<const Eigen::MatrixXd>(model.mean.data(), 3, model.points).transpose();
+    const Eigen::MatrixXd pos =
+        Eigen::Map<const Eigen::MatrixXd>(model.mean.data(), 3, model.points).transpose();
     const double diagonal = (pos.colwise().maxCoeff() - pos.colwise().minCoeff()).norm();
     for (const auto& g : base.regions) {
         // Every key within keyRadius of the region is one of its keys; at least minKeys (or all K).
         EXPECT_GE(Index(g.keys.size()), std::min<Index>(o.minKeys, model.keyCount()));
         for (Index k = 0; k < model.keyCount(); ++k) {
             double d = 1e300;
-            for (const Index p : g.points) d = std::min(d, (pos.row(model.keyPoints[size_t(k)]) - pos.row(p)).norm());
+            for (const Index p : g.points)
+                d = std::min(d, (pos.row(model.keyPoints[size_t(k)]) - pos.row(p)).norm());
             if (d <= o.keyRadius * diagonal) {
                 EXPECT_TRUE(std::binary_search(g.keys.begin(), g.keys.end(), k)) << k;
             }
@@ -285,7 +295,7 @@ TEST(LocalFailThrough, EachFailingPointIsEvaluatedOnceAndItsFullValueReachesTheS
     const pmsc::LocalRegions& regions = *model.regions;
     for (Index f = 0; f < Index(local.size()); ++f) {
         const Collected& c = local[size_t(f)];
-        expected += k;  // every frame evaluates its keys
+        expected += k;                             // every frame evaluates its keys
         if (c.state == CacheState::Hit) continue;  // region keys only for frames that do not hit
         expected += e;
         if (!c.local) {
@@ -317,13 +327,15 @@ TEST(LocalFailThrough, EachFailingPointIsEvaluatedOnceAndItsFullValueReachesTheS
 /// The novel sheet, except that evaluating the region keys throws.
 class RegionKeysFail : public pmsc::PointEvaluator {
 public:
-    RegionKeysFail(const LocalSurface& inner, std::vector<Index> regionKeys) : inner_(inner), keys_(std::move(regionKeys)) {}
+    RegionKeysFail(const LocalSurface& inner, std::vector<Index> regionKeys)
+        : inner_(inner), keys_(std::move(regionKeys)) {}
     std::string name() const override { return "region-keys-fail"; }
     Index pointCount() const override { return inner_.pointCount(); }
     Index channelCount() const override { return 3; }
     Index frameCount() const override { return inner_.frameCount(); }
     void evaluate(Index frame, std::span<const Index> points, double* out) const override {
-        if (std::equal(points.begin(), points.end(), keys_.begin(), keys_.end())) throw std::runtime_error("no region keys today");
+        if (std::equal(points.begin(), points.end(), keys_.begin(), keys_.end()))
+            throw std::runtime_error("no region keys today");
         inner_.evaluate(frame, points, out);
     }
 
@@ -379,7 +391,8 @@ Steps errorSteps(const Model& model, const std::vector<CacheState>& states, cons
                  const std::vector<double>& truth) {
     const auto regionOf = model.regions->regionOfPoints(model.points);
     const auto error = [&](Index p) {
-        return std::hypot(out[3 * p] - truth[3 * p], out[3 * p + 1] - truth[3 * p + 1], out[3 * p + 2] - truth[3 * p + 2]);
+        return std::hypot(out[3 * p] - truth[3 * p], out[3 * p + 1] - truth[3 * p + 1],
+                          out[3 * p + 2] - truth[3 * p + 2]);
     };
     Steps s;
     for (Index p = 0; p < model.points; ++p) {

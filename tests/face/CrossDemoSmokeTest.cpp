@@ -27,8 +27,8 @@ TEST(CrossDemoSmoke, QuickRunWritesACompleteReport) {
     ASSERT_NE(::mkdtemp(pattern.data()), nullptr);
     const fs::path dir = pattern, out = dir / "out";
     const std::string command = std::string("'") + PMSC_BINARY + "' demo cross --data '" + test::ictFolder() +
-                                "' --out '" + out.string() + "' --quick --quiet >'" + (dir / "stdout").string() +
-                                "' 2>'" + (dir / "stderr").string() + "'";
+                                "' --out '" + out.string() + "' --quick --quiet >'" +
+                                (dir / "stdout").string() + "' 2>'" + (dir / "stderr").string() + "'";
     const int status = std::system(command.c_str());
     ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << command;
     std::ifstream in(out / "report.json");

@@ -115,7 +115,8 @@ TEST(FaceDemoSmoke, QuickRunWritesACompleteReport) {
                          1.0 - s.at("hit_rate").get<double>())
             << set;
         for (const char* way : {"local", "whole_frame"})
-            EXPECT_LT(s.at(way).at("soft_max_error_pct_bbox_max").get<double>(), r.at("tolerance_pct_bbox").get<double>())
+            EXPECT_LT(s.at(way).at("soft_max_error_pct_bbox_max").get<double>(),
+                      r.at("tolerance_pct_bbox").get<double>())
                 << set << " " << way;
         EXPECT_LE(s.at("local").at("points_evaluated_fraction_mean").get<double>(),
                   s.at("whole_frame").at("points_evaluated_fraction_mean").get<double>())

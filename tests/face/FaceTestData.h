@@ -1,9 +1,9 @@
 // Shared by the face tests: where the ICT face is, and one rig built once per test program.
 #pragma once
 
-#include "tests/common/MissingData.h"
 #include "examples/face/FaceRig.h"
 #include "examples/face/IctFace.h"
+#include "tests/common/MissingData.h"
 
 #include <gtest/gtest.h>
 
@@ -35,9 +35,9 @@ inline const FaceFixture& fixture() {
 }  // namespace pmsc::face::test
 
 /// Skips a test (with the reason) when the ICT data are not where CMake said; fails under CI.
-#define PMSC_REQUIRE_ICT()                                                                 \
-    do {                                                                                   \
-        if (!::pmsc::face::test::haveIct())                                                \
-            PMSC_MISSING_DATA("ICT-FaceKit not found in " << ::pmsc::face::test::ictFolder() \
-                              << " (set -DPMSC_ICT_FACEKIT_DIR=...)");                       \
+#define PMSC_REQUIRE_ICT()                                                                         \
+    do {                                                                                           \
+        if (!::pmsc::face::test::haveIct())                                                        \
+            PMSC_MISSING_DATA("ICT-FaceKit not found in " << ::pmsc::face::test::ictFolder()       \
+                                                          << " (set -DPMSC_ICT_FACEKIT_DIR=...)"); \
     } while (0)

@@ -27,13 +27,14 @@ TEST(LearnDemoSmoke, QuickNightlyLoopWritesACompleteReport) {
     ASSERT_NE(::mkdtemp(pattern.data()), nullptr);
     const fs::path dir = pattern, out = dir / "out";
     const std::string command = std::string("'") + PMSC_BINARY + "' demo learn --data '" + test::ictFolder() +
-                                "' --out '" + out.string() + "' --quick --quiet >'" + (dir / "stdout").string() +
-                                "' 2>'" + (dir / "stderr").string() + "'";
+                                "' --out '" + out.string() + "' --quick --quiet >'" +
+                                (dir / "stdout").string() + "' 2>'" + (dir / "stderr").string() + "'";
     const int status = std::system(command.c_str());
     ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << command;
     std::ifstream in(out / "report.json");
     const nlohmann::json r = nlohmann::json::parse(in);
-    for (const char* key : {"frames", "models", "day1", "day2", "validation", "learn_vs_scratch", "calibration"})
+    for (const char* key :
+         {"frames", "models", "day1", "day2", "validation", "learn_vs_scratch", "calibration"})
         EXPECT_TRUE(r.contains(key)) << key;
     const long kept = r.at("frames").at("day1_kept").get<long>();
     EXPECT_GT(kept, 0);

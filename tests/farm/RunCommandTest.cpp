@@ -4,13 +4,13 @@
 // process on a real motion-capture clip from assimp-testmodels, killed with SIGKILL mid-run and
 // resumed; every bad input checked for its exit code, its one stderr line and the absence of any
 // partial file. Figures are printed (and recorded as test properties) for the closing note.
-#include "tests/common/MissingData.h"
 #include "cli/EvaluatorRegistry.h"
 #include "cli/RunCommand.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/NpyIO.h"
+#include "tests/common/MissingData.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -160,8 +160,8 @@ protected:
     }
     void SetUp() override {
         if (!fs::exists(kClip))
-            PMSC_MISSING_DATA("assimp-testmodels not installed (" << kClip
-                              << " not found); install the Debian package");
+            PMSC_MISSING_DATA("assimp-testmodels not installed ("
+                              << kClip << " not found); install the Debian package");
         ASSERT_TRUE(fs::exists(model)) << "the suite's model was not made";
     }
 
@@ -303,7 +303,8 @@ TEST_F(FarmRun, OverlappingRunsBothFinishAndALiveRunsTemporaryIsLeftAlone) {
     EXPECT_FALSE(hasTemporaries(both));
     Index identical = 0;
     for (const auto& name : listDir(single))
-        if (name.rfind("frame.", 0) == 0) identical += slurp((single / name).string()) == slurp((both / name).string());
+        if (name.rfind("frame.", 0) == 0)
+            identical += slurp((single / name).string()) == slurp((both / name).string());
     EXPECT_EQ(identical, 400);
 }
 

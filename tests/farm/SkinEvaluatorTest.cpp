@@ -3,10 +3,10 @@
 // The skin:ASSET evaluator: posing checked against hand-computed linear blend skinning and morph
 // targets on small glTF files written here, then subset == full bit for bit and thread safety on
 // real animated characters from Debian's assimp-testmodels.
-#include "tests/common/MissingData.h"
-#include "pmsc/ObjIO.h"
 #include "evaluators/SkinEvaluator.h"
 #include "pmsc/Errors.h"
+#include "pmsc/ObjIO.h"
+#include "tests/common/MissingData.h"
 
 #include <gtest/gtest.h>
 
@@ -42,11 +42,11 @@ std::string testModel(const std::string& relative) {
     return fs::exists(path) ? path : std::string();
 }
 
-#define REQUIRE_MODEL(var, rel)                                 \
-    const std::string var = testModel(rel);                     \
-    if (var.empty())                                            \
-        PMSC_MISSING_DATA("assimp-testmodels not installed (" rel \
-                          " not found); install the Debian package assimp-testmodels")
+#define REQUIRE_MODEL(var, rel)                               \
+    const std::string var = testModel(rel);                   \
+    if (var.empty())                                          \
+    PMSC_MISSING_DATA("assimp-testmodels not installed (" rel \
+                      " not found); install the Debian package assimp-testmodels")
 
 // A fresh folder per test, removed when the test ends.
 struct ScratchDir {

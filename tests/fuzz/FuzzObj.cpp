@@ -30,7 +30,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const ObjMesh back = readObj(again.path(), ObjContent::PositionsAndPolygons);
     if (back.positions.size() != mesh.positions.size() ||
         (!mesh.positions.empty() &&  // bit for bit (-0 stays -0); an empty vector's data() is null
-         std::memcmp(back.positions.data(), mesh.positions.data(), mesh.positions.size() * sizeof(double)) != 0) ||
+         std::memcmp(back.positions.data(), mesh.positions.data(), mesh.positions.size() * sizeof(double)) !=
+             0) ||
         back.polygonStart != mesh.polygonStart || back.polygonVertices != mesh.polygonVertices)
         std::abort();
     return 0;

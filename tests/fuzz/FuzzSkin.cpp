@@ -7,8 +7,8 @@
 #include "evaluators/SkinEvaluator.h"
 #include "pmsc/Errors.h"
 
-#include <cstdlib>
 #include <cstdio>
+#include <cstdlib>
 #include <string>
 #include <vector>
 
@@ -28,7 +28,8 @@ constexpr const char* kExtensions[] = {".bvh", ".x", ".dae", ".gltf", ".glb", ".
 
 std::string scratchPath(const char* extension) {
     const char* dir = std::getenv("TMPDIR");
-    return std::string(dir && *dir ? dir : "/tmp") + "/pmsc-fuzz-skin-" + std::to_string(::getpid()) + extension;
+    return std::string(dir && *dir ? dir : "/tmp") + "/pmsc-fuzz-skin-" + std::to_string(::getpid()) +
+           extension;
 }
 
 }  // namespace

@@ -95,8 +95,10 @@ void commandLine(const std::string& text) {
     bool json = false;
     std::string model, frames;
     cli::ArgParser p("fuzz", "[options] MODEL", "");
-    p.option("--threads", "T", "", [&](const std::string& v) { threads = cli::parseIndex("--threads", v, 1, 256); });
-    p.option("--tolerance", "E", "", [&](const std::string& v) { tolerance = cli::parseDouble("--tolerance", v, 0); });
+    p.option("--threads", "T", "",
+             [&](const std::string& v) { threads = cli::parseIndex("--threads", v, 1, 256); });
+    p.option("--tolerance", "E", "",
+             [&](const std::string& v) { tolerance = cli::parseDouble("--tolerance", v, 0); });
     p.option("--keys", "LIST", "", [&](const std::string& v) { keys = cli::parseIndexList("--keys", v); });
     p.option("--eps", "A,B", "", [&](const std::string& v) { eps = cli::parseDoublePair("--eps", v); });
     p.option("--dtype", "T", "", [&](const std::string& v) { dtype = cli::parseDtype("--dtype", v); });
@@ -122,10 +124,18 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (size == 0) return 0;
     const std::string text(reinterpret_cast<const char*>(data) + 1, size - 1);
     switch (data[0] % 4) {
-        case 0: frameRange(text); break;
-        case 1: evaluatorSpec(text); break;
-        case 2: skinArgs(text); break;
-        default: commandLine(text); break;
+        case 0:
+            frameRange(text);
+            break;
+        case 1:
+            evaluatorSpec(text);
+            break;
+        case 2:
+            skinArgs(text);
+            break;
+        default:
+            commandLine(text);
+            break;
     }
     return 0;
 }

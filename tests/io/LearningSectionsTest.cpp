@@ -1,7 +1,7 @@
 // The model-file sections of `pmsc learn` (issue 10): LEARNSVD and CALIBRAT round trips and bad bytes.
+#include "SmallModel.h"
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
-#include "SmallModel.h"
 
 #include <gtest/gtest.h>
 

@@ -14,9 +14,9 @@ namespace {
 
 using pmsc::InputError;
 using pmsc::Model;
+using pmsc::test::smallModel;
 using pmsc::test::TempDir;
 using pmsc::test::writeBytes;
-using pmsc::test::smallModel;
 
 template <class T>
 void poke(std::string& bytes, std::size_t offset, T value) {
@@ -145,7 +145,8 @@ TEST(ModelFile, FlagsOnlyInVersion3AndOnlyKnownOnesAndOnlyWithoutSectionsTheyExc
     reseal(bytes);
     what = decodeMessage(bytes, "m.pmsc");
     EXPECT_NE(what.find("m.pmsc: the header's reserved word (offset 60) is 1, not 0, in a version-1 file"),
-              std::string::npos) << what;
+              std::string::npos)
+        << what;
     // Version 3 without the flag: the per-channel arrays no longer fit the file.
     bytes = pmsc::encodeModel(pmsc::test::smallSharedChannelModel());
     poke<std::uint32_t>(bytes, 60, 0);
@@ -158,7 +159,8 @@ TEST(ModelFile, FlagsOnlyInVersion3AndOnlyKnownOnesAndOnlyWithoutSectionsTheyExc
     const std::string regions = pmsc::encodeModel(pmsc::test::smallModelWithRegions());
     const std::size_t regionsCore = pmsc::kModelHeaderBytes + 8 * (21 + 21 * 3 + 3 + 3 + 3 * 9);
     const std::size_t sharedCore = pmsc::kModelHeaderBytes + 8 * (21 + 7 * 3 + 3 + 3 + 3 * 3);
-    bytes = shared.substr(0, sharedCore) + regions.substr(regionsCore, regions.size() - 8 - regionsCore) + "12345678";
+    bytes = shared.substr(0, sharedCore) + regions.substr(regionsCore, regions.size() - 8 - regionsCore) +
+            "12345678";
     reseal(bytes);
     what = decodeMessage(bytes, "m.pmsc");
     EXPECT_EQ(what.rfind("m.pmsc: ", 0), 0u) << what;

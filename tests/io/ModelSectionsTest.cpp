@@ -51,7 +51,8 @@ std::string decodeMessage(const std::string& bytes) {
 void expectMessage(const std::string& bytes, std::initializer_list<std::string> fragments) {
     const std::string what = decodeMessage(bytes);
     EXPECT_EQ(what.rfind("m.pmsc: ", 0), 0u) << what;
-    for (const auto& f : fragments) EXPECT_NE(what.find(f), std::string::npos) << "missing '" << f << "' in: " << what;
+    for (const auto& f : fragments)
+        EXPECT_NE(what.find(f), std::string::npos) << "missing '" << f << "' in: " << what;
 }
 
 TEST(ModelSections, AModelWithoutSectionsIsStillVersion1) {

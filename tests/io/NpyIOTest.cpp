@@ -172,7 +172,8 @@ TEST(NpyMapped, ChecksEveryValueAcrossChunksAndRejectsWhatReadFramesRejects) {
     TempDir dir;
     // 3 frames x 30,000 points x 3: 270,000 values, more than the 65,536 checked at a time.
     FrameSet big(3, 30000, 3);
-    for (std::size_t i = 0; i < big.values.size(); ++i) big.values[i] = std::sin(0.001 * static_cast<double>(i));
+    for (std::size_t i = 0; i < big.values.size(); ++i)
+        big.values[i] = std::sin(0.001 * static_cast<double>(i));
     const auto good = dir.file("good.npy");
     pmsc::writeFrames(good, big, NpyDtype::Float32);
     const pmsc::MappedFrames m(good);

@@ -1,7 +1,7 @@
 // The project's one OBJ reader and writer (pmsc/ObjIO.h; issue 13 merged the face rig's, the skin
 // evaluator's and the synthetic ICT frames' copies).
-#include "pmsc/ObjIO.h"
 #include "pmsc/Errors.h"
+#include "pmsc/ObjIO.h"
 
 #include <gtest/gtest.h>
 
@@ -69,8 +69,9 @@ TEST(ObjWriter, CoordinatesReadBackExactlyAndPolygonsAsWritten) {
     quad.positions = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0};
     quad.polygonStart = {0, 4, 7};
     quad.polygonVertices = {0, 1, 2, 3, 0, 2, 3};
-    const std::vector<double> posed{0.1 + 1e-9, 1.0 / 3, -2.5e-17, 123456.789012345, 1e300, -0.0,
-                                    9.000000000000002, 5, 6, 7, 8, 0.30000000000000004};
+    const std::vector<double> posed{
+        0.1 + 1e-9, 1.0 / 3, -2.5e-17, 123456.789012345,   1e300, -0.0, 9.000000000000002, 5,
+        6,          7,       8,        0.30000000000000004};
     const std::string path = writeTemp("exact.obj", "");
     writeObj(path, quad, posed, "posed");
     Index faces = 0;

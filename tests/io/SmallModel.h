@@ -50,14 +50,17 @@ inline pmsc::Model smallModelWithRegions() {
     pmsc::LocalRegions regions;
     regions.featherWidth = 0.25;
     regions.maxLocalFraction = 0.5;
-    const auto region = [&](std::vector<pmsc::Index> points, std::vector<pmsc::Index> keys, pmsc::Index basisSize) {
+    const auto region = [&](std::vector<pmsc::Index> points, std::vector<pmsc::Index> keys,
+                            pmsc::Index basisSize) {
         pmsc::Region g;
         g.points = std::move(points);
         g.keys = std::move(keys);
         const auto rows = static_cast<Eigen::Index>(g.points.size()) * 3;
         Eigen::MatrixXd random(rows, basisSize);
-        for (Eigen::Index i = 0; i < random.size(); ++i) random.data()[i] = std::cos(1.3 * i + 0.2 * basisSize);
-        g.basis = Eigen::HouseholderQR<Eigen::MatrixXd>(random).householderQ() * Eigen::MatrixXd::Identity(rows, basisSize);
+        for (Eigen::Index i = 0; i < random.size(); ++i)
+            random.data()[i] = std::cos(1.3 * i + 0.2 * basisSize);
+        g.basis = Eigen::HouseholderQR<Eigen::MatrixXd>(random).householderQ() *
+                  Eigen::MatrixXd::Identity(rows, basisSize);
         g.keyBasis = Eigen::MatrixXd(static_cast<Eigen::Index>(g.keys.size()) * 3, basisSize);
         for (Eigen::Index i = 0; i < g.keyBasis.size(); ++i) g.keyBasis.data()[i] = std::sin(0.9 * i + 0.1);
         Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(g.keyBasis);

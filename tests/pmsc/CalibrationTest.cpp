@@ -1,7 +1,7 @@
 #include "pmsc/Calibration.h"
 
-#include "pmsc/Model.h"
 #include "Synthetic.h"
+#include "pmsc/Model.h"
 
 #include <gtest/gtest.h>
 
@@ -37,7 +37,8 @@ KnownRatio knownRatioData() {
     const Eigen::MatrixXd wk = pmsc::gatherKeyRows(w, c, d.keys);
     const Eigen::VectorXd pointErr = w - u * (p * wk);
     const Eigen::VectorXd keyErr = wk - pmsc::gatherKeyRows(u, c, d.keys) * (p * wk);
-    d.ratio = pmsc::maxPointNorm(pointErr, c) / (keyErr.norm() / std::sqrt(static_cast<double>(d.keys.size())));
+    d.ratio =
+        pmsc::maxPointNorm(pointErr, c) / (keyErr.norm() / std::sqrt(static_cast<double>(d.keys.size())));
     return d;
 }
 
@@ -111,10 +112,10 @@ TEST(Calibration, RejectsBadArguments) {
 
 TEST(Calibration, ConformalQuantileIsTheRankOfNPlusOneTimesCoverage) {
     std::vector<double> v;
-    for (int i = 19; i >= 1; --i) v.push_back(i);  // 1..19, unsorted
-    EXPECT_EQ(pmsc::conformalQuantile(v, 0.9), 18.0);   // ceil(20 * 0.9) = 18
-    EXPECT_EQ(pmsc::conformalQuantile(v, 0.5), 10.0);   // ceil(20 * 0.5) = 10
-    EXPECT_EQ(pmsc::conformalQuantile(v, 0.951), 19.0); // ceil(19.02) = 20 > n: the largest
+    for (int i = 19; i >= 1; --i) v.push_back(i);        // 1..19, unsorted
+    EXPECT_EQ(pmsc::conformalQuantile(v, 0.9), 18.0);    // ceil(20 * 0.9) = 18
+    EXPECT_EQ(pmsc::conformalQuantile(v, 0.5), 10.0);    // ceil(20 * 0.5) = 10
+    EXPECT_EQ(pmsc::conformalQuantile(v, 0.951), 19.0);  // ceil(19.02) = 20 > n: the largest
     EXPECT_EQ(pmsc::conformalQuantile({}, 0.9), 0.0);
 }
 
@@ -182,8 +183,9 @@ TEST(Calibration, ConformalRuleThroughCalibrateAndBadCoverage) {
     EXPECT_NEAR(s.ratio, d.ratio, 1e-3 * d.ratio);
     EXPECT_EQ(s.rule, pmsc::CalibrationRule::Conformal);
     EXPECT_EQ(s.coverage, 0.9);
-    EXPECT_THROW(pmsc::calibrate(d.q, 3, d.keys, 4, 0.002, 5, {}, nullptr, pmsc::CalibrationRule::Conformal, 1.0),
-                 std::invalid_argument);
+    EXPECT_THROW(
+        pmsc::calibrate(d.q, 3, d.keys, 4, 0.002, 5, {}, nullptr, pmsc::CalibrationRule::Conformal, 1.0),
+        std::invalid_argument);
     pmsc::CalibrationStats t = lognormalScores(50, 74);
     EXPECT_THROW(pmsc::setThresholds(t, 0.2, pmsc::CalibrationRule::Conformal, 0.0), std::invalid_argument);
     EXPECT_THROW(pmsc::setThresholds(t, -1, pmsc::CalibrationRule::MaxRatio, 0.0), std::invalid_argument);

@@ -87,7 +87,8 @@ struct NonlinearPairs {
                 for (Index j = i; j < 4; ++j) q[k++] = s[i] * s[j];
             control.col(f) = controlModes * s;
             target.col(f) = targetLinear * s + targetQuadratic * q;
-            for (Index r = 0; r < 90; ++r) target(r, f) += 0.02 * normal(rng) + 0.1 * std::sin(2.0 * s[r % 4]);
+            for (Index r = 0; r < 90; ++r)
+                target(r, f) += 0.02 * normal(rng) + 0.1 * std::sin(2.0 * s[r % 4]);
             for (Index r = 0; r < 150; ++r) control(r, f) += 0.01 * normal(rng);
         }
     }

@@ -1,7 +1,7 @@
 #include "pmsc/IncrementalSvd.h"
 
-#include "pmsc/Subspace.h"
 #include "Synthetic.h"
+#include "pmsc/Subspace.h"
 
 #include <gtest/gtest.h>
 
@@ -21,7 +21,9 @@ pmsc::IncrementalSubspace stateFromScratch(const Eigen::MatrixXd& raw, Index ran
     s.mean = pmsc::removeRowMean(raw, centered);
     Eigen::JacobiSVD<Eigen::MatrixXd> svd(centered, Eigen::ComputeThinU);
     Index r = 0;
-    while (r < rank && r < svd.singularValues().size() && svd.singularValues()[r] > 1e-12 * svd.singularValues()[0]) ++r;
+    while (r < rank && r < svd.singularValues().size() &&
+           svd.singularValues()[r] > 1e-12 * svd.singularValues()[0])
+        ++r;
     s.u = svd.matrixU().leftCols(r);
     s.sigma = svd.singularValues().head(r);
     s.frames = raw.cols();
@@ -110,7 +112,8 @@ TEST(IncrementalSvd, TruncatedStateObeysTheWeylAndWedinBounds) {
     EXPECT_NEAR(s.totalEnergy, exact.totalEnergy, 1e-12 * exact.totalEnergy);
     const double tail = s.tailNorm();
     EXPECT_GT(tail, 0.0);
-    for (Index i = 0; i < s.rank(); ++i) EXPECT_LE(std::abs(s.sigma[i] - exact.sigma[i]), tail * (1 + 1e-9)) << i;
+    for (Index i = 0; i < s.rank(); ++i)
+        EXPECT_LE(std::abs(s.sigma[i] - exact.sigma[i]), tail * (1 + 1e-9)) << i;
     const Index m = 5;
     const double gap = exact.sigma[m - 1] - exact.sigma[m];
     const double angle = pmsc::largestPrincipalAngle(exact.u.leftCols(m), s.u.leftCols(m));

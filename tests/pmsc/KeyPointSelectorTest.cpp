@@ -1,7 +1,7 @@
 #include "pmsc/KeyPointSelector.h"
 
-#include "pmsc/Model.h"
 #include "Synthetic.h"
+#include "pmsc/Model.h"
 
 #include <gtest/gtest.h>
 
@@ -106,7 +106,8 @@ TEST(Teleconnection, KeysLandInEveryIndependentlyDrivenPatch) {
     EXPECT_LT(sel.residualPerRound.back(), 1e-9);
     // The patch structure is also visible in the first 8 picks alone (one per rotated vector).
     std::set<pmsc::Index> firstPatches;
-    for (size_t i = 0; i < sel.keys.size(); i += 2) firstPatches.insert(patchOf[static_cast<size_t>(sel.keys[i])]);
+    for (size_t i = 0; i < sel.keys.size(); i += 2)
+        firstPatches.insert(patchOf[static_cast<size_t>(sel.keys[i])]);
     EXPECT_EQ(firstPatches.size(), 8u);
 }
 
@@ -133,7 +134,8 @@ TEST(Teleconnection, FiducialsComeFirstAndForcedDuplicatesAreSkipped) {
     // A repeated fiducial is an error naming it, not a silent drop.
     o.fiducials = {5, 5};
     o.gridPoints = {};
-    expectInvalidMentioning([&] { pmsc::selectKeysTeleconnection(q, basis, svd.u, svd.sigma, 3, o); }, "fiducial point 5");
+    expectInvalidMentioning([&] { pmsc::selectKeysTeleconnection(q, basis, svd.u, svd.sigma, 3, o); },
+                            "fiducial point 5");
 }
 
 TEST(Teleconnection, StopsAtMaxErrorAndRecordsEachRound) {
@@ -186,10 +188,12 @@ TEST(Teleconnection, RejectsBadBudgetAndBlock) {
     expectInvalidMentioning([&] { pmsc::selectKeysTeleconnection(q, svd.u, svd.u, svd.sigma, 3, o); }, "11");
     o.maxKeys = 4;
     o.block = 0;
-    expectInvalidMentioning([&] { pmsc::selectKeysTeleconnection(q, svd.u, svd.u, svd.sigma, 3, o); }, "block");
+    expectInvalidMentioning([&] { pmsc::selectKeysTeleconnection(q, svd.u, svd.u, svd.sigma, 3, o); },
+                            "block");
     o.block = 2;
     o.fiducials = {0, 1, 2, 3, 4};
-    expectInvalidMentioning([&] { pmsc::selectKeysTeleconnection(q, svd.u, svd.u, svd.sigma, 3, o); }, "budget");
+    expectInvalidMentioning([&] { pmsc::selectKeysTeleconnection(q, svd.u, svd.u, svd.sigma, 3, o); },
+                            "budget");
 }
 
 TEST(Determinacy, TooFewKeyValuesOrDependentKeysReduceM) {

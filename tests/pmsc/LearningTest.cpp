@@ -1,9 +1,9 @@
 #include "pmsc/Learning.h"
 
+#include "Synthetic.h"
 #include "pmsc/Errors.h"
 #include "pmsc/PointMultiplier.h"
 #include "pmsc/Training.h"
-#include "Synthetic.h"
 
 #include <gtest/gtest.h>
 
@@ -27,14 +27,16 @@ pmsc::FrameSet patches(Index first, Index frames, unsigned seed, Index still) {
     q += 0.01 * pmsc::test::gaussian(set.rows(), frames, seed + 100 + static_cast<unsigned>(first));
     const Index firstStill = (kPatches - still) * kPointsPerPatch * kChannels;
     // Still at the shot's mean pose, so that stillness adds no offset direction of its own.
-    for (Index row = firstStill; row < set.rows(); ++row) q.row(row).setConstant(shot.matrix().row(row).mean());
+    for (Index row = firstStill; row < set.rows(); ++row)
+        q.row(row).setConstant(shot.matrix().row(row).mean());
     return set;
 }
 
 pmsc::FrameSet join(const pmsc::FrameSet& a, const pmsc::FrameSet& b) {
     pmsc::FrameSet all(a.frames + b.frames, a.points, a.channels);
     std::copy(a.values.begin(), a.values.end(), all.values.begin());
-    std::copy(b.values.begin(), b.values.end(), all.values.begin() + static_cast<std::ptrdiff_t>(a.values.size()));
+    std::copy(b.values.begin(), b.values.end(),
+              all.values.begin() + static_cast<std::ptrdiff_t>(a.values.size()));
     return all;
 }
 
@@ -50,7 +52,9 @@ Errors errorsOn(const pmsc::Model& model, const pmsc::FrameSet& frames) {
     for (Index f = 0; f < frames.frames; ++f) {
         const double* full = frames.frame(f);
         for (Index k = 0; k < model.keyCount(); ++k)
-            for (Index c = 0; c < kChannels; ++c) keys[static_cast<size_t>(k * kChannels + c)] = full[model.keyPoints[static_cast<size_t>(k)] * kChannels + c];
+            for (Index c = 0; c < kChannels; ++c)
+                keys[static_cast<size_t>(k * kChannels + c)] =
+                    full[model.keyPoints[static_cast<size_t>(k)] * kChannels + c];
         pm.project(keys.data(), coords.data());
         const double rms = pm.keyRmsError(keys.data(), coords.data());
         e.keyRmsMax = std::max(e.keyRmsMax, rms);
@@ -58,7 +62,8 @@ Errors errorsOn(const pmsc::Model& model, const pmsc::FrameSet& frames) {
         pm.reconstruct(coords.data(), out.data());
         for (Index p = 0; p < frames.points; ++p) {
             double d = 0;
-            for (Index c = 0; c < kChannels; ++c) d += std::pow(out[static_cast<size_t>(p * kChannels + c)] - full[p * kChannels + c], 2);
+            for (Index c = 0; c < kChannels; ++c)
+                d += std::pow(out[static_cast<size_t>(p * kChannels + c)] - full[p * kChannels + c], 2);
             e.pointMax = std::max(e.pointMax, std::sqrt(d));
         }
     }

@@ -14,8 +14,8 @@ namespace {
 // not 2.5, and its p99 and p99.5 are its largest value, not 3.97 and 3.985.
 TEST(Percentiles, NearestRankGivesAValueOfTheSample) {
     const auto p = pmsc::percentiles({4, 1, 3, 2});
-    EXPECT_EQ(p.p50, 2);   // ceil(0.5 * 4) = 2nd smallest
-    EXPECT_EQ(p.p99, 4);   // ceil(3.96) = 4th
+    EXPECT_EQ(p.p50, 2);  // ceil(0.5 * 4) = 2nd smallest
+    EXPECT_EQ(p.p99, 4);  // ceil(3.96) = 4th
     EXPECT_EQ(p.p995, 4);
     EXPECT_EQ(p.max, 4);
     std::vector<double> ramp(201);

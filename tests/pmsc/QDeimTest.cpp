@@ -1,7 +1,7 @@
 #include "pmsc/QDeim.h"
 
-#include "pmsc/Model.h"
 #include "Synthetic.h"
+#include "pmsc/Model.h"
 
 #include <gtest/gtest.h>
 
@@ -21,8 +21,10 @@ Eigen::MatrixXd orthonormalBasis(pmsc::Index rows, pmsc::Index cols, unsigned se
     return (qr.householderQ() * Eigen::MatrixXd::Identity(rows, cols + 5)).leftCols(cols);
 }
 
-double keyCondition(const Eigen::MatrixXd& basis, pmsc::Index channels, const std::vector<pmsc::Index>& keys) {
-    const Eigen::VectorXd s = Eigen::JacobiSVD<Eigen::MatrixXd>(pmsc::gatherKeyRows(basis, channels, keys)).singularValues();
+double keyCondition(const Eigen::MatrixXd& basis, pmsc::Index channels,
+                    const std::vector<pmsc::Index>& keys) {
+    const Eigen::VectorXd s =
+        Eigen::JacobiSVD<Eigen::MatrixXd>(pmsc::gatherKeyRows(basis, channels, keys)).singularValues();
     return s[0] / s[s.size() - 1];
 }
 
@@ -56,7 +58,8 @@ TEST(QDeim, KeysAreBetterConditionedThanRandomKeys) {
     std::nth_element(randomConds.begin(), randomConds.begin() + 15, randomConds.end());
     EXPECT_LT(qdeim, randomConds[15]);
     // And the Drmac-Gugercin style bound holds comfortably: ||pinv(B_K)|| is modest.
-    const Eigen::VectorXd s = Eigen::JacobiSVD<Eigen::MatrixXd>(pmsc::gatherKeyRows(b, c, sel.keys)).singularValues();
+    const Eigen::VectorXd s =
+        Eigen::JacobiSVD<Eigen::MatrixXd>(pmsc::gatherKeyRows(b, c, sel.keys)).singularValues();
     EXPECT_GT(s[s.size() - 1], 0.05);
 }
 
@@ -73,7 +76,8 @@ TEST(QDeim, ExtendsBeyondOnePassWithoutDuplicates) {
     EXPECT_EQ(std::vector<pmsc::Index>(sel.keys.begin(), sel.keys.begin() + 2), one.keys);
     // Adding rows never worsens the smallest singular value.
     const auto smin = [&](const std::vector<pmsc::Index>& keys) {
-        const Eigen::VectorXd s = Eigen::JacobiSVD<Eigen::MatrixXd>(pmsc::gatherKeyRows(b, c, keys)).singularValues();
+        const Eigen::VectorXd s =
+            Eigen::JacobiSVD<Eigen::MatrixXd>(pmsc::gatherKeyRows(b, c, keys)).singularValues();
         return s[s.size() - 1];
     };
     EXPECT_GE(smin(sel.keys), smin(std::vector<pmsc::Index>(sel.keys.begin(), sel.keys.begin() + 6)) - 1e-12);

@@ -45,7 +45,8 @@ struct LightFrames {
         const Eigen::MatrixXd w = pmsc::test::gaussian(rank, frames, 13);
         for (Index f = 0; f < frames; ++f) {
             // Two colours only, alternating: a colour between them is outside their plane.
-            std::vector<double> colour = f % 2 ? std::vector<double>{1.2, 1.0, 0.7} : std::vector<double>{0.8, 1.0, 1.3};
+            std::vector<double> colour =
+                f % 2 ? std::vector<double>{1.2, 1.0, 0.7} : std::vector<double>{0.8, 1.0, 1.3};
             if (c != 3) {  // other channel counts: the same two ramps over the channels
                 colour.assign(static_cast<size_t>(c), 1.0);
                 for (Index ch = 0; ch < c; ++ch) {
@@ -69,7 +70,8 @@ std::vector<double> keysOf(const pmsc::Model& model, const double* frame) {
 // Relative RMS error of point multiplication from the keys on one frame.
 double pmError(const pmsc::Model& model, const double* frame) {
     const pmsc::PointMultiplier pm(model);
-    std::vector<double> coords(static_cast<size_t>(model.coordCount())), out(static_cast<size_t>(model.points * model.channels));
+    std::vector<double> coords(static_cast<size_t>(model.coordCount())),
+        out(static_cast<size_t>(model.points * model.channels));
     const std::vector<double> keys = keysOf(model, frame);
     pm.project(keys.data(), coords.data());
     pm.reconstruct(coords.data(), out.data());
@@ -125,7 +127,8 @@ TEST(SharedChannels, ProjectReconstructAndKeyErrorAgreeWithTheFormulas) {
     for (Index ch = 0; ch < 3; ++ch) {
         Eigen::VectorXd kc(k);
         for (Index i = 0; i < k; ++i)
-            kc[i] = keys[static_cast<size_t>(i * 3 + ch)] - model.mean[model.keyPoints[static_cast<size_t>(i)] * 3 + ch];
+            kc[i] = keys[static_cast<size_t>(i * 3 + ch)] -
+                    model.mean[model.keyPoints[static_cast<size_t>(i)] * 3 + ch];
         const Eigen::VectorXd b = model.projector * kc;
         for (Index j = 0; j < m; ++j) EXPECT_NEAR(coords[static_cast<size_t>(j * 3 + ch)], b[j], 1e-12);
     }
@@ -141,10 +144,12 @@ TEST(SharedChannels, ProjectReconstructAndKeyErrorAgreeWithTheFormulas) {
             for (Index j = 0; j < m; ++j) v += model.basis(p, j) * coords[static_cast<size_t>(j * 3 + ch)];
             EXPECT_NEAR(all[static_cast<size_t>(p * 3 + ch)], v, 1e-12);
         }
-    for (Index i = 0; i < 50 * 3; ++i) EXPECT_EQ(range[static_cast<size_t>(i)], all[static_cast<size_t>(40 * 3 + i)]);
+    for (Index i = 0; i < 50 * 3; ++i)
+        EXPECT_EQ(range[static_cast<size_t>(i)], all[static_cast<size_t>(40 * 3 + i)]);
     for (size_t i = 0; i < points.size(); ++i)
         for (Index ch = 0; ch < 3; ++ch)
-            EXPECT_NEAR(some[i * 3 + static_cast<size_t>(ch)], all[static_cast<size_t>(points[i] * 3 + ch)], 1e-12);
+            EXPECT_NEAR(some[i * 3 + static_cast<size_t>(ch)], all[static_cast<size_t>(points[i] * 3 + ch)],
+                        1e-12);
     // Key error: RMS over keys of the Euclidean error over channels, as for any model.
     double sum = 0;
     for (Index i = 0; i < k; ++i) {
@@ -182,7 +187,8 @@ TEST(SharedChannels, CalibratedEpsBoundTheEuclideanPointErrorOfTheTrainingFrames
         pm.reconstruct(coords.data(), out.data());
         for (Index p = 0; p < 200; ++p) {
             double e = 0;
-            for (Index ch = 0; ch < 3; ++ch) e += std::pow(out[static_cast<size_t>(p * 3 + ch)] - q.frame(f)[p * 3 + ch], 2);
+            for (Index ch = 0; ch < 3; ++ch)
+                e += std::pow(out[static_cast<size_t>(p * 3 + ch)] - q.frame(f)[p * 3 + ch], 2);
             EXPECT_LE(std::sqrt(e), o.tolerance * (1 + 1e-9)) << "frame " << f << " point " << p;
         }
     }
@@ -268,7 +274,8 @@ TEST(SharedChannels, ReconstructRangeIsTheWholeFrameForAnyChunkAcrossThePanels) 
                 if (model.sharedChannels)
                     ASSERT_EQ(pieces[i], all[i]) << "C " << c << " chunk " << chunk << " value " << i;
                 else
-                    ASSERT_NEAR(pieces[i], all[i], 1e-14) << "C " << c << " chunk " << chunk << " value " << i;
+                    ASSERT_NEAR(pieces[i], all[i], 1e-14)
+                        << "C " << c << " chunk " << chunk << " value " << i;
             }
         }
         // Against the formula, mean_c + basis * coords_c (or the plain model's when C = 1).
@@ -296,8 +303,8 @@ TEST(SharedChannels, CalibrationScoresOneEntryPerFrameInTheRuntimesMeasures) {
     pmsc::SingleProcess one;
     const Eigen::MatrixXd keyRows = pmsc::gatherKeyRows(q, 1, keys), gram = pmsc::gramMatrix(q);
     const auto flat = pmsc::calibrate(blocks, one, keyRows, keys, 2, 1.0, 4, gram);
-    const auto grouped = pmsc::calibrate(blocks, one, keyRows, keys, 2, 1.0, 4, gram, pmsc::CalibrationRule::MaxRatio,
-                                         0.9, 3);
+    const auto grouped =
+        pmsc::calibrate(blocks, one, keyRows, keys, 2, 1.0, 4, gram, pmsc::CalibrationRule::MaxRatio, 0.9, 3);
     ASSERT_EQ(flat.frames.size(), 12u);
     ASSERT_EQ(grouped.frames.size(), 4u);
     for (size_t g = 0; g < 4; ++g) {
@@ -314,9 +321,11 @@ TEST(SharedChannels, CalibrationScoresOneEntryPerFrameInTheRuntimesMeasures) {
     EXPECT_LE(grouped.maxRatio, flat.maxRatio * (1 + 1e-12));
     EXPECT_EQ(grouped.usableFrames, 4);
     // Slices count groups; a column count that is not whole groups is refused.
-    EXPECT_THROW((void)pmsc::calibrate(blocks, one, keyRows, keys, 2, 1.0, 5, gram, pmsc::CalibrationRule::MaxRatio, 0.9, 3),
+    EXPECT_THROW((void)pmsc::calibrate(blocks, one, keyRows, keys, 2, 1.0, 5, gram,
+                                       pmsc::CalibrationRule::MaxRatio, 0.9, 3),
                  std::invalid_argument);
-    EXPECT_THROW((void)pmsc::calibrate(blocks, one, keyRows, keys, 2, 1.0, 2, gram, pmsc::CalibrationRule::MaxRatio, 0.9, 5),
+    EXPECT_THROW((void)pmsc::calibrate(blocks, one, keyRows, keys, 2, 1.0, 2, gram,
+                                       pmsc::CalibrationRule::MaxRatio, 0.9, 5),
                  std::invalid_argument);
 }
 

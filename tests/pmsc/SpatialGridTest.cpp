@@ -40,7 +40,7 @@ TEST(SpatialGrid, OnePointPerOccupiedCellNearestItsCentre) {
 TEST(SpatialGrid, EmptyCellsContributeNothingAndResultIsDeterministic) {
     // Two clusters at opposite corners: a 4^3 grid has only two occupied cells.
     Eigen::MatrixXd p(6, 3);
-    p << 0, 0, 0,  0.1, 0, 0,  0, 0.2, 0,  10, 10, 10,  9.9, 10, 10,  9.8, 9.9, 10;
+    p << 0, 0, 0, 0.1, 0, 0, 0, 0.2, 0, 10, 10, 10, 9.9, 10, 10, 9.8, 9.9, 10;
     const std::vector<pmsc::Index> g = pmsc::sparseGridPoints(p, 4);
     ASSERT_EQ(g.size(), 2u);
     EXPECT_EQ(g, pmsc::sparseGridPoints(p, 4));

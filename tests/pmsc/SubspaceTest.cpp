@@ -51,7 +51,8 @@ TEST_P(SubspaceRoutes, OrthonormalAndMatchesJacobiSvdOnSmallData) {
     for (int i = 0; i < 8; ++i) {
         EXPECT_NEAR(s.sigma[i], ref.singularValues()[i], 1e-9 * ref.singularValues()[0]) << i;
         // Singular vectors up to sign.
-        const double d = std::min((s.u.col(i) - ref.matrixU().col(i)).norm(), (s.u.col(i) + ref.matrixU().col(i)).norm());
+        const double d =
+            std::min((s.u.col(i) - ref.matrixU().col(i)).norm(), (s.u.col(i) + ref.matrixU().col(i)).norm());
         EXPECT_LT(d, 1e-6) << i;
     }
     for (int i = 1; i < 8; ++i) EXPECT_GE(s.sigma[i - 1], s.sigma[i]);
@@ -67,7 +68,8 @@ TEST(Subspace, AutoRoutePicksTheCheaperAlgorithm) {
     EXPECT_FALSE(pmsc::truncatedSvd(q, 4).gramRoute);
     // Wide matrices never take the Gram route (Q^T Q would be the large side).
     EXPECT_FALSE(pmsc::truncatedSvd(Eigen::MatrixXd(q.transpose()), 100).gramRoute);
-    EXPECT_THROW(pmsc::truncatedSvd(Eigen::MatrixXd(q.transpose()), 5, route(Route::Gram)), std::invalid_argument);
+    EXPECT_THROW(pmsc::truncatedSvd(Eigen::MatrixXd(q.transpose()), 5, route(Route::Gram)),
+                 std::invalid_argument);
 }
 
 TEST(Subspace, RandomizedRouteIsDeterministicForASeed) {
@@ -106,7 +108,7 @@ TEST(Subspace, LeftVectorsLimitsTheGramRouteAndCanBeCompletedLater) {
 
 TEST(Subspace, RemoveRowMeanAndPointNorms) {
     Eigen::MatrixXd raw(6, 3);  // 2 points x 3 channels, 3 frames
-    raw << 1, 2, 3,  0, 0, 0,  4, 4, 4,  1, 1, 1,  -1, 0, 1,  2, 2, 5;
+    raw << 1, 2, 3, 0, 0, 0, 4, 4, 4, 1, 1, 1, -1, 0, 1, 2, 2, 5;
     Eigen::MatrixXd centered;
     const Eigen::VectorXd mean = pmsc::removeRowMean(raw, centered);
     EXPECT_NEAR(mean[0], 2.0, 1e-15);
@@ -165,7 +167,8 @@ TEST(Subspace, SvdFromGramOfAResidualMatchesTheExplicitSvd) {
     const Eigen::MatrixXd rtr = g - w.transpose() * c - c.transpose() * w + c.transpose() * c;
     const pmsc::TruncatedSvd fromGram = pmsc::svdFromGram(r, rtr, 5);
     Eigen::JacobiSVD<Eigen::MatrixXd> ref(r, Eigen::ComputeThinU);
-    for (int i = 0; i < 5; ++i) EXPECT_NEAR(fromGram.sigma[i], ref.singularValues()[i], 1e-9 * ref.singularValues()[0]);
+    for (int i = 0; i < 5; ++i)
+        EXPECT_NEAR(fromGram.sigma[i], ref.singularValues()[i], 1e-9 * ref.singularValues()[0]);
     EXPECT_LT(outside(fromGram.u, ref.matrixU().leftCols(5)), 1e-6);
 }
 

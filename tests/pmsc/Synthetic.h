@@ -40,7 +40,8 @@ inline Eigen::MatrixXd lowRank(Index rows, Index cols, Index rank, unsigned seed
 inline FrameSet framesFromMatrix(const Eigen::MatrixXd& m, Index channels, double offset = 5.0) {
     FrameSet set(m.cols(), m.rows() / channels, channels);
     auto q = set.matrix();
-    for (Index i = 0; i < m.rows(); ++i) q.row(i) = m.row(i).array() + offset * std::sin(0.37 * static_cast<double>(i));
+    for (Index i = 0; i < m.rows(); ++i)
+        q.row(i) = m.row(i).array() + offset * std::sin(0.37 * static_cast<double>(i));
     return set;
 }
 
@@ -56,18 +57,21 @@ inline FrameSet patchFrames(Index patches, Index pointsPerPatch, Index channels,
     Eigen::MatrixXd signals(patches, frames);
     for (Index k = 0; k < patches; ++k)
         for (Index t = 0; t < frames; ++t)
-            signals(k, t) = std::sin(0.05 * static_cast<double>((k + 1) * t) + static_cast<double>(k)) + 0.3 * normal(rng);
+            signals(k, t) = std::sin(0.05 * static_cast<double>((k + 1) * t) + static_cast<double>(k)) +
+                            0.3 * normal(rng);
     Eigen::MatrixXd shape(n, channels);
     for (Index p = 0; p < n; ++p) {
         const double local = static_cast<double>(p % pointsPerPatch) / static_cast<double>(pointsPerPatch);
-        for (Index c = 0; c < channels; ++c) shape(p, c) = (1.0 + 0.5 * c) * std::sin(3.14159 * local) + 0.1 * normal(rng);
+        for (Index c = 0; c < channels; ++c)
+            shape(p, c) = (1.0 + 0.5 * c) * std::sin(3.14159 * local) + 0.1 * normal(rng);
     }
     if (patchOf) patchOf->resize(static_cast<size_t>(n));
     for (Index p = 0; p < n; ++p) {
         const Index k = p / pointsPerPatch;
         if (patchOf) (*patchOf)[static_cast<size_t>(p)] = k;
         for (Index t = 0; t < frames; ++t)
-            for (Index c = 0; c < channels; ++c) set.frame(t)[p * channels + c] = 2.0 + shape(p, c) * signals(k, t);
+            for (Index c = 0; c < channels; ++c)
+                set.frame(t)[p * channels + c] = 2.0 + shape(p, c) * signals(k, t);
     }
     return set;
 }

@@ -1,9 +1,9 @@
 #include "pmsc/Training.h"
 
+#include "Synthetic.h"
 #include "pmsc/Errors.h"
 #include "pmsc/KeyPointSelector.h"
 #include "pmsc/PointMultiplier.h"
-#include "Synthetic.h"
 
 #include <gtest/gtest.h>
 
@@ -90,10 +90,20 @@ TEST(Training, RejectsBadOptionsNamingTheValue) {
     check([](auto& o) { o.energy = std::numeric_limits<double>::quiet_NaN(); }, "energy");
     check([](auto& o) { o.basis = -2; }, "-2");
     check([](auto& o) { o.maxError = -1; }, "max error");
-    check([](auto& o) { o.tolerance = 0.1; o.calibrationSlices = 1; }, "slices");
+    check(
+        [](auto& o) {
+            o.tolerance = 0.1;
+            o.calibrationSlices = 1;
+        },
+        "slices");
     check([](auto& o) { o.fiducials = {3, 99}; }, "99");
     check([](auto& o) { o.fiducials = {3, 4, 3}; }, "fiducial point 3");
-    check([](auto& o) { o.fiducials = {3}; o.gridPoints = {3}; }, "3");
+    check(
+        [](auto& o) {
+            o.fiducials = {3};
+            o.gridPoints = {3};
+        },
+        "3");
     check([](auto& o) { o.varimaxMaxIterations = 0; }, "varimax");
 }
 
@@ -107,7 +117,8 @@ TEST(Training, ProgressIsReportedAndCanCancel) {
         return true;
     };
     pmsc::train(frames, o);
-    for (const char* s : {"mean", "svd", "keys", "projector", "calibration"}) EXPECT_TRUE(stages.count(s)) << s;
+    for (const char* s : {"mean", "svd", "keys", "projector", "calibration"})
+        EXPECT_TRUE(stages.count(s)) << s;
     o.progress = [&](std::string_view stage, double, double) { return stage != "keys"; };
     expectThrowMentioning<pmsc::Cancelled>([&] { pmsc::train(frames, o); }, "keys");
 }
@@ -199,7 +210,8 @@ TEST(Training, QDeimSelectorTrainsAWellDeterminedModel) {
 
 TEST(Training, ToleranceCalibratesEps) {
     // Rank-6 structure plus small off-subspace noise, M = 6: held-out errors are the noise.
-    const Eigen::MatrixXd m = pmsc::test::lowRank(50 * 3, 90, 6, 10, 0.8) + 1e-4 * pmsc::test::gaussian(150, 90, 11);
+    const Eigen::MatrixXd m =
+        pmsc::test::lowRank(50 * 3, 90, 6, 10, 0.8) + 1e-4 * pmsc::test::gaussian(150, 90, 11);
     const pmsc::FrameSet frames = pmsc::test::framesFromMatrix(m, 3);
     pmsc::TrainingOptions o;
     o.basis = 6;

@@ -25,10 +25,11 @@ int main(int argc, char** argv) {
         }
         const bool sameKeys = a.keyPoints == b.keyPoints;
         const double residualDiff = std::abs(a.trainMaxPointResidual - b.trainMaxPointResidual);
-        std::printf("M %lld vs %lld, K %lld vs %lld, keys %s, basis angle (sin) %.3g, residual %.9g vs %.9g\n",
-                    static_cast<long long>(a.basisSize()), static_cast<long long>(b.basisSize()),
-                    static_cast<long long>(a.keyCount()), static_cast<long long>(b.keyCount()),
-                    sameKeys ? "identical" : "DIFFER", angle, a.trainMaxPointResidual, b.trainMaxPointResidual);
+        std::printf(
+            "M %lld vs %lld, K %lld vs %lld, keys %s, basis angle (sin) %.3g, residual %.9g vs %.9g\n",
+            static_cast<long long>(a.basisSize()), static_cast<long long>(b.basisSize()),
+            static_cast<long long>(a.keyCount()), static_cast<long long>(b.keyCount()),
+            sameKeys ? "identical" : "DIFFER", angle, a.trainMaxPointResidual, b.trainMaxPointResidual);
         const bool same = a.basisSize() == b.basisSize() && sameKeys && angle < 1e-9 &&
                           residualDiff <= 1e-9 * a.trainMaxPointResidual;
         return same ? 0 : 1;

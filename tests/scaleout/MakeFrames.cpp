@@ -16,14 +16,16 @@
 int main(int argc, char** argv) {
     using namespace pmsc;
     if (argc < 4) {
-        std::fprintf(stderr, "usage: %s OUT.npy GRID FRAMES [SEED] [float32|float64] [nan=FRAME:POINT]\n", argv[0]);
+        std::fprintf(stderr, "usage: %s OUT.npy GRID FRAMES [SEED] [float32|float64] [nan=FRAME:POINT]\n",
+                     argv[0]);
         return 2;
     }
     synthetic::SurfaceOptions o;
     o.grid = std::stoll(argv[2]);
     o.frames = std::stoll(argv[3]);
     o.seed = argc > 4 ? static_cast<unsigned>(std::stoul(argv[4])) : 1u;
-    const NpyDtype dtype = argc > 5 && std::string(argv[5]) == "float32" ? NpyDtype::Float32 : NpyDtype::Float64;
+    const NpyDtype dtype =
+        argc > 5 && std::string(argv[5]) == "float32" ? NpyDtype::Float32 : NpyDtype::Float64;
     Index nanFrame = -1, nanPoint = -1;
     if (argc > 6 && std::string(argv[6]).rfind("nan=", 0) == 0) {
         const std::string spec = std::string(argv[6]).substr(4);
@@ -38,7 +40,8 @@ int main(int argc, char** argv) {
     NpyFrameWriter writer(argv[1], o.frames, n, 3, dtype);
     for (Index f = 0; f < o.frames; ++f) {
         surface.evaluate(f, all, frame.data());
-        if (f == nanFrame) frame[static_cast<std::size_t>(nanPoint * 3 + 1)] = std::numeric_limits<double>::quiet_NaN();
+        if (f == nanFrame)
+            frame[static_cast<std::size_t>(nanPoint * 3 + 1)] = std::numeric_limits<double>::quiet_NaN();
         writer.writeFrame(f, frame.data());
     }
     writer.commit();

@@ -9,8 +9,8 @@
 #include "pmsc/RowBlocks.h"
 #include "pmsc/Training.h"
 
-#include <Eigen/SVD>
 #include <gtest/gtest.h>
+#include <Eigen/SVD>
 
 #include <cmath>
 #include <cstdlib>
@@ -25,8 +25,9 @@ namespace {
 std::string makeFrames(const TempDir& dir, const std::string& name, int grid, int frames, unsigned seed = 1,
                        const std::string& dtype = "float64", const std::string& extra = "") {
     const std::string path = dir.file(name);
-    const std::string command = shellQuote(PMSC_FRAMES_TOOL) + " " + shellQuote(path) + " " + std::to_string(grid) +
-                                " " + std::to_string(frames) + " " + std::to_string(seed) + " " + dtype + " " + extra;
+    const std::string command = shellQuote(PMSC_FRAMES_TOOL) + " " + shellQuote(path) + " " +
+                                std::to_string(grid) + " " + std::to_string(frames) + " " +
+                                std::to_string(seed) + " " + dtype + " " + extra;
     if (std::system(command.c_str()) != 0) throw std::runtime_error("cannot make frames: " + command);
     return path;
 }
@@ -73,7 +74,8 @@ TEST(OutOfCore, StreamedBlocksTrainTheInMemoryModel) {
         {"calibrated", [](TrainingOptions& o) { o.tolerance = 0.02; }},
         {"max-error basis rule", [](TrainingOptions& o) { o.basisMaxError = 0.01; }},
         {"Q-DEIM", [](TrainingOptions& o) { o.selector = Selector::QDeim; }},
-        {"fiducials, max error", [](TrainingOptions& o) {
+        {"fiducials, max error",
+         [](TrainingOptions& o) {
              o.fiducials = {3, 200};
              o.maxError = 0.004;
          }},
@@ -124,14 +126,16 @@ TEST(TrainCli, TwoShotsAreOneTrainingSet) {
     const Model reference = train(both, smallOptions());
     for (const bool stream : {true, false}) {
         const std::string out = dir.file(stream ? "streamed.pmsc" : "in-memory.pmsc");
-        std::vector<std::string> args = {"train", "--frames", a, "--frames", b, "--out", out, "--max-keys", "30",
-                                         "--max-basis", "40", "--block-points", "33", "--quiet"};
+        std::vector<std::string> args = {"train", "--frames",   a,    "--frames",    b,    "--out",
+                                         out,     "--max-keys", "30", "--max-basis", "40", "--block-points",
+                                         "33",    "--quiet"};
         if (stream) args.push_back("--out-of-core");
         const RunResult r = runPmsc(dir, args);
         ASSERT_EQ(r.exitCode, 0) << r.err;
         EXPECT_NE(r.out.find("120 frames x 400 points"), std::string::npos) << r.out;
         EXPECT_NE(r.out.find("2 --frames files"), std::string::npos) << r.out;
-        EXPECT_NE(r.out.find(stream ? "streamed from disk in blocks of 33 points" : "in memory"), std::string::npos)
+        EXPECT_NE(r.out.find(stream ? "streamed from disk in blocks of 33 points" : "in memory"),
+                  std::string::npos)
             << r.out;
         expectSameModel(reference, readModel(out), stream ? "streamed" : "in memory");
     }
@@ -174,8 +178,8 @@ TEST(TrainCli, BadInputsAreOneLineAndExitCode2) {
 std::string mpirun(int ranks) {
     // Root is allowed (CI and containers run as root); --oversubscribe because a CI machine may
     // have fewer cores than ranks.
-    return std::string("env OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 ") +
-           PMSC_MPIEXEC + " --oversubscribe -n " + std::to_string(ranks);
+    return std::string("env OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 ") + PMSC_MPIEXEC +
+           " --oversubscribe -n " + std::to_string(ranks);
 }
 
 TEST(Mpi, TwoRanksTrainTheSingleProcessModel) {
@@ -220,8 +224,8 @@ TEST(Mpi, ABadValueInOneRanksRowsStopsEveryRank) {
 TEST(Mpi, BadOptionsFailOnceBeforeAnyWork) {
     TempDir dir;
     const std::string a = makeFrames(dir, "a.npy", 20, 40, 1);
-    const RunResult r = runPmsc(dir, {"train", "--frames", a, "--out", dir.file("m.pmsc"), "--memory-limit", "1M"},
-                                mpirun(2));
+    const RunResult r = runPmsc(
+        dir, {"train", "--frames", a, "--out", dir.file("m.pmsc"), "--memory-limit", "1M"}, mpirun(2));
     EXPECT_EQ(r.exitCode, 2) << r.err;
     EXPECT_NE(r.err.find("pmsc: train: --memory-limit 1.0 MiB cannot be met"), std::string::npos) << r.err;
 }
@@ -236,8 +240,10 @@ std::uint64_t baselineAddressSpace(const TempDir& dir) {
     while (hi - lo > (4u << 20)) {
         const std::uint64_t mid = (lo + hi) / 2;
         const RunResult r = runPmsc(dir, {"train", "--help"}, "prlimit --as=" + std::to_string(mid));
-        if (r.exitCode == 0) hi = mid;
-        else lo = mid;
+        if (r.exitCode == 0)
+            hi = mid;
+        else
+            lo = mid;
     }
     return hi;
 }
@@ -252,20 +258,24 @@ TEST(AddressLimit, ATrainingSetTwiceTheLimitTrainsToTheInMemoryModel) {
     const int grid = 230, frames = 600;  // 52,900 points x 3 channels x 600 frames: 762 MB of doubles
     const std::string path = makeFrames(dir, "big.npy", grid, frames, 7);
     const double matrixBytes = double(grid) * grid * 3 * frames * 8;
-    const std::vector<std::string> options = {"--max-basis", "16", "--block", "8", "--max-keys", "24", "--quiet"};
+    const std::vector<std::string> options = {"--max-basis", "16", "--block", "8",
+                                              "--max-keys",  "24", "--quiet"};
     const std::uint64_t bound = trainingMemoryBound(Index(grid) * grid, 3, frames, 16, 8, 24, 1, 1, true);
     // The limit: the program's own address space, the streaming bound, and 32 MiB for blocks and
     // the allocator; the matrix must be at least twice that.
     const std::uint64_t limit = baseline + bound + (32u << 20);
-    std::printf("baseline address space %.1f MiB, streaming bound %.1f MiB, limit %.1f MiB, matrix %.1f MiB (%.2fx)\n",
-                baseline / 1048576.0, bound / 1048576.0, limit / 1048576.0, matrixBytes / 1048576.0,
-                matrixBytes / double(limit));
+    std::printf(
+        "baseline address space %.1f MiB, streaming bound %.1f MiB, limit %.1f MiB, matrix %.1f MiB "
+        "(%.2fx)\n",
+        baseline / 1048576.0, bound / 1048576.0, limit / 1048576.0, matrixBytes / 1048576.0,
+        matrixBytes / double(limit));
     ASSERT_GE(matrixBytes, 2.0 * double(limit)) << "the test data would not be twice the limit";
 
     auto limited = options, free = options;
     limited.insert(limited.begin(), {"train", "--frames", path, "--out", dir.file("limited.pmsc")});
     // In memory whatever the machine's size (without a limit pmsc would stream above half of it).
-    free.insert(free.begin(), {"train", "--frames", path, "--out", dir.file("free.pmsc"), "--memory-limit", "64G"});
+    free.insert(free.begin(),
+                {"train", "--frames", path, "--out", dir.file("free.pmsc"), "--memory-limit", "64G"});
     const RunResult r = runPmsc(dir, limited, "prlimit --as=" + std::to_string(limit));
     ASSERT_EQ(r.exitCode, 0) << r.err;
     EXPECT_NE(r.out.find("streamed from disk"), std::string::npos) << r.out;
@@ -275,14 +285,16 @@ TEST(AddressLimit, ATrainingSetTwiceTheLimitTrainsToTheInMemoryModel) {
     EXPECT_NE(f.out.find("in memory"), std::string::npos) << f.out;
     const Model a = readModel(dir.file("free.pmsc")), b = readModel(dir.file("limited.pmsc"));
     expectSameModel(a, b, "address limit");
-    std::printf("in memory: M = %lld, K = %lld, residual %.9g; limited: M = %lld, K = %lld, residual %.9g, "
-                "basis angle %.3g\n",
-                static_cast<long long>(a.basisSize()), static_cast<long long>(a.keyCount()), a.trainMaxPointResidual,
-                static_cast<long long>(b.basisSize()), static_cast<long long>(b.keyCount()), b.trainMaxPointResidual,
-                basisAngle(a.basis, b.basis));
+    std::printf(
+        "in memory: M = %lld, K = %lld, residual %.9g; limited: M = %lld, K = %lld, residual %.9g, "
+        "basis angle %.3g\n",
+        static_cast<long long>(a.basisSize()), static_cast<long long>(a.keyCount()), a.trainMaxPointResidual,
+        static_cast<long long>(b.basisSize()), static_cast<long long>(b.keyCount()), b.trainMaxPointResidual,
+        basisAngle(a.basis, b.basis));
     // And in memory it would not have fitted: the same limit with the whole set read fails.
-    const RunResult whole = runPmsc(dir, {"export-frames", "replay:" + path, "--out", dir.file("copy.npy"), "--quiet"},
-                                    "prlimit --as=" + std::to_string(limit));
+    const RunResult whole =
+        runPmsc(dir, {"export-frames", "replay:" + path, "--out", dir.file("copy.npy"), "--quiet"},
+                "prlimit --as=" + std::to_string(limit));
     EXPECT_NE(whole.exitCode, 0) << "reading the whole set fitted in the limit";
 }
 

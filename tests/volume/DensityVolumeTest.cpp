@@ -1,9 +1,9 @@
 // The density grid: bad inputs (one line each), the ray march against an analytic integral, the
 // smoke made from a mesh, and the cache grid's topology and file round trip.
-#include "tests/common/MissingData.h"
 #include "VdbFixtures.h"
 #include "examples/volume/DensityVolume.h"
 #include "pmsc/Errors.h"
+#include "tests/common/MissingData.h"
 
 #include <gtest/gtest.h>
 
@@ -46,7 +46,8 @@ TEST(DensityVolume, BadInputsAreOneLineInputErrorsNamingTheFile) {
     std::ofstream(text) << "not a vdb\n";
     e = errorOf([&] { DensityVolume::read(text); });
     EXPECT_NE(e.find("not a readable OpenVDB file"), std::string::npos) << e;
-    for (const std::string& msg : {errorOf([&] { DensityVolume::read(text); }), errorOf([&] { DensityVolume::read(missing); })})
+    for (const std::string& msg :
+         {errorOf([&] { DensityVolume::read(text); }), errorOf([&] { DensityVolume::read(missing); })})
         EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
     std::filesystem::remove_all(dir);
 }
@@ -73,7 +74,9 @@ TEST(DensityVolume, MarchIntegratesAConstantBoxExactlyAndSkipsEmptySpace) {
 
 TEST(DensityVolume, SmokeFromTheMeshHasTheWantedVoxelsAndVaryingDensity) {
     const std::string mesh = test::testMesh();
-    if (mesh.empty()) { PMSC_MISSING_DATA("assimp-testmodels not installed"); }
+    if (mesh.empty()) {
+        PMSC_MISSING_DATA("assimp-testmodels not installed");
+    }
     FogOptions fog;
     fog.targetVoxels = 8000;
     const DensityVolume v = DensityVolume::fromMesh(mesh, fog);
@@ -83,7 +86,7 @@ TEST(DensityVolume, SmokeFromTheMeshHasTheWantedVoxelsAndVaryingDensity) {
         lo = std::min(lo, v.densityAt(i));
         hi = std::max(hi, v.densityAt(i));
     }
-    EXPECT_GT(lo, 0.0);   // inactive where it is zero
+    EXPECT_GT(lo, 0.0);  // inactive where it is zero
     EXPECT_LE(hi, 1.0);
     EXPECT_GT(hi, 3 * lo);  // noise: heterogeneous
     const auto [a, b] = v.worldBounds();
@@ -96,7 +99,8 @@ TEST(DensityVolume, SmokeFromTheMeshHasTheWantedVoxelsAndVaryingDensity) {
     EXPECT_EQ(back.gridName(), "density");
     for (std::size_t i = 0; i < v.voxelCount(); i += 97) EXPECT_EQ(back.densityAt(i), v.densityAt(i));
 
-    EXPECT_NE(errorOf([&] { DensityVolume::fromMesh(dir + "/nope.obj", fog); }).find("no such file"), std::string::npos);
+    EXPECT_NE(errorOf([&] { DensityVolume::fromMesh(dir + "/nope.obj", fog); }).find("no such file"),
+              std::string::npos);
     std::filesystem::remove_all(dir);
 }
 

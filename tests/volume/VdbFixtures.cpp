@@ -4,13 +4,14 @@
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
 #include <cstdlib>
 #include <filesystem>
-#include <unistd.h>
 
 namespace pmsc::volume::test {
 
-void writeDensityBox(const std::string& path, const std::string& name, double half, double voxel, float density) {
+void writeDensityBox(const std::string& path, const std::string& name, double half, double voxel,
+                     float density) {
     openvdb::initialize();
     auto grid = openvdb::FloatGrid::create(0.0f);
     grid->setTransform(openvdb::math::Transform::createLinearTransform(voxel));
@@ -33,12 +34,14 @@ std::string testMesh() {
     if (std::filesystem::exists(p)) return p;
     // CI installs assimp-testmodels: a missing mesh there is a failure, not a skip.
     const char* ci = std::getenv("CI");
-    if (ci && std::string(ci) == "true") ADD_FAILURE() << "missing " << p << " (apt-get install assimp-testmodels)";
+    if (ci && std::string(ci) == "true")
+        ADD_FAILURE() << "missing " << p << " (apt-get install assimp-testmodels)";
     return "";
 }
 
 std::string tempDir(const std::string& tag) {
-    const auto d = std::filesystem::temp_directory_path() / ("pmsc_volume_" + tag + "_" + std::to_string(::getpid()));
+    const auto d =
+        std::filesystem::temp_directory_path() / ("pmsc_volume_" + tag + "_" + std::to_string(::getpid()));
     std::filesystem::remove_all(d);
     std::filesystem::create_directories(d);
     return d.string();

@@ -7,7 +7,8 @@ namespace pmsc::volume::test {
 
 /// A box of constant density `density` spanning [-half, half]^3 (world units), voxel `voxel`,
 /// as a FloatGrid named `name` in a new file at `path`.
-void writeDensityBox(const std::string& path, const std::string& name, double half, double voxel, float density);
+void writeDensityBox(const std::string& path, const std::string& name, double half, double voxel,
+                     float density);
 /// A file with only a Vec3SGrid "velocity" (no float grid).
 void writeVectorOnly(const std::string& path);
 /// The demo's mesh (assimp-testmodels' WusonOBJ.obj) or "" when the folder is missing.

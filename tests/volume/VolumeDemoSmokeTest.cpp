@@ -1,8 +1,8 @@
 // `pmsc demo volume --quick` end to end (the real program, its report, OpenVDB's own vdb_print on
 // a cache file) and the volume evaluator's bad inputs through the command line: one line, exit 2.
-#include "tests/common/MissingData.h"
 #include "VdbFixtures.h"
 #include "examples/volume/DensityVolume.h"
+#include "tests/common/MissingData.h"
 
 #include <nlohmann/json.hpp>
 
@@ -36,17 +36,21 @@ std::string run(const std::string& command, int& status) {
 }
 
 TEST(VolumeDemoQuick, WritesAReportWithinBoundsImagesAndCachesThatVdbPrintLists) {
-    if (pmsc::volume::test::testMesh().empty()) { PMSC_MISSING_DATA("assimp-testmodels not installed"); }
+    if (pmsc::volume::test::testMesh().empty()) {
+        PMSC_MISSING_DATA("assimp-testmodels not installed");
+    }
     const std::string dir = pmsc::volume::test::tempDir("quick");
     int status = -1;
-    const std::string output = run(std::string(PMSC_BINARY) + " demo volume --quick --quiet --out " + dir, status);
+    const std::string output =
+        run(std::string(PMSC_BINARY) + " demo volume --quick --quiet --out " + dir, status);
     ASSERT_EQ(status, 0) << output;
     EXPECT_NE(output.find("speedup"), std::string::npos) << output;
     std::ifstream f(dir + "/report.json");
     const nlohmann::json r = nlohmann::json::parse(f);
-    for (const char* key : {"points", "key_points", "basis", "train_frames", "test_frames", "full_seconds_per_frame",
-                            "pmsc_seconds_per_frame", "speedup", "rms_rel_error", "hit_rate", "reference_rms_rel_error_full",
-                            "reference_rms_rel_error_pm", "peak_rss_mb", "seconds"})
+    for (const char* key :
+         {"points", "key_points", "basis", "train_frames", "test_frames", "full_seconds_per_frame",
+          "pmsc_seconds_per_frame", "speedup", "rms_rel_error", "hit_rate", "reference_rms_rel_error_full",
+          "reference_rms_rel_error_pm", "peak_rss_mb", "seconds"})
         ASSERT_TRUE(r.contains(key)) << key;
     EXPECT_NEAR(r["points"].get<double>(), 12000, 12000 * 0.06);
     EXPECT_EQ(r["train_frames"].get<int>(), 24);
@@ -62,15 +66,18 @@ TEST(VolumeDemoQuick, WritesAReportWithinBoundsImagesAndCachesThatVdbPrintLists)
     EXPECT_GT(r["projection_rel_error"].get<double>(), 0);
     EXPECT_LE(r["projection_rel_error"].get<double>(), r["rms_rel_error"].get<double>() * (1 + 1e-9));
     EXPECT_GE(r["train_projection_rel_error"].get<double>(), 0);
-    EXPECT_LT(r["reference_self_rel_error"].get<double>(), 0.5 * r["reference_rms_rel_error_full"].get<double>());
+    EXPECT_LT(r["reference_self_rel_error"].get<double>(),
+              0.5 * r["reference_rms_rel_error_full"].get<double>());
     EXPECT_EQ(r["between_nearest_training_deg"].size(), 4u);
     EXPECT_EQ(r["images"].size(), 3u);
-    for (const auto& img : r["images"]) EXPECT_TRUE(std::filesystem::exists(dir + "/" + img["png"].get<std::string>()));
+    for (const auto& img : r["images"])
+        EXPECT_TRUE(std::filesystem::exists(dir + "/" + img["png"].get<std::string>()));
     EXPECT_TRUE(std::filesystem::exists(dir + "/density.vdb"));
 #ifdef PMSC_VDB_PRINT
     ASSERT_FALSE(r["vdb_files"].empty());
     for (const auto& name : r["vdb_files"]) {
-        const std::string listing = run(std::string(PMSC_VDB_PRINT) + " -l " + dir + "/" + name.get<std::string>(), status);
+        const std::string listing =
+            run(std::string(PMSC_VDB_PRINT) + " -l " + dir + "/" + name.get<std::string>(), status);
         ASSERT_EQ(status, 0) << listing;
         EXPECT_NE(listing.find("Name: inscatter"), std::string::npos) << listing;
         EXPECT_NE(listing.find("vec3s"), std::string::npos) << listing;
@@ -91,19 +98,24 @@ TEST(VolumeEvaluatorCli, ExportTrainAndRunWriteCacheFilesWithTheDensityTopology)
     pmsc::volume::test::writeDensityBox(dir + "/box.vdb", "density", 0.3, 0.05, 0.8f);  // 13^3 voxels
     const std::string bin = PMSC_BINARY;
     int status = -1;
-    std::string out = run(bin + " export-frames volume:" + dir + "/box.vdb:lights=training --quiet --out " + dir + "/t.npy", status);
+    std::string out =
+        run(bin + " export-frames volume:" + dir + "/box.vdb:lights=training --quiet --out " + dir + "/t.npy",
+            status);
     ASSERT_EQ(status, 0) << out;
-    out = run(bin + " train --frames " + dir + "/t.npy --out " + dir + "/m.pmsc --basis 8 --max-keys 40", status);
+    out = run(bin + " train --frames " + dir + "/t.npy --out " + dir + "/m.pmsc --basis 8 --max-keys 40",
+              status);
     ASSERT_EQ(status, 0) << out;
     // `pmsc run --format vdb` with MODEL writes caches of the density's topology into FOLDER.
     const auto runWritesCaches = [&](const std::string& model, const std::string& folder) {
         int runStatus = -1;
-        const std::string runOut = run(bin + " run --model " + dir + "/" + model + " --evaluator volume:" + dir +
-                                           "/box.vdb --frames 64-66 --out " + dir + "/" + folder + " --format vdb --quiet",
-                                       runStatus);
+        const std::string runOut =
+            run(bin + " run --model " + dir + "/" + model + " --evaluator volume:" + dir +
+                    "/box.vdb --frames 64-66 --out " + dir + "/" + folder + " --format vdb --quiet",
+                runStatus);
         ASSERT_EQ(runStatus, 0) << runOut;
         for (int f = 64; f <= 66; ++f) {
-            const auto cache = pmsc::volume::ScatterCache::read(dir + "/" + folder + "/frame.0000" + std::to_string(f) + ".vdb");
+            const auto cache = pmsc::volume::ScatterCache::read(dir + "/" + folder + "/frame.0000" +
+                                                                std::to_string(f) + ".vdb");
             EXPECT_EQ(cache.activeVoxelCount(), 13 * 13 * 13);
             EXPECT_EQ(cache.info().frame, f);
             EXPECT_EQ(cache.info().state, "soft-cached");
@@ -111,7 +123,8 @@ TEST(VolumeEvaluatorCli, ExportTrainAndRunWriteCacheFilesWithTheDensityTopology)
     };
     runWritesCaches("m.pmsc", "frames");
     // The same with red, green and blue sharing one basis (the volume demo's default).
-    out = run(bin + " train --frames " + dir + "/t.npy --out " + dir + "/s.pmsc --basis 8 --max-keys 40 --shared-channels --quiet",
+    out = run(bin + " train --frames " + dir + "/t.npy --out " + dir +
+                  "/s.pmsc --basis 8 --max-keys 40 --shared-channels --quiet",
               status);
     ASSERT_EQ(status, 0) << out;
     out = run(bin + " inspect " + dir + "/s.pmsc", status);
@@ -119,14 +132,17 @@ TEST(VolumeEvaluatorCli, ExportTrainAndRunWriteCacheFilesWithTheDensityTopology)
     EXPECT_NE(out.find("channels C = 3 (sharing one basis)"), std::string::npos) << out;
     runWritesCaches("s.pmsc", "shared");
     // pmsc learn refuses the shared model with one line.
-    out = run(bin + " learn --model " + dir + "/s.pmsc --frames " + dir + "/t.npy --out " + dir + "/learned.pmsc --quiet",
+    out = run(bin + " learn --model " + dir + "/s.pmsc --frames " + dir + "/t.npy --out " + dir +
+                  "/learned.pmsc --quiet",
               status);
     EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 2) << out;
     EXPECT_NE(out.find("shares one basis among its channels"), std::string::npos) << out;
     EXPECT_FALSE(std::filesystem::exists(dir + "/learned.pmsc"));
     // What shared channels do not combine with: one line, exit code 2, no model written.
     for (const char* extra : {"--regions 2", "--learn-rank 10", "--out-of-core"}) {
-        out = run(bin + " train --frames " + dir + "/t.npy --out " + dir + "/bad.pmsc --shared-channels " + extra, status);
+        out = run(
+            bin + " train --frames " + dir + "/t.npy --out " + dir + "/bad.pmsc --shared-channels " + extra,
+            status);
         EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 2) << extra << ": " << out;
         EXPECT_NE(out.find("does not combine with --shared-channels"), std::string::npos) << out;
         EXPECT_FALSE(std::filesystem::exists(dir + "/bad.pmsc"));
@@ -146,18 +162,20 @@ TEST(VolumeEvaluatorCli, MissingFileNoFloatGridAndWrongGridNameAreOneLineAndExit
     };
     for (const auto& [spec, what] : cases) {
         int status = -1;
-        const std::string out =
-            run(std::string(PMSC_BINARY) + " export-frames " + spec + " --quiet --out " + dir + "/f.npy", status);
+        const std::string out = run(
+            std::string(PMSC_BINARY) + " export-frames " + spec + " --quiet --out " + dir + "/f.npy", status);
         EXPECT_EQ(WEXITSTATUS(status), 2) << spec << ": " << out;
         EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << out;
         EXPECT_EQ(out.rfind("pmsc: ", 0), 0u) << out;
         EXPECT_NE(out.find(what), std::string::npos) << out;
         EXPECT_FALSE(std::filesystem::exists(dir + "/f.npy"));
     }
-    for (const char* bad : {"--voxels ten", "--elevations 30,95", "--elevations 30,x", "--spiral -1", "--colours 0",
-                            "--kelvin 6500,4000", "--kelvin 500,6500", "--kelvin 5000", "--kelvin 4000,5000,6000"}) {
+    for (const char* bad :
+         {"--voxels ten", "--elevations 30,95", "--elevations 30,x", "--spiral -1", "--colours 0",
+          "--kelvin 6500,4000", "--kelvin 500,6500", "--kelvin 5000", "--kelvin 4000,5000,6000"}) {
         int status = -1;
-        const std::string out = run(std::string(PMSC_BINARY) + " demo volume --quick --out " + dir + "/d " + bad, status);
+        const std::string out =
+            run(std::string(PMSC_BINARY) + " demo volume --quick --out " + dir + "/d " + bad, status);
         EXPECT_EQ(WEXITSTATUS(status), 2) << bad << ": " << out;
         EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << bad << ": " << out;
         EXPECT_FALSE(std::filesystem::exists(dir + "/d/report.json")) << bad;

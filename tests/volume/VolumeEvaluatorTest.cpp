@@ -1,17 +1,17 @@
 // The full calculation per voxel: physics against closed forms, the march's convergence, the
 // determinism the engine relies on, the colour control, the light rig and the spec's errors.
-#include "tests/common/MissingData.h"
 #include "VdbFixtures.h"
 #include "examples/volume/VolumeEvaluator.h"
 #include "pmsc/Errors.h"
+#include "tests/common/MissingData.h"
 
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
-#include <map>
 #include <filesystem>
+#include <map>
 #include <numeric>
 
 namespace pmsc::volume {
@@ -81,7 +81,9 @@ protected:
     }
     static void TearDownTestSuite() { world_.reset(); }
     void SetUp() override {
-        if (!world_) { PMSC_MISSING_DATA("assimp-testmodels not installed"); }
+        if (!world_) {
+            PMSC_MISSING_DATA("assimp-testmodels not installed");
+        }
     }
     static std::shared_ptr<const VolumeWorld> world_;
 };
@@ -99,7 +101,8 @@ TEST_F(SmokeTest, AVoxelsValueIsBitIdenticalAloneAmongAllAndAtAnyThreadCount) {
     std::vector<double> alone(3 * some.size());
     ev.evaluate(2, some, alone.data());
     for (std::size_t i = 0; i < some.size(); ++i)
-        for (int c = 0; c < 3; ++c) EXPECT_EQ(alone[3 * i + c], one[3 * static_cast<std::size_t>(some[i]) + c]);
+        for (int c = 0; c < 3; ++c)
+            EXPECT_EQ(alone[3 * i + c], one[3 * static_cast<std::size_t>(some[i]) + c]);
     EXPECT_THROW(ev.evaluate(3, some, alone.data()), std::out_of_range);
     const Index bad = static_cast<Index>(n);
     EXPECT_THROW(ev.evaluate(0, std::span<const Index>(&bad, 1), alone.data()), std::out_of_range);
@@ -110,7 +113,8 @@ TEST_F(SmokeTest, OneVoxelStepIsWithinHalfAPercentOfAFourTimesFinerMarch) {
     fine.stepVoxels = 0.25;
     const VolumeRig rig;
     const auto lights = rig.between(*world_, 2);
-    const VolumeEvaluator coarse(world_, lights), finer(VolumeWorld::create(world_->density, fine, "fine"), lights);
+    const VolumeEvaluator coarse(world_, lights),
+        finer(VolumeWorld::create(world_->density, fine, "fine"), lights);
     const std::size_t n = world_->density.voxelCount();
     std::vector<double> a(3 * n), b(3 * n);
     for (Index f = 0; f < 2; ++f) {
@@ -171,7 +175,8 @@ TEST(VolumeLightColour, KelvinGivesWarmAndColdLightOfEqualLuminance) {
 }
 
 double angleDeg(const Vec3& a, const Vec3& b) {
-    return std::acos(std::clamp(cornell::dot(a, b) / (cornell::length(a) * cornell::length(b)), -1.0, 1.0)) * 180 / M_PI;
+    return std::acos(std::clamp(cornell::dot(a, b) / (cornell::length(a) * cornell::length(b)), -1.0, 1.0)) *
+           180 / M_PI;
 }
 
 TEST(VolumeRig, SpiralCoversTheBandEvenlyCyclesColoursAndBetweenFindsItsHoles) {

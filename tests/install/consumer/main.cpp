@@ -8,8 +8,8 @@
 #include <pmsc/SoftCache.h>
 #include <pmsc/Training.h>
 
-#include <cmath>
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <string>
 #include <vector>
@@ -50,12 +50,14 @@ int main(int argc, char** argv) {
     };
     const auto inside = run(set.frame(7));
     std::vector<double> novel(set.frame(7), set.frame(7) + points * 3);
-    for (pmsc::Index p = 0; p < points; ++p) novel[p * 3 + 1] += 0.3 * std::sin(0.77 * p);  // a pattern no training frame has
+    for (pmsc::Index p = 0; p < points; ++p)
+        novel[p * 3 + 1] += 0.3 * std::sin(0.77 * p);  // a pattern no training frame has
     const auto outside = run(novel.data());
     std::printf("in-subspace frame: %s, largest error %.3g; novel frame: %s\n",
                 std::string(pmsc::toString(inside.first)).c_str(), inside.second,
                 std::string(pmsc::toString(outside.first)).c_str());
-    if (inside.first != pmsc::CacheState::Hit || inside.second > 1e-8 || outside.first == pmsc::CacheState::Hit) {
+    if (inside.first != pmsc::CacheState::Hit || inside.second > 1e-8 ||
+        outside.first == pmsc::CacheState::Hit) {
         std::printf("pmsc consumer: FAILED\n");
         return 1;
     }
