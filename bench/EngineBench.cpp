@@ -1,4 +1,4 @@
-// Engine benchmarks (issue 3, "Must show"). Each speed goal is a ratio of two benchmarks run in
+// Engine benchmarks. Each speed goal is a ratio of two benchmarks run in
 // the same process: pmsc_engine_report runs these and prints the ratios as one JSON object.
 //
 //   overhead:     plain serial loop vs the graph at 1 thread, trivial (recorded) evaluator, all hits

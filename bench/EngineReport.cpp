@@ -1,5 +1,5 @@
 // pmsc_engine_report: runs the engine benchmarks (EngineBench.cpp) and prints ONE JSON object
-// with the four ratios of issue 3 and the raw rates behind them. The usual Google Benchmark
+// with the four speed-goal ratios and the raw rates behind them. The usual Google Benchmark
 // table goes to stderr; extra arguments are passed to Google Benchmark (e.g.
 // --benchmark_repetitions=9, --benchmark_filter=Miss).
 #include <benchmark/benchmark.h>

@@ -1,4 +1,4 @@
-// pmsc_face_bench — the face rig's speed goal (issue 5, "Must show": speedup >= 8 over posing
+// pmsc_face_bench — the face rig's speed goal (speedup >= 8 over posing
 // all points with the same rig) as a ratio of two Google Benchmarks run in the same process:
 //
 //   BM_FaceFullPose  the rig posing all 26,719 points of a frame (FaceRig::evaluateAll)
@@ -11,7 +11,7 @@
 // names it (the demo's own keys and basis), otherwise one trained here from 10 sequences of the
 // demo's animation (M = 48, 170 keys, Multi-PIE fiducials). ICT data: PMSC_ICT_FACEKIT_DIR, or
 // the folder CMake was configured with.
-#include "examples/face/FaceEvaluator.h"
+#include "evaluators/face/FaceEvaluator.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/PointMultiplier.h"
 #include "pmsc/Training.h"

@@ -1,4 +1,4 @@
-// Local fail-through (issue 9, "Must show"): a frame where one region of R misses costs at most
+// Local fail-through (speed goal): a frame where one region of R misses costs at most
 // (region's points / N) of a full evaluation + 10%, measured in one run beside a whole-frame miss
 // and a plain full evaluation of the same frames.
 //

@@ -1,8 +1,8 @@
-// pmsc_scaleout_bench (issue 12): training time on one training set
+// pmsc_scaleout_bench: training time on one training set
 //   - in memory vs streamed from disk (out of core), both one process, in this process;
 //   - `mpirun -n 2 pmsc train` vs `mpirun -n 1 pmsc train` (streamed; child processes, wall time),
-// and prints the two ratios with the load average before and after (only 2 cores here: the
-// 2-rank ratio means something only on an idle machine). Goal (issue 12): 2 ranks <= 0.6 x 1 rank
+// and prints the two ratios with the load average before and after (with 2 cores the
+// 2-rank ratio means something only on an idle machine). Goal: 2 ranks <= 0.6 x 1 rank
 // on a set where the Gram accumulation dominates.
 //
 // The set: examples/synthetic's deforming sheet, GRID x GRID points x 3 channels x FRAMES frames,
@@ -12,7 +12,7 @@
 // reductions; idle-machine ratio 0.618 at 400 vs 0.52-0.57 at 800); Google Benchmark flags pass through.
 //
 //   build/bin/pmsc_scaleout_bench                # defaults: 90,000 points x 800 frames, 1.73 GB
-#include "examples/synthetic/SyntheticSurface.h"
+#include "evaluators/synthetic/SyntheticSurface.h"
 #include "pmsc/NpyIO.h"
 #include "pmsc/RowBlocks.h"
 #include "pmsc/Training.h"

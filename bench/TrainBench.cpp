@@ -1,4 +1,4 @@
-// pmsc_train_bench — times pmsc::train at the ICT face scale (issue 2 "Must show": 600 frames x
+// pmsc_train_bench — times pmsc::train at the ICT face scale (goal: 600 frames x
 // 26,719 points x 3, 170 keys, M around 60-100, under 15 s on the 2-core machine).
 //
 // The data is synthetic with a face-like spectrum: smooth low-rank blendshape motion (Gaussian

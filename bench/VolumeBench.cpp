@@ -1,4 +1,4 @@
-// Issue 11: the volume evaluator's cost per voxel is linear in the voxels asked for, so a hit
+// The volume evaluator's cost per voxel is linear in the voxels asked for, so a hit
 // (the key voxels only) costs K/N of a full frame. Smoke of 60,000 voxels from the demo's mesh,
 // one thread (serial evaluate(), as the engine calls it per key set or chunk), the demo's settings.
 //
@@ -8,7 +8,7 @@
 // BM_ReconstructSharedVsSeparate: see below.
 // BM_KeysVersusAll: 200 random voxels and all voxels in the same iteration; linearity =
 // (keys time / K) / (all time / N), which should be 1 within 20% (keys cost K/N of all voxels).
-#include "examples/volume/VolumeEvaluator.h"
+#include "evaluators/volume/VolumeEvaluator.h"
 #include "pmsc/PointMultiplier.h"
 
 #include <benchmark/benchmark.h>

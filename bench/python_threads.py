@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""A Python evaluator through the engine at 1 and 2 threads (issue 13: 2 threads must not be slower).
+"""A Python evaluator through the engine at 1 and 2 threads (goal: 2 threads must not be slower).
 
     PYTHONPATH=build/python bench/python_threads.py [--points 20000] [--frames 60] [--repeats 3]
 

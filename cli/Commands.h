@@ -1,13 +1,18 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include "app/ExitCodes.h"
+
 #include <string>
 #include <vector>
 
 namespace pmsc::cli {
 
+// The exit codes, the replay and the runs the command line shares with the Python module.
+using namespace pmsc::app;
+
 /// The subcommands of `pmsc`. Each takes the arguments after its name and returns
-/// an exit code (cli/ExitCodes.h); errors are thrown as the typed exceptions of
+/// an exit code (app/ExitCodes.h); errors are thrown as the typed exceptions of
 /// pmsc/Errors.h and turned into one stderr line and an exit code by main().
 /// One declaration per command; main.cpp's table maps names to them.
 int runTrain(const std::vector<std::string>& args);          // cli/TrainCommand.cpp
@@ -18,9 +23,10 @@ int runDemoSynthetic(const std::vector<std::string>& args);  // cli/DemoCommand.
 int runLearn(const std::vector<std::string>& args);          // cli/LearnCommand.cpp
 int runRun(const std::vector<std::string>& args);            // cli/RunCommand.cpp (render farm)
 int runExportFrames(const std::vector<std::string>& args);   // cli/ExportFramesCommand.cpp
+int runEvaluators(const std::vector<std::string>& args);     // cli/EvaluatorsCommand.cpp
 int runDemoCornell(const std::vector<std::string>& args);    // cli/CornellDemoCommand.cpp (examples/cornell)
 int runDemoLearn(const std::vector<std::string>& args);      // cli/LearnDemoCommand.cpp (examples/face)
-int runDemoCross(const std::vector<std::string>& args);      // cli/CrossDemoCommand.cpp (issue 10)
+int runDemoCross(const std::vector<std::string>& args);      // cli/CrossDemoCommand.cpp (examples/face)
 int runDemoFace(const std::vector<std::string>& args);       // cli/FaceDemoCommand.cpp (examples/face)
 int runDemoVolume(const std::vector<std::string>& args);     // cli/VolumeDemoCommand.cpp (examples/volume)
 

@@ -2,9 +2,9 @@
 // gather with Embree, a sparse OpenVDB lighting cache, PMSC through the engine, moving cameras.
 // The experiment itself lives in examples/cornell (CornellDemo.h); this file parses options,
 // shows progress and prints the summary.
+#include "app/ExitCodes.h"
 #include "cli/Args.h"
 #include "cli/Commands.h"
-#include "cli/ExitCodes.h"
 #include "cli/Progress.h"
 #include "examples/cornell/CornellDemo.h"
 
@@ -61,14 +61,14 @@ int runDemoCornell(const std::vector<std::string>& args) {
         "key points, validation lights through the soft-cache engine, and renders from moving\n"
         "cameras. Writes DIR/report.json, DIR/*.vdb (vdb_print -l), DIR/*.png and DIR/*.pfm.");
     parser.option("--out", "DIR", "output folder (created if missing)", out, true);
-    // Numbers go through Args' converters (issue 13), as every other command's.
+    // Numbers go through Args' converters, as every other command's.
     parser.option("--points", "N", "active voxels of the lighting cache (default 160000; --quick 6000)",
                   [&](const std::string& v) { points = parseIndex("--points", v, 1000, 4000000); });
     parser.option("--samples", "S", "paths per point per frame (default 160; --quick 32)",
                   [&](const std::string& v) { samples = parseIndex("--samples", v, 2, 65536); });
     parser.option("--threads", "T", "worker threads (default: every core)",
                   [&](const std::string& v) { threads = parseIndex("--threads", v, 0, 1024); });
-    parser.option("--regions", "R", "regions of local fail-through (issue 9; default 48; 0 = none)",
+    parser.option("--regions", "R", "regions of local fail-through (default 48; 0 = none)",
                   [&](const std::string& v) { regions = parseIndex("--regions", v, 0, 1024); });
     parser.option("--feather", "PCT",
                   "feather width of the regions' borders, % of the box's diagonal (default 3)",

@@ -1,8 +1,8 @@
-// `pmsc demo cross`: cross point multiplication on the ICT face (paper section 7, issue 10). The
+// `pmsc demo cross`: cross point multiplication on the ICT face (paper section 7). The
 // experiment lives in examples/face (CrossDemo.h); this file parses options and prints the summary.
+#include "app/ExitCodes.h"
 #include "cli/Args.h"
 #include "cli/Commands.h"
-#include "cli/ExitCodes.h"
 #include "cli/Progress.h"
 #include "examples/face/CrossDemo.h"
 

@@ -1,7 +1,8 @@
 #include "cli/CrossReplay.h"
+#include "cli/Commands.h"
 
+#include "app/Replay.h"  // percentiles
 #include "cli/Format.h"
-#include "cli/Replay.h"  // percentiles
 #include "pmsc/Cross.h"
 #include "pmsc/Errors.h"
 

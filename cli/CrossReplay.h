@@ -14,7 +14,7 @@
 
 namespace pmsc::cli {
 
-/// One frame of a cross point-multiplication replay (issue 10; pmsc/Cross.h).
+/// One frame of a cross point-multiplication replay (pmsc/Cross.h).
 struct CrossFrame {
     Index frame = 0;
     double keyRms = 0;  ///< the control's key RMS error (data units)

@@ -1,4 +1,4 @@
-// `pmsc run` with a cross model (issue 10): an evaluator of the CONTROL (e.g. face-control:DIR)
+// `pmsc run` with a cross model: an evaluator of the CONTROL (e.g. face-control:DIR)
 // is evaluated at the control key points only; the target frames come from the joint subspace and
 // are written one file per frame (FrameOutput: atomic, resumable). No fail-through exists.
 #include "cli/CrossRun.h"

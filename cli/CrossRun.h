@@ -5,7 +5,7 @@
 
 namespace pmsc::cli {
 
-/// `pmsc run` with a cross model (issue 10): `control` is an evaluator of the control (N = the
+/// `pmsc run` with a cross model: `control` is an evaluator of the control (N = the
 /// model's control points), evaluated at the key points only; the target frames are written one
 /// .npy per frame (targetPoints x C), resumable as runFrames(). The stats file has each frame's key
 /// RMS and bound and says fail-through is impossible. Checks before any work: the evaluator's N and

@@ -1,7 +1,8 @@
-// `pmsc train --targets`: cross point multiplication (issue 10, paper section 7). Called by
+// `pmsc train --targets`: cross point multiplication (paper section 7). Called by
 // TrainCommand.cpp once the options are parsed; the joint training is pmsc::trainCross.
 #include "cli/CrossTrain.h"
-#include "cli/ExitCodes.h"
+#include "app/ExitCodes.h"
+#include "cli/Commands.h"
 #include "cli/Format.h"
 #include "cli/Progress.h"
 #include "pmsc/AtomicFile.h"

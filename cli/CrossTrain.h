@@ -7,7 +7,7 @@
 
 namespace pmsc::cli {
 
-/// `pmsc train --frames CONTROL.npy --targets TARGET.npy` (cross point multiplication, issue 10),
+/// `pmsc train --frames CONTROL.npy --targets TARGET.npy` (cross point multiplication),
 /// after TrainCommand parsed and checked the options. Pairs that cannot match (frame or channel
 /// counts) fail from the headers, before anything is read or written.
 int runTrainCross(const std::string& controlPath, const std::string& targetsPath, const std::string& outPath,

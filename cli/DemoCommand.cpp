@@ -3,16 +3,16 @@
 // Until the Cornell box demo exists this is what `./pmsc.sh demo` runs: generate training and test
 // frames of a deforming surface (examples/synthetic), train, replay the test frames through the
 // soft cache, and measure what the key points buy on the real evaluator.
+#include "app/ExitCodes.h"
+#include "app/Replay.h"
 #include "cli/Args.h"
 #include "cli/Commands.h"
-#include "cli/ExitCodes.h"
 #include "cli/Interrupt.h"
 #include "cli/Progress.h"
-#include "cli/Replay.h"
 #include "cli/ReplaySummary.h"
 #include "cli/TrainSummary.h"
 #include "evaluators/ReplayEvaluator.h"
-#include "examples/synthetic/SyntheticSurface.h"
+#include "evaluators/synthetic/SyntheticSurface.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
@@ -25,7 +25,9 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <optional>
 #include <system_error>
+#include <utility>
 
 namespace pmsc::cli {
 
@@ -83,33 +85,31 @@ Speed measureSpeed(const PointEvaluator& evaluator, const Model& model, Index fr
     return s;
 }
 
-}  // namespace
-
-int runDemo(const std::vector<std::string>& args) {
-    // `pmsc demo` alone (what ./pmsc.sh demo runs) is the paper's main experiment, the Cornell box
-    // (issue 4, cli/CornellDemoCommand.cpp); with options it is this generated shot.
-    if (args.empty()) return runDemoCornell({"--out", "pmsc-demo-cornell"});
-    return runDemoSynthetic(args);
-}
-
-int runDemoSynthetic(const std::vector<std::string>& args) {
+/// What `pmsc demo synthetic` was asked.
+struct SyntheticArgs {
     std::string outDir = "pmsc-demo-out";
     synthetic::SurfaceOptions trainShot, testShot;
+    double tolerance = 0.02;
+    Index maxKeys = 48;
+    bool quiet = false;
+};
+
+/// Declares the options, parses and checks them; std::nullopt when --help was asked for.
+std::optional<SyntheticArgs> parseSyntheticArgs(const std::vector<std::string>& args) {
+    SyntheticArgs a;
+    synthetic::SurfaceOptions &trainShot = a.trainShot, &testShot = a.testShot;
     trainShot.frames = 1000;
     trainShot.seed = 1;
     testShot.frames = 200;
     testShot.seed = 2;
     testShot.novelFrames = 40;
-    double tolerance = 0.02;
-    Index maxKeys = 48;
-    bool quiet = false;
     ArgParser parser(
         "demo synthetic", "[--out DIR] [options]",
         "Generates a shot of a deforming surface (a sheet with sliding bumps and a twisting\n"
         "\"jaw\"; examples/synthetic), trains a model on one take, replays another take through\n"
         "the soft cache, and prints what happened. The test take ends with a motion the\n"
         "training never saw, which the soft cache must catch. Files go to --out.");
-    parser.option("--out", "DIR", "output folder (default pmsc-demo-out)", outDir);
+    parser.option("--out", "DIR", "output folder (default pmsc-demo-out)", a.outDir);
     parser.option("--grid", "G", "G x G points (default 64)", [&](const std::string& v) {
         trainShot.grid = testShot.grid = parseIndex("--grid", v, 4, 1024);
     });
@@ -123,25 +123,36 @@ int runDemoSynthetic(const std::vector<std::string>& args) {
         [&](const std::string& v) { testShot.novelFrames = parseIndex("--novel-frames", v, 0, 100000); });
     parser.option("--tolerance", "T",
                   "largest point error a hit may have (default 0.02, 0.7% of the sheet's diagonal)",
-                  [&](const std::string& v) { tolerance = parseDouble("--tolerance", v, 1e-12); });
+                  [&](const std::string& v) { a.tolerance = parseDouble("--tolerance", v, 1e-12); });
     parser.option("--max-keys", "K", "key point budget (default 48)",
-                  [&](const std::string& v) { maxKeys = parseIndex("--max-keys", v, 1); });
-    parser.flag("--quiet", "no progress display", quiet);
-    if (!parser.parse(args)) return kExitOk;
+                  [&](const std::string& v) { a.maxKeys = parseIndex("--max-keys", v, 1); });
+    parser.flag("--quiet", "no progress display", a.quiet);
+    if (!parser.parse(args)) return std::nullopt;
     if (testShot.novelFrames > testShot.frames) parser.fail("--novel-frames exceeds --test-frames");
+    return a;
+}
 
+/// The files the demo writes, all in --out.
+struct DemoFiles {
+    std::string trainPath, testPath, modelPath, reportPath, outPath;
+};
+
+/// Creates the output folder and names the files in it.
+DemoFiles demoFiles(const std::string& outDir) {
     std::error_code error;
     std::filesystem::create_directories(outDir, error);
     if (error) throw IoError(outDir + ": cannot create the folder: " + error.message());
     const auto file = [&](const char* name) { return (std::filesystem::path(outDir) / name).string(); };
-    const std::string trainPath = file("train.npy"), testPath = file("test.npy"),
-                      modelPath = file("model.pmsc"), reportPath = file("report.json"),
-                      outPath = file("out.npy");
+    return {file("train.npy"), file("test.npy"), file("model.pmsc"), file("report.json"), file("out.npy")};
+}
 
-    const auto total = Clock::now();
-    std::cout << "pmsc demo: point multiplication and soft caching on a generated shot\n\n";
-    // 1. Data.
-    const synthetic::SyntheticSurface trainRig(trainShot), testRig(testShot);
+/// 1. Data: the training and the test take, written to --out and described.
+std::pair<FrameFile, FrameFile> generateTakes(const SyntheticArgs& a,
+                                              const synthetic::SyntheticSurface& trainRig,
+                                              const synthetic::SyntheticSurface& testRig,
+                                              const DemoFiles& files) {
+    const synthetic::SurfaceOptions &trainShot = a.trainShot, &testShot = a.testShot;
+    const std::string &trainPath = files.trainPath, &testPath = files.testPath;
     auto t = Clock::now();
     FrameFile train{evaluateFrames(trainRig, 0, trainShot.frames), NpyDtype::Float64};
     FrameFile test{evaluateFrames(testRig, 0, testShot.frames), NpyDtype::Float64};
@@ -154,29 +165,39 @@ int runDemoSynthetic(const std::vector<std::string>& args) {
               << "   test take     " << testPath << ": " << testShot.frames
               << " frames, other motion; the last " << testShot.novelFrames
               << " ramp in a pucker of the \"jaw\" never seen in training\n\n";
+    return {std::move(train), std::move(test)};
+}
 
-    // 2. Train.
+/// 2. Train: the model, written to --out, and its summary.
+Model trainStep(const SyntheticArgs& a, const FrameSet& frames, const DemoFiles& files,
+                TrainingReport& report) {
+    const std::string &trainPath = files.trainPath, &modelPath = files.modelPath;
     TrainingOptions options;
-    options.tolerance = tolerance;
-    options.maxKeys = maxKeys;
-    TrainingReport report;
+    options.tolerance = a.tolerance;
+    options.maxKeys = a.maxKeys;
     Model model;
+    Clock::time_point t;
     {
-        Progress progress("train", !quiet);
+        Progress progress("train", !a.quiet);
         options.progress = [&](std::string_view stage, double done, double all) {
             return progress.update(stage, done, all);
         };
         t = Clock::now();
-        model = pmsc::train(train.frames, options, &report);
+        model = pmsc::train(frames, options, &report);
         writeModel(modelPath, model);
         progress.finish();
     }
-    std::cout << "2. pmsc train --frames " << trainPath << " --out " << modelPath << " --max-keys " << maxKeys
-              << " --tolerance " << tolerance << "\n";
-    printTrainSummary(std::cout, modelPath, train.frames, model, report, since(t));
+    std::cout << "2. pmsc train --frames " << trainPath << " --out " << modelPath << " --max-keys "
+              << a.maxKeys << " --tolerance " << a.tolerance << "\n";
+    printTrainSummary(std::cout, modelPath, frames, model, report, since(t));
     std::cout << "\n";
+    return model;
+}
 
-    // 3. Replay.
+/// 3. Replay: the test take through the soft cache, the report and the output written to --out.
+ReplayResult replayStep(const Model& model, FrameFile test, const DemoFiles& files) {
+    const std::string &testPath = files.testPath, &modelPath = files.modelPath, &outPath = files.outPath,
+                      &reportPath = files.reportPath;
     const evaluators::ReplayEvaluator recorded(std::move(test), testPath);
     ReplayOptions replayOptions;
     replayOptions.cancel = &interruptFlag();
@@ -191,6 +212,13 @@ int runDemoSynthetic(const std::vector<std::string>& args) {
     std::cout << "3. pmsc replay --model " << modelPath << " --frames " << testPath << " --out " << outPath
               << " --report " << reportPath << "\n";
     printReplaySummary(std::cout, model, result, false);
+    return result;
+}
+
+/// What the soft cache did with the trained and the unseen motion, and whether it kept the tolerance.
+void printTakeOutcome(const SyntheticArgs& a, const ReplayResult& result, const TrainingReport& report) {
+    const synthetic::SurfaceOptions& testShot = a.testShot;
+    const double tolerance = a.tolerance;
     const Index novelStart = testShot.frames - testShot.novelFrames;
     Index seenHits = 0, novelCaught = 0, novelMisses = 0;
     for (const auto& f : result.frames) {
@@ -226,8 +254,11 @@ int runDemoSynthetic(const std::vector<std::string>& args) {
                   << fmt("%.3g", report.calibration.ratio) << " x measured on held-out training frames\n";
     }
     std::cout << "\n";
+}
 
-    // 4. Speed on the real evaluator (the recorded frames would make the full path a memcpy).
+/// 4. Speed on the real evaluator (the recorded frames would make the full path a memcpy).
+void printSpeed(const synthetic::SyntheticSurface& testRig, const Model& model,
+                const synthetic::SurfaceOptions& testShot) {
     const Speed speed = measureSpeed(testRig, model, std::min<Index>(testShot.frames, 50));
     std::cout << "4. speed on the generating evaluator, one thread, per frame:\n"
               << "   full evaluation of " << model.points << " points        " << fmt("%8.3f", speed.fullMs)
@@ -236,6 +267,32 @@ int runDemoSynthetic(const std::vector<std::string>& args) {
               << fmt("%8.3f", speed.keysMs + speed.pmMs) << " ms (keys " << fmt("%.3f", speed.keysMs)
               << ", PM " << fmt("%.3f", speed.pmMs)
               << ") = " << fmt("%.1f", speed.fullMs / (speed.keysMs + speed.pmMs)) << "x faster on a hit\n\n";
+}
+
+}  // namespace
+
+int runDemo(const std::vector<std::string>& args) {
+    // `pmsc demo` alone (what ./pmsc.sh demo runs) is the paper's main experiment, the Cornell box
+    // (cli/CornellDemoCommand.cpp); with options it is this generated shot.
+    if (args.empty()) return runDemoCornell({"--out", "pmsc-demo-cornell"});
+    return runDemoSynthetic(args);
+}
+
+int runDemoSynthetic(const std::vector<std::string>& args) {
+    const std::optional<SyntheticArgs> a = parseSyntheticArgs(args);
+    if (!a) return kExitOk;
+    const std::string& outDir = a->outDir;
+    const DemoFiles files = demoFiles(outDir);
+
+    const auto total = Clock::now();
+    std::cout << "pmsc demo: point multiplication and soft caching on a generated shot\n\n";
+    const synthetic::SyntheticSurface trainRig(a->trainShot), testRig(a->testShot);
+    auto [train, test] = generateTakes(*a, trainRig, testRig, files);
+    TrainingReport report;
+    const Model model = trainStep(*a, train.frames, files, report);
+    const ReplayResult result = replayStep(model, std::move(test), files);
+    printTakeOutcome(*a, result, report);
+    printSpeed(testRig, model, a->testShot);
     std::cout << "done in " << fmt("%.1f", since(total)) << " s; files in " << outDir << "/\n";
     return kExitOk;
 }

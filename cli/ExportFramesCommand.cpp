@@ -1,12 +1,12 @@
-// `pmsc export-frames`: an evaluator's full frames as a .npy training set (issue 6: a user's own
+// `pmsc export-frames`: an evaluator's full frames as a .npy training set (a user's own
 // character, posed by skin:ASSET, becomes the frames `pmsc train` learns from).
+#include "app/ExitCodes.h"
 #include "cli/Args.h"
 #include "cli/Commands.h"
-#include "cli/EvaluatorRegistry.h"
-#include "cli/ExitCodes.h"
 #include "cli/FarmFrames.h"
 #include "cli/Interrupt.h"
 #include "cli/Progress.h"
+#include "evaluators/EvaluatorRegistry.h"
 #include "pmsc/Errors.h"
 #include "pmsc/NpyIO.h"
 #include "pmsc/Training.h"  // pmsc::Cancelled
@@ -27,7 +27,7 @@ namespace {
 /// for the skin evaluator, so `pmsc export-frames character.glb` does what it says.
 std::string specOrAsset(const std::string& text) {
     const std::string name = text.substr(0, text.find(':'));
-    for (const auto& kind : evaluatorKinds())
+    for (const auto& kind : evaluators::builtinRegistry().kinds())
         if (kind.name == name) return text;
     return "skin:" + text;
 }
@@ -61,7 +61,7 @@ int runExportFrames(const std::vector<std::string>& args) {
     }
 
     spec = specOrAsset(spec);
-    const std::unique_ptr<PointEvaluator> evaluator = makeEvaluator(spec);
+    const std::unique_ptr<PointEvaluator> evaluator = evaluators::makeEvaluator(spec);
     FrameSpan span{0, evaluator->frameCount() - 1, 1};
     if (!framesText.empty()) {
         try {

@@ -3,9 +3,9 @@
 // never seen in training) through the soft-cache engine with the rig as the evaluator.
 // The experiment itself lives in examples/face (FaceDemo.h); this file parses options, shows
 // progress and prints the summary.
+#include "app/ExitCodes.h"
 #include "cli/Args.h"
 #include "cli/Commands.h"
-#include "cli/ExitCodes.h"
 #include "cli/Progress.h"
 #include "examples/face/FaceDemo.h"
 
@@ -62,7 +62,7 @@ int runDemoFace(const std::vector<std::string>& args) {
                   "the ICT-FaceKit FaceXModel folder (generic_neutral_mesh.obj + 57 expressions)", data,
                   true);
     parser.option("--out", "DIR2", "output folder (created if missing)", out, true);
-    // Numbers go through Args' converters (issue 13): "--threads 2.5" is an error, not 2 threads.
+    // Numbers go through Args' converters: "--threads 2.5" is an error, not 2 threads.
     parser.option("--threads", "T", "worker threads (default: every core)",
                   [&](const std::string& v) { threads = parseIndex("--threads", v, 0, 1024); });
     parser.option("--tolerance", "PCT", "largest error of a hit, % of the head diagonal (default 1)",

@@ -1,15 +1,17 @@
 // `pmsc inspect`: what a model file holds.
+#include "app/ExitCodes.h"
 #include "cli/Args.h"
 #include "cli/Commands.h"
-#include "cli/ExitCodes.h"
 #include "cli/Format.h"
 #include "pmsc/ModelIO.h"
 
 #include <nlohmann/json.hpp>
 
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <optional>
 
 namespace pmsc::cli {
 
@@ -21,77 +23,97 @@ double capturedBy(const Model& model, Index m) {
     return model.singularValues.head(m).squaredNorm() / model.totalEnergy;
 }
 
-}  // namespace
-
-int runInspect(const std::vector<std::string>& args) {
+/// What `pmsc inspect` was asked.
+struct InspectArgs {
     std::string modelPath;
     bool json = false;
+};
+
+/// Declares the options and parses them; std::nullopt when --help was asked for.
+std::optional<InspectArgs> parseInspectArgs(const std::vector<std::string>& args) {
+    InspectArgs a;
     ArgParser parser("inspect", "MODEL.pmsc [--json]",
                      "Shows a model file: sizes, key point indices, the basis energy (captured fraction and\n"
                      "singular values), the soft-cache thresholds and the calibration tolerance.");
-    parser.positional("MODEL.pmsc", "model file", modelPath);
-    parser.flag("--json", "print one JSON object instead of text", json);
-    if (!parser.parse(args)) return kExitOk;
+    parser.positional("MODEL.pmsc", "model file", a.modelPath);
+    parser.flag("--json", "print one JSON object instead of text", a.json);
+    if (!parser.parse(args)) return std::nullopt;
+    return a;
+}
 
-    const Model model = readModel(modelPath);
-    // The version the file holds (a model without sections is written as version 1).
-    const unsigned version = modelFormatVersion(model);
-    const auto bytes = std::filesystem::file_size(modelPath);
-    const char* selector = model.selector == Selector::QDeim ? "qdeim" : "teleconnection";
-    if (json) {
-        nlohmann::ordered_json j;
-        j["file"] = modelPath;
-        j["format_version"] = version;
-        j["bytes"] = bytes;
-        j["points"] = model.points;
-        j["channels"] = model.channels;
-        j["shared_channels"] = model.sharedChannels;
-        j["train_frames"] = model.trainFrames;
-        j["basis"] = model.basisSize();
-        j["key_points"] = model.keyCount();
-        j["selector"] = selector;
-        j["energy_captured"] = model.energyCaptured();
-        j["total_energy"] = model.totalEnergy;
-        j["singular_values"] = std::vector<double>(model.singularValues.data(),
-                                                   model.singularValues.data() + model.singularValues.size());
-        j["eps_min"] = model.epsMin;
-        j["eps_max"] = model.epsMax;
-        j["tolerance"] = model.tolerance;
-        j["train_max_point_residual"] = model.trainMaxPointResidual;
-        j["key_indices"] = std::vector<long long>(model.keyPoints.begin(), model.keyPoints.end());
-        if (model.regions) {
-            nlohmann::ordered_json regions = nlohmann::ordered_json::array();
-            for (const Region& g : model.regions->regions)
-                regions.push_back({{"points", g.points.size()},
-                                   {"keys", g.keys.size()},
-                                   {"basis", g.basisSize()},
-                                   {"eps_min", g.epsMin},
-                                   {"eps_max", g.epsMax},
-                                   {"ratio", g.ratio}});
-            j["feather_width"] = model.regions->featherWidth;
-            j["max_local_fraction"] = model.regions->maxLocalFraction;
-            j["region_key_points"] = model.regions->extraKeyPoints;
-            j["regions"] = std::move(regions);
-        }
-        if (model.learning)
-            j["learning"] = {{"rank", model.learning->maxRank},
-                             {"stored_vectors", model.basisSize() + model.learning->extraBasis.cols()},
-                             {"updates", model.learning->updates},
-                             {"discarded_energy", model.learning->discardedEnergy}};
-        if (model.calibrationRecord)
-            j["calibration"] = {{"rule", toString(model.calibrationRecord->rule)},
-                                {"coverage", model.calibrationRecord->coverage},
-                                {"held_out_frames", model.calibrationRecord->keyRms.size()}};
-        if (model.cross)
-            j["cross"] = {{"control_points", model.cross->controlPoints},
-                          {"target_points", model.points - model.cross->controlPoints},
-                          {"coverage", model.cross->coverage},
-                          {"quantile", model.cross->quantile},
-                          {"scale", model.cross->scale},
-                          {"held_out_pairs", model.cross->keyRms.size()}};
-        std::cout << j.dump(2) << "\n";
-        return kExitOk;
+/// What is shown beside the model itself: the file, its format version and size, the selector's name.
+struct ModelFileFacts {
+    std::string path;
+    unsigned version = 0;
+    std::uintmax_t bytes = 0;
+    const char* selector = "";
+};
+
+/// The model as one JSON object (--json).
+void printModelJson(const Model& model, const ModelFileFacts& file) {
+    const std::string& modelPath = file.path;
+    const unsigned version = file.version;
+    const auto bytes = file.bytes;
+    const char* selector = file.selector;
+    nlohmann::ordered_json j;
+    j["file"] = modelPath;
+    j["format_version"] = version;
+    j["bytes"] = bytes;
+    j["points"] = model.points;
+    j["channels"] = model.channels;
+    j["shared_channels"] = model.sharedChannels;
+    j["train_frames"] = model.trainFrames;
+    j["basis"] = model.basisSize();
+    j["key_points"] = model.keyCount();
+    j["selector"] = selector;
+    j["energy_captured"] = model.energyCaptured();
+    j["total_energy"] = model.totalEnergy;
+    j["singular_values"] = std::vector<double>(model.singularValues.data(),
+                                               model.singularValues.data() + model.singularValues.size());
+    j["eps_min"] = model.epsMin;
+    j["eps_max"] = model.epsMax;
+    j["tolerance"] = model.tolerance;
+    j["train_max_point_residual"] = model.trainMaxPointResidual;
+    j["key_indices"] = std::vector<long long>(model.keyPoints.begin(), model.keyPoints.end());
+    if (model.regions) {
+        nlohmann::ordered_json regions = nlohmann::ordered_json::array();
+        for (const Region& g : model.regions->regions)
+            regions.push_back({{"points", g.points.size()},
+                               {"keys", g.keys.size()},
+                               {"basis", g.basisSize()},
+                               {"eps_min", g.epsMin},
+                               {"eps_max", g.epsMax},
+                               {"ratio", g.ratio}});
+        j["feather_width"] = model.regions->featherWidth;
+        j["max_local_fraction"] = model.regions->maxLocalFraction;
+        j["region_key_points"] = model.regions->extraKeyPoints;
+        j["regions"] = std::move(regions);
     }
+    if (model.learning)
+        j["learning"] = {{"rank", model.learning->maxRank},
+                         {"stored_vectors", model.basisSize() + model.learning->extraBasis.cols()},
+                         {"updates", model.learning->updates},
+                         {"discarded_energy", model.learning->discardedEnergy}};
+    if (model.calibrationRecord)
+        j["calibration"] = {{"rule", toString(model.calibrationRecord->rule)},
+                            {"coverage", model.calibrationRecord->coverage},
+                            {"held_out_frames", model.calibrationRecord->keyRms.size()}};
+    if (model.cross)
+        j["cross"] = {{"control_points", model.cross->controlPoints},
+                      {"target_points", model.points - model.cross->controlPoints},
+                      {"coverage", model.cross->coverage},
+                      {"quantile", model.cross->quantile},
+                      {"scale", model.cross->scale},
+                      {"held_out_pairs", model.cross->keyRms.size()}};
+    std::cout << j.dump(2) << "\n";
+}
+
+/// The model as text: sizes, energy, keys, thresholds, and the optional sections.
+void printModelText(const Model& model, const ModelFileFacts& file) {
+    const std::string& modelPath = file.path;
+    const unsigned version = file.version;
+    const auto bytes = file.bytes;
+    const char* selector = file.selector;
     std::cout << modelPath << ": pmsc model, format version " << version << ", " << bytes << " bytes\n";
     std::cout << "  points        N = " << model.points << ", channels C = " << model.channels
               << (model.sharedChannels ? " (sharing one basis)" : "") << ", trained on " << model.trainFrames
@@ -155,6 +177,24 @@ int runInspect(const std::vector<std::string>& args) {
                   << " x (key RMS + " << fmt("%.6g", model.cross->scale) << ") at coverage "
                   << fmt("%.3g", model.cross->coverage) << " (" << model.cross->keyRms.size()
                   << " held-out pairs)\n";
+}
+
+}  // namespace
+
+int runInspect(const std::vector<std::string>& args) {
+    const std::optional<InspectArgs> a = parseInspectArgs(args);
+    if (!a) return kExitOk;
+    const Model model = readModel(a->modelPath);
+    ModelFileFacts file;
+    file.path = a->modelPath;
+    // The version the file holds (a model without sections is written as version 1).
+    file.version = modelFormatVersion(model);
+    file.bytes = std::filesystem::file_size(a->modelPath);
+    file.selector = model.selector == Selector::QDeim ? "qdeim" : "teleconnection";
+    if (a->json)
+        printModelJson(model, file);
+    else
+        printModelText(model, file);
     return kExitOk;
 }
 

@@ -1,8 +1,8 @@
 // `pmsc learn`: a model + new frames (e.g. the misses `--keep-misses` kept) -> an updated model,
 // without the original training frames (paper section 5, "training could be done each night").
+#include "app/ExitCodes.h"
 #include "cli/Args.h"
 #include "cli/Commands.h"
-#include "cli/ExitCodes.h"
 #include "cli/Format.h"
 #include "cli/Progress.h"
 #include "pmsc/AtomicFile.h"
@@ -66,7 +66,7 @@ int runLearn(const std::vector<std::string>& args) {
         "Updates a model with new frames (typically the misses `replay`/`run --keep-misses` kept)\n"
         "without its training frames (paper section 5): mean and basis by Brand's incremental SVD,\n"
         "keys selected again by the model's selector, the projector, and eps re-calibrated on the\n"
-        "new frames by cross-fitting. Exact and approximate parts: README, 'Learning from misses'.\n"
+        "new frames by cross-fitting. Exact and approximate parts: docs/learning-and-calibration.md.\n"
         "A model trained with --learn-rank R keeps R singular vectors and its calibration scores,\n"
         "so updates lose less; any model can learn.");
     parser.option("--model", "MODEL.pmsc", "model to update", modelPath, true);

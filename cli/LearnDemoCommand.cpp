@@ -1,8 +1,8 @@
-// `pmsc demo learn`: the nightly loop of paper section 5 on the ICT face (issue 10). The experiment
+// `pmsc demo learn`: the nightly loop of paper section 5 on the ICT face. The experiment
 // lives in examples/face (LearnDemo.h); this file parses options, shows progress and prints the summary.
+#include "app/ExitCodes.h"
 #include "cli/Args.h"
 #include "cli/Commands.h"
-#include "cli/ExitCodes.h"
 #include "cli/Progress.h"
 #include "examples/face/LearnDemo.h"
 

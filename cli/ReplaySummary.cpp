@@ -19,7 +19,7 @@ std::string row(const char* label, const Percentiles& p) {
 
 }  // namespace
 
-void printReplaySummary(std::ostream& out, const Model& model, const ReplayResult& result,
+void printReplaySummary(std::ostream& out, const Model& model, const app::ReplayResult& result,
                         bool epsOverridden) {
     const double frames = static_cast<double>(result.frames.size());
     std::size_t hits = 0, blends = 0, misses = 0;

@@ -1,7 +1,7 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-#include "cli/Replay.h"
+#include "app/Replay.h"
 
 #include <ostream>
 
@@ -9,7 +9,7 @@ namespace pmsc::cli {
 
 /// The short human summary of a replay: cache states, error percentiles of PM
 /// alone and soft-cached, the thresholds and the speed.
-void printReplaySummary(std::ostream& out, const Model& model, const ReplayResult& result,
+void printReplaySummary(std::ostream& out, const Model& model, const app::ReplayResult& result,
                         bool epsOverridden);
 
 }  // namespace pmsc::cli

@@ -1,15 +1,15 @@
 // `pmsc run`: a render-farm task. One frame range of an evaluator through the soft-caching engine,
-// one atomic file per frame, resumable, with a JSON stats file and documented exit codes (issue 6).
+// one atomic file per frame, resumable, with a JSON stats file and documented exit codes.
 #include "cli/RunCommand.h"
 
+#include "app/ExitCodes.h"
 #include "cli/Args.h"
 #include "cli/Commands.h"
 #include "cli/CrossRun.h"
-#include "cli/EvaluatorRegistry.h"
-#include "cli/ExitCodes.h"
 #include "cli/Interrupt.h"
 #include "cli/Progress.h"
 #include "engine/Engine.h"
+#include "evaluators/EvaluatorRegistry.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 #include "pmsc/KeptFrames.h"
@@ -414,9 +414,9 @@ int runRun(const std::vector<std::string>& args) {
     o.cancel = &interruptFlag();
 
     const Model model = readModel(o.modelPath);
-    const std::unique_ptr<PointEvaluator> evaluator = makeEvaluator(o.evaluatorSpec);
+    const std::unique_ptr<PointEvaluator> evaluator = evaluators::makeEvaluator(o.evaluatorSpec);
     if (model.cross) {
-        // Cross point multiplication (issue 10): the evaluator is the control's; targets are written.
+        // Cross point multiplication: the evaluator is the control's; targets are written.
         const RunReport r = runCrossFrames(model, *evaluator, o);
         std::cout << "pmsc run (cross model, no fail-through): frames " << o.frames.text() << " -> "
                   << o.outDir << ": " << r.evaluated << " target frames written, " << r.skipped

@@ -11,7 +11,7 @@
 
 namespace pmsc::cli {
 
-/// What `pmsc run` was asked to do (issue 6: render-farm use).
+/// What `pmsc run` was asked to do (a render-farm task).
 struct RunOptions {
     std::string modelPath;               ///< for the stats only (the model is passed in)
     std::string evaluatorSpec;           ///< NAME[:ARGS], for the stats only
@@ -23,7 +23,7 @@ struct RunOptions {
     int threads = 0;                     ///< 0: every core
     bool force = false;                  ///< redo frames whose output is already valid
     bool quiet = false;                  ///< no progress display
-    bool wholeFrameFailThrough = false;  ///< models with regions: no local fail-through (issue 9)
+    bool wholeFrameFailThrough = false;  ///< models with regions: no local fail-through
     double logSeconds = 10;              ///< plain progress lines this often when stderr is not a terminal
     std::string commandLine;             ///< as typed, for the stats
     const std::atomic<bool>* cancel = nullptr;  ///< set by another thread (SIGINT/SIGTERM) to stop
@@ -48,7 +48,7 @@ struct RunReport {
 /// The stats file's default name for a range: OUT/pmsc-run.A-B.json (":S" -> "_byS").
 std::string defaultStatsPath(const std::string& outDir, const FrameSpan& frames);
 
-/// Runs the task's frames of `evaluator` through the soft-caching engine (issue 3) and writes
+/// Runs the task's frames of `evaluator` through the soft-caching engine and writes
 /// one file per frame (FrameOutput: atomic, resumable). Frames whose output exists and is valid
 /// are skipped unless options.force.
 ///

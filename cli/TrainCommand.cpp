@@ -1,8 +1,8 @@
 // `pmsc train`: frames (.npy) -> model (.pmsc). Sections 3-5 of the paper, plus calibration.
+#include "app/ExitCodes.h"
 #include "cli/Args.h"
 #include "cli/Commands.h"
 #include "cli/CrossTrain.h"
-#include "cli/ExitCodes.h"
 #include "cli/Format.h"
 #include "cli/Interrupt.h"
 #include "cli/Progress.h"
@@ -23,6 +23,7 @@
 #include <fstream>
 #include <iostream>
 #include <memory>
+#include <optional>
 
 #include <sys/resource.h>
 #include <unistd.h>
@@ -95,16 +96,18 @@ FrameSet readShots(const std::vector<Shot>& shots) {
     return all;
 }
 
-}  // namespace
-
-int runTrain(const std::vector<std::string>& args) {
+/// What `pmsc train` was asked; the training settings themselves are in `options`.
+struct TrainArgs {
     std::vector<std::string> framePaths;
-    std::string outPath, selector = "teleconnection";
+    std::string outPath, selector = "teleconnection", rule = "max", targetsPath;
     std::uint64_t memoryLimit = 0;
     Index blockPoints = 0;
-    bool outOfCore = false;
+    bool outOfCore = false, sharedChannels = false, quiet = false;
     TrainingOptions options;
-    bool quiet = false;
+};
+
+/// The parser with the command's description and its inputs and output (--frames, --out).
+ArgParser trainParser(TrainArgs& a) {
     ArgParser parser(
         "train", "--frames TRAIN.npy [--frames SHOT2.npy ...] --out MODEL.pmsc [options]",
         "Trains a point-multiplication model: mean removal, a truncated SVD basis (section 3),\n"
@@ -124,9 +127,15 @@ int runTrain(const std::vector<std::string>& args) {
     parser.option(
         "--frames", "FILE.npy",
         "training frames, shape (frames, points, channels), float32/64; repeat for several shots",
-        [&](const std::string& v) { framePaths.push_back(v); }, true);
+        [&a](const std::string& v) { a.framePaths.push_back(v); }, true);
     parser.repeatable("--frames");
-    parser.option("--out", "MODEL.pmsc", "model file to write (atomically)", outPath, true);
+    parser.option("--out", "MODEL.pmsc", "model file to write (atomically)", a.outPath, true);
+    return parser;
+}
+
+/// The options of the basis size M (section 3) and of the key points (section 4).
+void declareBasisAndKeyOptions(ArgParser& parser, TrainArgs& a) {
+    TrainingOptions& options = a.options;
     parser.option("--basis", "M", "basis size M",
                   [&](const std::string& v) { options.basis = parseIndex("--basis", v, 1); });
     parser.option("--energy", "E", "smallest M capturing this fraction of the energy, in (0, 1]",
@@ -152,18 +161,22 @@ int runTrain(const std::vector<std::string>& args) {
                   [&](const std::string& v) { options.fiducials = parseIndexList("--fiducials", v); });
     parser.option("--grid-points", "i,j,...", "sparse grid of points seeded as keys (rendering)",
                   [&](const std::string& v) { options.gridPoints = parseIndexList("--grid-points", v); });
-    parser.option("--selector", "NAME", "teleconnection (the paper's, default) or qdeim", selector);
+    parser.option("--selector", "NAME", "teleconnection (the paper's, default) or qdeim", a.selector);
+}
+
+/// The options of the thresholds' calibration (section 5), of learning and of the randomized SVD.
+void declareCalibrationOptions(ArgParser& parser, TrainArgs& a) {
+    TrainingOptions& options = a.options;
     parser.option("--tolerance", "T", "largest point error a hit may have (data units): calibrates eps",
                   [&](const std::string& v) { options.tolerance = parseDouble("--tolerance", v, 0.0); });
     parser.option("--slices", "S",
                   "leave-one-slice-out folds for --tolerance (default " +
                       std::to_string(options.calibrationSlices) + ")",
                   [&](const std::string& v) { options.calibrationSlices = parseIndex("--slices", v, 2); });
-    std::string rule = "max";
     parser.option("--calibration", "RULE",
                   "how --tolerance sets eps: max (largest held-out error ratio, default) or conformal "
                   "(its quantile at --coverage: P(hit over tolerance) <= 1 - coverage)",
-                  rule);
+                  a.rule);
     parser.option("--coverage", "C",
                   "coverage of --calibration conformal, in (0, 1) (default " +
                       std::to_string(options.calibrationCoverage).substr(0, 4) + ")",
@@ -186,17 +199,23 @@ int runTrain(const std::vector<std::string>& args) {
                   [&](const std::string& v) {
                       options.powerIterations = static_cast<int>(parseIndex("--power-iterations", v, 0, 20));
                   });
+}
+
+/// The options of larger-than-memory training, regions, cross models, shared channels and --quiet.
+void declareScaleOptions(ArgParser& parser, TrainArgs& a) {
+    TrainingOptions& options = a.options;
     parser.option("--memory-limit", "BYTES",
                   "largest memory training may use (e.g. 2G): streams from disk when the data do not fit, "
                   "fails before any work when even that cannot fit",
-                  [&](const std::string& v) { memoryLimit = parseBytes("--memory-limit", v); });
-    parser.flag("--out-of-core", "stream the frames from disk even when they would fit in memory", outOfCore);
+                  [&](const std::string& v) { a.memoryLimit = parseBytes("--memory-limit", v); });
+    parser.flag("--out-of-core", "stream the frames from disk even when they would fit in memory",
+                a.outOfCore);
     parser.option("--block-points", "P",
                   "points per block read when streaming (default: ~64 MiB blocks, "
                   "fewer under --memory-limit)",
-                  [&](const std::string& v) { blockPoints = parseIndex("--block-points", v, 1); });
+                  [&](const std::string& v) { a.blockPoints = parseIndex("--block-points", v, 1); });
     parser.option("--regions", "R",
-                  "learn R regions for local fail-through (issue 9; a version-2 model): only the regions\n"
+                  "learn R regions for local fail-through (a version-2 model): only the regions\n"
                   "that blend or miss go to the full calculation. Needs 3-channel (position) data",
                   [&](const std::string& v) { options.regions.count = parseIndex("--regions", v, 1); });
     parser.option("--feather", "F",
@@ -211,22 +230,25 @@ int runTrain(const std::vector<std::string>& args) {
         "keys among its points, evaluated only for frames that miss as a whole (default " +
             std::to_string(options.regions.ownKeys) + "; 0 = none)",
         [&](const std::string& v) { options.regions.ownKeys = parseIndex("--region-keys", v, 0, 1000); });
-    std::string targetsPath;
     parser.option(
         "--targets", "TARGET.npy",
         "cross point multiplication (paper section 7): frame f of --frames (the control) and frame f of\n"
         "TARGET.npy are a pair; learns their joint subspace with keys among the control's points, and an\n"
         "error bound on the target from held-out pairs (--coverage, default 0.9; --slices folds)",
-        targetsPath);
-    bool sharedChannels = false;
+        a.targetsPath);
     parser.flag(
         "--shared-channels",
-        "the channels share one basis over the points (issue 11; for light: RGB share their spatial\n"
+        "the channels share one basis over the points (for light: RGB share their spatial\n"
         "modes, a light's colour is reproduced exactly and reconstruction reads a third of the basis)",
-        sharedChannels);
-    parser.flag("--quiet", "no progress display", quiet);
-    if (!parser.parse(args)) return kExitOk;
-    if (sharedChannels) {
+        a.sharedChannels);
+    parser.flag("--quiet", "no progress display", a.quiet);
+}
+
+/// Checks the combinations of options and sets the selector and the calibration rule.
+void checkTrainArgs(const ArgParser& parser, TrainArgs& a) {
+    TrainingOptions& options = a.options;
+    const std::string &selector = a.selector, &rule = a.rule;
+    if (a.sharedChannels) {
         for (const char* o : {"--targets", "--regions", "--feather", "--region-keys", "--learn-rank",
                               "--memory-limit", "--out-of-core", "--block-points"})
             if (parser.given(o))
@@ -236,8 +258,8 @@ int runTrain(const std::vector<std::string>& args) {
                             "targets)");
         options.sharedChannels = true;
     }
-    if (!targetsPath.empty()) {
-        if (framePaths.size() != 1) parser.fail("--targets takes exactly one --frames file (the control)");
+    if (!a.targetsPath.empty()) {
+        if (a.framePaths.size() != 1) parser.fail("--targets takes exactly one --frames file (the control)");
         for (const char* o : {"--regions", "--feather", "--region-keys", "--learn-rank", "--calibration",
                               "--memory-limit", "--out-of-core", "--block-points"})
             if (parser.given(o))
@@ -248,8 +270,7 @@ int runTrain(const std::vector<std::string>& args) {
             options.selector = Selector::QDeim;
         else if (selector != "teleconnection")
             parser.fail("--selector: '" + selector + "' is not teleconnection or qdeim");
-        return runTrainCross(framePaths.front(), targetsPath, outPath, options, options.calibrationCoverage,
-                             options.calibrationSlices, quiet);
+        return;
     }
 
     const int sizeRules = parser.given("--basis") + parser.given("--energy") + parser.given("--basis-error");
@@ -273,7 +294,131 @@ int runTrain(const std::vector<std::string>& args) {
         parser.fail("--coverage needs --calibration conformal");
     if ((parser.given("--calibration") || parser.given("--coverage")) && !(options.tolerance > 0))
         parser.fail("--calibration and --coverage need --tolerance");
+}
 
+/// Declares the options, parses and checks them; std::nullopt when --help was asked for.
+std::optional<TrainArgs> parseTrainArgs(const std::vector<std::string>& args) {
+    TrainArgs a;
+    ArgParser parser = trainParser(a);
+    declareBasisAndKeyOptions(parser, a);
+    declareCalibrationOptions(parser, a);
+    declareScaleOptions(parser, a);
+    if (!parser.parse(args)) return std::nullopt;
+    checkTrainArgs(parser, a);
+    return a;
+}
+
+/// The frames' sizes over all the shots: N points, C channels, F frames.
+struct TrainSizes {
+    Index n = 0, c = 0, f = 0;
+};
+
+/// In memory or streamed, and how large a block, with the memory bounds (Training.h's).
+struct MemoryPlan {
+    std::uint64_t limit = 0;          ///< bytes training may use; 0 = none known
+    std::string limitSource;          ///< where `limit` comes from, for the messages
+    std::uint64_t inMemoryBytes = 0;  ///< the bound of training in memory
+    bool stream = false;              ///< the frames are streamed from disk in blocks of points
+    Index blockPoints = 0;            ///< points per block when streaming
+    std::uint64_t streamBytes = 0;    ///< the bound of streaming blocks of `blockPoints` (rank 0)
+};
+
+/// Decides in memory or streamed, and how large a block; fails at once when the limit cannot be met.
+MemoryPlan planMemory(const TrainArgs& a, const TrainSizes& sizes, int ranks) {
+    const TrainingOptions& options = a.options;
+    const Index n = sizes.n, c = sizes.c, f = sizes.f;
+    MemoryPlan plan;
+    std::uint64_t& limit = plan.limit;
+    std::string& limitSource = plan.limitSource;
+    limit = a.memoryLimit;
+    limitSource = "--memory-limit";
+    if (limit == 0) {
+        rlimit as{};
+        if (getrlimit(RLIMIT_AS, &as) == 0 && as.rlim_cur != RLIM_INFINITY) {
+            const std::uint64_t used = addressSpaceInUse();
+            limit = as.rlim_cur > used ? as.rlim_cur - used : 1;
+            limitSource = "the address-space limit (ulimit -v) less what the program already maps";
+        }
+    }
+    auto bound = [&](Index bp) {
+        if (options.sharedChannels && c > 1)  // the C=1 training of F*C channel frames, beside the frames
+            return trainingMemoryBound(n, 1, f * c, options.maxBasis, options.block, options.maxKeys, bp,
+                                       ranks, /*rootRank=*/true) +
+                   static_cast<std::uint64_t>(8) * static_cast<std::uint64_t>(n * c * f);
+        return trainingMemoryBound(n, c, f, options.maxBasis, options.block, options.maxKeys, bp, ranks,
+                                   /*rootRank=*/true);
+    };
+    const double physical =
+        static_cast<double>(sysconf(_SC_PHYS_PAGES)) * static_cast<double>(sysconf(_SC_PAGESIZE));
+    plan.inMemoryBytes = bound(0);
+    plan.stream = ranks > 1 || a.outOfCore || (limit > 0 && plan.inMemoryBytes > limit) ||
+                  (limit == 0 && static_cast<double>(plan.inMemoryBytes) > physical / 2);
+    if (plan.stream && options.sharedChannels)
+        throw InputError("train: --shared-channels trains in memory on one process, but " +
+                         std::string(ranks > 1 ? "MPI started several ranks"
+                                               : "the frames do not fit in memory (or the limit)"));
+    if (!plan.stream) return plan;
+    const Index defaultPoints = std::max<Index>(1, (Index{64} << 20) / (c * f * 8));
+    Index bp = a.blockPoints > 0 ? a.blockPoints : defaultPoints;
+    if (limit > 0) {
+        const double perPoint = static_cast<double>(bound(2)) - static_cast<double>(bound(1));
+        const double fixed = static_cast<double>(bound(1)) - perPoint;
+        if (fixed + perPoint > static_cast<double>(limit)) {
+            throw InputError("train: " + limitSource + " " + bytesText(static_cast<double>(limit)) +
+                             " cannot be met: streaming training of " + std::to_string(f) + " frames x " +
+                             std::to_string(n) + " points x " + std::to_string(c) +
+                             " channels needs at least " + bytesText(fixed + perPoint) +
+                             " (lower --max-basis/--max-keys, or use more MPI ranks)");
+        }
+        const Index fits = static_cast<Index>((static_cast<double>(limit) - fixed) / perPoint);
+        if (a.blockPoints > 0 && a.blockPoints > fits) {
+            throw InputError("train: --block-points " + std::to_string(a.blockPoints) + " does not fit in " +
+                             limitSource + " " + bytesText(static_cast<double>(limit)) + " (at most " +
+                             std::to_string(fits) + ")");
+        }
+        bp = std::min(bp, fits);
+    }
+    plan.blockPoints = std::min(bp, std::max<Index>(1, n));
+    plan.streamBytes = bound(plan.blockPoints);
+    return plan;
+}
+
+/// Each rank's CPU seconds, to rank 0: the busiest rank is the critical path when every rank
+/// has a core of its own (wall time says that only on an idle machine).
+std::vector<double> cpuSecondsPerRank(Communicator& comm) {
+    timespec cpu{};
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &cpu);
+    const double mine = static_cast<double>(cpu.tv_sec) + 1e-9 * static_cast<double>(cpu.tv_nsec);
+    std::vector<double> cpuPerRank;
+    comm.gather(&mine, 1, cpuPerRank, 0);
+    return cpuPerRank;
+}
+
+/// The summary's last lines: CPU per rank, the shots, and how the frames were held in memory.
+void printResources(const std::vector<double>& cpuPerRank, std::size_t shots, Index f,
+                    const MemoryPlan& plan) {
+    std::cout << "  cpu         ";
+    for (std::size_t r = 0; r < cpuPerRank.size(); ++r)
+        std::cout << (r ? ", " : "") << fmt("%.2f", cpuPerRank[r]);
+    std::cout << " s of CPU" << (cpuPerRank.size() > 1 ? " per rank" : "") << "\n";
+    if (shots > 1) std::cout << "  shots       " << shots << " --frames files, " << f << " frames in all\n";
+    if (plan.stream) {
+        std::cout << "  memory      streamed from disk in blocks of " << plan.blockPoints << " points; bound "
+                  << bytesText(static_cast<double>(plan.streamBytes)) << " (rank 0)"
+                  << (plan.limit > 0 ? ", limit " + bytesText(static_cast<double>(plan.limit))
+                                     : std::string())
+                  << "\n";
+    } else {
+        std::cout << "  memory      in memory; bound " << bytesText(static_cast<double>(plan.inMemoryBytes))
+                  << "\n";
+    }
+}
+
+/// Trains on one process or on the MPI ranks, in memory or streamed; rank 0 writes the model and
+/// prints the summary.
+int trainModel(TrainArgs& a) {
+    TrainingOptions& options = a.options;
+    const std::string& outPath = a.outPath;
     // MPI only when a launcher started us (cli/mpi/MpiLaunch.h); otherwise one process.
     std::unique_ptr<MpiWorld> mpi = joinMpiIfLaunched();
     SingleProcess one;
@@ -285,113 +430,39 @@ int runTrain(const std::vector<std::string>& args) {
         if (root) AtomicFile(outPath).abandon();
 
         const auto start = std::chrono::steady_clock::now();
-        const std::vector<Shot> shots = openShots(framePaths);
-        const Index n = shots.front().info.points;
-        const Index c = shots.front().info.channels;
-        Index f = 0;
-        for (const Shot& s : shots) f += s.info.frames;
+        const std::vector<Shot> shots = openShots(a.framePaths);
+        TrainSizes sizes;
+        sizes.n = shots.front().info.points;
+        sizes.c = shots.front().info.channels;
+        for (const Shot& s : shots) sizes.f += s.info.frames;
+        const MemoryPlan plan = planMemory(a, sizes, comm.size());
 
-        // --- in memory or streamed, and how large a block (the bound is Training.h's).
-        std::uint64_t limit = memoryLimit;
-        std::string limitSource = "--memory-limit";
-        if (limit == 0) {
-            rlimit as{};
-            if (getrlimit(RLIMIT_AS, &as) == 0 && as.rlim_cur != RLIM_INFINITY) {
-                const std::uint64_t used = addressSpaceInUse();
-                limit = as.rlim_cur > used ? as.rlim_cur - used : 1;
-                limitSource = "the address-space limit (ulimit -v) less what the program already maps";
-            }
-        }
-        auto bound = [&](Index bp) {
-            if (options.sharedChannels && c > 1)  // the C=1 training of F*C channel frames, beside the frames
-                return trainingMemoryBound(n, 1, f * c, options.maxBasis, options.block, options.maxKeys, bp,
-                                           comm.size(), /*rootRank=*/true) +
-                       static_cast<std::uint64_t>(8) * static_cast<std::uint64_t>(n * c * f);
-            return trainingMemoryBound(n, c, f, options.maxBasis, options.block, options.maxKeys, bp,
-                                       comm.size(),
-                                       /*rootRank=*/true);
-        };
-        const double physical =
-            static_cast<double>(sysconf(_SC_PHYS_PAGES)) * static_cast<double>(sysconf(_SC_PAGESIZE));
-        const std::uint64_t inMemoryBytes = bound(0);
-        const bool stream = comm.size() > 1 || outOfCore || (limit > 0 && inMemoryBytes > limit) ||
-                            (limit == 0 && static_cast<double>(inMemoryBytes) > physical / 2);
-        Index bp = 0;
-        if (stream && options.sharedChannels)
-            throw InputError("train: --shared-channels trains in memory on one process, but " +
-                             std::string(comm.size() > 1 ? "MPI started several ranks"
-                                                         : "the frames do not fit in memory (or the limit)"));
-        if (stream) {
-            const Index defaultPoints = std::max<Index>(1, (Index{64} << 20) / (c * f * 8));
-            bp = blockPoints > 0 ? blockPoints : defaultPoints;
-            if (limit > 0) {
-                const double perPoint = static_cast<double>(bound(2)) - static_cast<double>(bound(1));
-                const double fixed = static_cast<double>(bound(1)) - perPoint;
-                if (fixed + perPoint > static_cast<double>(limit)) {
-                    throw InputError("train: " + limitSource + " " + bytesText(static_cast<double>(limit)) +
-                                     " cannot be met: streaming training of " + std::to_string(f) +
-                                     " frames x " + std::to_string(n) + " points x " + std::to_string(c) +
-                                     " channels needs at least " + bytesText(fixed + perPoint) +
-                                     " (lower --max-basis/--max-keys, or use more MPI ranks)");
-                }
-                const Index fits = static_cast<Index>((static_cast<double>(limit) - fixed) / perPoint);
-                if (blockPoints > 0 && blockPoints > fits) {
-                    throw InputError("train: --block-points " + std::to_string(blockPoints) +
-                                     " does not fit in " + limitSource + " " +
-                                     bytesText(static_cast<double>(limit)) + " (at most " +
-                                     std::to_string(fits) + ")");
-                }
-                bp = std::min(bp, fits);
-            }
-            bp = std::min(bp, std::max<Index>(1, n));
-        }
-
-        Progress progress("train", !quiet && root);
+        Progress progress("train", !a.quiet && root);
         options.progress = [&](std::string_view stage, double done, double total) {
             return progress.update(stage, done, total);
         };
         TrainingReport report;
         Model model;
-        if (stream) {
-            NpyBlocks blocks(shots, pointShare(n, comm.rank(), comm.size()), bp);
+        if (plan.stream) {
+            NpyBlocks blocks(shots, pointShare(sizes.n, comm.rank(), comm.size()), plan.blockPoints);
             collective = comm.size() > 1;
             model = train(blocks, comm, options, &report);
         } else {
             const FrameSet frames = readShots(shots);
             model = train(frames, options, &report);
         }
-        // Each rank's CPU seconds, to rank 0: the busiest rank is the critical path when every rank
-        // has a core of its own (wall time says that only on an idle machine).
-        timespec cpu{};
-        clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &cpu);
-        const double mine = static_cast<double>(cpu.tv_sec) + 1e-9 * static_cast<double>(cpu.tv_nsec);
-        std::vector<double> cpuPerRank;
-        comm.gather(&mine, 1, cpuPerRank, 0);
+        const std::vector<double> cpuPerRank = cpuSecondsPerRank(comm);
         if (!root) return kExitOk;
         writeModel(outPath, model);
         progress.finish();
         const double seconds =
             std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-        FrameSet sizes;
-        sizes.frames = f;
-        sizes.points = n;
-        sizes.channels = c;
-        printTrainSummary(std::cout, outPath, sizes, model, report, seconds);
-        std::cout << "  cpu         ";
-        for (std::size_t r = 0; r < cpuPerRank.size(); ++r)
-            std::cout << (r ? ", " : "") << fmt("%.2f", cpuPerRank[r]);
-        std::cout << " s of CPU" << (cpuPerRank.size() > 1 ? " per rank" : "") << "\n";
-        if (shots.size() > 1)
-            std::cout << "  shots       " << shots.size() << " --frames files, " << f << " frames in all\n";
-        if (stream) {
-            std::cout << "  memory      streamed from disk in blocks of " << bp << " points; bound "
-                      << bytesText(static_cast<double>(bound(bp))) << " (rank 0)"
-                      << (limit > 0 ? ", limit " + bytesText(static_cast<double>(limit)) : std::string())
-                      << "\n";
-        } else {
-            std::cout << "  memory      in memory; bound " << bytesText(static_cast<double>(inMemoryBytes))
-                      << "\n";
-        }
+        FrameSet shape;
+        shape.frames = sizes.f;
+        shape.points = sizes.n;
+        shape.channels = sizes.c;
+        printTrainSummary(std::cout, outPath, shape, model, report, seconds);
+        printResources(cpuPerRank, shots.size(), sizes.f, plan);
         return kExitOk;
     } catch (...) {
         if (!mpi) throw;
@@ -405,6 +476,17 @@ int runTrain(const std::vector<std::string>& args) {
         if (root) throw;
         return reason.code;
     }
+}
+
+}  // namespace
+
+int runTrain(const std::vector<std::string>& args) {
+    std::optional<TrainArgs> a = parseTrainArgs(args);
+    if (!a) return kExitOk;
+    if (!a->targetsPath.empty())
+        return runTrainCross(a->framePaths.front(), a->targetsPath, a->outPath, a->options,
+                             a->options.calibrationCoverage, a->options.calibrationSlices, a->quiet);
+    return trainModel(*a);
 }
 
 }  // namespace pmsc::cli

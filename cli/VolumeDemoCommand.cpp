@@ -1,128 +1,139 @@
-// `pmsc demo volume` (issue 11): light scattered inside smoke, cached at the active voxels of an
+// `pmsc demo volume`: light scattered inside smoke, cached at the active voxels of an
 // OpenVDB grid, PMSC through the engine, moving cameras. The experiment lives in examples/volume
 // (VolumeDemo.h); this file parses options, shows progress and prints the summary.
+#include "app/ExitCodes.h"
 #include "cli/Args.h"
 #include "cli/Commands.h"
-#include "cli/ExitCodes.h"
 #include "cli/Progress.h"
 #include "examples/volume/VolumeDemo.h"
 
 #include <cstdio>
+#include <optional>
 #include <string>
 
 namespace pmsc::cli {
 
-int runDemoVolume(const std::vector<std::string>& args) {
+namespace {
+
+/// What `pmsc demo volume` was asked; a negative number or an empty list is "not given".
+struct VolumeArgs {
     std::string out, mesh, density, grid;
     bool quick = false, quiet = false, noVdbRender = false, separateChannels = false;
-    volume::VolumeDemoOptions defaults;
     long spiral = -1, colours = -1, gridKeys = -1;
     long voxels = -1, samples = -1, threads = -1, basis = -1, keys = -1, azimuths = -1;
     std::vector<double> elevations, kelvin;
+};
+
+/// Declares the options, parses and checks them; std::nullopt when --help was asked for.
+std::optional<VolumeArgs> parseVolumeArgs(const std::vector<std::string>& args) {
+    VolumeArgs a;
+    volume::VolumeDemoOptions defaults;
     ArgParser parser(
         "demo volume", "--out DIR [--mesh FILE | --density FILE.vdb [--grid NAME]] [options]",
-        "Issue 11: smoke made from a mesh with OpenVDB (meshToLevelSet, fog volume, noise), lit\n"
+        "Smoke made from a mesh with OpenVDB (meshToLevelSet, fog volume, noise), lit\n"
         "by a spherical light moving around and over it with a changing colour temperature.\n"
         "The light scattered at every active voxel (soft shadows through the heterogeneous\n"
         "density, multiple scattering) is the expensive calculation; 96 training frames, a\n"
         "basis and key voxels, validation between the training lights and on a path through\n"
         "the soft-cache engine, renders from three moving cameras (one inside the smoke).\n"
         "Writes DIR/report.json, DIR/density.vdb, DIR/cache_*.vdb (grid 'inscatter'), DIR/*.png.");
-    parser.option("--out", "DIR", "output folder (created if missing)", out, true);
-    parser.option("--mesh", "FILE", "mesh to make smoke of (default " + defaults.mesh + ")", mesh);
-    parser.option("--density", "FILE.vdb", "a density grid of your own instead of the mesh", density);
-    parser.option("--grid", "NAME", "its float grid (default 'density', else the first float grid)", grid);
+    parser.option("--out", "DIR", "output folder (created if missing)", a.out, true);
+    parser.option("--mesh", "FILE", "mesh to make smoke of (default " + defaults.mesh + ")", a.mesh);
+    parser.option("--density", "FILE.vdb", "a density grid of your own instead of the mesh", a.density);
+    parser.option("--grid", "NAME", "its float grid (default 'density', else the first float grid)", a.grid);
     parser.option("--voxels", "N",
                   "active voxels of the smoke made from the mesh (default 260000; --quick 12000)",
-                  [&](const std::string& v) { voxels = parseIndex("--voxels", v, 1000, 8000000); });
+                  [&](const std::string& v) { a.voxels = parseIndex("--voxels", v, 1000, 8000000); });
     parser.option("--samples", "S", "shadow rays per voxel to the light (default 6; --quick 4)",
-                  [&](const std::string& v) { samples = parseIndex("--samples", v, 1, 4096); });
+                  [&](const std::string& v) { a.samples = parseIndex("--samples", v, 1, 4096); });
     parser.option("--basis", "M", "basis vectors (default " + std::to_string(defaults.basis) + ")",
-                  [&](const std::string& v) { basis = parseIndex("--basis", v, 1, 512); });
+                  [&](const std::string& v) { a.basis = parseIndex("--basis", v, 1, 512); });
     parser.option("--keys", "K", "key voxels (default " + std::to_string(defaults.keys) + ")",
-                  [&](const std::string& v) { keys = parseIndex("--keys", v, 1, 100000); });
+                  [&](const std::string& v) { a.keys = parseIndex("--keys", v, 1, 100000); });
     parser.option(
         "--azimuths", "A",
         "training light azimuths per elevation (default " + std::to_string(defaults.rig.azimuths) + ")",
-        [&](const std::string& v) { azimuths = parseIndex("--azimuths", v, 2, 360); });
+        [&](const std::string& v) { a.azimuths = parseIndex("--azimuths", v, 2, 360); });
     parser.option("--elevations", "E1,E2,..", "training light elevations in degrees, each in [0, 89]",
                   [&](const std::string& v) {
-                      elevations.clear();
+                      a.elevations.clear();
                       for (Index e : parseIndexList("--elevations", v)) {
                           if (e > 89)
                               throw UsageError("--elevations: " + std::to_string(e) +
                                                " is out of range (must be in [0, 89])");
-                          elevations.push_back(static_cast<double>(e));
+                          a.elevations.push_back(static_cast<double>(e));
                       }
                   });
     parser.option(
         "--spiral", "P",
         "training light positions on a spiral over the band of elevations (0 = the azimuth x elevation grid)",
-        [&](const std::string& v) { spiral = parseIndex("--spiral", v, 0, 4096); });
+        [&](const std::string& v) { a.spiral = parseIndex("--spiral", v, 0, 4096); });
     parser.option("--colours", "C", "training colour temperatures along the spiral (2 or 3)",
-                  [&](const std::string& v) { colours = parseIndex("--colours", v, 1, 8); });
+                  [&](const std::string& v) { a.colours = parseIndex("--colours", v, 1, 8); });
     parser.option("--kelvin", "LOW,HIGH",
                   "the light's colour temperatures: training from LOW to HIGH, validation between (default " +
                       std::to_string(static_cast<int>(defaults.rig.kelvinLow)) + "," +
                       std::to_string(static_cast<int>(defaults.rig.kelvinHigh)) + "; LOW = HIGH: one colour)",
                   [&](const std::string& v) {
-                      kelvin.clear();
+                      a.kelvin.clear();
                       for (Index k : parseIndexList("--kelvin", v)) {
                           if (k < 1000 || k > 40000)
                               throw UsageError("--kelvin: " + std::to_string(k) +
                                                " K is out of range (must be in [1000, 40000])");
-                          kelvin.push_back(static_cast<double>(k));
+                          a.kelvin.push_back(static_cast<double>(k));
                       }
-                      if (kelvin.size() != 2 || kelvin[0] > kelvin[1])
+                      if (a.kelvin.size() != 2 || a.kelvin[0] > a.kelvin[1])
                           throw UsageError("--kelvin: give LOW,HIGH with LOW <= HIGH, not '" + v + "'");
                   });
     parser.option("--grid-keys", "G", "key voxels seeded from a sparse spatial grid (at most K)",
-                  [&](const std::string& v) { gridKeys = parseIndex("--grid-keys", v, 0, 100000); });
+                  [&](const std::string& v) { a.gridKeys = parseIndex("--grid-keys", v, 0, 100000); });
     parser.option("--threads", "T", "worker threads (default: every core)",
-                  [&](const std::string& v) { threads = parseIndex("--threads", v, 0, 1024); });
+                  [&](const std::string& v) { a.threads = parseIndex("--threads", v, 0, 1024); });
     parser.flag("--separate-channels",
                 "a basis over (voxel, channel) rows instead of one shared by red, green and blue",
-                separateChannels);
-    parser.flag("--no-vdb-render", "skip OpenVDB's vdb_render view of the density", noVdbRender);
-    parser.flag("--quick", "small settings, a smoke test of the whole pipeline (under 30 s)", quick);
-    parser.flag("--quiet", "no progress display", quiet);
-    if (!parser.parse(args)) return kExitOk;
-    if (!density.empty() && !mesh.empty()) parser.fail("--mesh and --density exclude each other");
-    if (density.empty() && !grid.empty()) parser.fail("--grid needs --density");
+                a.separateChannels);
+    parser.flag("--no-vdb-render", "skip OpenVDB's vdb_render view of the density", a.noVdbRender);
+    parser.flag("--quick", "small settings, a smoke test of the whole pipeline (under 30 s)", a.quick);
+    parser.flag("--quiet", "no progress display", a.quiet);
+    if (!parser.parse(args)) return std::nullopt;
+    if (!a.density.empty() && !a.mesh.empty()) parser.fail("--mesh and --density exclude each other");
+    if (a.density.empty() && !a.grid.empty()) parser.fail("--grid needs --density");
+    return a;
+}
 
-    volume::VolumeDemoOptions options = quick ? volume::VolumeDemoOptions::quickOptions() : defaults;
-    options.outDir = out;
-    if (!mesh.empty()) options.mesh = mesh;
-    options.density = density;
-    options.grid = grid;
-    if (voxels > 0) options.fog.targetVoxels = static_cast<std::size_t>(voxels);
-    if (samples > 0) options.medium.lightSamples = static_cast<int>(samples);
-    if (basis > 0) options.basis = static_cast<int>(basis);
-    if (keys > 0) options.keys = static_cast<int>(keys);
-    if (azimuths > 0) options.rig.azimuths = static_cast<int>(azimuths);
-    if (!elevations.empty()) options.rig.elevations = elevations;
-    if (spiral >= 0) options.rig.spiral = static_cast<int>(spiral);
-    if (colours > 0) options.rig.colours = static_cast<int>(colours);
-    if (!kelvin.empty()) {
-        options.rig.kelvinLow = kelvin[0];
-        options.rig.kelvinHigh = kelvin[1];
+/// The experiment's settings: the defaults (or --quick's) with what was given on top.
+volume::VolumeDemoOptions demoOptions(const VolumeArgs& a) {
+    volume::VolumeDemoOptions options =
+        a.quick ? volume::VolumeDemoOptions::quickOptions() : volume::VolumeDemoOptions{};
+    options.outDir = a.out;
+    if (!a.mesh.empty()) options.mesh = a.mesh;
+    options.density = a.density;
+    options.grid = a.grid;
+    if (a.voxels > 0) options.fog.targetVoxels = static_cast<std::size_t>(a.voxels);
+    if (a.samples > 0) options.medium.lightSamples = static_cast<int>(a.samples);
+    if (a.basis > 0) options.basis = static_cast<int>(a.basis);
+    if (a.keys > 0) options.keys = static_cast<int>(a.keys);
+    if (a.azimuths > 0) options.rig.azimuths = static_cast<int>(a.azimuths);
+    if (!a.elevations.empty()) options.rig.elevations = a.elevations;
+    if (a.spiral >= 0) options.rig.spiral = static_cast<int>(a.spiral);
+    if (a.colours > 0) options.rig.colours = static_cast<int>(a.colours);
+    if (!a.kelvin.empty()) {
+        options.rig.kelvinLow = a.kelvin[0];
+        options.rig.kelvinHigh = a.kelvin[1];
     }
-    if (gridKeys >= 0) options.gridKeys = static_cast<int>(gridKeys);
+    if (a.gridKeys >= 0) options.gridKeys = static_cast<int>(a.gridKeys);
     if (options.gridKeys > options.keys) options.gridKeys = options.keys;
-    if (threads >= 0) options.threads = static_cast<int>(threads);
-    if (noVdbRender) options.vdbRender = false;
-    if (separateChannels) options.sharedChannels = false;
+    if (a.threads >= 0) options.threads = static_cast<int>(a.threads);
+    if (a.noVdbRender) options.vdbRender = false;
+    if (a.separateChannels) options.sharedChannels = false;
+    return options;
+}
 
-    Progress progress("demo volume", !quiet);
-    options.progress = [&](std::string_view stage, double done, double total) {
-        return progress.update(stage, done, total);
-    };
-    const nlohmann::json r = volume::runVolumeDemo(options);
-    progress.finish();
-
+/// The summary of the demo's report, on stdout.
+void printVolumeSummary(const nlohmann::json& r, const std::string& out) {
     auto num = [&](const char* key) { return r.at(key).get<double>(); };
     std::printf(
-        "Volume lighting cache (issue 11): %ld active voxels (voxel %.4f m, sigma_t %.3g/m), %ld key voxels, "
+        "Volume lighting cache: %ld active voxels (voxel %.4f m, sigma_t %.3g/m), %ld key voxels, "
         "%ld basis vectors (%s), %d shadow rays/voxel, %d scattering octaves\n",
         r.at("points").get<long>(), num("voxel_size_m"), num("sigma_t_per_m"), r.at("key_points").get<long>(),
         r.at("basis").get<long>(),
@@ -158,6 +169,21 @@ int runDemoVolume(const std::vector<std::string>& args) {
         "s, peak %.0f MB]\n",
         out.c_str(), r.at("vdb_files").size(), r.at("images").size(),
         r.at("seconds").at("total").get<double>(), num("peak_rss_mb"));
+}
+
+}  // namespace
+
+int runDemoVolume(const std::vector<std::string>& args) {
+    const std::optional<VolumeArgs> a = parseVolumeArgs(args);
+    if (!a) return kExitOk;
+    volume::VolumeDemoOptions options = demoOptions(*a);
+    Progress progress("demo volume", !a->quiet);
+    options.progress = [&](std::string_view stage, double done, double total) {
+        return progress.update(stage, done, total);
+    };
+    const nlohmann::json r = volume::runVolumeDemo(options);
+    progress.finish();
+    printVolumeSummary(r, a->out);
     return kExitOk;
 }
 

@@ -1,9 +1,9 @@
 // pmsc — the command line of Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 //
 // main() only dispatches: it finds the subcommand in the table below, runs it, and turns every
-// typed error into ONE line on stderr and an exit code (cli/ExitCodes.h).
+// typed error into ONE line on stderr and an exit code (app/ExitCodes.h).
+#include "app/ExitCodes.h"
 #include "cli/Commands.h"
-#include "cli/ExitCodes.h"
 #include "cli/Interrupt.h"
 #include "pmsc/Errors.h"
 #include "pmsc/Training.h"  // pmsc::Cancelled
@@ -38,12 +38,13 @@ const Command kCommands[] = {
     {"demo", "the main demo (the Cornell box); with options, the generated shot of 'demo synthetic'", runDemo},
     {"demo synthetic", "train and replay on a generated shot, and print what the soft cache did", runDemoSynthetic},
     {"demo cornell", "section 8: Cornell box indirect light, OpenVDB lighting cache, moving cameras", runDemoCornell},
-    {"demo volume", "issue 11: light scattered in smoke, a sparse volumetric lighting cache in OpenVDB", runDemoVolume},
+    {"demo volume", "light scattered in smoke, a sparse volumetric lighting cache in OpenVDB", runDemoVolume},
     {"demo face", "section 7: a nonlinear face rig on the ICT face, 170 key points, novel-control detection", runDemoFace},
     {"demo cross", "section 7: cross point multiplication on the ICT face, cheap control face -> full rig", runDemoCross},
     {"demo learn", "section 5: the nightly loop on the ICT face, misses kept and learned, day 1 vs day 2", runDemoLearn},
     {"run", "render-farm task: a frame range through the soft cache, one resumable file per frame", runRun},
     {"export-frames", "write an evaluator's frames (e.g. an animated asset's poses) as training .npy", runExportFrames},
+    {"evaluators", "list the calculations --evaluator accepts, with their NAME[:ARGS] syntax", runEvaluators},
 };
 // clang-format on
 

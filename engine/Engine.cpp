@@ -25,6 +25,7 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <optional>
 #include <span>
 #include <string>
 #include <thread>
@@ -164,11 +165,13 @@ struct Engine::Impl {
 
     using Clocks = std::array<NodeClock, kNodeCount>;
 
-    // run() in named steps (issue 13): check, take slots, run the graph, collect, report.
+    // run() in named steps: check, take slots, run the graph, collect, report.
     RunStats run(FrameRange range, FrameSink& sink);
     void checkRange(FrameRange range) const;
     /// The frame slots of a run of `frames` frames: the pool grown to what the run can use.
     std::span<const std::unique_ptr<FrameSlot>> takeSlots(Index frames);
+    struct Bodies;  ///< one run's node bodies
+    struct Graph;   ///< one run's flow graph
     /// Builds the flow graph in the arena, streams `range` through it, and waits.
     void runGraph(FrameRange range, FrameSink& sink, nodes::RunControl& control, Clocks& clocks,
                   std::span<const std::unique_ptr<FrameSlot>> slots, Clock::time_point start);
@@ -272,213 +275,317 @@ RunStats Engine::Impl::run(FrameRange range, FrameSink& sink) {
     return last;
 }
 
-void Engine::Impl::runGraph(FrameRange range, FrameSink& sink, nodes::RunControl& control, Clocks& clocks,
-                            std::span<const std::unique_ptr<FrameSlot>> slots, Clock::time_point start) {
-    const auto seconds = [](Clock::duration d) { return std::chrono::duration<double>(d).count(); };
-    const nodes::KeyPointEvaluator keysBody(model, evaluator);
-    const nodes::Projector projectBody(pm);
-    const nodes::ErrorMonitor monitorBody(pm, policy, options.keepPointMultiplication,
-                                          regions ? &*regions : nullptr, &evaluator);
-    const nodes::Reconstructor reconstructBody(pm, plan);
-    const nodes::FailThroughEvaluator failThroughBody(evaluator, plan);
-    const nodes::Blender blendBody(pm, plan);
-    std::optional<nodes::LocalBranch> localBody;
-    std::optional<nodes::LocalCombiner> featherBody;
-    if (regions) {
-        // The local frame's full evaluation: one call when the evaluator is failed through
-        // whole (its subset poses share work), else pieces of the fail-through's chunk size.
-        localBody.emplace(evaluator, *regions, model.channels, shape.wholeFrame ? 0 : chunkPoints);
-        featherBody.emplace(model.channels);
-    }
-    nodes::OrderedSink sinkBody(plan, sink, options.failurePolicy, control);
-    const bool stopOnFailure = options.failurePolicy == FailurePolicy::StopRun;
-    const Index chunkCount = Index(plan.chunks.size());
+/// The node bodies of one run: each stage's work on a frame slot, built from the engine's state.
+struct Engine::Impl::Bodies {
+    const nodes::KeyPointEvaluator keys;
+    const nodes::Projector project;
+    const nodes::ErrorMonitor monitor;
+    const nodes::Reconstructor reconstruct;
+    const nodes::FailThroughEvaluator failThrough;
+    const nodes::Blender blend;
+    std::optional<nodes::LocalBranch> local;      ///< set when frames are routed region by region
+    std::optional<nodes::LocalCombiner> feather;  ///< set when frames are routed region by region
+    nodes::OrderedSink sink;
 
-    // The graph is built inside the arena so that its tasks run on the arena's threads.
-    //
-    //  source ──seq──┐
-    //                ├─ bind (reserving join) ─> keys ─> project ─> monitor ──hit──> reconstruct ─┐
-    //  tokens ─slot──┘                                              │  │  (keepPm: │ then chunks)  │
-    //    ^                                                    failed│  └─blend/miss: one message   │
-    //    │                                                          │     per chunk ─┐            │
-    //    │                                                          │                v            │
-    //    │                                                          │   fail-through (unlimited)   │
-    //    │                                                          │                v            │
-    //    │                                                          │     blend (same task)        │
-    //    │                                                          │                v            │
-    //    │                                                          │  gather (the last branch     │
-    //    │                                                          │   sends the frame on)        │
-    //    │               monitor ──local (issue 9): one message per region, then one per piece │
-    //    │                 of the failing points ──> local (unlimited: region PM, or a piece of   │
-    //    │                                            the failing regions' fail sets' union) ─>   │
-    //    │                                            local gather (the last branch runs the      │
-    //    │                                            feathered blend, sends the frame on) ─────┐ │
-    //    │                                                          v                v          v v
-    //    └──────────────── slot ── sink (serial) <── sequencer (restores order) <──────────────────┘
-    //
-    // tokens holds the free frame slots: a frame starts only when bind pairs a sequence
-    // number with a free slot, and the slot comes back only after the sink, so at most
-    // maxInFlight frames are anywhere in the graph.
+    Bodies(Impl& impl, FrameSink& frames, nodes::RunControl& control);
+    /// The local fail-through's branch body, when the engine routes frames region by region.
+    static std::optional<nodes::LocalBranch> localBranchOf(Impl& impl);
+    /// The local fail-through's feathered blend, when the engine routes frames region by region.
+    static std::optional<nodes::LocalCombiner> featherOf(const Impl& impl);
+};
+
+Engine::Impl::Bodies::Bodies(Impl& impl, FrameSink& frames, nodes::RunControl& control)
+    : keys(impl.model, impl.evaluator),
+      project(impl.pm),
+      monitor(impl.pm, impl.policy, impl.options.keepPointMultiplication,
+              impl.regions ? &*impl.regions : nullptr, &impl.evaluator),
+      reconstruct(impl.pm, impl.plan),
+      failThrough(impl.evaluator, impl.plan),
+      blend(impl.pm, impl.plan),
+      local(localBranchOf(impl)),
+      feather(featherOf(impl)),
+      sink(impl.plan, frames, impl.options.failurePolicy, control) {}
+
+std::optional<nodes::LocalBranch> Engine::Impl::Bodies::localBranchOf(Impl& impl) {
+    if (!impl.regions) return std::nullopt;
+    // The local frame's full evaluation: one call when the evaluator is failed through
+    // whole (its subset poses share work), else pieces of the fail-through's chunk size.
+    return std::optional<nodes::LocalBranch>(std::in_place, impl.evaluator, *impl.regions,
+                                             impl.model.channels,
+                                             impl.shape.wholeFrame ? 0 : impl.chunkPoints);
+}
+
+std::optional<nodes::LocalCombiner> Engine::Impl::Bodies::featherOf(const Impl& impl) {
+    if (!impl.regions) return std::nullopt;
+    return std::optional<nodes::LocalCombiner>(std::in_place, impl.model.channels);
+}
+
+/// One run's flow graph: its nodes (members, in the order they are built) and the bodies'
+/// shared state. The graph is built inside the arena so that its tasks run on the arena's threads.
+//
+//  source ──seq──┐
+//                ├─ bind (reserving join) ─> keys ─> project ─> monitor ──hit──> reconstruct ─┐
+//  tokens ─slot──┘                                              │  │  (keepPm: │ then chunks)  │
+//    ^                                                    failed│  └─blend/miss: one message   │
+//    │                                                          │     per chunk ─┐            │
+//    │                                                          │                v            │
+//    │                                                          │   fail-through (unlimited)   │
+//    │                                                          │                v            │
+//    │                                                          │     blend (same task)        │
+//    │                                                          │                v            │
+//    │                                                          │  gather (the last branch     │
+//    │                                                          │   sends the frame on)        │
+//    │               monitor ──local: one message per region, then one per piece           │
+//    │                 of the failing points ──> local (unlimited: region PM, or a piece of   │
+//    │                                            the failing regions' fail sets' union) ─>   │
+//    │                                            local gather (the last branch runs the      │
+//    │                                            feathered blend, sends the frame on) ─────┐ │
+//    │                                                          v                v          v v
+//    └──────────────── slot ── sink (serial) <── sequencer (restores order) <──────────────────┘
+//
+// tokens holds the free frame slots: a frame starts only when bind pairs a sequence
+// number with a free slot, and the slot comes back only after the sink, so at most
+// maxInFlight frames are anywhere in the graph.
+struct Engine::Impl::Graph {
     using Token = FrameSlot*;
     using MonitorNode = flow::multifunction_node<Token, std::tuple<Token, ChunkMsg, Token, ChunkMsg>,
                                                  flow::queueing_lightweight>;
     using ReconstructNode = flow::multifunction_node<Token, std::tuple<Token, ChunkMsg>>;
     using GatherNode = flow::multifunction_node<ChunkMsg, std::tuple<Token>, flow::queueing_lightweight>;
 
-#if defined(__SANITIZE_THREAD__)
-    // Declared first, so it runs last: this thread leaves with checks back on.
-    struct ChecksBackOn {
-        ~ChecksBackOn() { setIgnoring(false); }
-    } checksBackOn;
-    setIgnoring(true);  // from here this thread runs TBB's code too (building, waiting, destroying)
-#endif
+    Bodies& bodies;
+    nodes::RunControl& control;
+    Clocks& clocks;
+    const EngineOptions& options;
+    const FrameRange range;
+    const Clock::time_point start;
+    const bool stopOnFailure;
+    const Index chunkCount;
+
     flow::graph g;
     const char runDone = 0;  // sync object only (TSan): every body's end -> after wait_for_all
-    control.setCancelHook([&g] {
-        PMSC_UNCHECKED_SCOPE;  // TBB's code, called from inside a node body
-        g.cancel();
-    });
-
-    nodes::FrameSource source(range, control);
-    flow::input_node<Index> sourceNode(g, [&](tbb::flow_control& fc) -> Index {
-        PMSC_NODE_BODY(&runDone);
-        takeOver(&source);
-        Index seq = 0;
-        if (!source.next(seq)) fc.stop();
-        handOver(&source);
-        return seq;
-    });
-    flow::buffer_node<Token> tokens(g);
-    flow::join_node<std::tuple<Index, Token>, flow::reserving> bind(g);
-
-    flow::function_node<std::tuple<Index, Token>, Token> keys(
-        g, flow::unlimited, [&](const std::tuple<Index, Token>& in) -> Token {
-            PMSC_NODE_BODY(&runDone);
-            Token slot = std::get<1>(in);
-            takeOver(slot);
-            const Index seq = std::get<0>(in);
-            slot->reset(seq, range.frame(seq));
-            control.frameStarted();
-            if (!control.cancelled()) timed(clocks[kKeys], [&] { keysBody(*slot); });
-            if (slot->failed() && stopOnFailure) control.stopAfter(seq);
-            handOver(slot);
-            return slot;
-        });
+    nodes::FrameSource source;
+    flow::input_node<Index> sourceNode;
+    flow::buffer_node<Token> tokens;
+    flow::join_node<std::tuple<Index, Token>, flow::reserving> bind;
+    flow::function_node<std::tuple<Index, Token>, Token> keys;
     // Cheap bodies run as lightweight nodes: in the task of the node before them.
-    flow::function_node<Token, Token, flow::queueing_lightweight> project(
-        g, flow::unlimited, [&](Token slot) -> Token {
-            PMSC_NODE_BODY(&runDone);
-            takeOver(slot);
-            if (!control.cancelled()) timed(clocks[kProject], [&] { projectBody(*slot); });
-            handOver(slot);
-            return slot;
-        });
-    // A multifunction body's output: the slot's happens-before edge first (TSan builds), then
-    // TBB's try_put, unchecked. A frame for the fail-through branches goes out as one message per chunk.
-    const auto send = [](Token slot, auto& port, const auto& message) {
+    flow::function_node<Token, Token, flow::queueing_lightweight> project;
+    MonitorNode monitor;
+    ReconstructNode reconstruct;
+    flow::function_node<ChunkMsg, ChunkMsg> failThrough;
+    flow::function_node<ChunkMsg, ChunkMsg, flow::queueing_lightweight> blend;
+    GatherNode gather;
+    // Local fail-through: one branch per region, the feathered blend in the last one's task.
+    flow::function_node<ChunkMsg, ChunkMsg> localBranch;
+    GatherNode localGather;
+    flow::sequencer_node<Token> sequencer;
+    flow::function_node<Token, Token> sinkNode;
+
+    Graph(const Impl& impl, Bodies& bodies, FrameRange range, nodes::RunControl& control, Clocks& clocks,
+          Clock::time_point start);
+    /// Connects the nodes as drawn above.
+    void wire();
+    /// Puts the free slots in `tokens`, activates the source last, and waits for the graph.
+    void run(std::span<const std::unique_ptr<FrameSlot>> slots);
+
+    // The nodes' bodies, one per node (the stage's work is in `bodies`).
+    Index sourceStep(tbb::flow_control& fc);
+    Token keysStep(const std::tuple<Index, Token>& in);
+    Token projectStep(Token slot);
+    void monitorStep(Token slot, MonitorNode::output_ports_type& out);
+    void reconstructStep(Token slot, ReconstructNode::output_ports_type& out);
+    ChunkMsg failThroughStep(ChunkMsg m);
+    ChunkMsg blendStep(ChunkMsg m);
+    void gatherStep(ChunkMsg m, GatherNode::output_ports_type& out);
+    ChunkMsg localBranchStep(ChunkMsg m);
+    void localGatherStep(ChunkMsg m, GatherNode::output_ports_type& out);
+    Token sinkStep(Token slot);
+
+    /// A multifunction body's output: the slot's happens-before edge first (TSan builds), then
+    /// TBB's try_put, unchecked.
+    template <class Port, class Message>
+    static void send(Token slot, Port& port, const Message& message) {
         handOver(slot);
         PMSC_UNCHECKED_SCOPE;
         port.try_put(message);
-    };
-    const auto sendChunks = [&](Token slot, auto& port) {
+    }
+    /// A frame for the fail-through branches goes out as one message per chunk.
+    template <class Port>
+    void sendChunks(Token slot, Port& port) const {
         slot->chunksLeft.store(chunkCount, std::memory_order_relaxed);
         for (Index c = 0; c < chunkCount; ++c) send(slot, port, ChunkMsg{slot, c});
-    };
-    MonitorNode monitor(g, flow::unlimited, [&](Token slot, MonitorNode::output_ports_type& out) {
-        PMSC_NODE_BODY(&runDone);
-        takeOver(slot);
-        if (control.cancelled()) {
-            send(slot, std::get<2>(out), slot);
-            return;
-        }
-        const Route route = timed(clocks[kMonitor], [&] { return monitorBody(*slot); });
-        if (route == Route::Reconstruct) {
-            send(slot, std::get<0>(out), slot);
-        } else if (route == Route::FailThrough) {
-            sendChunks(slot, std::get<1>(out));
-        } else if (route == Route::Local) {
-            const Index messages = localBody->messages(*slot);
-            slot->chunksLeft.store(messages, std::memory_order_relaxed);
-            for (Index i = 0; i < messages; ++i) send(slot, std::get<3>(out), ChunkMsg{slot, i});
-        } else {
-            send(slot, std::get<2>(out), slot);
-        }
-    });
-    ReconstructNode reconstruct(g, flow::unlimited, [&](Token slot, ReconstructNode::output_ports_type& out) {
-        PMSC_NODE_BODY(&runDone);
-        takeOver(slot);
-        if (control.cancelled()) {
-            send(slot, std::get<0>(out), slot);
-            return;
-        }
-        const bool done = timed(clocks[kReconstruct], [&] { return reconstructBody(*slot); });
-        if (done) {
-            send(slot, std::get<0>(out), slot);
-        } else {
-            sendChunks(slot, std::get<1>(out));
-        }
-    });
-    flow::function_node<ChunkMsg, ChunkMsg> failThrough(g, flow::unlimited, [&](ChunkMsg m) {
-        PMSC_NODE_BODY(&runDone);
-        takeOver(m.slot);
-        if (!control.cancelled()) timed(clocks[kFailThrough], [&] { failThroughBody(*m.slot, m.chunk); });
-        return m;
-    });
-    flow::function_node<ChunkMsg, ChunkMsg, flow::queueing_lightweight> blend(
-        g, flow::unlimited, [&](ChunkMsg m) {
-            PMSC_NODE_BODY(&runDone);
-            if (m.slot->decision.state == CacheState::Blend && !control.cancelled()) {
-                timed(clocks[kBlend], [&] { blendBody(*m.slot, m.chunk); });
-            }
-            return m;
-        });
-    GatherNode gather(g, flow::unlimited, [&](ChunkMsg m, GatherNode::output_ports_type& out) {
-        PMSC_NODE_BODY(&runDone);
-        // acq_rel: the last branch sees every other branch's writes before the frame moves on.
-        if (m.slot->chunksLeft.fetch_sub(1, std::memory_order_acq_rel) == 1) {
-            if (m.slot->failed() && stopOnFailure) control.stopAfter(m.slot->sequence);
-            send(m.slot, std::get<0>(out), m.slot);
-        }
-    });
-    // Local fail-through: one branch per region, the feathered blend in the last one's task.
-    flow::function_node<ChunkMsg, ChunkMsg> localBranch(g, flow::unlimited, [&](ChunkMsg m) {
-        PMSC_NODE_BODY(&runDone);
-        takeOver(m.slot);
-        if (!control.cancelled()) timed(clocks[kLocal], [&] { (*localBody)(*m.slot, m.chunk); });
-        return m;
-    });
-    GatherNode localGather(g, flow::unlimited, [&](ChunkMsg m, GatherNode::output_ports_type& out) {
-        PMSC_NODE_BODY(&runDone);
-        // acq_rel: the last branch sees every other branch's writes before it blends.
-        if (m.slot->chunksLeft.fetch_sub(1, std::memory_order_acq_rel) == 1) {
-            if (!control.cancelled()) timed(clocks[kFeather], [&] { (*featherBody)(*m.slot); });
-            if (m.slot->failed() && stopOnFailure) control.stopAfter(m.slot->sequence);
-            send(m.slot, std::get<0>(out), m.slot);
-        }
-    });
-    flow::sequencer_node<Token> sequencer(g, [](const Token& slot) { return size_t(slot->sequence); });
-    flow::function_node<Token, Token> sinkNode(g, flow::serial, [&](Token slot) -> Token {
-        PMSC_NODE_BODY(&runDone);
-        takeOver(slot);
-        takeOver(&sinkBody);  // the serial sink's calls follow one another
-        timed(clocks[kSink], [&] { sinkBody(*slot); });
-        control.frameFinished();
-        if (options.progress && !control.cancelled()) {
-            Progress p;
-            p.framesDone = control.delivered.load(std::memory_order_relaxed);
-            p.framesTotal = range.count;
-            p.hits = control.hits.load(std::memory_order_relaxed);
-            p.blends = control.blends.load(std::memory_order_relaxed);
-            p.misses = control.misses.load(std::memory_order_relaxed);
-            p.failed = control.failed.load(std::memory_order_relaxed);
-            p.elapsedSeconds = seconds(Clock::now() - start);
-            options.progress(p);
-        }
-        handOver(&sinkBody);
-        handOver(slot);
-        return slot;
-    });
+    }
+};
 
+Engine::Impl::Graph::Graph(const Impl& impl, Bodies& runBodies, FrameRange runRange,
+                           nodes::RunControl& runControl, Clocks& runClocks, Clock::time_point runStart)
+    : bodies(runBodies),
+      control(runControl),
+      clocks(runClocks),
+      options(impl.options),
+      range(runRange),
+      start(runStart),
+      stopOnFailure(impl.options.failurePolicy == FailurePolicy::StopRun),
+      chunkCount(Index(impl.plan.chunks.size())),
+      source(runRange, runControl),
+      sourceNode(g, [this](tbb::flow_control& fc) -> Index { return sourceStep(fc); }),
+      tokens(g),
+      bind(g),
+      keys(g, flow::unlimited, [this](const std::tuple<Index, Token>& in) -> Token { return keysStep(in); }),
+      project(g, flow::unlimited, [this](Token slot) -> Token { return projectStep(slot); }),
+      monitor(g, flow::unlimited,
+              [this](Token slot, MonitorNode::output_ports_type& out) { monitorStep(slot, out); }),
+      reconstruct(
+          g, flow::unlimited,
+          [this](Token slot, ReconstructNode::output_ports_type& out) { reconstructStep(slot, out); }),
+      failThrough(g, flow::unlimited, [this](ChunkMsg m) { return failThroughStep(m); }),
+      blend(g, flow::unlimited, [this](ChunkMsg m) { return blendStep(m); }),
+      gather(g, flow::unlimited,
+             [this](ChunkMsg m, GatherNode::output_ports_type& out) { gatherStep(m, out); }),
+      localBranch(g, flow::unlimited, [this](ChunkMsg m) { return localBranchStep(m); }),
+      localGather(g, flow::unlimited,
+                  [this](ChunkMsg m, GatherNode::output_ports_type& out) { localGatherStep(m, out); }),
+      sequencer(g, [](const Token& slot) { return size_t(slot->sequence); }),
+      sinkNode(g, flow::serial, [this](Token slot) -> Token { return sinkStep(slot); }) {
+    // Nothing runs before run() puts the tokens and activates the source, so the hook may be
+    // set once every node is built.
+    runControl.setCancelHook([this] {
+        PMSC_UNCHECKED_SCOPE;  // TBB's code, called from inside a node body
+        g.cancel();
+    });
+}
+
+Index Engine::Impl::Graph::sourceStep(tbb::flow_control& fc) {
+    PMSC_NODE_BODY(&runDone);
+    takeOver(&source);
+    Index seq = 0;
+    if (!source.next(seq)) fc.stop();
+    handOver(&source);
+    return seq;
+}
+
+Engine::Impl::Graph::Token Engine::Impl::Graph::keysStep(const std::tuple<Index, Token>& in) {
+    PMSC_NODE_BODY(&runDone);
+    Token slot = std::get<1>(in);
+    takeOver(slot);
+    const Index seq = std::get<0>(in);
+    slot->reset(seq, range.frame(seq));
+    control.frameStarted();
+    if (!control.cancelled()) timed(clocks[kKeys], [&] { bodies.keys(*slot); });
+    if (slot->failed() && stopOnFailure) control.stopAfter(seq);
+    handOver(slot);
+    return slot;
+}
+
+Engine::Impl::Graph::Token Engine::Impl::Graph::projectStep(Token slot) {
+    PMSC_NODE_BODY(&runDone);
+    takeOver(slot);
+    if (!control.cancelled()) timed(clocks[kProject], [&] { bodies.project(*slot); });
+    handOver(slot);
+    return slot;
+}
+
+void Engine::Impl::Graph::monitorStep(Token slot, MonitorNode::output_ports_type& out) {
+    PMSC_NODE_BODY(&runDone);
+    takeOver(slot);
+    if (control.cancelled()) {
+        send(slot, std::get<2>(out), slot);
+        return;
+    }
+    const Route route = timed(clocks[kMonitor], [&] { return bodies.monitor(*slot); });
+    if (route == Route::Reconstruct) {
+        send(slot, std::get<0>(out), slot);
+    } else if (route == Route::FailThrough) {
+        sendChunks(slot, std::get<1>(out));
+    } else if (route == Route::Local) {
+        const Index messages = bodies.local->messages(*slot);
+        slot->chunksLeft.store(messages, std::memory_order_relaxed);
+        for (Index i = 0; i < messages; ++i) send(slot, std::get<3>(out), ChunkMsg{slot, i});
+    } else {
+        send(slot, std::get<2>(out), slot);
+    }
+}
+
+void Engine::Impl::Graph::reconstructStep(Token slot, ReconstructNode::output_ports_type& out) {
+    PMSC_NODE_BODY(&runDone);
+    takeOver(slot);
+    if (control.cancelled()) {
+        send(slot, std::get<0>(out), slot);
+        return;
+    }
+    const bool done = timed(clocks[kReconstruct], [&] { return bodies.reconstruct(*slot); });
+    if (done) {
+        send(slot, std::get<0>(out), slot);
+    } else {
+        sendChunks(slot, std::get<1>(out));
+    }
+}
+
+ChunkMsg Engine::Impl::Graph::failThroughStep(ChunkMsg m) {
+    PMSC_NODE_BODY(&runDone);
+    takeOver(m.slot);
+    if (!control.cancelled()) timed(clocks[kFailThrough], [&] { bodies.failThrough(*m.slot, m.chunk); });
+    return m;
+}
+
+ChunkMsg Engine::Impl::Graph::blendStep(ChunkMsg m) {
+    PMSC_NODE_BODY(&runDone);
+    if (m.slot->decision.state == CacheState::Blend && !control.cancelled()) {
+        timed(clocks[kBlend], [&] { bodies.blend(*m.slot, m.chunk); });
+    }
+    return m;
+}
+
+void Engine::Impl::Graph::gatherStep(ChunkMsg m, GatherNode::output_ports_type& out) {
+    PMSC_NODE_BODY(&runDone);
+    // acq_rel: the last branch sees every other branch's writes before the frame moves on.
+    if (m.slot->chunksLeft.fetch_sub(1, std::memory_order_acq_rel) == 1) {
+        if (m.slot->failed() && stopOnFailure) control.stopAfter(m.slot->sequence);
+        send(m.slot, std::get<0>(out), m.slot);
+    }
+}
+
+ChunkMsg Engine::Impl::Graph::localBranchStep(ChunkMsg m) {
+    PMSC_NODE_BODY(&runDone);
+    takeOver(m.slot);
+    if (!control.cancelled()) timed(clocks[kLocal], [&] { (*bodies.local)(*m.slot, m.chunk); });
+    return m;
+}
+
+void Engine::Impl::Graph::localGatherStep(ChunkMsg m, GatherNode::output_ports_type& out) {
+    PMSC_NODE_BODY(&runDone);
+    // acq_rel: the last branch sees every other branch's writes before it blends.
+    if (m.slot->chunksLeft.fetch_sub(1, std::memory_order_acq_rel) == 1) {
+        if (!control.cancelled()) timed(clocks[kFeather], [&] { (*bodies.feather)(*m.slot); });
+        if (m.slot->failed() && stopOnFailure) control.stopAfter(m.slot->sequence);
+        send(m.slot, std::get<0>(out), m.slot);
+    }
+}
+
+Engine::Impl::Graph::Token Engine::Impl::Graph::sinkStep(Token slot) {
+    PMSC_NODE_BODY(&runDone);
+    takeOver(slot);
+    takeOver(&bodies.sink);  // the serial sink's calls follow one another
+    timed(clocks[kSink], [&] { bodies.sink(*slot); });
+    control.frameFinished();
+    if (options.progress && !control.cancelled()) {
+        Progress p;
+        p.framesDone = control.delivered.load(std::memory_order_relaxed);
+        p.framesTotal = range.count;
+        p.hits = control.hits.load(std::memory_order_relaxed);
+        p.blends = control.blends.load(std::memory_order_relaxed);
+        p.misses = control.misses.load(std::memory_order_relaxed);
+        p.failed = control.failed.load(std::memory_order_relaxed);
+        p.elapsedSeconds = std::chrono::duration<double>(Clock::now() - start).count();
+        options.progress(p);
+    }
+    handOver(&bodies.sink);
+    handOver(slot);
+    return slot;
+}
+
+void Engine::Impl::Graph::wire() {
     flow::make_edge(sourceNode, flow::input_port<0>(bind));
     flow::make_edge(tokens, flow::input_port<1>(bind));
     flow::make_edge(bind, keys);
@@ -497,7 +604,9 @@ void Engine::Impl::runGraph(FrameRange range, FrameSink& sink, nodes::RunControl
     flow::make_edge(flow::output_port<0>(localGather), sequencer);
     flow::make_edge(sequencer, sinkNode);
     flow::make_edge(sinkNode, tokens);
+}
 
+void Engine::Impl::Graph::run(std::span<const std::unique_ptr<FrameSlot>> slots) {
     for (auto& slot : slots) {
         handOver(slot.get());
         tokens.try_put(slot.get());
@@ -507,9 +616,25 @@ void Engine::Impl::runGraph(FrameRange range, FrameSink& sink, nodes::RunControl
     g.wait_for_all();
     // Everything the graph's threads wrote is visible after wait_for_all().
     for (auto& slot : slots) takeOver(slot.get());
-    takeOver(&sinkBody);
+    takeOver(&bodies.sink);
     takeOver(&source);
     takeOver(&runDone);
+}
+
+void Engine::Impl::runGraph(FrameRange range, FrameSink& sink, nodes::RunControl& control, Clocks& clocks,
+                            std::span<const std::unique_ptr<FrameSlot>> slots, Clock::time_point start) {
+    Bodies bodies(*this, sink, control);
+#if defined(__SANITIZE_THREAD__)
+    // Declared before the graph, so it runs after the graph is destroyed: this thread leaves
+    // with checks back on.
+    struct ChecksBackOn {
+        ~ChecksBackOn() { setIgnoring(false); }
+    } checksBackOn;
+    setIgnoring(true);  // from here this thread runs TBB's code too (building, waiting, destroying)
+#endif
+    Graph graph(*this, bodies, range, control, clocks, start);
+    graph.wire();
+    graph.run(slots);
 }
 
 }  // namespace pmsc::engine

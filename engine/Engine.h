@@ -1,9 +1,9 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-#include "engine/FrameRange.h"
-#include "engine/FrameSink.h"
 #include "engine/RunStats.h"
+#include "nodes/FrameRange.h"
+#include "nodes/FrameSink.h"
 #include "pmsc/Errors.h"  // pmsc::Cancelled
 #include "pmsc/Model.h"
 #include "pmsc/PointEvaluator.h"
@@ -15,6 +15,13 @@
 #include <vector>
 
 namespace pmsc::engine {
+
+// The run vocabulary lives below the nodes (nodes/FrameSink.h, nodes/FrameRange.h); a program
+// that embeds the engine names it through the engine.
+using pmsc::FailurePolicy;
+using pmsc::FrameRange;
+using pmsc::FrameResult;
+using pmsc::FrameSink;
 
 /// Live numbers for a progress line, passed to EngineOptions::progress after each delivered frame.
 struct Progress {
@@ -41,7 +48,7 @@ struct EngineOptions {
     /// chunks (for evaluators whose full evaluation shares work between points). Also on when
     /// the evaluator declares it (PointEvaluator::failThroughShape()).
     bool wholeFrameFailThrough = false;
-    /// Local fail-through (issue 9) for models with regions: a frame that does not hit as a whole
+    /// Local fail-through for models with regions: a frame that does not hit as a whole
     /// sends only the points of its regions that blend or miss (and their feather bands) to the
     /// full calculation. Off: every frame that does not hit fails through whole, as for a
     /// version-1 model (`--whole-frame-fail-through`). Needs all output points (pointsWanted
@@ -62,7 +69,7 @@ struct EngineOptions {
     std::function<void(const Progress&)> progress;
 };
 
-/// The soft-caching evaluation engine (sections 5 and 6, issue 3): a oneTBB
+/// The soft-caching evaluation engine (sections 5 and 6): a oneTBB
 /// flow graph that streams a frame range through key-point evaluation,
 /// projection, the error monitor, and either point multiplication (a hit) or
 /// the fail-through branches (a blend or a miss), then restores frame order

@@ -32,7 +32,7 @@ struct RunStats {
     bool cancelled = false;
     std::vector<NodeTiming> nodes;
 
-    // --- local fail-through (issue 9) ---
+    // --- local fail-through ---
     /// Per region: how many delivered frames it hit, blended, missed in (a whole-frame hit
     /// counts as a hit of every region). Empty without regions.
     struct RegionCounts {

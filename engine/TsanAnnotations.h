@@ -1,7 +1,7 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-// The engine's ThreadSanitizer annotations, in their own header (issue 13) so Engine.cpp reads as
+// The engine's ThreadSanitizer annotations, in their own header so Engine.cpp reads as
 // the graph it builds. Private to engine/ (not installed); included by Engine.cpp only.
 
 #include <oneapi/tbb/task_arena.h>

@@ -1,8 +1,5 @@
 #include "evaluators/EvaluatorRegistry.h"
 
-#include "evaluators/ReplayEvaluator.h"
-#include "evaluators/SkinEvaluator.h"
-
 #include <stdexcept>
 
 namespace pmsc::evaluators {
@@ -12,15 +9,6 @@ std::string requireArgs(const std::string& name, const std::string& what, const 
         throw std::invalid_argument("evaluator '" + name + "' needs " + what + ": '" + name + ":" + what +
                                     "'");
     return args;
-}
-
-EvaluatorRegistry EvaluatorRegistry::withBuiltins() {
-    EvaluatorRegistry registry;
-    // clang-format off
-    registry.add({"replay", "FILE.npy", "recorded frames (F, N, C) stand in for the calculation", [](const std::string& a) -> std::unique_ptr<PointEvaluator> { return std::make_unique<ReplayEvaluator>(requireArgs("replay", "FILE.npy", a)); }});
-    registry.add({"skin", "ASSET[:fps=F][:animation=A]", "an animated, skinned asset (glTF 2, FBX, Collada, X, BVH, ...) posed by linear blend skinning", [](const std::string& a) -> std::unique_ptr<PointEvaluator> { return makeSkinEvaluator(requireArgs("skin", "ASSET", a)); }});
-    // clang-format on
-    return registry;
 }
 
 void EvaluatorRegistry::add(EvaluatorKind kind) {

@@ -21,13 +21,14 @@ struct EvaluatorKind {
     EvaluatorFactory make;
 };
 
-/// Maps evaluator specs to evaluators. A program starts from the built-in kinds (replay, skin)
-/// and adds its own (the `pmsc` program adds the paper's demos: cornell, face).
+/// Maps evaluator specs to evaluators. withBuiltins() holds every calculation pmsc ships; a
+/// program that embeds pmsc may start from it, or from an empty registry, and add its own.
 class EvaluatorRegistry {
 public:
     /// An empty registry.
     EvaluatorRegistry() = default;
-    /// The kinds this library provides: "replay" (recorded frames) and "skin" (an animated asset).
+    /// Every calculation pmsc ships, in this order: replay, skin, synthetic, cornell, face,
+    /// face-control, volume (evaluators/Builtins.cpp).
     static EvaluatorRegistry withBuiltins();
 
     /// Adds a kind after the others. @throws std::invalid_argument for an empty name, a name
@@ -45,6 +46,13 @@ public:
 private:
     std::vector<EvaluatorKind> kinds_;
 };
+
+/// The registry the `pmsc` program and the Python module use: withBuiltins(), built once.
+const EvaluatorRegistry& builtinRegistry();
+
+/// builtinRegistry().make(spec): "replay:FILE.npy", "volume:FILE.vdb", "face:DIR", ...
+/// @throws as EvaluatorRegistry::make.
+std::unique_ptr<PointEvaluator> makeEvaluator(const std::string& spec);
 
 /// For factories whose ARGS are required: returns `args`, or throws std::invalid_argument
 /// ("evaluator 'NAME' needs WHAT: 'NAME:WHAT'") when it is empty.

@@ -14,7 +14,7 @@ enum class Route : int {
     Reconstruct = 0,  ///< a hit: point multiplication only
     FailThrough = 1,  ///< a blend or a miss: the fail-through branches
     Done = 2,         ///< a failed frame: straight to the sink
-    Local = 3,        ///< local fail-through: one branch per region (issue 9)
+    Local = 3,        ///< local fail-through: one branch per region
 };
 
 /// Step 3 (section 5): the key points' RMS error decides hit / blend / miss
@@ -28,7 +28,7 @@ public:
     ///                    with finite keys still goes through reconstruction first
     ErrorMonitor(const PointMultiplier& pm, SoftCachePolicy policy, bool keepPm)
         : pm_(pm), policy_(policy), keepPm_(keepPm) {}
-    /// With local fail-through (issue 9): a frame that does not hit as a whole is decided region
+    /// With local fail-through: a frame that does not hit as a whole is decided region
     /// by region (each region's own projection, key error and thresholds). It goes the local
     /// route unless its feathered weights send more than the regions' largest local fraction of
     /// the points to the full calculation; then, like a frame whose keys are not finite, it fails

@@ -57,7 +57,7 @@ struct FrameSlot {
 
     std::atomic<Index> chunksLeft{0};  ///< fail-through branches still running
 
-    // --- local fail-through (issue 9); sized by enableRegions(), empty otherwise ---
+    // --- local fail-through; sized by enableRegions(), empty otherwise ---
     /// Sizes the local buffers for `regions` (once, before the slot's first run).
     void enableRegions(const RegionMultiplier& regions, Index points, Index channels);
     bool local = false;                    ///< this frame is routed region by region

@@ -1,12 +1,10 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-#include "engine/FrameRange.h"
+#include "nodes/FrameRange.h"
 #include "nodes/RunControl.h"
 
 namespace pmsc::nodes {
-
-using engine::FrameRange;
 
 /// The head of the graph (body of an input_node): stamps each frame with its
 /// sequence number 0, 1, 2, ..., which the sequencer uses to restore order.

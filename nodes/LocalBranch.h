@@ -7,7 +7,7 @@
 
 namespace pmsc::nodes {
 
-/// The branches of a locally failed-through frame (issue 9; paper section 9, "compute the full
+/// The branches of a locally failed-through frame (paper section 9, "compute the full
 /// calculation on a subset of the domain"). The engine sends a local frame as messages() separate
 /// messages to an unlimited node, so they run as parallel branches:
 ///  - messages 0 .. R-1, one per region: region r reconstructs its points from its own

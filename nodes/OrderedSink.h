@@ -1,16 +1,12 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-#include "engine/FrameSink.h"
+#include "nodes/FrameSink.h"
 #include "nodes/FrameSlot.h"
 #include "nodes/RunControl.h"
 #include "pmsc/SoftCache.h"
 
 namespace pmsc::nodes {
-
-using engine::FailurePolicy;
-using engine::FrameResult;
-using engine::FrameSink;
 
 /// The serial, in-order end of the graph (after the sequencer): hands each
 /// finished frame to the user's FrameSink, applies the failure policy, and counts.

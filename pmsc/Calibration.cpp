@@ -58,15 +58,15 @@ CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index cha
                      gram ? *gram : gramMatrix(q), rule, coverage);
 }
 
-CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::MatrixXd& keyRows,
-                           const std::vector<Index>& keys, Index basisSize, double tolerance, Index slices,
-                           const Eigen::MatrixXd& gram, CalibrationRule rule, double coverage, Index group) {
-    const Index f = q.frames();
+namespace {
+
+/// The arguments of the cross-fitted calibration, checked before any work.
+void checkCalibrationArguments(Index f, Index group, double tolerance, Index slices, Index basisSize,
+                               const Eigen::MatrixXd& gram, CalibrationRule rule, double coverage) {
     if (group < 1 || f % group != 0)
         throw std::invalid_argument("calibrate: " + std::to_string(f) + " frames are not whole groups of " +
                                     std::to_string(group));
     const Index groups = f / group;
-    const Index channels = q.channels();
     if (!(tolerance > 0) || !std::isfinite(tolerance)) {
         throw std::invalid_argument("calibration tolerance must be a positive number, got " +
                                     std::to_string(tolerance));
@@ -82,110 +82,162 @@ CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::Matrix
     }
     if (gram.rows() != f || gram.cols() != f)
         throw std::invalid_argument("calibrate: Gram matrix is not F x F");
+}
+
+/// The Gram matrix of the held-in frames (all but [first, last)), centred on their own mean.
+Eigen::MatrixXd heldInGram(const Eigen::MatrixXd& gram, Index first, Index last) {
+    const Index f = gram.rows();
+    const Index in = f - (last - first);
+    const Index right = f - last;
+    Eigen::MatrixXd g(in, in);
+    g.topLeftCorner(first, first) = gram.topLeftCorner(first, first);
+    g.topRightCorner(first, right) = gram.topRightCorner(first, right);
+    g.bottomLeftCorner(right, first) = gram.bottomLeftCorner(right, first);
+    g.bottomRightCorner(right, right) = gram.bottomRightCorner(right, right);
+    // J g J: subtract row and column means, add back the grand mean.
+    const Eigen::VectorXd rowMean = g.rowwise().mean();
+    const double grand = rowMean.mean();
+    g.colwise() -= rowMean;
+    g.rowwise() -= rowMean.transpose();
+    g.array() += grand;
+    return g;
+}
+
+/// The cross-fitting folds: what they share, and the tally of folds with a smaller basis.
+struct Folds {
+    RowBlocks& q;
+    Communicator& comm;
+    const Eigen::MatrixXd& keyRows;
+    const std::vector<Index>& keys;
+    const Eigen::MatrixXd& gram;
+    Index basisSize;
+    Index cappedFolds = 0;
+    Index smallestM = basisSize;
+    Eigen::MatrixXd uBlock, residual;  // block buffers, reused fold after fold
+
+    Folds(RowBlocks& blocks, Communicator& communicator, const Eigen::MatrixXd& rowsAtKeys,
+          const std::vector<Index>& keyPoints, const Eigen::MatrixXd& gramMatrix, Index m)
+        : q(blocks),
+          comm(communicator),
+          keyRows(rowsAtKeys),
+          keys(keyPoints),
+          gram(gramMatrix),
+          basisSize(m) {}
+
+    /// One fold: the model of the frames outside [first, last) scores the held-out frames, whose
+    /// key RMS and largest point error are appended to `s`.
+    void score(Index first, Index last, CalibrationStats& s);
+};
+
+void Folds::score(Index first, Index last, CalibrationStats& s) {
+    const Index f = q.frames();
+    const Index channels = q.channels();
+    const Index out = last - first;
+    const Index in = f - out;
+    const Index right = f - last;
+    // A centered matrix of `in` frames has rank <= in - 1.
+    Index m = std::min(basisSize, in - 1);
+    if (m < 1) {
+        ++cappedFolds;
+        return;
+    }
+    const Eigen::MatrixXd g = heldInGram(gram, first, last);
+    TruncatedSvd fold = svdFromGram(Eigen::MatrixXd(0, in), g, m, 0);
+    if (fold.sigma.size() < basisSize) ++cappedFolds;
+    m = fold.sigma.size();
+    smallestM = std::min(smallestM, m);
+    if (m < 1) return;
+    // U = Q_I (J V) S^-1; J V removes each column's mean. Only its key rows are formed whole
+    // (for the projector); the other rows are formed block by block below.
+    Eigen::MatrixXd jv = fold.v;
+    jv.rowwise() -= jv.colwise().mean();
+    for (Index i = 0; i < jv.cols(); ++i) jv.col(i) /= fold.sigma[i];
+    auto heldInTimes = [&](const Eigen::Ref<const Eigen::MatrixXd>& rows, Eigen::MatrixXd& u) {
+        u.resize(rows.rows(), m);
+        u.noalias() = rows.leftCols(first) * jv.topRows(first);
+        u.noalias() += rows.rightCols(right) * jv.bottomRows(right);
+    };
+    auto heldInMean = [&](const Eigen::Ref<const Eigen::MatrixXd>& rows) -> Eigen::VectorXd {
+        return (rows.leftCols(first).rowwise().sum() + rows.rightCols(right).rowwise().sum()) /
+               static_cast<double>(in);
+    };
+    Eigen::MatrixXd uk;
+    heldInTimes(keyRows, uk);
+    const Eigen::MatrixXd projector = projectorFromKeyRows(uk, channels);
+    Eigen::MatrixXd heldOutK = keyRows.middleCols(first, out).colwise() - heldInMean(keyRows);
+    const Eigen::MatrixXd coords = projector * heldOutK;
+    heldOutK.noalias() -= uk * coords;  // the PM residual at the keys
+
+    Eigen::VectorXd pointErr = Eigen::VectorXd::Zero(out);
+    for (Index b = 0; b < q.blockCount(); ++b) {
+        const Eigen::Ref<const Eigen::MatrixXd> rows = q.block(b);
+        heldInTimes(rows, uBlock);
+        residual = rows.middleCols(first, out).colwise() - heldInMean(rows);
+        residual.noalias() -= uBlock * coords;  // the PM residual of the held-out frames
+        const Eigen::VectorXd e = maxPointNormPerColumn(residual, channels);
+        for (Index j = 0; j < out; ++j)
+            if (!(e[j] <= pointErr[j])) pointErr[j] = e[j];  // NaN wins
+    }
+    maxOverRanks(comm, pointErr.data(), static_cast<std::size_t>(out));
+    for (Index j = 0; j < out; ++j) {
+        s.frames.push_back(first + j);
+        s.keyRms.push_back(std::sqrt(heldOutK.col(j).squaredNorm() / static_cast<double>(keys.size())));
+        s.maxPointError.push_back(pointErr[j]);
+    }
+}
+
+/// Folds the scores of a group's members (shared channels: a frame's C channel frames) into one
+/// score per frame.
+void foldGroups(CalibrationStats& s, Index group) {
+    // One entry per frame, not per member of its group (shared channels: a frame's C channel
+    // frames), in the measures the runtime uses: e_f = sqrt(sum_c e_c^2) is exactly the
+    // frame's key error (RMS over keys of the Euclidean error over channels, PointMultiplier),
+    // and E_f = sqrt(sum_c E_c^2) bounds its largest Euclidean point error from above (each
+    // E_c is the largest over points of that channel's error). Decision: so the conformal
+    // rule's coverage counts frames, as its users read it, and both rules bound the point
+    // error a user measures; per channel the max rule would be a little more conservative
+    // (max_c E_c / e_c >= E_f / e_f) at the price of counting each frame C times.
+    // Folded in place: group f is read from entries f*g.. before entry f is written.
+    const std::size_t g = static_cast<std::size_t>(group), groups = s.frames.size() / g;
+    for (std::size_t f = 0; f < groups; ++f) {
+        double k2 = 0, e2 = 0;
+        for (std::size_t j = f * g; j < (f + 1) * g; ++j) {
+            k2 += s.keyRms[j] * s.keyRms[j];
+            e2 += s.maxPointError[j] * s.maxPointError[j];  // NaN stays NaN
+        }
+        s.frames[f] = s.frames[f * g] / group;
+        s.keyRms[f] = std::sqrt(k2);
+        s.maxPointError[f] = std::sqrt(e2);
+    }
+    s.frames.resize(groups);
+    s.keyRms.resize(groups);
+    s.maxPointError.resize(groups);
+}
+
+}  // namespace
+
+CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::MatrixXd& keyRows,
+                           const std::vector<Index>& keys, Index basisSize, double tolerance, Index slices,
+                           const Eigen::MatrixXd& gram, CalibrationRule rule, double coverage, Index group) {
+    const Index f = q.frames();
+    checkCalibrationArguments(f, group, tolerance, slices, basisSize, gram, rule, coverage);
+    const Index groups = f / group;
     CalibrationStats s;
     s.tolerance = tolerance;
     s.slices = slices;
     s.frames.reserve(static_cast<size_t>(f));
-    Index cappedFolds = 0;
-    Index smallestM = basisSize;
-    Eigen::MatrixXd uBlock, residual;
+    Folds folds(q, comm, keyRows, keys, gram, basisSize);
     for (Index slice = 0; slice < slices; ++slice) {
         const Index first = group * (slice * groups / slices);
         const Index last = group * ((slice + 1) * groups / slices);  // exclusive
-        const Index out = last - first;
-        const Index in = f - out;
-        const Index right = f - last;
-        // A centered matrix of `in` frames has rank <= in - 1.
-        Index m = std::min(basisSize, in - 1);
-        if (m < 1) {
-            ++cappedFolds;
-            continue;
-        }
-        Eigen::MatrixXd g(in, in);
-        g.topLeftCorner(first, first) = gram.topLeftCorner(first, first);
-        g.topRightCorner(first, right) = gram.topRightCorner(first, right);
-        g.bottomLeftCorner(right, first) = gram.bottomLeftCorner(right, first);
-        g.bottomRightCorner(right, right) = gram.bottomRightCorner(right, right);
-        // J g J: subtract row and column means, add back the grand mean.
-        const Eigen::VectorXd rowMean = g.rowwise().mean();
-        const double grand = rowMean.mean();
-        g.colwise() -= rowMean;
-        g.rowwise() -= rowMean.transpose();
-        g.array() += grand;
-        TruncatedSvd fold = svdFromGram(Eigen::MatrixXd(0, in), g, m, 0);
-        if (fold.sigma.size() < basisSize) ++cappedFolds;
-        m = fold.sigma.size();
-        smallestM = std::min(smallestM, m);
-        if (m < 1) continue;
-        // U = Q_I (J V) S^-1; J V removes each column's mean. Only its key rows are formed whole
-        // (for the projector); the other rows are formed block by block below.
-        Eigen::MatrixXd jv = fold.v;
-        jv.rowwise() -= jv.colwise().mean();
-        for (Index i = 0; i < jv.cols(); ++i) jv.col(i) /= fold.sigma[i];
-        auto heldInTimes = [&](const Eigen::Ref<const Eigen::MatrixXd>& rows, Eigen::MatrixXd& u) {
-            u.resize(rows.rows(), m);
-            u.noalias() = rows.leftCols(first) * jv.topRows(first);
-            u.noalias() += rows.rightCols(right) * jv.bottomRows(right);
-        };
-        auto heldInMean = [&](const Eigen::Ref<const Eigen::MatrixXd>& rows) -> Eigen::VectorXd {
-            return (rows.leftCols(first).rowwise().sum() + rows.rightCols(right).rowwise().sum()) /
-                   static_cast<double>(in);
-        };
-        Eigen::MatrixXd uk;
-        heldInTimes(keyRows, uk);
-        const Eigen::MatrixXd projector = projectorFromKeyRows(uk, channels);
-        Eigen::MatrixXd heldOutK = keyRows.middleCols(first, out).colwise() - heldInMean(keyRows);
-        const Eigen::MatrixXd coords = projector * heldOutK;
-        heldOutK.noalias() -= uk * coords;  // the PM residual at the keys
-
-        Eigen::VectorXd pointErr = Eigen::VectorXd::Zero(out);
-        for (Index b = 0; b < q.blockCount(); ++b) {
-            const Eigen::Ref<const Eigen::MatrixXd> rows = q.block(b);
-            heldInTimes(rows, uBlock);
-            residual = rows.middleCols(first, out).colwise() - heldInMean(rows);
-            residual.noalias() -= uBlock * coords;  // the PM residual of the held-out frames
-            const Eigen::VectorXd e = maxPointNormPerColumn(residual, channels);
-            for (Index j = 0; j < out; ++j)
-                if (!(e[j] <= pointErr[j])) pointErr[j] = e[j];  // NaN wins
-        }
-        maxOverRanks(comm, pointErr.data(), static_cast<std::size_t>(out));
-        for (Index j = 0; j < out; ++j) {
-            s.frames.push_back(first + j);
-            s.keyRms.push_back(std::sqrt(heldOutK.col(j).squaredNorm() / static_cast<double>(keys.size())));
-            s.maxPointError.push_back(pointErr[j]);
-        }
+        folds.score(first, last, s);
     }
-    if (cappedFolds > 0) {
-        s.notes.push_back("calibration: " + std::to_string(cappedFolds) + " of " + std::to_string(slices) +
-                          " folds had fewer than M = " + std::to_string(basisSize) +
-                          " usable basis vectors (down to " + std::to_string(smallestM) + ")");
+    if (folds.cappedFolds > 0) {
+        s.notes.push_back("calibration: " + std::to_string(folds.cappedFolds) + " of " +
+                          std::to_string(slices) + " folds had fewer than M = " + std::to_string(basisSize) +
+                          " usable basis vectors (down to " + std::to_string(folds.smallestM) + ")");
     }
-
-    if (group > 1) {
-        // One entry per frame, not per member of its group (shared channels: a frame's C channel
-        // frames), in the measures the runtime uses: e_f = sqrt(sum_c e_c^2) is exactly the
-        // frame's key error (RMS over keys of the Euclidean error over channels, PointMultiplier),
-        // and E_f = sqrt(sum_c E_c^2) bounds its largest Euclidean point error from above (each
-        // E_c is the largest over points of that channel's error). Decision: so the conformal
-        // rule's coverage counts frames, as its users read it, and both rules bound the point
-        // error a user measures; per channel the max rule would be a little more conservative
-        // (max_c E_c / e_c >= E_f / e_f) at the price of counting each frame C times.
-        // Folded in place: group f is read from entries f*g.. before entry f is written.
-        const std::size_t g = static_cast<std::size_t>(group), groups = s.frames.size() / g;
-        for (std::size_t f = 0; f < groups; ++f) {
-            double k2 = 0, e2 = 0;
-            for (std::size_t j = f * g; j < (f + 1) * g; ++j) {
-                k2 += s.keyRms[j] * s.keyRms[j];
-                e2 += s.maxPointError[j] * s.maxPointError[j];  // NaN stays NaN
-            }
-            s.frames[f] = s.frames[f * g] / group;
-            s.keyRms[f] = std::sqrt(k2);
-            s.maxPointError[f] = std::sqrt(e2);
-        }
-        s.frames.resize(groups);
-        s.keyRms.resize(groups);
-        s.maxPointError.resize(groups);
-    }
+    if (group > 1) foldGroups(s, group);
     setThresholds(s, tolerance, rule, coverage);
     return s;
 }

@@ -14,9 +14,9 @@
 namespace pmsc {
 
 /// How calibration turns the held-out frames' scores (key error e_f, largest point error E_f) into
-/// the ratio r of the bound E <= r e, and so eps_min = T / r (issue 10).
+/// the ratio r of the bound E <= r e, and so eps_min = T / r.
 enum class CalibrationRule : int {
-    /// r = max_f E_f / e_f (issue 2's rule). Promise: every held-out frame under eps_min had
+    /// r = max_f E_f / e_f. Promise: every held-out frame under eps_min had
     /// E <= T. One extreme pose sets r for every frame, so on real motion it throws hits away.
     MaxRatio = 0,
     /// r = the split-conformal quantile of E_f / e_f at `coverage` 1 - alpha: the
@@ -95,9 +95,9 @@ std::vector<double> heldOutRatios(const CalibrationStats& s);
 /// largest when that rank exceeds n (and +0 for an empty sample).
 double conformalQuantile(std::vector<double> values, double coverage);
 
-/// The calibration above over the rows this process owns (issue 12; the one implementation: the
+/// The calibration above over the rows this process owns (the one implementation: the
 /// overload above wraps q in MatrixBlocks, computing Q^T Q when `gram` is null, so every fold
-/// takes the frame-space route; `svd` is no longer used). One pass over q's blocks per fold; the
+/// takes the frame-space route; `svd` is not used). One pass over q's blocks per fold; the
 /// per-frame largest point errors are reduced over ranks.
 /// @param keyRows Q's rows at the keys (K*C x F), the same q as `gram` (centred or not)
 /// @param group   frames that belong together and stay in one slice: consecutive runs of

@@ -7,7 +7,7 @@
 namespace pmsc {
 
 /// The few collectives training needs when the rows of the training matrix are split across
-/// processes (issue 12). pmsc/ stays free of MPI: this is the whole interface; the single-process
+/// processes. pmsc/ stays free of MPI: this is the whole interface; the single-process
 /// implementation is below, the MPI one lives in cli/mpi/ and is built only when MPI is found.
 ///
 /// Every call is collective: all ranks make it, in the same order, with the same counts. Results

@@ -12,7 +12,7 @@
 
 namespace pmsc {
 
-/// Cross point multiplication (paper section 7; issue 10): "the animator poses the control face
+/// Cross point multiplication (paper section 7): "the animator poses the control face
 /// and the system uses the control face points to find the projection into the joint (control
 /// face, simulated face) subspace and computes the corresponding simulated face. ... the Soft
 /// Cache fail through to a full calculation is not possible."
@@ -51,7 +51,7 @@ struct CrossReport {
 /// RMS e_f and its target's largest point error E_f. scale = median e_f; quantile = the
 /// ceil((n+1) coverage)-th smallest E_f / (e_f + scale) (conformalQuantile). Promise: for a pair
 /// exchangeable with the held-out training pairs, P(E > quantile (e + scale)) <= 1 - coverage
-/// (split-conformal, with two approximations stated in the README: the scores come from fold
+/// (split-conformal, with two approximations stated in docs/face.md: the scores come from fold
 /// models trained on (S-1)/S of the pairs, not the final model, and the scale is taken from the
 /// same scores).
 /// @throws InputError for pairs that do not match (frame or channel counts), too few frames,

@@ -1,4 +1,4 @@
-// CrossState (issue 10: cross point multiplication) as the model file holds it: its checks and the
+// CrossState (cross point multiplication) as the model file holds it: its checks and the
 // "CROSSPM" section codec (format version 2, ModelSections.h):
 //   u64 control points, f64 coverage, f64 quantile, f64 scale, u64 slices,
 //   u64 n, f64 x n held-out key RMS, f64 x n held-out target errors.

@@ -7,7 +7,7 @@
 
 namespace pmsc {
 
-/// What makes a model a cross point-multiplication model (paper section 7, issue 10; section
+/// What makes a model a cross point-multiplication model (paper section 7; section
 /// CROSSPM of a version-2 model file, pmsc/Cross.h). The model's N points are the joint
 /// (control, target) points: the first `controlPoints` are the control's, the rest the target's;
 /// its mean and basis are the joint subspace of (control, target) training pairs and its keys

@@ -7,7 +7,7 @@
 namespace pmsc {
 
 /// Typed errors. The command line maps each to one line on stderr and an exit
-/// code (cli/ExitCodes.h): InputError -> 2, EvaluatorError -> 3, IoError -> 4.
+/// code (app/ExitCodes.h): InputError -> 2, EvaluatorError -> 3, IoError -> 4.
 /// Messages name the file, the frame and the value, so one line is enough.
 
 /// Bad input a user can fix: an unreadable, truncated or corrupt file, a wrong

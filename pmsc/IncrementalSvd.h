@@ -9,7 +9,7 @@ namespace pmsc {
 
 /// A mean-centred truncated SVD that can absorb new frames without the old ones (paper section 5:
 /// "poses identified as cache misses can be tagged and used as additional training ... training
-/// could be done each night"; issue 10).
+/// could be done each night").
 ///
 /// Holds the running mean mu of every frame absorbed so far and a rank-r factorisation
 /// U diag(sigma) of the mean-removed matrix of all of them (the right singular vectors V are not

@@ -12,7 +12,7 @@ namespace pmsc {
 
 /// The frames a soft cache sent to the full calculation, kept as training for `pmsc learn`
 /// (paper section 5: "poses identified as cache misses can be tagged and used as additional
-/// training"; `pmsc replay|run --keep-misses FILE.npy`, issue 10).
+/// training"; `pmsc replay|run --keep-misses FILE.npy`).
 ///
 /// Files: FILE.npy, frames (F, N, C) like any training file, and the sidecar FILE.npy.frames,
 /// text, one tab-separated line per frame in the same order after a '#' header:

@@ -19,7 +19,7 @@ namespace pmsc {
 class KeySet {
 public:
     explicit KeySet(Index points) : isKey_(static_cast<size_t>(points), 0) {}
-    /// Only points [0, candidates) may become keys (cross point multiplication, issue 10: the keys
+    /// Only points [0, candidates) may become keys (cross point multiplication: the keys
     /// of a joint (control, target) model are control points); 0 or >= points: all of them.
     KeySet(Index points, Index candidates) : KeySet(points) {
         if (candidates > 0)
@@ -63,7 +63,7 @@ void seedKeys(KeySet& keys, const std::vector<Index>& fiducials, const std::vect
 Index addTeleconnectionPair(const Eigen::Ref<const Eigen::VectorXd>& v, Index channels, KeySet& keys,
                             Index budget);
 
-/// The same pair for a vector whose rows are split across ranks (issue 12): `v` holds the rows of
+/// The same pair for a vector whose rows are split across ranks: `v` holds the rows of
 /// the points [firstPoint, firstPoint + v.size() / C); `keys` is replicated. The arg-max and
 /// arg-min go through argMaxOverRanks (same tie rule: the lower index), and the first point's
 /// loading is sent from its owner, so every rank adds the same keys.
@@ -134,7 +134,7 @@ struct KeySelection {
 /// U_R = R V_R S_R^-1 = Q (V_R S_R^-1) - B (C V_R S_R^-1) is two skinny products: the residual
 /// is never formed (its largest point error comes from maxPointResidual, block by block). That replaces the
 /// six (N*C) x F x (B+10) products and three tall QRs of the randomized SVD per round (a third of the
-/// key-selection time at the face scale). Since issue 12 it is always used (see the RowBlocks overload below
+/// key-selection time at the face scale). It is always used (see the RowBlocks overload below
 /// for why and for what replaces it when the residual is too small for the subtraction, sigma_R <= 1e-6
 /// sigma_1(Q)). This overload wraps q in MatrixBlocks on one process and computes Q^T Q when `gram` is null.
 /// @param q the mean-removed training matrix, (N*C) x F
@@ -147,7 +147,7 @@ KeySelection selectKeysTeleconnection(const Eigen::Ref<const Eigen::MatrixXd>& q
                                       const TeleconnectionOptions& options,
                                       const Eigen::MatrixXd* gram = nullptr);
 
-/// The selection above over the rows of Q this process owns (issue 12; the one implementation:
+/// The selection above over the rows of Q this process owns (the one implementation:
 /// the in-memory overload wraps q in MatrixBlocks). `basis` and `firstBlock` hold the owned rows;
 /// `gram` = Q^T Q is required. Every product with Q is one pass over q's blocks, reduced over
 /// ranks; the residual's leading vectors always come from frame space (see above), because out of

@@ -45,7 +45,7 @@ struct LearnReport {
 };
 
 /// Updates a model with new frames without its training frames (paper section 5's nightly
-/// training; issue 10):
+/// training):
 /// 1. mean and basis by Brand's incremental SVD (updateSubspace) of the model's state;
 /// 2. keys selected again by the model's selector and settings on the rank-r surrogate of all
 ///    frames seen, U_r diag(sigma) (its Gram matrix is diag(sigma^2): every key-selection step
@@ -57,7 +57,7 @@ struct LearnReport {
 ///    other slices, the new keys) and r = the larger of the rule's ratio on those scores and on
 ///    the stored training scores; eps_min = T / r, eps_max = 2 eps_min.
 /// What is exact and what is approximate compared with training from scratch on all frames is
-/// in the README ("Learning from misses") and IncrementalSvd.h.
+/// in docs/learning-and-calibration.md and IncrementalSvd.h.
 /// @throws InputError if the frames' N or C differ from the model's, there are none, or a value
 ///         is NaN/Inf; std::invalid_argument for bad options; pmsc::Cancelled.
 Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& options = {},

@@ -1,4 +1,4 @@
-// The model-file sections of issue 10 (format version 2, ModelSections.h):
+// The model-file sections of `pmsc learn` (format version 2, ModelSections.h):
 //
 // "LEARNSVD" (Model::learning, LearningState):
 //   u64 maxRank, u64 updates, f64 discardedEnergy,

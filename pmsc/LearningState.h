@@ -10,7 +10,7 @@
 
 namespace pmsc {
 
-/// What `pmsc learn` needs to update a model without its training frames (issue 10; stored as
+/// What `pmsc learn` needs to update a model without its training frames (stored as
 /// the model file's "LEARNSVD" section by `pmsc train --learn-rank R`).
 ///
 /// The model's own mean, basis (M vectors), singular values, frame count and total energy are

@@ -1,8 +1,8 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-// The error measures every report of the project shares (issue 13: `pmsc replay`, the face and
-// learning demos each had their own, and two percentile definitions disagreed).
+// The error measures every report of the project shares (`pmsc replay`, the face and
+// learning demos), so one percentile means the same thing in each.
 
 #include "pmsc/FrameSet.h"  // Index
 
@@ -19,7 +19,7 @@ double maxPointError(const double* a, const double* b, Index points, Index chann
 /// The q-percentile (q in [0, 1]) of a sample, by nearest rank: the ceil(q n)-th smallest of the
 /// n values (the smallest for q = 0, the largest for q = 1); 0 for an empty sample.
 ///
-/// Decision (issue 13): nearest rank, not NumPy's default linear interpolation. Every percentile
+/// Decision: nearest rank, not NumPy's default linear interpolation. Every percentile
 /// pmsc reports is of per-frame largest point errors, read as "99.5% of the frames were at or under
 /// this"; with nearest rank that sentence is exactly true and the value is one a frame really had,
 /// while an interpolated value can lie between two frames' errors and cover a fraction of frames

@@ -33,7 +33,7 @@ struct Model {
     Eigen::VectorXd mean;  ///< N*C training mean (paper footnote 1)
     /// (N*C) x M, orthonormal columns a_i[x] (section 3); N x M when sharedChannels.
     Eigen::MatrixXd basis;
-    /// The channels share one basis over the points (issue 11; `TrainingOptions::sharedChannels`):
+    /// The channels share one basis over the points (`TrainingOptions::sharedChannels`):
     /// basis is N x M, projector M x K, and a frame has M coordinates per channel (C*M in all,
     /// coords[j*C + c]); channel c of a frame is mean_c + basis * coords_c. Decision, for light:
     /// red, green and blue carry the same transport (same shadows, same paths), so they share
@@ -56,14 +56,14 @@ struct Model {
     double trainMaxPointResidual = 0;  ///< largest point error of PM on the training set
 
     // --- optional parts: each one is a tagged section of a version-2 model file (ModelSections.h)
-    /// Local fail-through (issue 9): regions with their own keys, projection and thresholds.
+    /// Local fail-through: regions with their own keys, projection and thresholds.
     std::optional<LocalRegions> regions;
-    /// `pmsc learn` (issue 10): the incremental-SVD state beyond the basis and the key-selection
+    /// `pmsc learn`: the incremental-SVD state beyond the basis and the key-selection
     /// settings (section LEARNSVD; written by `pmsc train --learn-rank` and `pmsc learn`).
     std::optional<LearningState> learning;
     /// The held-out scores eps were calibrated from, and the rule (section CALIBRAT; same).
     std::optional<CalibrationRecord> calibrationRecord;
-    /// Cross point multiplication (issue 10, paper section 7): the points are (control, target)
+    /// Cross point multiplication (paper section 7): the points are (control, target)
     /// and the keys the control's; no fail-through, an error bound instead (section CROSSPM).
     std::optional<CrossState> cross;
 

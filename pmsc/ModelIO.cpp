@@ -156,7 +156,10 @@ std::string encodeModel(const Model& model) {
     return out;
 }
 
-Model decodeModel(std::string_view bytes, const std::string& name) {
+namespace {
+
+/// The magic, the length a header needs, and a version this build reads; returns the version.
+std::uint32_t checkVersion(std::string_view bytes, const std::string& name) {
     const std::uint64_t length = bytes.size();
     if (length >= sizeof kModelMagic && std::memcmp(bytes.data(), kModelMagic, sizeof kModelMagic) != 0)
         bad(name, "not a pmsc model file (bad magic; expected \"PMSCMODL\")");
@@ -171,18 +174,35 @@ Model decodeModel(std::string_view bytes, const std::string& name) {
         bad(name, "unsupported model format version " + std::to_string(version) +
                       " (this build reads versions " + std::to_string(kModelFormatVersionCore) + " to " +
                       std::to_string(kModelFormatVersion) + ")");
-    const bool hasSections = version >= 2;
+    return version;
+}
 
-    const auto n = get<std::uint64_t>(bytes, 16);
-    const auto c = get<std::uint64_t>(bytes, 24);
-    const auto m = get<std::uint64_t>(bytes, 32);
-    const auto k = get<std::uint64_t>(bytes, 40);
-    const auto trainFrames = get<std::uint64_t>(bytes, 48);
-    const auto selector = get<std::uint32_t>(bytes, 56);
+/// The header's sizes and the array lengths they imply.
+struct CoreLayout {
+    std::uint64_t n = 0, c = 0, m = 0, k = 0, trainFrames = 0;
+    std::uint32_t selector = 0;
+    bool shared = false;
+    std::uint64_t nc = 0, nb = 0, ncm = 0, kc = 0, mkc = 0;
+    std::uint64_t coreEnd = 0;  ///< where the sections (version 2) or the checksum begin
+    std::string sizes;          ///< "N=.., C=.., M=.., K=.." for messages
+};
+
+/// Reads the header's sizes and flags and checks that the file is exactly as long as they say.
+CoreLayout readLayout(std::string_view bytes, const std::string& name, std::uint32_t version) {
+    const std::uint64_t length = bytes.size();
+    const bool hasSections = version >= 2;
+    CoreLayout h;
+    h.n = get<std::uint64_t>(bytes, 16);
+    h.c = get<std::uint64_t>(bytes, 24);
+    h.m = get<std::uint64_t>(bytes, 32);
+    h.k = get<std::uint64_t>(bytes, 40);
+    h.trainFrames = get<std::uint64_t>(bytes, 48);
+    h.selector = get<std::uint32_t>(bytes, 56);
     const auto flags = get<std::uint32_t>(bytes, 60);
-    const std::string sizes = "N=" + std::to_string(n) + ", C=" + std::to_string(c) +
-                              ", M=" + std::to_string(m) + ", K=" + std::to_string(k);
-    if (n == 0 || c == 0 || m == 0 || k == 0)
+    h.sizes = "N=" + std::to_string(h.n) + ", C=" + std::to_string(h.c) + ", M=" + std::to_string(h.m) +
+              ", K=" + std::to_string(h.k);
+    const std::string& sizes = h.sizes;
+    if (h.n == 0 || h.c == 0 || h.m == 0 || h.k == 0)
         bad(name, "inconsistent sizes in the header (" + sizes + "): all must be positive");
 
     if (version < kModelFormatVersionFlags && flags != 0)
@@ -191,20 +211,21 @@ Model decodeModel(std::string_view bytes, const std::string& name) {
     if ((flags & ~kModelFlagSharedChannels) != 0)
         bad(name,
             "unknown model flags " + std::to_string(flags) + " (this build knows only 1: shared channels)");
-    const bool shared = (flags & kModelFlagSharedChannels) != 0;
+    h.shared = (flags & kModelFlagSharedChannels) != 0;
     // Expected length = header + 8*(N*C + N*B*M + M + K + M*K*B) + checksum, B = C (or 1 when
     // the channels share the basis), all computed without wrapping; only a file that is exactly
     // that long is parsed (version 2: at least that long plus the section count), so every
     // allocation below is bounded by the real file length.
-    const std::uint64_t b = shared ? 1 : c;
-    std::uint64_t nc = 0, nb = 0, ncm = 0, kc = 0, mkc = 0, values = 0, expected = 0;
-    const bool ok = mulOk(n, c, nc) && mulOk(n, b, nb) && mulOk(nb, m, ncm) && mulOk(k, b, kc) &&
-                    mulOk(m, kc, mkc) && addOk(nc, ncm, values) && addOk(values, m, values) &&
-                    addOk(values, k, values) && addOk(values, mkc, values) && mulOk(values, 8, expected) &&
+    const std::uint64_t b = h.shared ? 1 : h.c;
+    std::uint64_t values = 0, expected = 0;
+    const bool ok = mulOk(h.n, h.c, h.nc) && mulOk(h.n, b, h.nb) && mulOk(h.nb, h.m, h.ncm) &&
+                    mulOk(h.k, b, h.kc) && mulOk(h.m, h.kc, h.mkc) && addOk(h.nc, h.ncm, values) &&
+                    addOk(values, h.m, values) && addOk(values, h.k, values) &&
+                    addOk(values, h.mkc, values) && mulOk(values, 8, expected) &&
                     addOk(expected, kModelHeaderBytes + 8, expected);
     if (!ok)
         bad(name, "inconsistent sizes in the header (" + sizes + "): the arrays would not fit in any file");
-    const std::uint64_t coreEnd = expected - 8;  // where the sections (version 2) or the checksum begin
+    h.coreEnd = expected - 8;
     if (hasSections && !addOk(expected, 8, expected))
         bad(name, "inconsistent sizes in the header (" + sizes + "): the arrays would not fit in any file");
     if (hasSections ? length < expected : expected != length) {
@@ -215,6 +236,12 @@ Model decodeModel(std::string_view bytes, const std::string& name) {
                       " bytes, the file has " + std::to_string(length) + " (" +
                       std::to_string(length - expected) + " extra)");
     }
+    return h;
+}
+
+/// The stored checksum against the one of the bytes before it.
+void checkChecksum(std::string_view bytes, const std::string& name) {
+    const std::uint64_t length = bytes.size();
     const auto stored = get<std::uint64_t>(bytes, length - 8);
     const auto computed = fnv1a64(bytes.data(), length - 8);
     if (stored != computed) {
@@ -223,19 +250,26 @@ Model decodeModel(std::string_view bytes, const std::string& name) {
                       static_cast<unsigned long long>(stored), static_cast<unsigned long long>(computed));
         bad(name, std::string("checksum mismatch: the model file is corrupted") + detail);
     }
-    if (selector > static_cast<std::uint32_t>(Selector::QDeim))
-        bad(name, "unknown key-point selector " + std::to_string(selector));
-    if (m > nb) bad(name, "inconsistent sizes (" + sizes + "): more basis vectors than basis rows");
-    if (k > n) bad(name, "inconsistent sizes (" + sizes + "): more key points than points");
-    if (trainFrames > static_cast<std::uint64_t>(INT64_MAX))
-        bad(name, "inconsistent header: " + std::to_string(trainFrames) + " training frames");
+}
 
+/// The header's values that its sizes alone do not bound.
+void checkHeaderValues(const CoreLayout& h, const std::string& name) {
+    if (h.selector > static_cast<std::uint32_t>(Selector::QDeim))
+        bad(name, "unknown key-point selector " + std::to_string(h.selector));
+    if (h.m > h.nb) bad(name, "inconsistent sizes (" + h.sizes + "): more basis vectors than basis rows");
+    if (h.k > h.n) bad(name, "inconsistent sizes (" + h.sizes + "): more key points than points");
+    if (h.trainFrames > static_cast<std::uint64_t>(INT64_MAX))
+        bad(name, "inconsistent header: " + std::to_string(h.trainFrames) + " training frames");
+}
+
+/// The core model: the header's scalars and the arrays after it.
+Model readCore(std::string_view bytes, const std::string& name, const CoreLayout& h) {
     Model model;
-    model.points = static_cast<Index>(n);
-    model.channels = static_cast<Index>(c);
-    model.trainFrames = static_cast<Index>(trainFrames);
-    model.selector = static_cast<Selector>(selector);
-    model.sharedChannels = shared;
+    model.points = static_cast<Index>(h.n);
+    model.channels = static_cast<Index>(h.c);
+    model.trainFrames = static_cast<Index>(h.trainFrames);
+    model.selector = static_cast<Selector>(h.selector);
+    model.sharedChannels = h.shared;
     model.epsMin = get<double>(bytes, 64);
     model.epsMax = get<double>(bytes, 72);
     model.tolerance = get<double>(bytes, 80);
@@ -246,36 +280,50 @@ Model decodeModel(std::string_view bytes, const std::string& name) {
         std::memcpy(out, bytes.data() + at, count * sizeof(double));
         at += count * sizeof(double);
     };
-    model.mean.resize(static_cast<Index>(nc));
-    readDoubles(model.mean.data(), nc);
-    model.basis.resize(static_cast<Index>(nb), static_cast<Index>(m));
-    readDoubles(model.basis.data(), ncm);
-    model.singularValues.resize(static_cast<Index>(m));
-    readDoubles(model.singularValues.data(), m);
-    model.keyPoints.resize(k);
+    model.mean.resize(static_cast<Index>(h.nc));
+    readDoubles(model.mean.data(), h.nc);
+    model.basis.resize(static_cast<Index>(h.nb), static_cast<Index>(h.m));
+    readDoubles(model.basis.data(), h.ncm);
+    model.singularValues.resize(static_cast<Index>(h.m));
+    readDoubles(model.singularValues.data(), h.m);
+    model.keyPoints.resize(h.k);
     for (auto& key : model.keyPoints) {
         const auto raw = get<std::uint64_t>(bytes, at);
         at += 8;
-        if (raw >= n)
+        if (raw >= h.n)
             bad(name,
-                "key point index " + std::to_string(raw) + " is outside [0, " + std::to_string(n) + ")");
+                "key point index " + std::to_string(raw) + " is outside [0, " + std::to_string(h.n) + ")");
         key = static_cast<Index>(raw);
     }
-    model.projector.resize(static_cast<Index>(m), static_cast<Index>(kc));
-    readDoubles(model.projector.data(), mkc);
+    model.projector.resize(static_cast<Index>(h.m), static_cast<Index>(h.kc));
+    readDoubles(model.projector.data(), h.mkc);
+    return model;
+}
+
+/// Model::validate, its complaint reported as the file's.
+void validateDecoded(const Model& model, const std::string& name) {
     try {
         model.validate();
     } catch (const std::invalid_argument& e) {
         bad(name, std::string("inconsistent model: ") + e.what());
     }
+}
+
+}  // namespace
+
+Model decodeModel(std::string_view bytes, const std::string& name) {
+    const std::uint64_t length = bytes.size();
+    const std::uint32_t version = checkVersion(bytes, name);
+    const bool hasSections = version >= 2;
+    const CoreLayout layout = readLayout(bytes, name, version);
+    checkChecksum(bytes, name);
+    checkHeaderValues(layout, name);
+    Model model = readCore(bytes, name, layout);
+    validateDecoded(model, name);
     if (hasSections) {
-        decodeSections(bytes.substr(coreEnd, length - 8 - coreEnd), name, model);
+        decodeSections(bytes.substr(layout.coreEnd, length - 8 - layout.coreEnd), name, model);
         // Again with the sections: what they may not be combined with (shared channels have none).
-        try {
-            model.validate();
-        } catch (const std::invalid_argument& e) {
-            bad(name, std::string("inconsistent model: ") + e.what());
-        }
+        validateDecoded(model, name);
     }
     return model;
 }

@@ -12,16 +12,16 @@ namespace pmsc {
 /// Newest model file layout this build writes and reads (it reads every older one too).
 inline constexpr std::uint32_t kModelFormatVersion = 3;
 /// Version 2 with the header's flags word (offset 60) in use: written only for a model with a
-/// flag set (shared channels, issue 11), so an older build says "unsupported version 3" instead
+/// flag set (shared channels), so an older build says "unsupported version 3" instead
 /// of misreading the arrays.
 inline constexpr std::uint32_t kModelFormatVersionFlags = 3;
-/// Version 1 with tagged sections (issue 9).
+/// Version 1 with tagged sections.
 inline constexpr std::uint32_t kModelFormatVersionSections = 2;
 /// The layout without sections. A model with no optional part is still written as version 1,
-/// byte for byte as before version 2 existed, so older builds keep reading it.
+/// byte for byte the same, so builds that read only version 1 keep reading it.
 inline constexpr std::uint32_t kModelFormatVersionCore = 1;
 
-/// The .pmsc model file (issue 2, item 8). Little-endian, no padding:
+/// The .pmsc model file. Little-endian, no padding:
 ///
 ///   offset  size        field
 ///   0       8           magic "PMSCMODL"
@@ -34,7 +34,7 @@ inline constexpr std::uint32_t kModelFormatVersionCore = 1;
 ///   48      8  u64      training frames
 ///   56      4  u32      selector (0 teleconnection, 1 Q-DEIM)
 ///   60      4  u32      reserved, 0; version 3: flags, 1 = the channels share the basis
-///                       (issue 11; then B = 1 below, else B = C)
+///                       (then B = 1 below, else B = C)
 ///   64      8  f64      eps_min
 ///   72      8  f64      eps_max
 ///   80      8  f64      tolerance (0: not calibrated)
@@ -50,8 +50,8 @@ inline constexpr std::uint32_t kModelFormatVersionCore = 1;
 /// The whole file size follows from the header, so a reader knows before it
 /// allocates anything whether the file can hold what the header claims.
 ///
-/// Version 3 (issue 11) is version 2 with the flags word in use; it is written only when a flag
-/// is set. Version 2 (issue 9) is version 1 with version 2 in the header and, between the
+/// Version 3 (shared channels) is version 2 with the flags word in use; it is written only when a flag
+/// is set. Version 2 is version 1 with version 2 in the header and, between the
 /// projector and the checksum, optional tagged sections (version 3 has them too):
 ///
 ///           8  u64      S  section count

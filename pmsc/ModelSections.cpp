@@ -12,9 +12,9 @@ std::span<const ModelSectionCodec> modelSectionCodecs() {
     // One line per feature. The order is the order of the sections in a written file.
     static const ModelSectionCodec codecs[] = {
         regionsSectionCodec(),
-        learningSectionCodec(),     // LEARNSVD (issue 10)
-        calibrationSectionCodec(),  // CALIBRAT (issue 10)
-        crossSectionCodec(),        // CROSSPM (issue 10: cross point multiplication)
+        learningSectionCodec(),     // LEARNSVD (`pmsc learn`)
+        calibrationSectionCodec(),  // CALIBRAT (`pmsc learn`)
+        crossSectionCodec(),        // CROSSPM (cross point multiplication)
     };
     return codecs;
 }

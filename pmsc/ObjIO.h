@@ -1,7 +1,7 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-// Wavefront .obj: the one reader and the one writer of the project (issue 13). The face rig reads
+// Wavefront .obj: the one reader and the one writer of the project. The face rig reads
 // the ICT meshes with it, the synthetic ICT frames read their blendshapes with it, and every
 // evaluator that poses a mesh (face, skin) writes `pmsc run --format obj` frames with it, so an
 // .obj output has the same format, and holds the same values, whichever evaluator made it.

@@ -22,7 +22,7 @@ namespace pmsc {
 /// on which other points are evaluated with it, nor on the thread count.
 class PointEvaluator {
 public:
-    /// How this evaluator is best failed through (issue 9): a property of the calculation, not
+    /// How this evaluator is best failed through: a property of the calculation, not
     /// an engine option, because only the evaluator knows whether its full evaluation shares work
     /// between points and whether a subset costs in proportion to its size.
     struct FailThroughShape {

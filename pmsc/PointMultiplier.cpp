@@ -128,7 +128,7 @@ double PointMultiplier::keyRmsError(const double* keyValues, const double* coord
     // so the number reads like a point error in data units and eps can be compared with the
     // point errors a user measures.
     // The key basis is column-major: a block of rows at a time, accumulated column by column,
-    // reads it contiguously (a row-by-row dot product strides by K*C and was, after the
+    // reads it contiguously (a row-by-row dot product strides by K*C and would be, after the
     // evaluator, the largest cost of a missed frame in the engine benchmark). The block lives
     // on the stack, so there is still no K*C temporary on the heap.
     constexpr Index kBlock = 256;

@@ -144,14 +144,11 @@ void featherEntries(const Eigen::MatrixXd& pos, const std::vector<Index>& region
     }
 }
 
-}  // namespace
-
-LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Model& model,
-                          const RegionOptions& options, double tolerance, Index slices, const SvdOptions& svd,
-                          std::vector<std::string>* notes) {
+/// The options and the model regions are learned for, checked before any work.
+void checkRegionInput(const Eigen::Ref<const Eigen::MatrixXd>& q, const Model& model,
+                      const RegionOptions& options) {
     const Index n = model.points;
     const Index c = model.channels;
-    const Index f = q.cols();
     if (options.count < 1 || options.count > n)
         badOption("count must be in [1, " + std::to_string(n) + "], got " + std::to_string(options.count));
     if (!(options.featherFraction >= 0 && options.featherFraction < 1))
@@ -168,7 +165,12 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
         throw std::invalid_argument(
             "learnRegions: a model whose channels share the basis has no regions in this version");
     if (q.rows() != n * c) throw std::invalid_argument("learnRegions: q has the wrong row count");
+}
 
+/// The points' positions (N x 3): the given ones, else the mean of 3-channel data.
+Eigen::MatrixXd pointPositions(const Model& model, const RegionOptions& options) {
+    const Index n = model.points;
+    const Index c = model.channels;
     Eigen::MatrixXd pos;
     if (options.positions.size() > 0) {
         if (options.positions.rows() != n || options.positions.cols() != 3 || !options.positions.allFinite())
@@ -179,6 +181,158 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
     } else {
         badOption("point positions are needed for " + std::to_string(c) + "-channel data (none given)");
     }
+    return pos;
+}
+
+/// Step 3a: region keys where a region holds fewer than ownKeys of the model's keys:
+/// farthest-point sampling over its points, seeded by its most moving point.
+void addRegionKeys(const Eigen::Ref<const Eigen::MatrixXd>& q, const Model& model,
+                   const RegionOptions& options, const std::vector<Index>& regionOf,
+                   const Eigen::MatrixXd& pos, LocalRegions& out) {
+    const Index c = model.channels;
+    const Index r = Index(out.regions.size());
+    std::vector<Index> inside(size_t(r), 0);
+    for (const Index p : model.keyPoints) ++inside[size_t(regionOf[size_t(p)])];
+    for (Index ri = 0; ri < r; ++ri) {
+        const std::vector<Index>& pts = out.regions[size_t(ri)].points;
+        const Index need = std::min<Index>(options.ownKeys - inside[size_t(ri)], Index(pts.size()));
+        if (need <= 0) continue;
+        Index seed = 0;
+        double most = -1;
+        for (size_t i = 0; i < pts.size(); ++i) {
+            const double motion = q.middleRows(pts[i] * c, c).squaredNorm();
+            if (motion > most) most = motion, seed = Index(i);
+        }
+        std::vector<double> nearest(pts.size(), std::numeric_limits<double>::infinity());
+        Index next = seed;
+        for (Index j = 0; j < need; ++j) {
+            out.extraKeyPoints.push_back(pts[size_t(next)]);
+            for (size_t i = 0; i < pts.size(); ++i)
+                nearest[i] =
+                    std::min(nearest[i], (pos.row(pts[i]) - pos.row(pts[size_t(next)])).squaredNorm());
+            next = Index(std::max_element(nearest.begin(), nearest.end()) - nearest.begin());
+        }
+    }
+}
+
+/// Step 3: region `ri`'s keys: every key inside it, then the nearest outside ones until it has
+/// minKeys, and any within keyRadius of it; sorted.
+void chooseRegionKeys(Region& g, Index ri, const Model& model, const LocalRegions& out,
+                      const RegionOptions& options, const std::vector<Index>& regionOf,
+                      const Eigen::MatrixXd& pos, double diagonal) {
+    const Index k = model.keyCount() + Index(out.extraKeyPoints.size());
+    std::vector<std::pair<double, Index>> outside;  // (distance to the region's nearest point, key number)
+    for (Index key = 0; key < k; ++key) {
+        const Index p = out.keyPoint(model, key);
+        if (regionOf[size_t(p)] == ri) {
+            g.keys.push_back(key);
+        } else {
+            double d = std::numeric_limits<double>::infinity();
+            for (const Index other : g.points) d = std::min(d, (pos.row(p) - pos.row(other)).squaredNorm());
+            outside.push_back({std::sqrt(d), key});
+        }
+    }
+    std::sort(outside.begin(), outside.end());
+    for (size_t i = 0; i < outside.size() && (Index(g.keys.size()) < options.minKeys ||
+                                              outside[i].first <= options.keyRadius * diagonal);
+         ++i)
+        g.keys.push_back(outside[i].second);
+    std::sort(g.keys.begin(), g.keys.end());
+}
+
+/// The region's rows of q: its points, then its keys that lie outside it; `keyLocal` gets the
+/// position of each key among them.
+Eigen::MatrixXd regionRows(const Eigen::Ref<const Eigen::MatrixXd>& q, const Region& g, const Model& model,
+                           const LocalRegions& out, std::vector<Index>& keyLocal) {
+    const Index c = model.channels;
+    std::vector<Index> local = g.points;
+    for (const Index key : g.keys) {
+        const Index p = out.keyPoint(model, key);
+        const auto at = std::lower_bound(g.points.begin(), g.points.end(), p);
+        if (at != g.points.end() && *at == p) {
+            keyLocal.push_back(at - g.points.begin());
+        } else {
+            keyLocal.push_back(static_cast<Index>(local.size()));
+            local.push_back(p);
+        }
+    }
+    Eigen::MatrixXd qr(Index(local.size()) * c, q.cols());
+    for (size_t i = 0; i < local.size(); ++i) qr.middleRows(Index(i) * c, c) = q.middleRows(local[i] * c, c);
+    return qr;
+}
+
+/// Step 4: the region's thresholds from its calibration (or training) key errors.
+void setRegionThresholds(Region& g, const CalibrationStats& cal, double tolerance,
+                         const RegionOptions& options) {
+    // Decision: a region's blend zone is [eps_min, 1.5 eps_min] (the paper's hand-picked ratio,
+    // section 7), narrower than the frame's [eps_min, 2 eps_min]: its bound rests on a few keys
+    // and a motion training never saw (the reason a region fails) can exceed the calibrated
+    // ratio, so a region that sees any of it should reach the full result sooner.
+    g.epsMin = cal.epsMin;
+    // A region PM reconstructed exactly on every held-out frame (a part that never moved in
+    // training: the back of a head) gets its largest held-out key error as eps_min, which is
+    // rounding noise: the same noise on a new frame would fail it through. Any key error under
+    // 1e-6 of the tolerance is noise for such a region, so it is the floor.
+    if (tolerance > 0 && cal.ratio == 0) g.epsMin = std::max(g.epsMin, 1e-6 * tolerance);
+    // The margin (RegionOptions::ratioMargin) on the calibrated bound, not on the noise floor.
+    if (tolerance > 0 && cal.ratio > 0) g.epsMin /= options.ratioMargin;
+    g.epsMax = 1.5 * g.epsMin;
+}
+
+/// Step 4: region `ri`'s local basis (the energy rule, capped by its share of key values), key
+/// projector and thresholds, learned from its rows `qr`; true if the cap made the basis smaller
+/// than the model's.
+bool fitRegion(Region& g, Index ri, const Eigen::MatrixXd& qr, const std::vector<Index>& keyLocal,
+               const Model& model, const RegionOptions& options, double tolerance, Index slices,
+               const SvdOptions& svd) {
+    const Index c = model.channels;
+    const Index f = qr.cols();
+    const Index kc = Index(g.keys.size()) * c;
+    const Index cap =
+        std::max<Index>(1, std::min({model.basisSize(), Index(options.basisShare * double(kc)), f - 1}));
+    SvdOptions o = svd;
+    o.seed = svd.seed + 7919u * static_cast<unsigned>(ri + 1);
+    const TruncatedSvd local_svd = truncatedSvd(qr, cap, o);
+    const double energy = qr.squaredNorm();
+    Index m = local_svd.sigma.size() > 0
+                  ? basisSizeForEnergy(local_svd.sigma, energy > 0 ? energy : 1.0, options.energy)
+                  : 0;
+    m = std::clamp<Index>(m, 1, std::max<Index>(1, local_svd.sigma.size()));
+    if (local_svd.sigma.size() == 0) {
+        // A region that never moved in training: a zero basis vector reconstructs the mean.
+        g.basis = Eigen::MatrixXd::Zero(Index(g.points.size()) * c, 1);
+        g.keyBasis = Eigen::MatrixXd::Zero(kc, 1);
+    } else {
+        const Eigen::MatrixXd u = local_svd.u.leftCols(m);
+        g.basis = u.topRows(Index(g.points.size()) * c);
+        g.keyBasis = gatherKeyRows(u, c, keyLocal);
+    }
+    const bool capped = m == cap && cap < model.basisSize();
+    {
+        Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(g.keyBasis);
+        g.projector = cod.pseudoInverse();
+    }
+    CalibrationStats cal;
+    if (tolerance > 0 && local_svd.sigma.size() > 0) {
+        cal = calibrate(qr, c, keyLocal, m, tolerance, slices, o);
+        g.ratio = cal.ratio;
+    } else {
+        Eigen::MatrixXd u = Eigen::MatrixXd::Zero(qr.rows(), 1);
+        if (local_svd.sigma.size() > 0) u = local_svd.u.leftCols(m);
+        cal = thresholdsFromTraining(qr, u, c, keyLocal, g.projector);
+    }
+    setRegionThresholds(g, cal, tolerance, options);
+    return capped;
+}
+
+}  // namespace
+
+LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Model& model,
+                          const RegionOptions& options, double tolerance, Index slices, const SvdOptions& svd,
+                          std::vector<std::string>* notes) {
+    const Index n = model.points;
+    checkRegionInput(q, model, options);
+    const Eigen::MatrixXd pos = pointPositions(model, options);
     const double diagonal = (pos.colwise().maxCoeff() - pos.colwise().minCoeff()).norm();
     const double scale = diagonal > 0 ? std::sqrt(double(options.count)) / diagonal : 1.0;
 
@@ -198,124 +352,16 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
     out.featherWidth = options.featherFraction * diagonal;
     out.regions.resize(size_t(r));
     for (Index p = 0; p < n; ++p) out.regions[size_t(regionOf[size_t(p)])].points.push_back(p);
-
-    // Step 3a: region keys where a region holds fewer than ownKeys of the model's keys:
-    // farthest-point sampling over its points, seeded by its most moving point.
-    if (options.ownKeys > 0) {
-        std::vector<Index> inside(size_t(r), 0);
-        for (const Index p : model.keyPoints) ++inside[size_t(regionOf[size_t(p)])];
-        for (Index ri = 0; ri < r; ++ri) {
-            const std::vector<Index>& pts = out.regions[size_t(ri)].points;
-            const Index need = std::min<Index>(options.ownKeys - inside[size_t(ri)], Index(pts.size()));
-            if (need <= 0) continue;
-            Index seed = 0;
-            double most = -1;
-            for (size_t i = 0; i < pts.size(); ++i) {
-                const double motion = q.middleRows(pts[i] * c, c).squaredNorm();
-                if (motion > most) most = motion, seed = Index(i);
-            }
-            std::vector<double> nearest(pts.size(), std::numeric_limits<double>::infinity());
-            Index next = seed;
-            for (Index j = 0; j < need; ++j) {
-                out.extraKeyPoints.push_back(pts[size_t(next)]);
-                for (size_t i = 0; i < pts.size(); ++i)
-                    nearest[i] =
-                        std::min(nearest[i], (pos.row(pts[i]) - pos.row(pts[size_t(next)])).squaredNorm());
-                next = Index(std::max_element(nearest.begin(), nearest.end()) - nearest.begin());
-            }
-        }
-    }
-    const auto keyPoint = [&](Index key) { return out.keyPoint(model, key); };
+    if (options.ownKeys > 0) addRegionKeys(q, model, options, regionOf, pos, out);
 
     // Steps 3-4: keys, local basis, projector, thresholds.
-    const Index k = model.keyCount() + Index(out.extraKeyPoints.size());
     Index smallBases = 0;
     for (Index ri = 0; ri < r; ++ri) {
         Region& g = out.regions[size_t(ri)];
-        std::vector<std::pair<double, Index>>
-            outside;  // (distance to the region's nearest point, key number)
-        for (Index key = 0; key < k; ++key) {
-            const Index p = keyPoint(key);
-            if (regionOf[size_t(p)] == ri) {
-                g.keys.push_back(key);
-            } else {
-                double d = std::numeric_limits<double>::infinity();
-                for (const Index other : g.points)
-                    d = std::min(d, (pos.row(p) - pos.row(other)).squaredNorm());
-                outside.push_back({std::sqrt(d), key});
-            }
-        }
-        std::sort(outside.begin(), outside.end());
-        for (size_t i = 0; i < outside.size() && (Index(g.keys.size()) < options.minKeys ||
-                                                  outside[i].first <= options.keyRadius * diagonal);
-             ++i)
-            g.keys.push_back(outside[i].second);
-        std::sort(g.keys.begin(), g.keys.end());
-
-        // The region's rows of q: its points, then its keys that lie outside it.
-        std::vector<Index> local = g.points;
-        std::vector<Index> keyLocal;  // position of each key in `local`
-        for (const Index key : g.keys) {
-            const Index p = keyPoint(key);
-            const auto at = std::lower_bound(g.points.begin(), g.points.end(), p);
-            if (at != g.points.end() && *at == p) {
-                keyLocal.push_back(at - g.points.begin());
-            } else {
-                keyLocal.push_back(static_cast<Index>(local.size()));
-                local.push_back(p);
-            }
-        }
-        Eigen::MatrixXd qr(Index(local.size()) * c, f);
-        for (size_t i = 0; i < local.size(); ++i)
-            qr.middleRows(Index(i) * c, c) = q.middleRows(local[i] * c, c);
-
-        const Index kc = Index(g.keys.size()) * c;
-        const Index cap =
-            std::max<Index>(1, std::min({model.basisSize(), Index(options.basisShare * double(kc)), f - 1}));
-        SvdOptions o = svd;
-        o.seed = svd.seed + 7919u * static_cast<unsigned>(ri + 1);
-        const TruncatedSvd local_svd = truncatedSvd(qr, cap, o);
-        const double energy = qr.squaredNorm();
-        Index m = local_svd.sigma.size() > 0
-                      ? basisSizeForEnergy(local_svd.sigma, energy > 0 ? energy : 1.0, options.energy)
-                      : 0;
-        m = std::clamp<Index>(m, 1, std::max<Index>(1, local_svd.sigma.size()));
-        if (local_svd.sigma.size() == 0) {
-            // A region that never moved in training: a zero basis vector reconstructs the mean.
-            g.basis = Eigen::MatrixXd::Zero(Index(g.points.size()) * c, 1);
-            g.keyBasis = Eigen::MatrixXd::Zero(kc, 1);
-        } else {
-            const Eigen::MatrixXd u = local_svd.u.leftCols(m);
-            g.basis = u.topRows(Index(g.points.size()) * c);
-            g.keyBasis = gatherKeyRows(u, c, keyLocal);
-        }
-        if (m == cap && cap < model.basisSize()) ++smallBases;
-        {
-            Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(g.keyBasis);
-            g.projector = cod.pseudoInverse();
-        }
-        CalibrationStats cal;
-        if (tolerance > 0 && local_svd.sigma.size() > 0) {
-            cal = calibrate(qr, c, keyLocal, m, tolerance, slices, o);
-            g.ratio = cal.ratio;
-        } else {
-            Eigen::MatrixXd u = Eigen::MatrixXd::Zero(qr.rows(), 1);
-            if (local_svd.sigma.size() > 0) u = local_svd.u.leftCols(m);
-            cal = thresholdsFromTraining(qr, u, c, keyLocal, g.projector);
-        }
-        // Decision: a region's blend zone is [eps_min, 1.5 eps_min] (the paper's hand-picked ratio,
-        // section 7), narrower than the frame's [eps_min, 2 eps_min]: its bound rests on a few keys
-        // and a motion training never saw (the reason a region fails) can exceed the calibrated
-        // ratio, so a region that sees any of it should reach the full result sooner.
-        g.epsMin = cal.epsMin;
-        // A region PM reconstructed exactly on every held-out frame (a part that never moved in
-        // training: the back of a head) gets its largest held-out key error as eps_min, which is
-        // rounding noise: the same noise on a new frame would fail it through. Any key error under
-        // 1e-6 of the tolerance is noise for such a region, so it is the floor.
-        if (tolerance > 0 && cal.ratio == 0) g.epsMin = std::max(g.epsMin, 1e-6 * tolerance);
-        // The margin (RegionOptions::ratioMargin) on the calibrated bound, not on the noise floor.
-        if (tolerance > 0 && cal.ratio > 0) g.epsMin /= options.ratioMargin;
-        g.epsMax = 1.5 * g.epsMin;
+        chooseRegionKeys(g, ri, model, out, options, regionOf, pos, diagonal);
+        std::vector<Index> keyLocal;  // position of each key in the region's rows
+        const Eigen::MatrixXd qr = regionRows(q, g, model, out, keyLocal);
+        if (fitRegion(g, ri, qr, keyLocal, model, options, tolerance, slices, svd)) ++smallBases;
     }
     if (notes && smallBases > 0)
         notes->push_back("regions: " + std::to_string(smallBases) + " of " + std::to_string(r) +

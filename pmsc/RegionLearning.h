@@ -11,8 +11,8 @@
 
 namespace pmsc {
 
-/// How training learns the regions of local fail-through (issue 9). count = 0: no regions (the
-/// model is then a version-1 model, as before).
+/// How training learns the regions of local fail-through. count = 0: no regions (the
+/// model is then a version-1 model).
 struct RegionOptions {
     Index count = 0;  ///< R, the number of regions wanted (fewer if clustering leaves some empty)
     /// Feather width as a fraction of the positions' bounding-box diagonal (Regions.h).
@@ -24,7 +24,7 @@ struct RegionOptions {
     /// real test.
     double energy = 0.9999;
     /// Fewest keys a region projects from; the nearest keys outside it are added when it holds fewer.
-    /// 12 (36 key values on a face): with 6 (the first version) a region's key error was noise
+    /// 12 (36 key values on a face): with 6 a region's key error was noise
     /// on the ICT face's novel set — frames whose region error exceeded 1% of the head diagonal
     /// had key errors below those of frames with 0.1% — because most regions (neck, teeth,
     /// gums, mouth socket) hold no key of their own.
@@ -49,16 +49,16 @@ struct RegionOptions {
     /// 0.85%; 6% 47.5% (worst 0.78%), 3% 45.0% but worst 0.97%, too close to the tolerance.
     double keyRadius = 0.045;
     /// Each region's basis has at most this share of its key values (K_r*C): the rest of the key
-    /// values are left as residual, so the region's key error still tests its points. 0.4 (it was
-    /// 2/3): a region's key RMS measured on 2/3 of a few dozen values left about ten degrees of
+    /// values are left as residual, so the region's key error still tests its points. 0.4, not
+    /// 2/3: a region's key RMS measured on 2/3 of a few dozen values left about ten degrees of
     /// freedom, too few to see a motion its basis absorbs.
     double basisShare = 0.4;
     /// Safety factor on each region's calibrated ratio: eps_min = T / (margin r). Held-out slices
     /// are ordinary motion, but a region fails for motion training never saw, and on the ICT
     /// face's novel set (cheekPuff, mouthLeft, jawForward) the region error per key error came
     /// out up to 1.4x the largest held-out ratio (regions bordering the mouth). With 1.5 no
-    /// region hit exceeded the tolerance there; 1 let the worst frame reach 1.36%. That was
-    /// before regions had keys of their own (ownKeys): with 4 of them the worst novel frame is
+    /// region hit exceeded the tolerance there; 1 let the worst frame reach 1.36%. Measured
+    /// with no keys of their own (ownKeys = 0); with 4 of them the worst novel frame is
     /// 0.51% at 1.5 and 0.78% at 1, so 1 (the calibrated bound itself, 47.5% of the points
     /// evaluated against 51.6%). A model trained with ownKeys = 0 should set 1.5 again.
     double ratioMargin = 1.0;

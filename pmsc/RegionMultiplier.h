@@ -9,7 +9,7 @@
 
 namespace pmsc {
 
-/// The runtime of local fail-through (issue 9; paper section 9): each region's block projection
+/// The runtime of local fail-through (paper section 9): each region's block projection
 /// from its own keys, its key error and soft-cache decision, the feathered per-point weights of
 /// the full result, and each region's reconstruction.
 ///

@@ -125,8 +125,8 @@ void LocalRegions::validate(const Model& model) const {
 //            f64[M_r*Kr*C] projector (matrices column-major)
 //   u64 E feather entries, u64[N+1] feather start, u64[E] regions, f64[E] factors
 //   only when the model has region keys: u64 X region keys, u64[X] their points (a region's key
-//   numbers K .. K+X-1 name them). A section without them (the first version 2 files) ends
-//   after the factors and is read as before.
+//   numbers K .. K+X-1 name them). A section without them ends
+//   after the factors and is read as a model without region keys.
 
 namespace {
 

@@ -13,7 +13,7 @@ namespace pmsc {
 struct Model;
 struct ModelSectionCodec;
 
-/// One region of local fail-through (paper section 9, "local fail through"; issue 9): a set of
+/// One region of local fail-through (paper section 9, "local fail through"): a set of
 /// points whose errors rise and fall together, with its own key points, its own block projection
 /// and its own calibrated key-error thresholds.
 ///
@@ -51,7 +51,7 @@ struct LocalRegions {
     /// (one full evaluation costs less than many partial ones).
     double maxLocalFraction = 0.6;
     /// Feather entries of point p: [featherStart[p], featherStart[p+1]) in featherRegion/featherFactor.
-    /// Region keys (issue 9): points evaluated, like the model's keys, for frames that miss as a
+    /// Region keys: points evaluated, like the model's keys, for frames that miss as a
     /// whole, so that regions holding none of the model's keys see their own motion. Key number
     /// K + i in Region::keys is extraKeyPoints[i].
     std::vector<Index> extraKeyPoints;

@@ -10,7 +10,7 @@
 
 namespace pmsc {
 
-// The passes over the rows of Q that training makes (issue 12). Each visits the owned blocks once
+// The passes over the rows of Q that training makes. Each visits the owned blocks once
 // and reduces over ranks through the Communicator; "local" matrices hold the owned rows only
 // (ownedRows() x k), replicated ones are the same on every rank.
 

@@ -16,7 +16,7 @@ namespace pmsc {
 
 /// The rows of the mean-removed training matrix Q ((N*C) x F, rows x = p*C + c, section 3) that
 /// this process owns: the contiguous points [firstPoint, firstPoint + ownedPoints), handed out in
-/// blocks of whole points (issue 12). Training runs one algorithm over this abstraction: in memory
+/// blocks of whole points. Training runs one algorithm over this abstraction: in memory
 /// it is one block of every point; out of core, blocks are read from the .npy files on demand, so
 /// only one block of F columns is in memory at a time; under MPI each rank owns its share of the
 /// points and never reads another rank's rows.

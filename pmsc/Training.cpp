@@ -212,23 +212,8 @@ Model trainSharedChannels(const FrameSet& frames, const TrainingOptions& options
     return model;
 }
 
-}  // namespace
-
-Model train(const FrameSet& frames, const TrainingOptions& options, TrainingReport* reportOut) {
-    validateFrames(frames);
-    if (options.sharedChannels && frames.channels > 1) return trainSharedChannels(frames, options, reportOut);
-    MatrixBlocks q(frames);
-    SingleProcess one;
-    return train(q, one, options, reportOut);
-}
-
-Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, TrainingReport* reportOut) {
-    const auto start = std::chrono::steady_clock::now();
-    TrainingReport localReport;
-    TrainingReport& report = reportOut ? *reportOut : localReport;
-    report = TrainingReport{};
-    report.ranks = comm.size();
-    report.blockPoints = q.blockPoints();
+/// What train() checks before any work: the options against the data's sizes.
+void checkTrainingInput(RowBlocks& q, Communicator& comm, const TrainingOptions& options) {
     if (options.sharedChannels && q.channels() > 1)
         throw std::invalid_argument(
             "channels sharing the basis are trained in memory on one process; drop the shared channels, "
@@ -237,17 +222,8 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
         throw std::invalid_argument(
             "regions (local fail-through) are learned from the training matrix in memory on one process; "
             "drop --regions, or train in memory without MPI");
-
-    auto progress = [&](std::string_view stage, double done, double total) {
-        if (options.progress && !options.progress(stage, done, total)) {
-            throw Cancelled("training cancelled during " + std::string(stage));
-        }
-    };
-
     const Index n = q.points();
-    const Index channels = q.channels();
     const Index f = q.frames();
-    const Index rows = n * channels;
     if (f < 2) throw InputError("train: need at least 2 training frames, got " + std::to_string(f));
     validateOptions(options, n, f);
     {
@@ -256,30 +232,96 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
         KeySet check(n);
         seedKeys(check, options.fiducials, options.gridPoints);
     }
+}
 
+/// The training of one model from the mean-removed rows of Q, step by step (the paper's
+/// sections in order); each step reads what the ones before it left in the members.
+struct Trainer {
+    RowBlocks& q;
+    Communicator& comm;
+    const TrainingOptions& options;
+    TrainingReport& report;
+    const Index n, channels, f, rows;
+    Model model;
+    Eigen::MatrixXd gram;          ///< Q^T Q, F x F, replicated
+    TruncatedSvd svd;              ///< of Q; U's owned rows, formed as far as needed
+    Index cap = 0;                 ///< the largest basis the options and the data allow
+    Index available = 0;           ///< basis vectors with non-negligible singular values, <= cap
+    Index m = 0;                   ///< the basis size
+    Eigen::MatrixXd basis;         ///< owned rows
+    std::vector<Index> keys;       ///< the key points
+    Eigen::MatrixXd keyRows;       ///< Q's rows at the keys, K*C x F, replicated
+    Eigen::MatrixXd basisKeyRows;  ///< the basis's rows at the keys, K*C x M, replicated
+
+    Trainer(RowBlocks& blocks, Communicator& communicator, const TrainingOptions& trainingOptions,
+            TrainingReport& trainingReport)
+        : q(blocks),
+          comm(communicator),
+          options(trainingOptions),
+          report(trainingReport),
+          n(blocks.points()),
+          channels(blocks.channels()),
+          f(blocks.frames()),
+          rows(n * channels) {}
+
+    /// Calls the caller's progress callback; cancels the training when it says stop.
+    void progress(std::string_view stage, double done, double total) const;
+    /// Q's Gram matrix and the model's sizes.
+    void meanAndGram();
+    /// The subspace (section 3): V and sigma from eig(Q^T Q).
+    void subspace();
+    /// M: the first rule that is set wins (TrainingOptions order); forms U's first M columns.
+    void chooseBasisSize();
+    /// M from the largest point error of each basis size (--basis-max-error).
+    void basisSizeFromPointErrors();
+    /// Key points (section 4) by teleconnection.
+    void teleconnectionKeys();
+    /// Key points (section 4) by Q-DEIM, on rank 0.
+    void qdeimKeys();
+    /// Determinacy: never leave the key system unable to determine the basis; returns whether the
+    /// residual the selection reported is the final one.
+    bool determineBasis();
+    /// The key projector and the training residual.
+    void projector();
+    /// eps (section 5; calibration beyond the paper).
+    void thresholds();
+    /// The learning state: the next left singular vectors after the basis, up to rank r.
+    void learningState();
+    /// Regions of local fail-through (paper section 9), on the final core.
+    void regions();
+};
+
+void Trainer::progress(std::string_view stage, double done, double total) const {
+    if (options.progress && !options.progress(stage, done, total)) {
+        throw Cancelled("training cancelled during " + std::string(stage));
+    }
+}
+
+void Trainer::meanAndGram() {
     // --- Q: mean-removed training matrix (paper footnote 1), rows x = p*C + c, columns frames;
     // each block is centred as it is read (RowBlocks). Its Gram matrix Q^T Q is the one pass every
     // later step reuses: the SVD (section 3), the residual blocks of key selection, calibration.
     progress("mean", 0, 1);
-    Model model;
     model.points = n;
     model.channels = channels;
     model.trainFrames = f;
     model.selector = options.selector;
     progress("mean", 1, 1);
     progress("svd", 0, 1);
-    const Eigen::MatrixXd gram = gramOf(q, comm);
+    gram = gramOf(q, comm);
     model.totalEnergy = gram.trace();
     if (!(model.totalEnergy > 0)) {
         throw InputError("train: the training frames are all identical; there is no motion to learn");
     }
+}
 
+void Trainer::subspace() {
     // --- Subspace (section 3): eig(Q^T Q) gives V and sigma; U = Q V S^-1 is formed (one pass)
     // once it is known how many columns the M rule and key selection need. Decision: always this
     // Gram route (Subspace.h weighs it against a randomized SVD in memory): out of core and under
     // MPI it costs one pass over the data and one reduction of F x F, where the randomized route
     // needs 2q + 2 passes and a distributed tall QR.
-    const Index cap = std::min({options.maxBasis, f, rows});
+    cap = std::min({options.maxBasis, f, rows});
     Index wanted = options.basis > 0 ? std::min(options.basis, cap) : cap;
     if (options.basis > cap) {
         report.warnings.push_back("basis " + std::to_string(options.basis) + " capped to " +
@@ -287,14 +329,14 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
     }
     // The first key-selection block needs the top `block` vectors of Q even when M is smaller.
     const Index svdRank = std::min(std::max({wanted, options.block, options.learnRank}), std::min(f, rows));
-    TruncatedSvd svd = svdFromGram(Eigen::MatrixXd(0, f), gram, svdRank, 0);
+    svd = svdFromGram(Eigen::MatrixXd(0, f), gram, svdRank, 0);
     svd.u.resize(q.ownedRows(), 0);
-    const Index available = std::min<Index>(cap, svd.sigma.size());
+    available = std::min<Index>(cap, svd.sigma.size());
     if (available < 1) throw InputError("train: the training frames have no usable variation");
     progress("svd", 1, 1);
+}
 
-    // --- M: the first rule that is set wins (TrainingOptions order).
-    Index m = 0;
+void Trainer::chooseBasisSize() {
     if (options.basis > 0) {
         m = std::min(options.basis, available);
         if (m < std::min(options.basis, cap)) {
@@ -312,85 +354,83 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
                                       " basis vectors (captured " + num(got) + "); raise --max-basis?");
         }
     } else {
-        progress("basis-error", 0, 1);
-        formLeftVectors(q, svd, available);
-        std::vector<double> errors(static_cast<std::size_t>(available), 0.0);
-        for (Index b = 0; b < q.blockCount(); ++b) {
-            accumulateBasisErrors(q.block(b), svd.u.middleRows(q.blockFirstRow(b), q.blockRows(b)), svd,
-                                  channels, errors);
-        }
-        maxOverRanks(comm, errors.data(), errors.size());
-        m = basisSizeFromErrors(errors, options.basisMaxError);
-        if (m > available) {
-            m = available;
-            report.warnings.push_back(
-                "basis max error " + num(options.basisMaxError) + " not reached within " + std::to_string(m) +
-                " basis vectors (largest point error " + num(errors.empty() ? 0.0 : errors.back()) + ")");
-        }
-        progress("basis-error", 1, 1);
+        basisSizeFromPointErrors();
     }
     report.requestedBasis = m;
     formLeftVectors(q, svd, std::max(m, options.block));
-    Eigen::MatrixXd basis = svd.u.leftCols(m);  // owned rows
+    basis = svd.u.leftCols(m);
+}
 
-    // --- Key points (section 4).
-    std::vector<Index> keys;
-    Eigen::MatrixXd keyRows;  // Q's rows at the keys, K*C x F, replicated
-    if (options.selector == Selector::Teleconnection) {
-        TeleconnectionOptions t;
-        t.maxKeys = options.maxKeys;
-        t.maxError = options.maxError;
-        t.block = options.block;
-        t.fiducials = options.fiducials;
-        t.gridPoints = options.gridPoints;
-        t.candidates = options.keyCandidates;
-        t.varimax.tolerance = options.varimaxTolerance;
-        t.varimax.maxIterations = options.varimaxMaxIterations;
-        t.svd.seed = options.seed;
-        t.svd.powerIterations = options.powerIterations;
-        t.onRound = [&](Index, Index k, double) {
-            progress("keys", static_cast<double>(k), static_cast<double>(options.maxKeys));
-        };
-        progress("keys", 0, static_cast<double>(options.maxKeys));
-        KeySelection sel = selectKeysTeleconnection(q, comm, basis, svd.u, svd.sigma, t, gram);
-        keys = std::move(sel.keys);
-        keyRows = std::move(sel.keyRows);
-        report.iterations = sel.rounds;
-        report.residualPerRound = std::move(sel.residualPerRound);
-    } else {
-        progress("keys", 0, static_cast<double>(options.maxKeys));
-        // Q-DEIM pivots over every row at once: it runs on rank 0 on the gathered basis (which
-        // rank 0 holds anyway to write the model) and the keys are sent to the others.
-        const Eigen::MatrixXd full = gatherRowsTo(comm, basis, rows, 0);
-        std::vector<double> picked;
-        double passes = 0;
-        if (comm.rank() == 0) {
-            KeySet check(n);
-            seedKeys(check, options.fiducials, options.gridPoints);
-            QDeimSelection sel =
-                selectKeysQDeim(full, channels, options.maxKeys, check.keys(), options.keyCandidates);
-            picked.assign(sel.keys.begin(), sel.keys.end());
-            passes = static_cast<double>(sel.passes);
-        }
-        double count[2] = {static_cast<double>(picked.size()), passes};
-        comm.broadcast(count, 2, 0);
-        picked.resize(static_cast<std::size_t>(count[0]));
-        comm.broadcast(picked.data(), picked.size(), 0);
-        for (double k : picked) keys.push_back(static_cast<Index>(k));
-        report.iterations = static_cast<Index>(count[1]);
-        keyRows = keyRowsOfQ(q, comm, keys);
-        progress("keys", static_cast<double>(keys.size()), static_cast<double>(options.maxKeys));
+void Trainer::basisSizeFromPointErrors() {
+    progress("basis-error", 0, 1);
+    formLeftVectors(q, svd, available);
+    std::vector<double> errors(static_cast<std::size_t>(available), 0.0);
+    for (Index b = 0; b < q.blockCount(); ++b) {
+        accumulateBasisErrors(q.block(b), svd.u.middleRows(q.blockFirstRow(b), q.blockRows(b)), svd, channels,
+                              errors);
     }
-    if (static_cast<Index>(keys.size()) < options.maxKeys && options.maxError <= 0) {
-        report.warnings.push_back("selected " + std::to_string(keys.size()) + " keys of the budget " +
-                                  std::to_string(options.maxKeys) +
-                                  ": no further candidate improved the basis");
+    maxOverRanks(comm, errors.data(), errors.size());
+    m = basisSizeFromErrors(errors, options.basisMaxError);
+    if (m > available) {
+        m = available;
+        report.warnings.push_back("basis max error " + num(options.basisMaxError) + " not reached within " +
+                                  std::to_string(m) + " basis vectors (largest point error " +
+                                  num(errors.empty() ? 0.0 : errors.back()) + ")");
     }
+    progress("basis-error", 1, 1);
+}
 
-    // --- Determinacy: never leave the key system unable to determine the basis (issue 2).
-    progress("projector", 0, 1);
+void Trainer::teleconnectionKeys() {
+    TeleconnectionOptions t;
+    t.maxKeys = options.maxKeys;
+    t.maxError = options.maxError;
+    t.block = options.block;
+    t.fiducials = options.fiducials;
+    t.gridPoints = options.gridPoints;
+    t.candidates = options.keyCandidates;
+    t.varimax.tolerance = options.varimaxTolerance;
+    t.varimax.maxIterations = options.varimaxMaxIterations;
+    t.svd.seed = options.seed;
+    t.svd.powerIterations = options.powerIterations;
+    t.onRound = [&](Index, Index k, double) {
+        progress("keys", static_cast<double>(k), static_cast<double>(options.maxKeys));
+    };
+    progress("keys", 0, static_cast<double>(options.maxKeys));
+    KeySelection sel = selectKeysTeleconnection(q, comm, basis, svd.u, svd.sigma, t, gram);
+    keys = std::move(sel.keys);
+    keyRows = std::move(sel.keyRows);
+    report.iterations = sel.rounds;
+    report.residualPerRound = std::move(sel.residualPerRound);
+}
+
+void Trainer::qdeimKeys() {
+    progress("keys", 0, static_cast<double>(options.maxKeys));
+    // Q-DEIM pivots over every row at once: it runs on rank 0 on the gathered basis (which
+    // rank 0 holds anyway to write the model) and the keys are sent to the others.
+    const Eigen::MatrixXd full = gatherRowsTo(comm, basis, rows, 0);
+    std::vector<double> picked;
+    double passes = 0;
+    if (comm.rank() == 0) {
+        KeySet check(n);
+        seedKeys(check, options.fiducials, options.gridPoints);
+        QDeimSelection sel =
+            selectKeysQDeim(full, channels, options.maxKeys, check.keys(), options.keyCandidates);
+        picked.assign(sel.keys.begin(), sel.keys.end());
+        passes = static_cast<double>(sel.passes);
+    }
+    double count[2] = {static_cast<double>(picked.size()), passes};
+    comm.broadcast(count, 2, 0);
+    picked.resize(static_cast<std::size_t>(count[0]));
+    comm.broadcast(picked.data(), picked.size(), 0);
+    for (double k : picked) keys.push_back(static_cast<Index>(k));
+    report.iterations = static_cast<Index>(count[1]);
+    keyRows = keyRowsOfQ(q, comm, keys);
+    progress("keys", static_cast<double>(keys.size()), static_cast<double>(options.maxKeys));
+}
+
+bool Trainer::determineBasis() {
     const Index kc = static_cast<Index>(keys.size()) * channels;
-    Eigen::MatrixXd basisKeyRows = keyRowsOf(q, comm, basis, keys);
+    basisKeyRows = keyRowsOf(q, comm, basis, keys);
     std::vector<Index> keyOrder(keys.size());
     for (std::size_t i = 0; i < keys.size(); ++i) keyOrder[i] = static_cast<Index>(i);
     const Index determined = determinedBasisSize(basisKeyRows, channels, keyOrder);
@@ -416,6 +456,12 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
                                   "): the key residual is identically zero, so the soft-cache error "
                                   "monitor is blind; add keys or reduce M");
     }
+    return reportedResidualIsFinal;
+}
+
+void Trainer::projector() {
+    progress("projector", 0, 1);
+    const bool reportedResidualIsFinal = determineBasis();
     model.singularValues = svd.sigma.head(m);
     model.keyPoints = keys;
     model.projector = projectorFromKeyRows(basisKeyRows, channels);
@@ -429,8 +475,9 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
     }
     if (options.selector == Selector::QDeim) report.residualPerRound.push_back(model.trainMaxPointResidual);
     progress("projector", 1, 1);
+}
 
-    // --- eps (section 5; calibration beyond the paper).
+void Trainer::thresholds() {
     progress("calibration", 0, 1);
     if (options.tolerance > 0) {
         report.calibration =
@@ -444,49 +491,87 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
     model.epsMin = report.calibration.epsMin;
     model.epsMax = report.calibration.epsMax;
     progress("calibration", 1, 1);
+}
 
-    if (options.learnRank > 0) {
-        // The learning state: the next left singular vectors after the basis, up to rank r.
-        LearningState learning;
-        learning.maxRank = std::max(options.learnRank, m);
-        if (options.learnRank < m) {
-            report.warnings.push_back("learn rank " + std::to_string(options.learnRank) +
-                                      " raised to M = " + std::to_string(m));
-        }
-        const Index stored = std::min<Index>(learning.maxRank, svd.sigma.size());
-        formLeftVectors(q, svd, stored);
-        // Owned rows on each rank; rank 0, which writes the model, gathers them.
-        learning.extraBasis = gatherRowsTo(comm, Eigen::MatrixXd(svd.u.middleCols(m, stored - m)), rows, 0);
-        learning.extraSigma = svd.sigma.segment(m, stored - m);
-        learning.maxKeys = options.maxKeys;
-        learning.block = options.block;
-        learning.maxError = options.maxError;
-        learning.fiducials = options.fiducials;
-        learning.gridPoints = options.gridPoints;
-        model.learning = std::move(learning);
-        if (options.tolerance > 0) model.calibrationRecord = CalibrationRecord::from(report.calibration);
+void Trainer::learningState() {
+    LearningState learning;
+    learning.maxRank = std::max(options.learnRank, m);
+    if (options.learnRank < m) {
+        report.warnings.push_back("learn rank " + std::to_string(options.learnRank) +
+                                  " raised to M = " + std::to_string(m));
     }
+    const Index stored = std::min<Index>(learning.maxRank, svd.sigma.size());
+    formLeftVectors(q, svd, stored);
+    // Owned rows on each rank; rank 0, which writes the model, gathers them.
+    learning.extraBasis = gatherRowsTo(comm, Eigen::MatrixXd(svd.u.middleCols(m, stored - m)), rows, 0);
+    learning.extraSigma = svd.sigma.segment(m, stored - m);
+    learning.maxKeys = options.maxKeys;
+    learning.block = options.block;
+    learning.maxError = options.maxError;
+    learning.fiducials = options.fiducials;
+    learning.gridPoints = options.gridPoints;
+    model.learning = std::move(learning);
+    if (options.tolerance > 0) model.calibrationRecord = CalibrationRecord::from(report.calibration);
+}
+
+void Trainer::regions() {
+    // They are learned from the whole mean-removed matrix, so only in-memory, one-process
+    // training learns them (checked before any work, at the top).
+    progress("regions", 0, 1);
+    const auto& inMemory = dynamic_cast<const MatrixBlocks&>(q);
+    SvdOptions svdOptions;
+    svdOptions.seed = options.seed;
+    svdOptions.powerIterations = options.powerIterations;
+    model.regions = learnRegions(inMemory.matrix(), model, options.regions, options.tolerance,
+                                 options.calibrationSlices, svdOptions, &report.warnings);
+    progress("regions", 1, 1);
+}
+
+}  // namespace
+
+Model train(const FrameSet& frames, const TrainingOptions& options, TrainingReport* reportOut) {
+    validateFrames(frames);
+    if (options.sharedChannels && frames.channels > 1) return trainSharedChannels(frames, options, reportOut);
+    MatrixBlocks q(frames);
+    SingleProcess one;
+    return train(q, one, options, reportOut);
+}
+
+Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, TrainingReport* reportOut) {
+    const auto start = std::chrono::steady_clock::now();
+    TrainingReport localReport;
+    TrainingReport& report = reportOut ? *reportOut : localReport;
+    report = TrainingReport{};
+    report.ranks = comm.size();
+    report.blockPoints = q.blockPoints();
+    checkTrainingInput(q, comm, options);
+
+    Trainer t(q, comm, options, report);
+    t.meanAndGram();
+    t.subspace();
+    t.chooseBasisSize();
+    // --- Key points (section 4).
+    if (options.selector == Selector::Teleconnection) {
+        t.teleconnectionKeys();
+    } else {
+        t.qdeimKeys();
+    }
+    if (static_cast<Index>(t.keys.size()) < options.maxKeys && options.maxError <= 0) {
+        report.warnings.push_back("selected " + std::to_string(t.keys.size()) + " keys of the budget " +
+                                  std::to_string(options.maxKeys) +
+                                  ": no further candidate improved the basis");
+    }
+    t.projector();
+    t.thresholds();
+    if (options.learnRank > 0) t.learningState();
 
     // --- The (N*C)-row arrays go to rank 0, which writes the model.
-    model.basis = gatherRowsTo(comm, basis, rows, 0);
-    model.mean = gatherRowsTo(comm, q.mean(), rows, 0);
-
-    // --- regions of local fail-through (paper section 9; issue 9), on the final core. They are
-    //     learned from the whole mean-removed matrix, so only in-memory, one-process training
-    //     learns them (checked before any work, at the top).
-    if (options.regions.count > 0) {
-        progress("regions", 0, 1);
-        const auto& inMemory = dynamic_cast<const MatrixBlocks&>(q);
-        SvdOptions svdOptions;
-        svdOptions.seed = options.seed;
-        svdOptions.powerIterations = options.powerIterations;
-        model.regions = learnRegions(inMemory.matrix(), model, options.regions, options.tolerance,
-                                     options.calibrationSlices, svdOptions, &report.warnings);
-        progress("regions", 1, 1);
-    }
-    if (comm.rank() == 0) model.validate();
+    t.model.basis = gatherRowsTo(comm, t.basis, t.rows, 0);
+    t.model.mean = gatherRowsTo(comm, q.mean(), t.rows, 0);
+    if (options.regions.count > 0) t.regions();
+    if (comm.rank() == 0) t.model.validate();
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    return model;
+    return std::move(t.model);
 }
 
 }  // namespace pmsc

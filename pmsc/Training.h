@@ -38,7 +38,7 @@ struct TrainingOptions {
     std::vector<Index> fiducials;   ///< designer points, seeded into the first batch
     std::vector<Index> gridPoints;  ///< sparse spatial grid of points (rendering), seeded too
     /// Only points [0, keyCandidates) may be keys; 0 = every point. Cross point multiplication
-    /// (issue 10, pmsc/Cross.h) trains on (control, target) pairs with the control's points first.
+    /// (pmsc/Cross.h) trains on (control, target) pairs with the control's points first.
     Index keyCandidates = 0;
 
     // --- Varimax ---
@@ -48,18 +48,18 @@ struct TrainingOptions {
     // --- calibration of eps (beyond the paper) ---
     double tolerance = 0;         ///< largest point error a hit may have (data units); 0 = no calibration
     Index calibrationSlices = 5;  ///< leave-one-slice-out folds
-    /// How the held-out ratios E/e become eps (Calibration.h; issue 10 compares the two).
+    /// How the held-out ratios E/e become eps (Calibration.h).
     CalibrationRule calibrationRule = CalibrationRule::MaxRatio;
-    double calibrationCoverage = 0.9;  ///< 1 - alpha of CalibrationRule::Conformal (see README: 0.9 measured)
+    double calibrationCoverage = 0.9;  ///< 1 - alpha of CalibrationRule::Conformal (docs/learning-and-calibration.md: 0.9 measured)
 
-    // --- learning (issue 10) ---
+    // --- learning from misses (`pmsc learn`) ---
     /// r > 0: store what `pmsc learn` needs in the model (Model::learning: the left singular
     /// vectors M+1 .. r and the key-selection settings; Model::calibrationRecord: the held-out
     /// scores), so updates lose only the energy beyond rank r. 0 = a plain model.
     /// @pre 0 or >= the final M (it is raised to M with a warning otherwise).
     Index learnRank = 0;
 
-    // --- channels (issue 11) ---
+    // --- channels ---
     /// The channels share one basis over the points (Model::sharedChannels): training sees each
     /// channel of each frame as a frame of its own (F*C columns of N rows, each point-channel's
     /// mean removed), so M vectors of N values serve every channel. For light (RGB): a light's
@@ -78,7 +78,7 @@ struct TrainingOptions {
     /// every frame on its own. The frame count must be a multiple of it.
     Index calibrationGroup = 1;
 
-    // --- local fail-through (issue 9): regions.count = 0 keeps the model a version-1 model ---
+    // --- local fail-through: regions.count = 0 keeps the model a version-1 model ---
     RegionOptions regions;
 
     // --- SVD ---
@@ -114,7 +114,7 @@ struct TrainingReport {
 ///         2 frames, or frames that do not vary.
 Model train(const FrameSet& frames, const TrainingOptions& options, TrainingReport* report = nullptr);
 
-/// Training over the rows of Q this process owns (issue 12): the one implementation, which the
+/// Training over the rows of Q this process owns: the one implementation, which the
 /// overload above runs on one in-memory block. Out of core (NpyBlocks) every product with Q is a
 /// pass over its blocks; under MPI (a Communicator of P ranks) each rank owns a contiguous share
 /// of the points and every reduction (Gram matrix, Varimax sums, the key arg-max, residual and

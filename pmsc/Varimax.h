@@ -42,7 +42,7 @@ double varimaxCriterion(const Eigen::Ref<const Eigen::MatrixXd>& z);
 /// A block of one column is returned unrotated.
 VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const VarimaxOptions& options = {});
 
-/// The same rotation of a block whose rows are split across ranks (issue 12): `loadings` holds
+/// The same rotation of a block whose rows are split across ranks: `loadings` holds
 /// this rank's rows, the criterion's column moments and the gradient G are summed over ranks (one
 /// B x B + 2B reduction per step), so every rank takes the same steps and gets the same rotation;
 /// `rotated` holds this rank's rows. The single-process varimax above is this with one rank.

@@ -1,7 +1,7 @@
 // Errors as Python exceptions with the command line's messages, and long calls with the GIL released.
 #include "python/Errors.h"
 
-#include "cli/ExitCodes.h"
+#include "app/ExitCodes.h"
 #include "pmsc/Errors.h"
 
 #include <stdexcept>
@@ -43,19 +43,19 @@ py::object exceptionClass(const char* name) { return py::module_::import("pmsc")
 }  // namespace
 
 void setPythonError(std::exception_ptr error, py::object cause) {
-    const cli::ExitReason reason = cli::exitReason(error);
+    const app::ExitReason reason = app::exitReason(error);
     const char* name = "Error";
     switch (reason.code) {
-        case cli::kExitBadInput:
+        case app::kExitBadInput:
             name = "InputError";
             break;
-        case cli::kExitEvaluator:
+        case app::kExitEvaluator:
             name = "EvaluatorError";
             break;
-        case cli::kExitIo:
+        case app::kExitIo:
             name = "IoError";
             break;
-        case cli::kExitInterrupted:
+        case app::kExitInterrupted:
             name = "Cancelled";
             break;
         default:

@@ -1,4 +1,4 @@
-// The Python module `pmsc` (issue 13): training, the model, replay and the evaluation engine from Python,
+// The Python module `pmsc`: training, the model, replay and the evaluation engine from Python,
 // with NumPy arrays in and out. Every long call releases the GIL; errors are the command line's one-line
 // messages as Python exceptions (pmsc.InputError, pmsc.EvaluatorError, pmsc.IoError, pmsc.Cancelled).
 //   Errors.cpp    exceptions, running with the GIL released     PyModel.cpp  pmsc.Model

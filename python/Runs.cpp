@@ -4,7 +4,7 @@
 #include "python/Evaluators.h"
 #include "python/PyModel.h"
 
-#include "cli/Replay.h"
+#include "app/Replay.h"
 #include "engine/Engine.h"
 #include "evaluators/EvaluatorRegistry.h"
 #include "evaluators/ReplayEvaluator.h"
@@ -69,7 +69,7 @@ py::tuple replayFrames(const PyModel& self, py::handle frames, py::object eps, i
     }
     checkMatches(m, *recorded, what);
 
-    cli::ReplayOptions options;
+    app::ReplayOptions options;
     options.eps = epsOf(eps);
     options.threads = threads;
     options.localFailThrough = !wholeFrame;
@@ -81,11 +81,11 @@ py::tuple replayFrames(const PyModel& self, py::handle frames, py::object eps, i
     options.frameOut = [&](Index sequence, const double* v) {
         storeValues(data, dtype, static_cast<std::size_t>(sequence) * values, v, values);
     };
-    cli::ReplayResult result;
+    app::ReplayResult result;
     std::string report;
     runReleased(cancel, [&] {
-        result = cli::replay(m, *recorded, options);
-        report = cli::replayReport(m, result).dump();
+        result = app::replay(m, *recorded, options);
+        report = app::replayReport(m, result).dump();
     });
     return py::make_tuple(out, jsonToPython(report));
 }
@@ -159,7 +159,8 @@ struct RunEvaluator {
     engine::FrameRange range;
 };
 
-/// A spec ("replay:FILE.npy", from the registry's built-ins) or a Python callable.
+/// A spec ("replay:FILE.npy", "volume:FILE.vdb", ...: the registry the command line uses) or a
+/// Python callable.
 RunEvaluator makeRunEvaluator(const Model& m, py::object evaluator, py::object frames, py::object points,
                               bool wholeFrame, Index frameCount) {
     RunEvaluator r;
@@ -167,15 +168,15 @@ RunEvaluator makeRunEvaluator(const Model& m, py::object evaluator, py::object f
         const std::string spec = evaluator.cast<std::string>();
         {
             py::gil_scoped_release nogil;
-            r.evaluator = evaluators::EvaluatorRegistry::withBuiltins().make(spec);
+            r.evaluator = evaluators::makeEvaluator(spec);
         }
         r.range = frameRange(frames, r.evaluator->frameCount());
         return r;
     }
     if (!PyCallable_Check(evaluator.ptr()))
         throw InputError(
-            "evaluator: expected a callable f(frame, point_indices) -> values or a spec 'NAME:ARGS' "
-            "(replay:FILE.npy, skin:ASSET)");
+            "evaluator: expected a callable f(frame, point_indices) -> values or a spec 'NAME[:ARGS]' "
+            "(pmsc.evaluators() lists the names)");
     r.range = frameRange(frames, 0);
     const Index needed = r.range.last() + 1;
     if (frameCount > 0 && frameCount < needed)
@@ -281,8 +282,17 @@ void bindRuns(py::module_& m) {
         "max_frames_in_flight"_a = 0, "frame_count"_a = 0,
         "Runs the evaluation engine over `frames` (a range, a count, or None = every frame of a spec "
         "evaluator). "
-        "evaluator: a spec 'replay:FILE.npy' / 'skin:ASSET', or a Python callable f(frame, point_indices) -> "
-        "values (P, C). Returns (out (frames, points, C), report {'summary': run stats, 'frames': rows}).");
+        "evaluator: a spec 'NAME[:ARGS]' (pmsc.evaluators(): replay:FILE.npy, volume:FILE.vdb, ...), or a "
+        "Python callable f(frame, point_indices) -> values (P, C). Returns (out (frames, points, C), report "
+        "{'summary': run stats, 'frames': rows}).");
+    m.def(
+        "evaluators",
+        [] {
+            std::vector<std::string> names;
+            for (const auto& kind : evaluators::builtinRegistry().kinds()) names.push_back(kind.name);
+            return names;
+        },
+        "The names of the evaluators run() accepts as 'NAME[:ARGS]', as `pmsc evaluators` lists them.");
 }
 
 }  // namespace pmsc::python

@@ -8,7 +8,7 @@
 
 namespace pmsc::cli {
 
-/// The MPI world of a `pmsc` started by an MPI launcher (issue 12). Decision: MPI is initialised
+/// The MPI world of a `pmsc` started by an MPI launcher. Decision: MPI is initialised
 /// only when the environment says a launcher started this process (mpirun: OMPI_COMM_WORLD_SIZE;
 /// srun --mpi=pmix or any PMIx launcher: PMIX_RANK; PMI-2 launchers: PMI_SIZE), so a plain
 /// `pmsc train` never touches MPI and needs no mpirun. The implementation is MpiWorld.cpp when

@@ -1,4 +1,4 @@
-// The MPI Communicator (issue 12): the only translation unit that includes mpi.h.
+// The MPI Communicator: the only translation unit that includes mpi.h.
 #include "cli/mpi/MpiLaunch.h"
 #include "pmsc/Errors.h"
 

@@ -27,7 +27,7 @@ struct LocalReportScale {
 /// evaluator's evaluateAll() (a demo that already holds its full calculations passes them here).
 using FullValues = std::function<void(Index frame, double* out)>;
 
-/// Local fail-through (issue 9) on one set of frames, measured both ways against the full evaluation:
+/// Local fail-through on one set of frames, measured both ways against the full evaluation:
 /// - errors: the engine with local fail-through (`threads` cores), each output against the full
 ///   values: largest point error (scale.maxErrorKey), RMS point error (scale.rmsErrorKey), relative
 ///   RMS error (soft_rms_rel_error), frames over the limit, local frames, fraction of points

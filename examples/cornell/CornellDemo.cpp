@@ -1,11 +1,11 @@
 #include "examples/cornell/CornellDemo.h"
 
 #include "engine/Engine.h"
-#include "examples/cornell/CornellEvaluator.h"
+#include "evaluators/cornell/CornellEvaluator.h"
 #include "examples/cornell/CornellLocalChange.h"
-#include "examples/cornell/DemoValidation.h"
-#include "examples/cornell/ImageIO.h"
-#include "examples/cornell/LightingCacheGrid.h"
+#include "examples/common/DemoValidation.h"
+#include "evaluators/scene/Image.h"
+#include "evaluators/cornell/LightingCacheGrid.h"
 #include "examples/cornell/Renderer.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
@@ -27,6 +27,9 @@
 #include <set>
 
 namespace pmsc::cornell {
+
+using examples::RelError;
+using examples::ValidationSink;
 
 namespace {
 
@@ -171,7 +174,7 @@ TrainedModel trainModel(const DemoRun& run, const CornellWorld& world, FrameSet 
     topt.tolerance = o.toleranceFraction * trained.peak;
     if (o.gridKeys > 0) topt.gridPoints = gridKeyPoints(world, o.gridKeys);
     if (o.regions > 0) {
-        // Local fail-through (issue 9): regions clustered on the voxels' positions (RGB values are
+        // Local fail-through: regions clustered on the voxels' positions (RGB values are
         // no positions) and their loading patterns.
         topt.regions.count = o.regions;
         topt.regions.featherFraction = o.featherPercent / 100.0;

@@ -36,7 +36,7 @@ struct CornellDemoOptions {
     int imageSize = 256;
     int renderFrames = 2;  ///< path frames rendered per camera (spread over the path)
     int threads = 0;       ///< 0 = every core; full gathers and the engine use the same
-    /// Regions of local fail-through (issue 9) learned in training, from the voxels' positions;
+    /// Regions of local fail-through learned in training, from the voxels' positions;
     /// 0 = none (a version-1 model; no "local_fail_through" in the report). 48, measured at --quick
     /// on a 100 mm cube against the back wall at x 150-250 (its 2 frames that miss as a whole): 16 regions
     /// gathered 54% of the points of those frames, 32 sent one of them whole (77% on average), 48 routed both
@@ -46,7 +46,7 @@ struct CornellDemoOptions {
     /// at --quick and 8 at the default size. 1.5% is under one --quick voxel (no feathering at
     /// all; it gathered 34% of the points); 5% gathered 48% for the same largest error.
     double featherPercent = 3;
-    /// Edge (mm) of issue 9's local change (LocalChangeBox: a cube on the floor against the back
+    /// Edge (mm) of the local change (LocalChangeBox: a cube on the floor against the back
     /// wall, never seen in training); 0 = no local-change set. Needs regions > 0.
     double localChangeMm = 100;
     int localChangeLights = 8;  ///< the local-change set: the first this many scattered lights
@@ -58,7 +58,7 @@ struct CornellDemoOptions {
     static CornellDemoOptions quickOptions();
 };
 
-/// Runs the whole experiment (section 8, issue 4) and writes into options.outDir:
+/// Runs the whole experiment (section 8) and writes into options.outDir:
 /// - report.json (returned too): points, key_points, basis, train_frames, test_frames,
 ///   samples_per_point, full_seconds_per_frame, pmsc_seconds_per_frame, speedup,
 ///   rms_rel_error, hit_rate, reference_rms_rel_error_full, reference_rms_rel_error_pm, and more;

@@ -1,7 +1,7 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-#include "examples/cornell/CornellEvaluator.h"
+#include "evaluators/cornell/CornellEvaluator.h"
 #include "pmsc/Model.h"
 
 #include <nlohmann/json.hpp>
@@ -14,7 +14,7 @@
 
 namespace pmsc::cornell {
 
-/// Issue 9's local change of the Cornell box: a white cube of edge `edgeMm` standing on the floor
+/// The local change of the Cornell box: a white cube of edge `edgeMm` standing on the floor
 /// 10 mm from a wall. Training never sees it: it covers the floor under it, throws a contact shadow
 /// on the floor and the wall next to it, and reflects light onto both.
 ///
@@ -56,7 +56,7 @@ struct LocalFailThroughInputs {
     std::function<void(std::string_view, double, double)> progress;
 };
 
-/// report.json's "local_fail_through" (issue 9): the regions, then
+/// report.json's "local_fail_through": the regions, then
 /// examples::localFailThroughReport() (errors as multiples of the tolerance) both ways on
 /// - "validation": the scattered validation lights (the ordinary validation set), and
 /// - "local_change": the same cache points and the first changeLights scattered lights in the box

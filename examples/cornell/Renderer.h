@@ -1,13 +1,20 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-#include "examples/cornell/CornellEvaluator.h"
-#include "examples/cornell/ImageIO.h"
-#include "examples/cornell/LightingCacheGrid.h"
+#include "evaluators/cornell/CornellEvaluator.h"
+#include "evaluators/cornell/LightingCacheGrid.h"
+#include "evaluators/scene/Image.h"
 
 #include <vector>
 
 namespace pmsc::cornell {
+
+using scene::absDifference;
+using scene::Image;
+using scene::readPfm;
+using scene::sideBySide;
+using scene::writePfm;
+using scene::writePng;
 
 /// Renders the box from a camera: each pixel's visible surface gets its direct light exactly
 /// (a shadow ray to the point light) and its indirect light looked up in world space from a

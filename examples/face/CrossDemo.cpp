@@ -1,6 +1,7 @@
 #include "examples/face/CrossDemo.h"
 
-#include "examples/face/FaceEvaluator.h"
+#include "evaluators/face/FaceEvaluator.h"
+#include "examples/common/DemoSetup.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Cross.h"
 #include "pmsc/Errors.h"
@@ -20,20 +21,6 @@
 
 namespace pmsc::face {
 
-void FaceControlEvaluator::evaluate(Index frame, std::span<const Index> points, double* out) const {
-    if (frame < 0 || frame >= frameCount())
-        throw std::out_of_range("face-control: frame " + std::to_string(frame) + " outside [0, " +
-                                std::to_string(frameCount()) + ")");
-    rig_->evaluateControl(animation_->frame(frame), points, out);
-}
-
-std::unique_ptr<FaceControlEvaluator> makeFaceControlEvaluator(const std::string& folder) {
-    const IctFace face = loadIctFace(folder);
-    return std::make_unique<FaceControlEvaluator>(
-        std::make_shared<const FaceRig>(face),
-        std::make_shared<const FaceAnimation>(FaceAnimation::generate({})));
-}
-
 CrossDemoOptions CrossDemoOptions::quickOptions() {
     CrossDemoOptions o;
     o.quick = true;
@@ -49,8 +36,11 @@ CrossDemoOptions CrossDemoOptions::quickOptions() {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+using examples::createOutputFolder;
+using examples::DemoClock;
+using examples::DemoSetup;
+using examples::FolderErrorWording;
+using examples::secondsSince;
 
 double threadCpuSeconds() {
     timespec t{};
@@ -112,11 +102,10 @@ nlohmann::json summarize(const std::vector<FrameScore>& s, double percent) {
         {"control_vs_full_pct_bbox", pct(gap)}};
 }
 
-}  // namespace
+// --- the steps of runCrossDemo, in the order it runs them ------------------------------------
 
-nlohmann::json runCrossDemo(const CrossDemoOptions& options) {
-    namespace fs = std::filesystem;
-    const Clock::time_point start = Clock::now();
+/// Throws InputError unless the options are usable.
+void checkOptions(const CrossDemoOptions& options) {
     if (options.outDir.empty()) throw InputError("demo cross: --out is required");
     if (options.dataDir.empty()) throw InputError("demo cross: --data is required");
     if (options.sequences < 2 || options.novelSequences < 1 || options.minFrames < 8 ||
@@ -129,15 +118,22 @@ nlohmann::json runCrossDemo(const CrossDemoOptions& options) {
             "0 < training fraction < 1, basis >= 1, 68 <= keys <= 170, 0 < coverage < 1, timing frames >= 1, "
             "threads >= 0)");
     }
-    auto step = [&](std::string_view stage, double done, double total) {
-        if (options.progress && !options.progress(stage, done, total)) throw Cancelled("demo cross");
-    };
-    tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::this_task_arena::max_concurrency());
-    nlohmann::json report, seconds;
+}
 
-    // --- the face, the rig, the animation (the face demo's) -------------------------------------------
-    Clock::time_point t = Clock::now();
-    step("load", 0, 1);
+/// The face's rig, the animation (the face demo's), the frames by use, and every point's index.
+struct CrossScene {
+    double diagonal = 0;  // of the head's bounding box
+    double percent = 0;   // model units per % of the head diagonal
+    std::shared_ptr<const FaceRig> rig;
+    FaceAnimation animation;
+    Index n = 0;  // points
+    std::vector<Index> trainingFrames{}, validationFrames{}, novelFrames{};
+    std::vector<Index> all{};  // 0 .. n-1: the control face at every point
+};
+
+/// The face's rig and the animation, without the frames.
+CrossScene loadScene(const DemoSetup& run, const CrossDemoOptions& options) {
+    run.progress("load", 0, 1);
     const IctFace face = loadIctFace(options.dataDir);
     auto rig = std::make_shared<const FaceRig>(face);
     FaceAnimationOptions ao;
@@ -146,145 +142,190 @@ nlohmann::json runCrossDemo(const CrossDemoOptions& options) {
     ao.novelSequences = options.novelSequences;
     ao.minFrames = options.minFrames;
     ao.maxFrames = options.maxFrames;
-    const FaceAnimation animation = FaceAnimation::generate(ao);
-    const Index n = rig->pointCount();
-    const double percent = face.boundingBoxDiagonal() / 100.0;
-    std::error_code ec;
-    fs::create_directories(options.outDir, ec);
-    if (ec || !fs::is_directory(options.outDir))
-        throw IoError(options.outDir +
-                      ": cannot create the output folder: " + (ec ? ec.message() : "not a folder"));
-    const std::string out = options.outDir + "/";
+    return CrossScene{.diagonal = face.boundingBoxDiagonal(),
+                      .percent = face.boundingBoxDiagonal() / 100.0,
+                      .rig = rig,
+                      .animation = FaceAnimation::generate(ao),
+                      .n = rig->pointCount()};
+}
+
+/// The frames by use (the face demo's split) and every point's index.
+void splitFrames(const CrossDemoOptions& options, CrossScene& scene) {
+    const FaceAnimation& animation = scene.animation;
     std::vector<Index> trainingSeqs, validationSeqs, novelSeqs;
     animation.splitOrdinary(options.trainingFraction, options.seed + 4, trainingSeqs, validationSeqs);
     for (Index s = 0; s < static_cast<Index>(animation.sequences().size()); ++s)
         if (animation.sequences()[static_cast<size_t>(s)].novel) novelSeqs.push_back(s);
-    const std::vector<Index> trainingFrames = animation.framesOf(trainingSeqs);
-    const std::vector<Index> validationFrames = animation.framesOf(validationSeqs);
-    const std::vector<Index> novelFrames = animation.framesOf(novelSeqs);
-    std::vector<Index> all(static_cast<size_t>(n));
-    for (Index v = 0; v < n; ++v) all[static_cast<size_t>(v)] = v;
-    seconds["load"] = since(t);
+    scene.trainingFrames = animation.framesOf(trainingSeqs);
+    scene.validationFrames = animation.framesOf(validationSeqs);
+    scene.novelFrames = animation.framesOf(novelSeqs);
+    scene.all.resize(static_cast<size_t>(scene.n));
+    for (Index v = 0; v < scene.n; ++v) scene.all[static_cast<size_t>(v)] = v;
+}
 
-    // --- training pairs: the control face and the full rig on the training frames -----------------
-    t = Clock::now();
-    const Index f = static_cast<Index>(trainingFrames.size());
+/// The cross model and its training report.
+struct CrossTrained {
+    CrossReport report;
+    Model model;
+};
+
+/// Training pairs (the control face and the full rig on the training frames) and the cross
+/// model trained on them, written as cross.pmsc.
+CrossTrained trainCrossModel(DemoSetup& run, const CrossDemoOptions& options, const CrossScene& scene,
+                             const std::string& out) {
+    DemoClock::time_point t = DemoClock::now();
+    const Index f = static_cast<Index>(scene.trainingFrames.size()), n = scene.n;
     FrameSet control(f, n, 3), target(f, n, 3);
-    {
-        std::atomic<Index> posed{0};
-        arena.execute([&] {
-            tbb::parallel_for(Index{0}, f, [&](Index i) {
-                const ControlVector& c = animation.frame(trainingFrames[static_cast<size_t>(i)]);
-                rig->evaluateControl(c, all, control.frame(i));
-                rig->evaluateAll(c, target.frame(i));
-                const Index k = ++posed;
-                if (k % 64 == 0) step("pose training pairs", static_cast<double>(k), static_cast<double>(f));
-            });
+    std::atomic<Index> posed{0};
+    run.arena.execute([&] {
+        tbb::parallel_for(Index{0}, f, [&](Index i) {
+            const ControlVector& c = scene.animation.frame(scene.trainingFrames[static_cast<size_t>(i)]);
+            scene.rig->evaluateControl(c, scene.all, control.frame(i));
+            scene.rig->evaluateAll(c, target.frame(i));
+            const Index k = ++posed;
+            if (k % 64 == 0)
+                run.progress("pose training pairs", static_cast<double>(k), static_cast<double>(f));
         });
-    }
-    seconds["pose_training"] = since(t);
+    });
+    run.lap("pose_training", t);
     CrossOptions co;
     co.coverage = options.coverage;
     co.training.basis = options.basis;
     co.training.maxKeys = options.maxKeys;
     co.training.fiducials.assign(IctFace::multiPie68().begin(), IctFace::multiPie68().end());
-    co.training.tolerance = percent;  // 1% of the head diagonal: frames whose bound exceeds it are flagged
-    co.training.progress = [&](std::string_view stage, double done, double total) {
-        step(stage, done, total);
+    co.training.tolerance =
+        scene.percent;  // 1% of the head diagonal: frames whose bound exceeds it are flagged
+    co.training.progress = [&run](std::string_view stage, double done, double total) {
+        run.progress(stage, done, total);
         return true;
     };
-    t = Clock::now();
-    CrossReport trainReport;
-    Model model;
-    arena.execute([&] { model = trainCross(control, target, co, &trainReport); });
-    seconds["train"] = since(t);
+    t = DemoClock::now();
+    CrossTrained trained;
+    run.arena.execute([&] { trained.model = trainCross(control, target, co, &trained.report); });
+    run.lap("train", t);
     std::vector<double>().swap(control.values);
     std::vector<double>().swap(target.values);
-    writeModel(out + "cross.pmsc", model);
-    const CrossMultiplier cross(model);
+    writeModel(out + "cross.pmsc", trained.model);
+    return trained;
+}
 
-    // --- validation and novel: cross PM against the full rig -----------------------------------------
-    auto score = [&](const std::vector<Index>& frames, const char* stage) {
-        std::vector<FrameScore> r(frames.size());
-        std::atomic<Index> done{0};
-        arena.execute([&] {
-            tbb::parallel_for(size_t{0}, frames.size(), [&](size_t i) {
-                const ControlVector& c = animation.frame(frames[i]);
-                std::vector<double> keys(static_cast<size_t>(3 * model.keyCount())),
-                    rec(static_cast<size_t>(3 * n)), full(static_cast<size_t>(3 * n)),
-                    ctl(static_cast<size_t>(3 * n));
-                rig->evaluateControl(c, cross.keyPoints(), keys.data());
-                const CrossMultiplier::Result res = cross.apply(keys.data(), rec.data());
-                rig->evaluateAll(c, full.data());
-                rig->evaluateControl(c, all, ctl.data());
-                r[i] = {frames[i], res.keyRms, res.bound, maxPointDistance(rec.data(), full.data(), n),
-                        maxPointDistance(ctl.data(), full.data(), n)};
-                const Index k = ++done;
-                if (k % 64 == 0) step(stage, static_cast<double>(k), static_cast<double>(frames.size()));
-            });
+/// Validation or novel frames: cross PM against the full rig; the seconds taken go to
+/// timings[stage].
+std::vector<FrameScore> scoreFrames(DemoSetup& run, const CrossScene& scene, const Model& model,
+                                    const CrossMultiplier& cross, const std::vector<Index>& frames,
+                                    const char* stage) {
+    const DemoClock::time_point t = DemoClock::now();
+    const Index n = scene.n;
+    std::vector<FrameScore> r(frames.size());
+    std::atomic<Index> done{0};
+    run.arena.execute([&] {
+        tbb::parallel_for(size_t{0}, frames.size(), [&](size_t i) {
+            const ControlVector& c = scene.animation.frame(frames[i]);
+            std::vector<double> keys(static_cast<size_t>(3 * model.keyCount())),
+                rec(static_cast<size_t>(3 * n)), full(static_cast<size_t>(3 * n)),
+                ctl(static_cast<size_t>(3 * n));
+            scene.rig->evaluateControl(c, cross.keyPoints(), keys.data());
+            const CrossMultiplier::Result res = cross.apply(keys.data(), rec.data());
+            scene.rig->evaluateAll(c, full.data());
+            scene.rig->evaluateControl(c, scene.all, ctl.data());
+            r[i] = {frames[i], res.keyRms, res.bound, maxPointDistance(rec.data(), full.data(), n),
+                    maxPointDistance(ctl.data(), full.data(), n)};
+            const Index k = ++done;
+            if (k % 64 == 0) run.progress(stage, static_cast<double>(k), static_cast<double>(frames.size()));
         });
-        return r;
-    };
-    t = Clock::now();
-    const std::vector<FrameScore> validation = score(validationFrames, "validation");
-    seconds["validation"] = since(t);
-    t = Clock::now();
-    const std::vector<FrameScore> novel = score(novelFrames, "novel");
-    seconds["novel"] = since(t);
+    });
+    run.lap(stage, t);
+    return r;
+}
 
-    // --- speed: one thread, one frame at a time, full rig and cross PM interleaved ------------------
-    t = Clock::now();
+/// Thread CPU and wall seconds, summed over the timed frames.
+struct SpeedTotals {
+    Index timed = 0;
     double cpuFull = 0, cpuKeys = 0, cpuProject = 0, cpuReconstruct = 0, wallFull = 0, wallCross = 0;
-    const Index timed = std::min<Index>(options.timingFrames, static_cast<Index>(validationFrames.size()));
-    {
-        std::vector<double> full(static_cast<size_t>(3 * n)), rec(static_cast<size_t>(3 * n)),
-            keys(static_cast<size_t>(3 * model.keyCount()));
-        Eigen::VectorXd coords(model.coordCount());
-        const PointMultiplier pm(model);
-        for (Index i = 0; i < timed; ++i) {
-            const ControlVector& c = animation.frame(validationFrames[static_cast<size_t>(
-                i * static_cast<Index>(validationFrames.size()) / timed)]);
-            double c0 = threadCpuSeconds();
-            Clock::time_point w0 = Clock::now();
-            rig->evaluateAll(c, full.data());
-            cpuFull += threadCpuSeconds() - c0;
-            wallFull += since(w0);
-            w0 = Clock::now();
-            c0 = threadCpuSeconds();
-            rig->evaluateControl(c, cross.keyPoints(), keys.data());
-            double c1 = threadCpuSeconds();
-            cpuKeys += c1 - c0;
-            pm.project(keys.data(), coords.data());
-            volatile double e = pm.keyRmsError(keys.data(), coords.data());
-            (void)e;
-            double c2 = threadCpuSeconds();
-            cpuProject += c2 - c1;
-            pm.reconstructRange(coords.data(), cross.controlPoints(), cross.targetPoints(), rec.data());
-            cpuReconstruct += threadCpuSeconds() - c2;
-            wallCross += since(w0);
-            step("timing", static_cast<double>(i + 1), static_cast<double>(timed));
-        }
-    }
-    seconds["timing"] = since(t);
-    const double per = 1.0 / static_cast<double>(timed);
-    const double crossCpu = (cpuKeys + cpuProject + cpuReconstruct) * per;
+};
 
-    // --- files ----------------------------------------------------------------------------------------
-    {
-        std::ostringstream csv;
-        csv << "set,frame,key_rms,bound_pct_bbox,error_pct_bbox,control_vs_full_pct_bbox\n";
-        for (const auto* set : {&validation, &novel})
-            for (const FrameScore& s : *set)
-                csv << (set == &validation ? "validation" : "novel") << ',' << s.frame << ',' << s.keyRms
-                    << ',' << s.bound / percent << ',' << s.error / percent << ',' << s.controlGap / percent
-                    << '\n';
-        AtomicFile file(out + "frames.csv");
-        const std::string text = csv.str();
-        file.write(text.data(), text.size());
-        file.commit();
+/// Speed: one thread, one frame at a time, full rig and cross PM interleaved.
+SpeedTotals timeFullRigAgainstCross(DemoSetup& run, const CrossDemoOptions& options, const CrossScene& scene,
+                                    const Model& model, const CrossMultiplier& cross) {
+    const DemoClock::time_point t = DemoClock::now();
+    const std::vector<Index>& validationFrames = scene.validationFrames;
+    SpeedTotals s;
+    s.timed = std::min<Index>(options.timingFrames, static_cast<Index>(validationFrames.size()));
+    std::vector<double> full(static_cast<size_t>(3 * scene.n)), rec(static_cast<size_t>(3 * scene.n)),
+        keys(static_cast<size_t>(3 * model.keyCount()));
+    Eigen::VectorXd coords(model.coordCount());
+    const PointMultiplier pm(model);
+    for (Index i = 0; i < s.timed; ++i) {
+        const ControlVector& c = scene.animation.frame(
+            validationFrames[static_cast<size_t>(i * static_cast<Index>(validationFrames.size()) / s.timed)]);
+        double c0 = threadCpuSeconds();
+        DemoClock::time_point w0 = DemoClock::now();
+        scene.rig->evaluateAll(c, full.data());
+        s.cpuFull += threadCpuSeconds() - c0;
+        s.wallFull += secondsSince(w0);
+        w0 = DemoClock::now();
+        c0 = threadCpuSeconds();
+        scene.rig->evaluateControl(c, cross.keyPoints(), keys.data());
+        double c1 = threadCpuSeconds();
+        s.cpuKeys += c1 - c0;
+        pm.project(keys.data(), coords.data());
+        volatile double e = pm.keyRmsError(keys.data(), coords.data());
+        (void)e;
+        double c2 = threadCpuSeconds();
+        s.cpuProject += c2 - c1;
+        pm.reconstructRange(coords.data(), cross.controlPoints(), cross.targetPoints(), rec.data());
+        s.cpuReconstruct += threadCpuSeconds() - c2;
+        s.wallCross += secondsSince(w0);
+        run.progress("timing", static_cast<double>(i + 1), static_cast<double>(s.timed));
     }
+    run.lap("timing", t);
+    return s;
+}
+
+/// Writes `text` to `path` atomically.
+void writeAtomically(const std::string& path, const std::string& text) {
+    AtomicFile file(path);
+    file.write(text.data(), text.size());
+    file.commit();
+}
+
+/// frames.csv: one row per validation and novel frame.
+void writeFramesCsv(const std::string& path, const std::vector<FrameScore>& validation,
+                    const std::vector<FrameScore>& novel, double percent) {
+    std::ostringstream csv;
+    csv << "set,frame,key_rms,bound_pct_bbox,error_pct_bbox,control_vs_full_pct_bbox\n";
+    for (const auto* set : {&validation, &novel})
+        for (const FrameScore& s : *set)
+            csv << (set == &validation ? "validation" : "novel") << ',' << s.frame << ',' << s.keyRms << ','
+                << s.bound / percent << ',' << s.error / percent << ',' << s.controlGap / percent << '\n';
+    writeAtomically(path, csv.str());
+}
+
+/// The report's speed figures: per frame, in milliseconds.
+nlohmann::json speedJson(const SpeedTotals& s) {
+    const double per = 1.0 / static_cast<double>(s.timed);
+    const double crossCpu = (s.cpuKeys + s.cpuProject + s.cpuReconstruct) * per;
+    return {{"timed_frames", s.timed},
+            {"full_rig_cpu_ms", 1e3 * s.cpuFull * per},
+            {"cross_cpu_ms", 1e3 * crossCpu},
+            {"control_keys_cpu_ms", 1e3 * s.cpuKeys * per},
+            {"projection_cpu_ms", 1e3 * s.cpuProject * per},
+            {"reconstruction_cpu_ms", 1e3 * s.cpuReconstruct * per},
+            {"speedup_cpu", crossCpu > 0 ? s.cpuFull * per / crossCpu : 0.0},
+            {"full_rig_wall_ms", 1e3 * s.wallFull * per},
+            {"cross_wall_ms", 1e3 * s.wallCross * per},
+            {"speedup_wall", s.wallCross > 0 ? s.wallFull / s.wallCross : 0.0}};
+}
+
+/// The report: the model, its bound, the errors and the speed (the timings are added by the caller).
+nlohmann::json makeReport(const CrossDemoOptions& options, const CrossScene& scene,
+                          const CrossTrained& trained, const std::vector<FrameScore>& validation,
+                          const std::vector<FrameScore>& novel, const SpeedTotals& speed) {
+    const Model& model = trained.model;
     const CrossState& st = *model.cross;
-    report["head_diagonal"] = face.boundingBoxDiagonal();
+    const double percent = scene.percent;
+    nlohmann::json report;
+    report["head_diagonal"] = scene.diagonal;
     report["control"] = "FaceRig::evaluateControl: blendshapes (with correctives), jaw, eyelids, eyes";
     report["target"] = "FaceRig::evaluateAll: the full rig (plus relax, flesh muscles, lip and lid contact)";
     report["fail_through"] = "impossible (cross point multiplication)";
@@ -296,37 +337,51 @@ nlohmann::json runCrossDemo(const CrossDemoOptions& options) {
                        {"train_frames", model.trainFrames},
                        {"energy_captured", model.energyCaptured()},
                        {"train_max_point_residual_pct_bbox", model.trainMaxPointResidual / percent},
-                       {"warnings", trainReport.training.warnings}};
+                       {"warnings", trained.report.training.warnings}};
     report["bound"] = {{"rule", "quantile * (key_rms + scale), split-conformal on held-out training pairs"},
                        {"coverage", st.coverage},
                        {"quantile", st.quantile},
                        {"scale", st.scale},
                        {"held_out_pairs", st.keyRms.size()},
-                       {"held_out_inside_rate", trainReport.heldOutCoverage}};
+                       {"held_out_inside_rate", trained.report.heldOutCoverage}};
     report["validation"] = summarize(validation, percent);
     report["novel"] = summarize(novel, percent);
-    report["speed"] = {{"timed_frames", timed},
-                       {"full_rig_cpu_ms", 1e3 * cpuFull * per},
-                       {"cross_cpu_ms", 1e3 * crossCpu},
-                       {"control_keys_cpu_ms", 1e3 * cpuKeys * per},
-                       {"projection_cpu_ms", 1e3 * cpuProject * per},
-                       {"reconstruction_cpu_ms", 1e3 * cpuReconstruct * per},
-                       {"speedup_cpu", crossCpu > 0 ? cpuFull * per / crossCpu : 0.0},
-                       {"full_rig_wall_ms", 1e3 * wallFull * per},
-                       {"cross_wall_ms", 1e3 * wallCross * per},
-                       {"speedup_wall", wallCross > 0 ? wallFull / wallCross : 0.0}};
-    report["frames"] = {{"training", trainingFrames.size()},
-                        {"validation", validationFrames.size()},
-                        {"novel", novelFrames.size()}};
-    seconds["total"] = since(start);
-    report["seconds"] = seconds;
+    report["speed"] = speedJson(speed);
+    report["frames"] = {{"training", scene.trainingFrames.size()},
+                        {"validation", scene.validationFrames.size()},
+                        {"novel", scene.novelFrames.size()}};
     report["quick"] = options.quick;
-    {
-        AtomicFile file(out + "report.json");
-        const std::string text = report.dump(2) + "\n";
-        file.write(text.data(), text.size());
-        file.commit();
-    }
+    return report;
+}
+
+}  // namespace
+
+nlohmann::json runCrossDemo(const CrossDemoOptions& options) {
+    const DemoClock::time_point start = DemoClock::now();
+    checkOptions(options);
+    DemoSetup run(options.threads > 0 ? options.threads : tbb::this_task_arena::max_concurrency(),
+                  options.progress, "demo cross", start);
+
+    // --- the face, the rig, the animation (the face demo's) -------------------------------------------
+    const DemoClock::time_point t = DemoClock::now();
+    CrossScene scene = loadScene(run, options);
+    createOutputFolder(options.outDir, FolderErrorWording::OutputFolder);
+    const std::string out = options.outDir + "/";
+    splitFrames(options, scene);
+    run.lap("load", t);
+
+    const CrossTrained trained = trainCrossModel(run, options, scene, out);
+    const CrossMultiplier cross(trained.model);
+    const std::vector<FrameScore> validation =
+        scoreFrames(run, scene, trained.model, cross, scene.validationFrames, "validation");
+    const std::vector<FrameScore> novel =
+        scoreFrames(run, scene, trained.model, cross, scene.novelFrames, "novel");
+    const SpeedTotals speed = timeFullRigAgainstCross(run, options, scene, trained.model, cross);
+
+    writeFramesCsv(out + "frames.csv", validation, novel, scene.percent);
+    nlohmann::json report = makeReport(options, scene, trained, validation, novel, speed);
+    report["seconds"] = run.finish();
+    writeAtomically(out + "report.json", report.dump(2) + "\n");
     return report;
 }
 

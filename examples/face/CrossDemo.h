@@ -1,8 +1,9 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-#include "examples/face/FaceAnimation.h"
-#include "examples/face/FaceRig.h"
+#include "evaluators/face/FaceAnimation.h"
+#include "evaluators/face/FaceControlEvaluator.h"
+#include "evaluators/face/FaceRig.h"
 #include "pmsc/PointEvaluator.h"
 
 #include <nlohmann/json.hpp>
@@ -15,7 +16,7 @@
 
 namespace pmsc::face {
 
-/// Cross point multiplication on the ICT face (paper section 7; `pmsc demo cross`, issue 10):
+/// Cross point multiplication on the ICT face (paper section 7; `pmsc demo cross`):
 /// the control face is the rig without its expensive stages (FaceRig::evaluateControl:
 /// blendshapes, jaw, eyelids, eyes), the target the full rig (plus relax, the flesh's muscles and
 /// the lip and lid contact). The animator poses the control; the target comes from the joint
@@ -45,28 +46,6 @@ struct CrossDemoOptions {
     /// `--quick`: 6 + 1 short sequences (2 train), M = 12, K = 120, 8 timed frames (a smoke test).
     static CrossDemoOptions quickOptions();
 };
-
-/// The control face as a point evaluator ("face-control:DIR" on the command line): frame f ->
-/// the default animation's controls at f (the same frames as "face:DIR") -> FaceRig::evaluateControl.
-/// What `pmsc run --model CROSS.pmsc --evaluator face-control:DIR` evaluates at the key points.
-class FaceControlEvaluator : public PointEvaluator {
-public:
-    FaceControlEvaluator(std::shared_ptr<const FaceRig> rig, std::shared_ptr<const FaceAnimation> animation)
-        : rig_(std::move(rig)), animation_(std::move(animation)) {}
-    std::string name() const override { return "face-control"; }
-    Index pointCount() const override { return rig_->pointCount(); }
-    Index channelCount() const override { return 3; }
-    Index frameCount() const override { return animation_->frameCount(); }
-    void evaluate(Index frame, std::span<const Index> points, double* out) const override;
-
-private:
-    std::shared_ptr<const FaceRig> rig_;
-    std::shared_ptr<const FaceAnimation> animation_;
-};
-
-/// Loads the ICT face from `folder` and builds the control evaluator over the default animation.
-/// @throws InputError naming the file for a missing or bad ICT folder.
-std::unique_ptr<FaceControlEvaluator> makeFaceControlEvaluator(const std::string& folder);
 
 /// Runs the experiment and writes DIR/report.json (returned), DIR/frames.csv and DIR/cross.pmsc:
 /// 1. poses the training sequences twice, control and full rig (the pairs), and trains the cross

@@ -3,7 +3,7 @@
 #include "examples/face/FaceLocalReport.h"
 
 #include "engine/Engine.h"
-#include "examples/face/FaceEvaluator.h"
+#include "evaluators/face/FaceEvaluator.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 #include "pmsc/Metrics.h"
@@ -273,7 +273,7 @@ EngineTotals runTestSequencesThroughEngine(const DemoRun& run, const FaceScene& 
     eo.threads = run.options.threads;
     // The rig shares work between points (relax rings, contact inputs): a miss is posed whole.
     eo.wholeFrameFailThrough = true;
-    // The decisions checked below are the whole frame's: today's soft cache (local fail-through
+    // The decisions checked below are the whole frame's: the whole-frame soft cache (local fail-through
     // is measured on its own afterwards).
     eo.localFailThrough = false;
     engine::Engine engine(model, scene.evaluator, eo);
@@ -309,7 +309,7 @@ EngineTotals runTestSequencesThroughEngine(const DemoRun& run, const FaceScene& 
     return totals;
 }
 
-// Local fail-through (issue 9): validation sample, novel and mixed sets, both ways.
+// Local fail-through: validation sample, novel and mixed sets, both ways.
 nlohmann::json measureLocalFailThrough(const DemoRun& run, const FaceScene& scene, const Model& model,
                                        const SequenceSplit& split) {
     const Clock::time_point t = Clock::now();

@@ -31,7 +31,7 @@ struct FaceDemoOptions {
     /// doubles). The paper used 85 for its 2,986 points.
     long basis = 48;
     long maxKeys = 170;  ///< K (paper: 170), Multi-PIE 68 fiducials included
-    /// Regions of local fail-through (issue 9; 0 = none). Training learns them after the model's
+    /// Regions of local fail-through (0 = none). Training learns them after the model's
     /// core, so every figure of the whole-frame soft cache is unchanged; report.json then gains
     /// "local_fail_through" with the validation (first 4 sequences) and novel sets measured both
     /// ways (FaceLocalReport.h).
@@ -67,7 +67,7 @@ struct FaceDemoOptions {
     static FaceDemoOptions quickOptions();
 };
 
-/// Runs the whole experiment (section 7, issue 5) and writes into options.outDir:
+/// Runs the whole experiment (section 7) and writes into options.outDir:
 /// - report.json (returned too): points, key_points, basis, train_frames, test_frames,
 ///   full_seconds_per_frame, pmsc_seconds_per_frame, speedup, hit_rate, blend_rate, miss_rate,
 ///   max_error_pct_bbox_p995, soft_max_error_pct_bbox_max, novel_nonhit_rate, and the details

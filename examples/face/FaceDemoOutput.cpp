@@ -1,9 +1,9 @@
 #include "examples/face/FaceDemoSteps.h"
 
-#include "examples/face/FaceControls.h"
+#include "evaluators/face/FaceControls.h"
+#include "evaluators/face/IctFace.h"
+#include "evaluators/face/ObjWriter.h"
 #include "examples/face/FaceRenderer.h"
-#include "examples/face/IctFace.h"
-#include "examples/face/ObjWriter.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Metrics.h"
 #include "pmsc/ModelIO.h"

@@ -3,10 +3,10 @@
 // FaceDemo.cpp runs the steps up to the timing; FaceDemoOutput.cpp writes the files and the report.
 #pragma once
 
-#include "examples/face/FaceAnimation.h"
+#include "evaluators/face/FaceAnimation.h"
+#include "evaluators/face/FaceEvaluator.h"
+#include "evaluators/face/FaceRig.h"
 #include "examples/face/FaceDemo.h"
-#include "examples/face/FaceEvaluator.h"
-#include "examples/face/FaceRig.h"
 #include "pmsc/Errors.h"
 #include "pmsc/Model.h"
 #include "pmsc/ObjIO.h"

@@ -1,7 +1,7 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-#include "examples/face/FaceAnimation.h"
+#include "evaluators/face/FaceAnimation.h"
 #include "pmsc/Model.h"
 #include "pmsc/PointEvaluator.h"
 

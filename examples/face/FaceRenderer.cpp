@@ -1,7 +1,7 @@
 #include "examples/face/FaceRenderer.h"
 
-#include "examples/common/Png.h"
-#include "examples/face/IctFace.h"
+#include "evaluators/face/IctFace.h"
+#include "evaluators/scene/Png.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 
@@ -152,7 +152,7 @@ std::array<float, 3> errorColour(double error, double full) {
 }
 
 void writePng(const std::string& path, const RgbImage& image) {
-    examples::writePngRgb8(path, image.width, image.height, image.pixels.data());
+    scene::writePngRgb8(path, image.width, image.height, image.pixels.data());
 }
 
 }  // namespace pmsc::face

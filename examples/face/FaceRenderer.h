@@ -1,7 +1,7 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-#include "examples/face/MeshTopology.h"
+#include "evaluators/face/MeshTopology.h"
 
 #include <Eigen/Core>
 

@@ -1,6 +1,7 @@
 #include "examples/face/LearnDemo.h"
 
-#include "examples/face/FaceEvaluator.h"
+#include "evaluators/face/FaceEvaluator.h"
+#include "examples/common/DemoSetup.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 #include "pmsc/IncrementalSvd.h"
@@ -42,8 +43,11 @@ LearnDemoOptions LearnDemoOptions::quickOptions() {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+using examples::createOutputFolder;
+using examples::DemoClock;
+using examples::DemoSetup;
+using examples::FolderErrorWording;
+using examples::secondsSince;
 
 // What point multiplication of one model makes of one fully posed frame.
 struct Score {
@@ -141,11 +145,10 @@ nlohmann::json summarize(const std::vector<Score>& scores, const Model& model, d
              {{"p50", percentile(big, 0.5)}, {"p95", percentile(big, 0.95)}, {"max", percentile(big, 1.0)}}}};
 }
 
-}  // namespace
+// --- the steps of runLearnDemo, in the order it runs them ------------------------------------
 
-nlohmann::json runLearnDemo(const LearnDemoOptions& options) {
-    namespace fs = std::filesystem;
-    const Clock::time_point start = Clock::now();
+/// Throws InputError unless the options are usable.
+void checkOptions(const LearnDemoOptions& options) {
     if (options.outDir.empty()) throw InputError("demo learn: --out is required");
     if (options.dataDir.empty()) throw InputError("demo learn: --data is required");
     if (options.sequences < 2 || options.novelSequences < 2 || options.minFrames < 8 ||
@@ -159,15 +162,22 @@ nlohmann::json runLearnDemo(const LearnDemoOptions& options) {
             "0 < training fraction < 1, 1 <= keys <= 170, tolerance > 0, learn rank >= basis, "
             "0 < coverage < 1, threads >= 0)");
     }
-    auto step = [&](std::string_view stage, double done, double total) {
-        if (options.progress && !options.progress(stage, done, total)) throw Cancelled("demo learn");
-    };
-    tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::this_task_arena::max_concurrency());
-    nlohmann::json report, seconds;
+}
 
-    // --- the face, the rig, the animation -------------------------------------------------------
-    Clock::time_point t = Clock::now();
-    step("load", 0, 1);
+/// The face, its rig and the animation, and the units errors are stated in.
+struct LearnScene {
+    std::shared_ptr<const FaceRig> rig;
+    std::shared_ptr<const ObjMesh> mesh;
+    std::shared_ptr<const FaceAnimation> animation;
+    FaceEvaluator evaluator;
+    Index n = 0;           // points
+    double percent = 0;    // model units per % of the head diagonal
+    double tolerance = 0;  // T
+};
+
+/// Loads the face, builds the rig and generates the animation.
+LearnScene loadScene(const DemoSetup& run, const LearnDemoOptions& options) {
+    run.progress("load", 0, 1);
     const IctFace face = loadIctFace(options.dataDir);
     auto rig = std::make_shared<const FaceRig>(face);
     auto mesh = std::make_shared<const ObjMesh>(face.neutral);
@@ -178,47 +188,59 @@ nlohmann::json runLearnDemo(const LearnDemoOptions& options) {
     ao.minFrames = options.minFrames;
     ao.maxFrames = options.maxFrames;
     auto animation = std::make_shared<const FaceAnimation>(FaceAnimation::generate(ao));
-    const FaceEvaluator evaluator(rig, animation, mesh);
-    const Index n = rig->pointCount();
     const double percent = face.boundingBoxDiagonal() / 100.0;
-    const double tolerance = options.tolerancePercent * percent;
-    std::error_code ec;
-    fs::create_directories(options.outDir, ec);
-    if (ec || !fs::is_directory(options.outDir))
-        throw IoError(options.outDir +
-                      ": cannot create the output folder: " + (ec ? ec.message() : "not a folder"));
-    const std::string out = options.outDir + "/";
+    return LearnScene{rig,
+                      mesh,
+                      animation,
+                      FaceEvaluator(rig, animation, mesh),
+                      rig->pointCount(),
+                      percent,
+                      options.tolerancePercent * percent};
+}
 
+/// Sequences by use (day 1's shot: the first half of the novel ones, day 2's: the second) and
+/// their frames.
+struct Split {
     std::vector<Index> trainingSeqs, validationSeqs, day1Seqs, day2Seqs;
-    animation->splitOrdinary(options.trainingFraction, options.seed + 4, trainingSeqs, validationSeqs);
-    {
-        std::vector<Index> novel;
-        for (Index s = 0; s < static_cast<Index>(animation->sequences().size()); ++s)
-            if (animation->sequences()[s].novel) novel.push_back(s);
-        const size_t half = novel.size() / 2;
-        day1Seqs.assign(novel.begin(), novel.begin() + static_cast<std::ptrdiff_t>(half));
-        day2Seqs.assign(novel.begin() + static_cast<std::ptrdiff_t>(half), novel.end());
-    }
-    const std::vector<Index> trainingFrames = animation->framesOf(trainingSeqs);
-    const std::vector<Index> day1Frames = animation->framesOf(day1Seqs);
-    const std::vector<Index> day2Frames = animation->framesOf(day2Seqs);
-    const std::vector<Index> validationFrames = animation->framesOf(validationSeqs);
-    seconds["load"] = since(t);
+    std::vector<Index> trainingFrames, day1Frames, day2Frames, validationFrames;
+};
 
-    // --- training (the night before day 1) ------------------------------------------------------
-    t = Clock::now();
-    FrameSet training(static_cast<Index>(trainingFrames.size()), n, 3);
-    {
-        std::atomic<Index> posed{0};
-        arena.execute([&] {
-            tbb::parallel_for(size_t{0}, trainingFrames.size(), [&](size_t i) {
-                evaluator.evaluateAll(trainingFrames[i], training.frame(static_cast<Index>(i)));
-                ++posed;
-            });
+/// Splits the sequences as `pmsc demo face` does, the novel ones between the two days.
+Split splitSequences(const LearnDemoOptions& options, const FaceAnimation& animation) {
+    Split s;
+    animation.splitOrdinary(options.trainingFraction, options.seed + 4, s.trainingSeqs, s.validationSeqs);
+    std::vector<Index> novel;
+    for (Index q = 0; q < static_cast<Index>(animation.sequences().size()); ++q)
+        if (animation.sequences()[q].novel) novel.push_back(q);
+    const size_t half = novel.size() / 2;
+    s.day1Seqs.assign(novel.begin(), novel.begin() + static_cast<std::ptrdiff_t>(half));
+    s.day2Seqs.assign(novel.begin() + static_cast<std::ptrdiff_t>(half), novel.end());
+    s.trainingFrames = animation.framesOf(s.trainingSeqs);
+    s.day1Frames = animation.framesOf(s.day1Seqs);
+    s.day2Frames = animation.framesOf(s.day2Seqs);
+    s.validationFrames = animation.framesOf(s.validationSeqs);
+    return s;
+}
+
+/// The training frames, fully posed.
+FrameSet poseTrainingFrames(DemoSetup& run, const LearnScene& scene,
+                            const std::vector<Index>& trainingFrames) {
+    const DemoClock::time_point t = DemoClock::now();
+    FrameSet training(static_cast<Index>(trainingFrames.size()), scene.n, 3);
+    std::atomic<Index> posed{0};
+    run.arena.execute([&] {
+        tbb::parallel_for(size_t{0}, trainingFrames.size(), [&](size_t i) {
+            scene.evaluator.evaluateAll(trainingFrames[i], training.frame(static_cast<Index>(i)));
+            ++posed;
         });
-        step("pose training", static_cast<double>(posed), static_cast<double>(trainingFrames.size()));
-    }
-    seconds["pose_training"] = since(t);
+    });
+    run.progress("pose training", static_cast<double>(posed), static_cast<double>(trainingFrames.size()));
+    run.lap("pose_training", t);
+    return training;
+}
+
+/// How the day-1 model (and the scratch one) is trained.
+TrainingOptions trainingOptions(const LearnDemoOptions& options, double tolerance) {
     TrainingOptions to;
     to.basis = options.basis;
     to.maxKeys = options.maxKeys;
@@ -227,233 +249,336 @@ nlohmann::json runLearnDemo(const LearnDemoOptions& options) {
     to.calibrationRule = options.conformal ? CalibrationRule::Conformal : CalibrationRule::MaxRatio;
     to.calibrationCoverage = options.coverage;
     to.learnRank = options.learnRank;
-    t = Clock::now();
-    TrainingReport day1Report;
-    Model day1;
-    arena.execute([&] { day1 = train(training, to, &day1Report); });
-    seconds["train_day1"] = since(t);
-    step("train", 1, 1);
-    writeModel(out + "day1.pmsc", day1);
-    // Both rules' eps from the same held-out frames and the same model (only eps differ).
-    CalibrationStats oldRule = day1Report.calibration;
-    setThresholds(oldRule, tolerance, CalibrationRule::MaxRatio, 0);
-    std::vector<CalibrationStats> conformalRules;
-    for (double coverage : {0.9, 0.95, 0.99}) {
-        conformalRules.push_back(day1Report.calibration);
-        setThresholds(conformalRules.back(), tolerance, CalibrationRule::Conformal, coverage);
-    }
+    return to;
+}
 
-    // --- day 1: the shot through the soft cache, misses kept ------------------------------------
-    t = Clock::now();
+/// The day-1 model and its eps by both calibration rules.
+struct Day1Model {
+    TrainingReport report;
+    Model model;
+    CalibrationStats oldRule;                      // the max rule
+    std::vector<CalibrationStats> conformalRules;  // coverages 0.9, 0.95, 0.99
+};
+
+/// Training (the night before day 1): the day-1 model, written as day1.pmsc.
+Day1Model trainDay1(DemoSetup& run, const FrameSet& training, const TrainingOptions& to, double tolerance,
+                    const std::string& out) {
+    const DemoClock::time_point t = DemoClock::now();
+    Day1Model d;
+    run.arena.execute([&] { d.model = train(training, to, &d.report); });
+    run.lap("train_day1", t);
+    run.progress("train", 1, 1);
+    writeModel(out + "day1.pmsc", d.model);
+    // Both rules' eps from the same held-out frames and the same model (only eps differ).
+    d.oldRule = d.report.calibration;
+    setThresholds(d.oldRule, tolerance, CalibrationRule::MaxRatio, 0);
+    for (double coverage : {0.9, 0.95, 0.99}) {
+        d.conformalRules.push_back(d.report.calibration);
+        setThresholds(d.conformalRules.back(), tolerance, CalibrationRule::Conformal, coverage);
+    }
+    return d;
+}
+
+/// Day 1's shot: its scores and the frames that were kept (blends and misses).
+struct Day1Shot {
+    std::vector<Score> scores;
+    std::string keptPath;  // day1-misses.npy
+    Index keptCount = 0;
+};
+
+/// Day 1's kept frames into `shot.keptPath` (replacing an earlier run's); frees `keptValues`.
+void writeKeptFrames(const LearnScene& scene, const std::vector<Index>& day1Frames,
+                     const SoftCachePolicy& policy, std::vector<std::vector<double>>& keptValues,
+                     Day1Shot& shot) {
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    fs::remove(shot.keptPath, ec);
+    fs::remove(KeptFrames::sidecarPath(shot.keptPath), ec);
+    KeptFrames kept(shot.keptPath, scene.n, 3, NpyDtype::Float32, "demo learn day 1, model=day1.pmsc");
+    for (size_t i = 0; i < day1Frames.size(); ++i) {
+        if (keptValues[i].empty()) continue;
+        const CacheDecision d = policy.decide(shot.scores[i].keyRms);
+        kept.add(day1Frames[i], d.state, shot.scores[i].keyRms, keptValues[i].data());
+        std::vector<double>().swap(keptValues[i]);
+    }
+    shot.keptCount = kept.count();
+    kept.commit();
+}
+
+/// Day 1: the shot through the soft cache, misses kept.
+Day1Shot runDay1(DemoSetup& run, const LearnScene& scene, const Model& day1,
+                 const std::vector<Index>& day1Frames, const std::string& out) {
+    const DemoClock::time_point t = DemoClock::now();
     const Probe day1Probe(day1);
-    std::vector<Score> day1Scores(day1Frames.size());
+    Day1Shot shot;
+    shot.scores.resize(day1Frames.size());
     std::vector<std::vector<double>> keptValues(day1Frames.size());
     const SoftCachePolicy day1Policy(day1.epsMin, day1.epsMax);
-    arena.execute([&] {
+    run.arena.execute([&] {
         tbb::parallel_for(size_t{0}, day1Frames.size(), [&](size_t i) {
-            std::vector<double> full(static_cast<size_t>(3 * n));
-            evaluator.evaluateAll(day1Frames[i], full.data());
-            day1Scores[i] = day1Probe.score(full.data());
-            if (day1Policy.decide(day1Scores[i].keyRms).state != CacheState::Hit)
+            std::vector<double> full(static_cast<size_t>(3 * scene.n));
+            scene.evaluator.evaluateAll(day1Frames[i], full.data());
+            shot.scores[i] = day1Probe.score(full.data());
+            if (day1Policy.decide(shot.scores[i].keyRms).state != CacheState::Hit)
                 keptValues[i] = std::move(full);
         });
     });
-    const std::string keptPath = out + "day1-misses.npy";
-    fs::remove(keptPath, ec);
-    fs::remove(KeptFrames::sidecarPath(keptPath), ec);
-    Index keptCount = 0;
-    {
-        KeptFrames kept(keptPath, n, 3, NpyDtype::Float32, "demo learn day 1, model=day1.pmsc");
-        for (size_t i = 0; i < day1Frames.size(); ++i) {
-            if (keptValues[i].empty()) continue;
-            const CacheDecision d = day1Policy.decide(day1Scores[i].keyRms);
-            kept.add(day1Frames[i], d.state, day1Scores[i].keyRms, keptValues[i].data());
-            std::vector<double>().swap(keptValues[i]);
-        }
-        keptCount = kept.count();
-        kept.commit();
-    }
-    seconds["day1"] = since(t);
-    step("day 1", 1, 1);
-    if (keptCount == 0) throw InputError("demo learn: day 1 kept no frame; nothing to learn");
+    shot.keptPath = out + "day1-misses.npy";
+    writeKeptFrames(scene, day1Frames, day1Policy, keptValues, shot);
+    run.lap("day1", t);
+    run.progress("day 1", 1, 1);
+    if (shot.keptCount == 0) throw InputError("demo learn: day 1 kept no frame; nothing to learn");
+    return shot;
+}
 
-    // --- the night: learn from the kept frames; and, for comparison, train from scratch ----------
-    const FrameSet misses = readFrames(keptPath).frames;  // what `pmsc learn --frames` would read
-    t = Clock::now();
+/// The night's two models: learned from the kept frames, and trained from scratch for comparison.
+struct NightModels {
     LearnReport learnReport;
     Model day2;
-    arena.execute([&] { day2 = learn(day1, misses, {}, &learnReport); });
-    const double learnSeconds = since(t);
-    writeModel(out + "day2.pmsc", day2);
-    step("learn", 1, 1);
-    FrameSet all(training.frames + misses.frames, n, 3);
+    double learnSeconds = 0;
+    Model scratch;
+    double scratchSeconds = 0;
+};
+
+/// The night: learn from the kept frames; and, for comparison, train from scratch on the training
+/// frames and the kept ones (frees `training`).
+NightModels learnAtNight(DemoSetup& run, const LearnScene& scene, const Model& day1, const FrameSet& misses,
+                         FrameSet& training, const TrainingOptions& to, const std::string& out) {
+    NightModels night;
+    DemoClock::time_point t = DemoClock::now();
+    run.arena.execute([&] { night.day2 = learn(day1, misses, {}, &night.learnReport); });
+    night.learnSeconds = secondsSince(t);
+    writeModel(out + "day2.pmsc", night.day2);
+    run.progress("learn", 1, 1);
+    FrameSet all(training.frames + misses.frames, scene.n, 3);
     std::copy(training.values.begin(), training.values.end(), all.values.begin());
     std::copy(misses.values.begin(), misses.values.end(),
               all.values.begin() + static_cast<std::ptrdiff_t>(training.values.size()));
     std::vector<double>().swap(training.values);
-    t = Clock::now();
-    Model scratch;
+    t = DemoClock::now();
     TrainingReport scratchReport;
-    arena.execute([&] { scratch = train(all, to, &scratchReport); });
-    const double scratchSeconds = since(t);
+    run.arena.execute([&] { night.scratch = train(all, to, &scratchReport); });
+    night.scratchSeconds = secondsSince(t);
     std::vector<double>().swap(all.values);
-    writeModel(out + "scratch.pmsc", scratch);
-    step("train from scratch", 1, 1);
+    writeModel(out + "scratch.pmsc", night.scratch);
+    run.progress("train from scratch", 1, 1);
+    return night;
+}
 
-    // --- day 2 and validation through the three models ------------------------------------------
-    const Probe day2Probe(day2), scratchProbe(scratch);
-    struct Three {
-        std::vector<Score> day1, day2, scratch;
-    };
-    auto scoreAll = [&](const std::vector<Index>& frames, const char* stage) {
-        Three r;
-        r.day1.resize(frames.size());
-        r.day2.resize(frames.size());
-        r.scratch.resize(frames.size());
-        std::atomic<Index> done{0};
-        arena.execute([&] {
-            tbb::parallel_for(size_t{0}, frames.size(), [&](size_t i) {
-                std::vector<double> full(static_cast<size_t>(3 * n));
-                evaluator.evaluateAll(frames[i], full.data());
-                r.day1[i] = day1Probe.score(full.data());
-                r.day2[i] = day2Probe.score(full.data());
-                r.scratch[i] = scratchProbe.score(full.data());
-                const Index k = ++done;
-                if (k % 64 == 0) step(stage, static_cast<double>(k), static_cast<double>(frames.size()));
-            });
+/// One set of frames scored by the three models.
+struct Three {
+    std::vector<Score> day1, day2, scratch;
+};
+
+/// Poses `frames` fully and scores them with the day-1, day-2 and scratch models; the seconds
+/// taken go to timings[timing].
+Three scoreWithThree(DemoSetup& run, const LearnScene& scene, const Probe& day1Probe, const Probe& day2Probe,
+                     const Probe& scratchProbe, const std::vector<Index>& frames, const char* stage,
+                     const char* timing) {
+    const DemoClock::time_point t = DemoClock::now();
+    Three r;
+    r.day1.resize(frames.size());
+    r.day2.resize(frames.size());
+    r.scratch.resize(frames.size());
+    std::atomic<Index> done{0};
+    run.arena.execute([&] {
+        tbb::parallel_for(size_t{0}, frames.size(), [&](size_t i) {
+            std::vector<double> full(static_cast<size_t>(3 * scene.n));
+            scene.evaluator.evaluateAll(frames[i], full.data());
+            r.day1[i] = day1Probe.score(full.data());
+            r.day2[i] = day2Probe.score(full.data());
+            r.scratch[i] = scratchProbe.score(full.data());
+            const Index k = ++done;
+            if (k % 64 == 0) run.progress(stage, static_cast<double>(k), static_cast<double>(frames.size()));
         });
-        return r;
-    };
-    t = Clock::now();
-    const Three day2Scores = scoreAll(day2Frames, "day 2");
-    seconds["day2"] = since(t);
-    t = Clock::now();
-    const Three validation = scoreAll(validationFrames, "validation");
-    seconds["validation"] = since(t);
+    });
+    run.lap(timing, t);
+    return r;
+}
 
-    // --- the report -------------------------------------------------------------------------------
-    report["points"] = n;
-    report["tolerance"] = tolerance;
-    report["tolerance_pct_bbox"] = options.tolerancePercent;
-    report["frames"] = {{"training", trainingFrames.size()},
-                        {"day1", day1Frames.size()},
-                        {"day1_kept", keptCount},
-                        {"day2", day2Frames.size()},
-                        {"validation", validationFrames.size()}};
+/// The report's table of the novel sequences of both days.
+nlohmann::json novelSequences(const FaceAnimation& animation, const Split& split) {
     nlohmann::json novel = nlohmann::json::array();
-    for (const auto* set : {&day1Seqs, &day2Seqs})
+    for (const auto* set : {&split.day1Seqs, &split.day2Seqs})
         for (Index s : *set) {
             nlohmann::json controls = nlohmann::json::array();
-            for (int c : animation->sequences()[s].novelControls)
+            for (int c : animation.sequences()[s].novelControls)
                 controls.push_back(std::string(controlName(c)));
-            novel.push_back({{"sequence", animation->sequences()[s].name},
-                             {"day", set == &day1Seqs ? 1 : 2},
-                             {"frames", animation->sequences()[s].frameCount},
+            novel.push_back({{"sequence", animation.sequences()[s].name},
+                             {"day", set == &split.day1Seqs ? 1 : 2},
+                             {"frames", animation.sequences()[s].frameCount},
                              {"novel_controls", controls}});
         }
-    report["novel_sequences"] = novel;
-    auto modelJson = [&](const Model& m) {
-        return nlohmann::json{{"basis", m.basisSize()},        {"key_points", m.keyCount()},
-                              {"train_frames", m.trainFrames}, {"eps_min", m.epsMin},
-                              {"eps_max", m.epsMax},           {"energy_captured", m.energyCaptured()}};
+    return novel;
+}
+
+/// A model's size and calibration, for the report.
+nlohmann::json modelJson(const Model& m) {
+    return nlohmann::json{{"basis", m.basisSize()},        {"key_points", m.keyCount()},
+                          {"train_frames", m.trainFrames}, {"eps_min", m.epsMin},
+                          {"eps_max", m.epsMax},           {"energy_captured", m.energyCaptured()}};
+}
+
+/// The report's comparison of the learned model with the one trained from scratch.
+nlohmann::json learnVersusScratch(const NightModels& night) {
+    const Model &day2 = night.day2, &scratch = night.scratch;
+    const LearnReport& learnReport = night.learnReport;
+    const Index commonM = std::min(day2.basisSize(), scratch.basisSize());
+    Index shared = 0;
+    for (Index k : day2.keyPoints)
+        shared += std::find(scratch.keyPoints.begin(), scratch.keyPoints.end(), k) != scratch.keyPoints.end();
+    return {{"largest_principal_angle_deg",
+             largestPrincipalAngle(scratch.basis.leftCols(commonM), day2.basis.leftCols(commonM)) * 180.0 /
+                 3.141592653589793},
+            {"keys_shared", shared},
+            {"learn_seconds", night.learnSeconds},
+            {"scratch_train_seconds", night.scratchSeconds},
+            {"learn_stage_seconds",
+             {{"subspace", learnReport.secondsSubspace},
+              {"keys", learnReport.secondsKeys},
+              {"calibration", learnReport.secondsCalibration}}},
+            {"state_rank", learnReport.rankAfter},
+            {"state_tail_norm", learnReport.tailNorm},
+            {"calibration_ratio_new_frames", learnReport.calibrationRatioNew},
+            {"calibration_ratio_stored", learnReport.calibrationRatioOld},
+            {"warnings", learnReport.warnings}};
+}
+
+/// Calibration: the max rule and the conformal one on the same model and held-out frames, against
+/// the oracle threshold, on one set of frames.
+nlohmann::json compareCalibration(const std::vector<Score>& scores, const Day1Model& d, double tolerance,
+                                  double percent) {
+    const auto [threshold, bestHits] = bestThreshold(scores, tolerance);
+    const double count = static_cast<double>(scores.size());
+    auto rule = [&](const CalibrationStats& c) {
+        const Outcome o = outcome(scores, c.epsMin, c.epsMax, tolerance);
+        nlohmann::json j = {
+            {"eps_min", c.epsMin},
+            {"ratio", c.ratio},
+            {"hits", o.hits},
+            {"hit_rate", static_cast<double>(o.hits) / count},
+            {"share_of_best",
+             bestHits > 0 ? static_cast<double>(o.hits) / static_cast<double>(bestHits) : 0.0},
+            {"frames_over_tolerance", o.overTolerance},
+            {"soft_max_error_pct_bbox", o.softMax / percent}};
+        if (c.rule == CalibrationRule::Conformal) j["coverage"] = c.coverage;
+        return j;
     };
+    nlohmann::json conformal = nlohmann::json::array();
+    for (const auto& c : d.conformalRules) conformal.push_back(rule(c));
+    return nlohmann::json{
+        {"frames", scores.size()},
+        {"best_single_threshold",
+         {{"threshold", threshold}, {"hits", bestHits}, {"hit_rate", static_cast<double>(bestHits) / count}}},
+        {"max_rule", rule(d.oldRule)},
+        {"conformal_rule", conformal}};
+}
+
+/// What the three models made of day 1, day 2 and the validation frames.
+struct Scores {
+    const std::vector<Score>& day1;
+    const Three& day2;
+    const Three& validation;
+};
+
+/// The report: frames, novel sequences, models, their scores, learning against training, calibration.
+nlohmann::json makeReport(const LearnDemoOptions& options, const LearnScene& scene, const Split& split,
+                          Index keptCount, const Day1Model& d1, const NightModels& night, const Scores& s) {
+    const double percent = scene.percent, tolerance = scene.tolerance;
+    const Model &day1 = d1.model, &day2 = night.day2, &scratch = night.scratch;
+    nlohmann::json report;
+    report["points"] = scene.n;
+    report["tolerance"] = tolerance;
+    report["tolerance_pct_bbox"] = options.tolerancePercent;
+    report["frames"] = {{"training", split.trainingFrames.size()},
+                        {"day1", split.day1Frames.size()},
+                        {"day1_kept", keptCount},
+                        {"day2", split.day2Frames.size()},
+                        {"validation", split.validationFrames.size()}};
+    report["novel_sequences"] = novelSequences(*scene.animation, split);
     report["models"] = {
         {"day1", modelJson(day1)}, {"day2_learned", modelJson(day2)}, {"scratch", modelJson(scratch)}};
-    report["day1"] = summarize(day1Scores, day1, percent);
-    report["day2"] = {{"day1_model", summarize(day2Scores.day1, day1, percent)},
-                      {"learned_model", summarize(day2Scores.day2, day2, percent)},
-                      {"scratch_model", summarize(day2Scores.scratch, scratch, percent)}};
-    report["validation"] = {{"day1_model", summarize(validation.day1, day1, percent)},
-                            {"learned_model", summarize(validation.day2, day2, percent)},
-                            {"scratch_model", summarize(validation.scratch, scratch, percent)}};
-    const Index commonM = std::min(day2.basisSize(), scratch.basisSize());
-    report["learn_vs_scratch"] = {
-        {"largest_principal_angle_deg",
-         largestPrincipalAngle(scratch.basis.leftCols(commonM), day2.basis.leftCols(commonM)) * 180.0 /
-             3.141592653589793},
-        {"keys_shared",
-         [&] {
-             Index shared = 0;
-             for (Index k : day2.keyPoints)
-                 shared += std::find(scratch.keyPoints.begin(), scratch.keyPoints.end(), k) !=
-                           scratch.keyPoints.end();
-             return shared;
-         }()},
-        {"learn_seconds", learnSeconds},
-        {"scratch_train_seconds", scratchSeconds},
-        {"learn_stage_seconds",
-         {{"subspace", learnReport.secondsSubspace},
-          {"keys", learnReport.secondsKeys},
-          {"calibration", learnReport.secondsCalibration}}},
-        {"state_rank", learnReport.rankAfter},
-        {"state_tail_norm", learnReport.tailNorm},
-        {"calibration_ratio_new_frames", learnReport.calibrationRatioNew},
-        {"calibration_ratio_stored", learnReport.calibrationRatioOld},
-        {"warnings", learnReport.warnings}};
-    // Calibration: the old rule and the new on the same model and held-out frames, against the
-    // oracle threshold, on the validation set and on day 2's shot.
-    auto compare = [&](const std::vector<Score>& scores) {
-        const auto [threshold, bestHits] = bestThreshold(scores, tolerance);
-        const double count = static_cast<double>(scores.size());
-        auto rule = [&](const CalibrationStats& c) {
-            const Outcome o = outcome(scores, c.epsMin, c.epsMax, tolerance);
-            nlohmann::json j = {
-                {"eps_min", c.epsMin},
-                {"ratio", c.ratio},
-                {"hits", o.hits},
-                {"hit_rate", static_cast<double>(o.hits) / count},
-                {"share_of_best",
-                 bestHits > 0 ? static_cast<double>(o.hits) / static_cast<double>(bestHits) : 0.0},
-                {"frames_over_tolerance", o.overTolerance},
-                {"soft_max_error_pct_bbox", o.softMax / percent}};
-            if (c.rule == CalibrationRule::Conformal) j["coverage"] = c.coverage;
-            return j;
-        };
-        nlohmann::json conformal = nlohmann::json::array();
-        for (const auto& c : conformalRules) conformal.push_back(rule(c));
-        return nlohmann::json{{"frames", scores.size()},
-                              {"best_single_threshold",
-                               {{"threshold", threshold},
-                                {"hits", bestHits},
-                                {"hit_rate", static_cast<double>(bestHits) / count}}},
-                              {"max_rule", rule(oldRule)},
-                              {"conformal_rule", conformal}};
-    };
-    report["calibration"] = {{"held_out_frames", day1Report.calibration.keyRms.size()},
-                             {"validation", compare(validation.day1)},
-                             {"day1_shot", compare(day1Scores)},
-                             {"day2_shot", compare(day2Scores.day1)}};
+    report["day1"] = summarize(s.day1, day1, percent);
+    report["day2"] = {{"day1_model", summarize(s.day2.day1, day1, percent)},
+                      {"learned_model", summarize(s.day2.day2, day2, percent)},
+                      {"scratch_model", summarize(s.day2.scratch, scratch, percent)}};
+    report["validation"] = {{"day1_model", summarize(s.validation.day1, day1, percent)},
+                            {"learned_model", summarize(s.validation.day2, day2, percent)},
+                            {"scratch_model", summarize(s.validation.scratch, scratch, percent)}};
+    report["learn_vs_scratch"] = learnVersusScratch(night);
+    report["calibration"] = {{"held_out_frames", d1.report.calibration.keyRms.size()},
+                             {"validation", compareCalibration(s.validation.day1, d1, tolerance, percent)},
+                             {"day1_shot", compareCalibration(s.day1, d1, tolerance, percent)},
+                             {"day2_shot", compareCalibration(s.day2.day1, d1, tolerance, percent)}};
     report["day1"]["frames_over_tolerance"] =
-        outcome(day1Scores, day1.epsMin, day1.epsMax, tolerance).overTolerance;
+        outcome(s.day1, day1.epsMin, day1.epsMax, tolerance).overTolerance;
     report["day2"]["learned_model"]["frames_over_tolerance"] =
-        outcome(day2Scores.day2, day2.epsMin, day2.epsMax, tolerance).overTolerance;
+        outcome(s.day2.day2, day2.epsMin, day2.epsMax, tolerance).overTolerance;
     report["validation"]["learned_model"]["frames_over_tolerance"] =
-        outcome(validation.day2, day2.epsMin, day2.epsMax, tolerance).overTolerance;
-    seconds["total"] = since(start);
-    report["seconds"] = seconds;
+        outcome(s.validation.day2, day2.epsMin, day2.epsMax, tolerance).overTolerance;
+    return report;
+}
 
-    // frames.csv: one row per frame of day 1, day 2 and validation.
+/// frames.csv: one row per frame of day 1, day 2 and validation.
+void writeFramesCsv(const std::string& path, const Split& split, const Scores& s, double percent) {
     std::ostringstream csv;
     csv << "set,frame,day1_key_rms,day1_pm_max_pct,day2_key_rms,day2_pm_max_pct,scratch_key_rms,scratch_pm_"
            "max_pct\n";
     char line[256];
-    for (size_t i = 0; i < day1Frames.size(); ++i) {
-        std::snprintf(line, sizeof line, "day1,%ld,%.6g,%.6g,,,,\n", static_cast<long>(day1Frames[i]),
-                      day1Scores[i].keyRms, day1Scores[i].pmMax / percent);
+    for (size_t i = 0; i < split.day1Frames.size(); ++i) {
+        std::snprintf(line, sizeof line, "day1,%ld,%.6g,%.6g,,,,\n", static_cast<long>(split.day1Frames[i]),
+                      s.day1[i].keyRms, s.day1[i].pmMax / percent);
         csv << line;
     }
-    auto rows = [&](const char* name, const std::vector<Index>& frames, const Three& s) {
+    auto rows = [&](const char* name, const std::vector<Index>& frames, const Three& t) {
         for (size_t i = 0; i < frames.size(); ++i) {
             std::snprintf(line, sizeof line, "%s,%ld,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g\n", name,
-                          static_cast<long>(frames[i]), s.day1[i].keyRms, s.day1[i].pmMax / percent,
-                          s.day2[i].keyRms, s.day2[i].pmMax / percent, s.scratch[i].keyRms,
-                          s.scratch[i].pmMax / percent);
+                          static_cast<long>(frames[i]), t.day1[i].keyRms, t.day1[i].pmMax / percent,
+                          t.day2[i].keyRms, t.day2[i].pmMax / percent, t.scratch[i].keyRms,
+                          t.scratch[i].pmMax / percent);
             csv << line;
         }
     };
-    rows("day2", day2Frames, day2Scores);
-    rows("validation", validationFrames, validation);
-    writeFileAtomically(out + "frames.csv", csv.str());
+    rows("day2", split.day2Frames, s.day2);
+    rows("validation", split.validationFrames, s.validation);
+    writeFileAtomically(path, csv.str());
+}
+
+}  // namespace
+
+nlohmann::json runLearnDemo(const LearnDemoOptions& options) {
+    const DemoClock::time_point start = DemoClock::now();
+    checkOptions(options);
+    DemoSetup run(options.threads > 0 ? options.threads : tbb::this_task_arena::max_concurrency(),
+                  options.progress, "demo learn", start);
+
+    // --- the face, the rig, the animation -------------------------------------------------------
+    const DemoClock::time_point t = DemoClock::now();
+    const LearnScene scene = loadScene(run, options);
+    createOutputFolder(options.outDir, FolderErrorWording::OutputFolder);
+    const std::string out = options.outDir + "/";
+    const Split split = splitSequences(options, *scene.animation);
+    run.lap("load", t);
+
+    // --- training (the night before day 1), day 1, the night ---------------------------------------
+    FrameSet training = poseTrainingFrames(run, scene, split.trainingFrames);
+    const TrainingOptions to = trainingOptions(options, scene.tolerance);
+    const Day1Model d1 = trainDay1(run, training, to, scene.tolerance, out);
+    const Day1Shot day1Shot = runDay1(run, scene, d1.model, split.day1Frames, out);
+    const FrameSet misses = readFrames(day1Shot.keptPath).frames;  // what `pmsc learn --frames` would read
+    const NightModels night = learnAtNight(run, scene, d1.model, misses, training, to, out);
+
+    // --- day 2 and validation through the three models ------------------------------------------
+    const Probe day1Probe(d1.model), day2Probe(night.day2), scratchProbe(night.scratch);
+    const Three day2Scores =
+        scoreWithThree(run, scene, day1Probe, day2Probe, scratchProbe, split.day2Frames, "day 2", "day2");
+    const Three validation = scoreWithThree(run, scene, day1Probe, day2Probe, scratchProbe,
+                                            split.validationFrames, "validation", "validation");
+
+    const Scores scores{day1Shot.scores, day2Scores, validation};
+    nlohmann::json report = makeReport(options, scene, split, day1Shot.keptCount, d1, night, scores);
+    report["seconds"] = run.finish();
+    writeFramesCsv(out + "frames.csv", split, scores, scene.percent);
     writeFileAtomically(out + "report.json", report.dump(2) + "\n");
     return report;
 }

@@ -9,7 +9,7 @@
 
 namespace pmsc::face {
 
-/// The nightly loop of paper section 5 on the ICT face (`pmsc demo learn`, issue 10): "poses
+/// The nightly loop of paper section 5 on the ICT face (`pmsc demo learn`): "poses
 /// identified as cache misses can be tagged and used as additional training ... training could be
 /// done each night".
 struct LearnDemoOptions {
@@ -55,7 +55,7 @@ struct LearnDemoOptions {
 ///    controls, other performances) through the day-1, day-2 and scratch models;
 /// 5. validation (the face demo's validation sequences) through the three models, and the
 ///    calibration comparison on it: hits and worst soft-cached error with eps from the largest
-///    held-out ratio (the old rule) and from the conformal quantile (the new rule), and the best
+///    held-out ratio (the max rule) and from the conformal quantile (the conformal rule), and the best
 ///    single threshold that keeps every frame under T (an oracle that sees the errors), for the
 ///    conformal rule at coverages 0.9, 0.95 and 0.99, with the frames each puts over T.
 /// @throws pmsc::InputError for a bad ICT folder or options, pmsc::IoError, pmsc::Cancelled.

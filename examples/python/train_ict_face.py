@@ -1,10 +1,10 @@
 #!/usr/bin/python3
 """Train PMSC on the ICT face from Python, replay a test take through the soft cache, and run the
-evaluation engine with a Python evaluator (issue 13).
+evaluation engine with a Python evaluator.
 
     PYTHONPATH=build/python examples/python/train_ict_face.py ICT-FaceKit/FaceXModel --work face-py
 
-The frames come from build/bin/pmsc_ict_frames (the README's face measurement: 600 training frames,
+The frames come from build/bin/pmsc_ict_frames (the face measurement of docs/face.md: 600 training frames,
 seed 1; 300 test frames, seed 2), made once into --work. Any (frames, points, 3) array would do: the
 frames of a Houdini or Maya export, numpy.stack of USD point arrays, ...
 """
@@ -38,7 +38,7 @@ def main():
     parser.add_argument("--train-frames", type=int, default=600)
     parser.add_argument("--test-frames", type=int, default=300)
     parser.add_argument("--max-keys", type=int, default=170)
-    parser.add_argument("--tolerance", type=float, default=0.2376, help="0.5%% of the head's diagonal (README)")
+    parser.add_argument("--tolerance", type=float, default=0.2376, help="0.5%% of the head's diagonal (docs/face.md)")
     parser.add_argument("--threads", type=int, default=0, help="engine threads (0 = every core)")
     args = parser.parse_args()
     os.makedirs(args.work, exist_ok=True)
@@ -47,7 +47,7 @@ def main():
     test = np.load(frames_file(args, "test.npy", args.test_frames, 2), mmap_mode="r")
     print(f"train {train.shape} {train.dtype}, test {test.shape} {test.dtype}")
 
-    # 1. Train: the same options and the same model bytes as `pmsc train` (README, Measurements).
+    # 1. Train: the same options and the same model bytes as `pmsc train` (docs/face.md).
     start = time.perf_counter()
     cpu = time.process_time()
     model = pmsc.train(train, max_keys=args.max_keys, tolerance=args.tolerance)

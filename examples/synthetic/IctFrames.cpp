@@ -1,6 +1,6 @@
 #include "examples/synthetic/IctFrames.h"
 
-#include "examples/synthetic/SmoothNoise.h"
+#include "evaluators/synthetic/SmoothNoise.h"
 #include "pmsc/Errors.h"
 #include "pmsc/ObjIO.h"
 

@@ -13,8 +13,8 @@ namespace pmsc::synthetic {
 /// A small blendshape + rotational-jaw rig built from the ICT FaceKit meshes
 /// (ICT-VGL/ICT-FaceKit, FaceXModel/): the neutral mesh and one whole mesh per
 /// expression, so a blendshape delta is expression - neutral. It makes
-/// training and test frames for issue 2's "Must show" (600 frames x 26,719
-/// points); the face example (issue 5) has the full rig.
+/// training and test frames at the face scale (600 frames x 26,719
+/// points); the face example has the full rig.
 ///
 /// The jaw is not the linear jawOpen blendshape but a rotation about a hinge,
 /// which is what makes the data nonlinear in the animation controls (section 2):

@@ -1,8 +1,9 @@
 #include "examples/volume/VolumeDemo.h"
 
 #include "engine/Engine.h"
-#include "examples/cornell/DemoValidation.h"
-#include "examples/cornell/ImageIO.h"
+#include "evaluators/scene/Image.h"
+#include "examples/common/DemoSetup.h"
+#include "examples/common/DemoValidation.h"
 #include "examples/volume/VolumeRenderer.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
@@ -31,13 +32,15 @@ extern char** environ;
 
 namespace pmsc::volume {
 
-using cornell::RelError;
-using cornell::ValidationSink;
+using examples::createOutputFolder;
+using examples::DemoClock;
+using examples::DemoSetup;
+using examples::FolderErrorWording;
+using examples::RelError;
+using examples::secondsSince;
+using examples::ValidationSink;
 
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double secondsSince(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 std::string frameTag(Index pathFrame) {
     char buf[32];
@@ -54,6 +57,7 @@ std::string triple(double a, double b, double c) {
 /// Runs a program found on PATH with arguments, no shell; its exit status (-1 if it did not start).
 int runProgram(const std::vector<std::string>& argv) {
     std::vector<char*> args;
+    args.reserve(argv.size() + 1);
     for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
     args.push_back(nullptr);
     posix_spawn_file_actions_t actions;
@@ -126,49 +130,49 @@ VolumeDemoOptions VolumeDemoOptions::quickOptions() {
     return o;
 }
 
-nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
-    const auto start = Clock::now();
+// --- the steps of runVolumeDemo, in the order it runs them ------------------------------------
+namespace {
+
+/// Throws InputError unless the options are usable.
+void checkOptions(const VolumeDemoOptions& o) {
     if (o.outDir.empty()) throw InputError("demo volume: --out DIR is required");
     if (o.basis < 1 || o.keys < 1 || o.gridKeys < 0 || o.gridKeys > o.keys || o.betweenLights < 1 ||
         o.pathFrames < 1 || o.pathFullEvery < 1 || o.referenceMultiplier < 1 || o.referencePoints < 1 ||
         o.referenceFrames < 1 || o.imageSize < 8 || o.renderFrames < 0 || o.threads < 0 ||
         !(o.toleranceFraction > 0) || o.rig.azimuths < 1 || o.rig.elevations.empty())
         throw InputError("demo volume: an option is out of range");
-    {
-        std::error_code ec;
-        std::filesystem::create_directories(o.outDir, ec);
-        if (ec || !std::filesystem::is_directory(o.outDir))
-            throw IoError("cannot create " + o.outDir + ": " + (ec ? ec.message() : "not a directory"));
-    }
-    const int threads = o.threads > 0 ? o.threads : tbb::info::default_concurrency();
-    tbb::task_arena arena(threads);
-    auto progress = [&](std::string_view stage, double done, double total) {
-        if (o.progress && !o.progress(stage, done, total)) throw Cancelled("demo volume: interrupted");
-    };
-    nlohmann::json report, timings;
+}
 
-    // 1. The medium: smoke from the mesh (or the user's density), written beside the caches.
-    auto t = Clock::now();
-    progress("density", 0, 1);
+/// 1. The medium: smoke from the mesh (or the user's density), written beside the caches.
+std::shared_ptr<const VolumeWorld> makeMedium(DemoSetup& run, const VolumeDemoOptions& o) {
+    const auto t = DemoClock::now();
+    run.progress("density", 0, 1);
     std::shared_ptr<const VolumeWorld> world;
-    arena.execute([&] {
+    run.arena.execute([&] {
         world = o.density.empty()
                     ? VolumeWorld::create(DensityVolume::fromMesh(o.mesh, o.fog), o.medium, o.mesh)
                     : VolumeWorld::create(DensityVolume::read(o.density, o.grid), o.medium, o.density);
     });
-    const Index n = static_cast<Index>(world->density.voxelCount());
     world->density.write(o.outDir + "/density.vdb");
-    timings["density"] = secondsSince(t);
+    run.lap("density", t);
+    return world;
+}
 
-    // 2. Training frames: the light on the rig around and over the medium in two colours. With
-    // rig.colourPairs a position's second colour is the first's per-channel rescaling (recolour).
-    const VolumeEvaluator trainEval(world, o.rig.training(*world), "volume-train");
+/// The training frames, and how many of them were full calculations (the others recoloured).
+struct TrainingFrames {
+    FrameSet q;
+    Index calculations = 0;
+};
+
+/// 2. Training frames: the light on the rig around and over the medium in two colours. With
+/// rig.colourPairs a position's second colour is the first's per-channel rescaling (recolour).
+TrainingFrames makeTrainingFrames(DemoSetup& run, const VolumeEvaluator& trainEval, Index n) {
     const Index trainFrames = trainEval.frameCount();
-    t = Clock::now();
-    FrameSet q(trainFrames, n, 3);
-    Index trainCalculations = 0;
+    const auto t = DemoClock::now();
+    TrainingFrames training{FrameSet(trainFrames, n, 3)};
+    FrameSet& q = training.q;
     for (Index f = 0; f < trainFrames; ++f) {
-        progress("training frames", static_cast<double>(f), static_cast<double>(trainFrames));
+        run.progress("training frames", static_cast<double>(f), static_cast<double>(trainFrames));
         const auto& l = trainEval.lights();
         const auto same = [&](const VolumeLight& a, const VolumeLight& b) {
             return a.position.x == b.position.x && a.position.y == b.position.y &&
@@ -178,332 +182,475 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
             std::copy(q.frame(f - 1), q.frame(f - 1) + 3 * n, q.frame(f));
             recolour(l[static_cast<std::size_t>(f - 1)], l[static_cast<std::size_t>(f)], q.frame(f), n);
         } else {
-            arena.execute([&] { trainEval.evaluateAll(f, q.frame(f)); });
-            ++trainCalculations;
+            run.arena.execute([&] { trainEval.evaluateAll(f, q.frame(f)); });
+            ++training.calculations;
         }
     }
-    const double trainSeconds = secondsSince(t);
-    timings["training_frames"] = trainSeconds;
+    run.lap("training_frames", t);
+    return training;
+}
 
-    // 3. Train: basis, key voxels (seeded with a sparse spatial grid), calibrated eps.
-    t = Clock::now();
-    double peak = 0;
+/// The model and what training made of the frames.
+struct Trained {
+    TrainingOptions options;
+    TrainingReport report;
+    Model model;
+    double peak = 0;      // the largest training radiance (Euclidean over RGB)
+    RelError projection;  // the training frames' own distance from the basis
+};
+
+/// 3. Train: basis, key voxels (seeded with a sparse spatial grid), calibrated eps; frees `q`.
+Trained trainModel(DemoSetup& run, const VolumeDemoOptions& o, const VolumeWorld& world, FrameSet& q,
+                   Index n) {
+    const auto t = DemoClock::now();
+    Trained trained;
+    const Index trainFrames = q.frames;
     for (Index i = 0; i < q.frames * n; ++i) {
         const double* v = q.values.data() + 3 * i;
-        peak = std::max(peak, std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]));
+        trained.peak = std::max(trained.peak, std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]));
     }
-    TrainingOptions topt;
+    TrainingOptions& topt = trained.options;
     topt.basis = o.basis;
     topt.maxKeys = o.keys;
     topt.sharedChannels = o.sharedChannels;
-    topt.tolerance = o.toleranceFraction * peak;
+    topt.tolerance = o.toleranceFraction * trained.peak;
     if (o.gridKeys > 0) {
         Eigen::MatrixXd positions(n, 3);
         for (Index i = 0; i < n; ++i) {
-            const Vec3 p = world->density.voxelPositions()[static_cast<std::size_t>(i)];
+            const Vec3 p = world.density.voxelPositions()[static_cast<std::size_t>(i)];
             positions.row(i) << p.x, p.y, p.z;
         }
         topt.gridPoints = sparseGridPointsByCount(positions, o.gridKeys);
     }
-    topt.progress = [&](std::string_view stage, double done, double total) {
-        progress(std::string("train: ") + std::string(stage), done, total);
+    topt.progress = [&run](std::string_view stage, double done, double total) {
+        run.progress(std::string("train: ") + std::string(stage), done, total);
         return true;
     };
-    TrainingReport trep;
-    Model model;
-    arena.execute([&] { model = train(q, topt, &trep); });
+    run.arena.execute([&] { trained.model = train(q, topt, &trained.report); });
     // The training frames' own distance from the basis (truncation to M vectors).
-    RelError trainProjection;
-    for (Index f = 0; f < trainFrames; ++f) addProjectionError(model, q.frame(f), trainProjection);
+    for (Index f = 0; f < trainFrames; ++f) addProjectionError(trained.model, q.frame(f), trained.projection);
     q = FrameSet();
-    timings["train"] = secondsSince(t);
+    run.lap("train", t);
+    return trained;
+}
 
-    // 4. Validation: settings between the training ones, then the path. Full calculations of the
-    // frames whose errors are measured and that are rendered.
-    std::vector<VolumeLight> lights = o.rig.between(*world, o.betweenLights);
-    const Index between = static_cast<Index>(lights.size());
-    for (const VolumeLight& l : o.rig.path(*world, o.pathFrames)) lights.push_back(l);
-    const VolumeEvaluator valEval(world, lights, "volume");
-    const Index testFrames = valEval.frameCount();
+/// The validation lights and which of their frames get full calculations and renders.
+struct ValidationFrames {
+    std::vector<VolumeLight> lights;  // the settings between the training ones, then the path
+    Index between = 0;
     std::set<Index> fullFrames, renderFrames;
-    for (Index f = 0; f < between; ++f) fullFrames.insert(f);
-    for (Index p = 0; p < o.pathFrames; p += o.pathFullEvery) fullFrames.insert(between + p);
+};
+
+/// 4. Validation: settings between the training ones, then the path. Full calculations of the
+/// frames whose errors are measured and that are rendered.
+ValidationFrames chooseValidationFrames(const VolumeDemoOptions& o, const VolumeWorld& world) {
+    ValidationFrames v;
+    v.lights = o.rig.between(world, o.betweenLights);
+    v.between = static_cast<Index>(v.lights.size());
+    for (const VolumeLight& l : o.rig.path(world, o.pathFrames)) v.lights.push_back(l);
+    for (Index f = 0; f < v.between; ++f) v.fullFrames.insert(f);
+    for (Index p = 0; p < o.pathFrames; p += o.pathFullEvery) v.fullFrames.insert(v.between + p);
     for (int r = 0; r < o.renderFrames; ++r) {
         Index p = static_cast<Index>(r + 1) * o.pathFrames / (o.renderFrames + 1);
         p -= p % o.pathFullEvery;
-        renderFrames.insert(between + p);
-        fullFrames.insert(between + p);
+        v.renderFrames.insert(v.between + p);
+        v.fullFrames.insert(v.between + p);
     }
-    std::map<Index, std::vector<double>> full;
-    t = Clock::now();
+    return v;
+}
+
+/// The full calculations of the validation frames that have them.
+struct FullFrames {
+    std::map<Index, std::vector<double>> values;
+    double secondsPerFrame = 0;
+};
+
+/// 4. (continued) The full calculations, timed.
+FullFrames calculateFullFrames(DemoSetup& run, const VolumeEvaluator& valEval,
+                               const std::set<Index>& fullFrames, Index n) {
+    FullFrames full;
+    const auto t = DemoClock::now();
     Index done = 0;
     for (Index f : fullFrames) {
-        progress("validation full calculations", static_cast<double>(done++),
-                 static_cast<double>(fullFrames.size()));
-        auto& v = full[f];
+        run.progress("validation full calculations", static_cast<double>(done++),
+                     static_cast<double>(fullFrames.size()));
+        auto& v = full.values[f];
         v.resize(static_cast<std::size_t>(3 * n));
-        arena.execute([&] { valEval.evaluateAll(f, v.data()); });
+        run.arena.execute([&] { valEval.evaluateAll(f, v.data()); });
     }
-    const double fullSecondsPerFrame = secondsSince(t) / static_cast<double>(fullFrames.size());
-    timings["validation_full"] = fullSecondsPerFrame * static_cast<double>(fullFrames.size());
+    full.secondsPerFrame = secondsSince(t) / static_cast<double>(fullFrames.size());
+    run.timings["validation_full"] = full.secondsPerFrame * static_cast<double>(fullFrames.size());
+    return full;
+}
 
-    std::vector<Index> subset(static_cast<std::size_t>(n));
+/// The voxels and frames the converged reference is calculated on.
+struct ReferenceSubset {
+    std::vector<Index> points;  // a random subset of the voxels, sorted
+    Index frames = 0;           // the first this many "between" settings
+    std::set<Index> frameSet;
+};
+
+/// 4. (continued) The reference's random voxels and its frames.
+ReferenceSubset chooseReferenceSubset(const VolumeDemoOptions& o, Index n, Index between) {
+    ReferenceSubset ref;
+    std::vector<Index>& subset = ref.points;
+    subset.resize(static_cast<std::size_t>(n));
     std::iota(subset.begin(), subset.end(), Index{0});
     std::mt19937 rng(20130711);
     std::shuffle(subset.begin(), subset.end(), rng);
     subset.resize(std::min<std::size_t>(subset.size(), static_cast<std::size_t>(o.referencePoints)));
     std::sort(subset.begin(), subset.end());
-    const Index referenceFrames = std::min<Index>(between, o.referenceFrames);
-    std::set<Index> subsetFrames;
-    for (Index f = 0; f < referenceFrames; ++f) subsetFrames.insert(f);
+    ref.frames = std::min<Index>(between, o.referenceFrames);
+    for (Index f = 0; f < ref.frames; ++f) ref.frameSet.insert(f);
+    return ref;
+}
 
-    // 5. The validation frames through the engine: key voxels, projection, soft cache per frame.
-    ValidationSink sink("volume", full, renderFrames, subset, subsetFrames);
-    sink.scatteredCount = between;
+/// 5. The validation frames through the engine: key voxels, projection, soft cache per frame.
+engine::RunStats runThroughEngine(DemoSetup& run, const Model& model, const VolumeEvaluator& valEval,
+                                  ValidationSink& sink) {
     engine::EngineOptions eopt;
-    eopt.threads = threads;
+    eopt.threads = run.threads;
     eopt.keepPointMultiplication = true;
-    eopt.progress = [&](const engine::Progress& p) {
-        progress("validation through the engine", static_cast<double>(p.framesDone),
-                 static_cast<double>(p.framesTotal));
+    eopt.progress = [&run](const engine::Progress& p) {
+        run.progress("validation through the engine", static_cast<double>(p.framesDone),
+                     static_cast<double>(p.framesTotal));
     };
     engine::Engine eng(model, valEval, eopt);
-    const engine::RunStats stats = eng.run(engine::FrameRange{0, testFrames, 1}, sink);
-    const double pmscSecondsPerFrame = stats.wallSeconds / static_cast<double>(testFrames);
-    timings["engine"] = stats.wallSeconds;
-    // The validation frames' distance from the basis: what M and the training lights allow.
-    RelError valProjection;
-    for (const auto& [f, v] : full) addProjectionError(model, v.data(), valProjection);
+    engine::RunStats stats = eng.run(engine::FrameRange{0, valEval.frameCount(), 1}, sink);
+    run.timings["engine"] = stats.wallSeconds;
+    return stats;
+}
 
-    // 6. Converged reference on the subset: referenceMultiplier x the light samples, 1/4 the step.
-    MediumSettings refMedium = world->medium;
-    refMedium.lightSamples *= o.referenceMultiplier;
-    refMedium.stepVoxels /= 4;
-    const VolumeEvaluator refEval(VolumeWorld::create(world->density, refMedium, world->source),
-                                  o.rig.between(*world, o.betweenLights), "volume-reference");
-    RelError refFull, refPm, refSelf;
-    t = Clock::now();
-    for (Index f = 0; f < referenceFrames; ++f) {
-        progress("converged reference", static_cast<double>(f), static_cast<double>(referenceFrames));
-        std::vector<double> ref(3 * subset.size());
-        arena.execute([&] {
-            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, subset.size(), 16), [&](const auto& r) {
-                refEval.evaluate(f, std::span<const Index>(subset.data() + r.begin(), r.size()),
-                                 ref.data() + 3 * r.begin());
-            });
+/// One frame of an evaluator at the subset's voxels (3 doubles a voxel into `out`), in the arena.
+void evaluateAtSubset(DemoSetup& run, const VolumeEvaluator& eval, Index frame,
+                      const std::vector<Index>& subset, std::vector<double>& out) {
+    run.arena.execute([&] {
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, subset.size(), 16), [&](const auto& r) {
+            eval.evaluate(frame, std::span<const Index>(subset.data() + r.begin(), r.size()),
+                          out.data() + 3 * r.begin());
         });
+    });
+}
+
+/// The converged reference's errors: of the full calculation, of PM, and its own (convergence).
+struct ReferenceErrors {
+    RelError full, pm, self;
+    MediumSettings medium;  // the reference's
+};
+
+/// 6. (check) How converged the reference is: its distance from one with twice its shadow rays
+/// and half its step, on the first frame's subset.
+void checkReferenceConvergence(DemoSetup& run, const VolumeWorld& world, const VolumeEvaluator& refEval,
+                               const std::vector<Index>& subset, const std::vector<double>& ref,
+                               ReferenceErrors& errors) {
+    run.progress("converged reference (check)", 0, 1);
+    MediumSettings fineMedium = errors.medium;
+    fineMedium.lightSamples *= 2;
+    fineMedium.stepVoxels /= 2;
+    const VolumeEvaluator fineEval(VolumeWorld::create(world.density, fineMedium, world.source),
+                                   {refEval.lights()[0]}, "volume-reference-check");
+    std::vector<double> fine(3 * subset.size());
+    evaluateAtSubset(run, fineEval, 0, subset, fine);
+    errors.self.add(ref.data(), fine.data(), fine.size());
+}
+
+/// 6. Converged reference on the subset: referenceMultiplier x the light samples, 1/4 the step.
+ReferenceErrors measureAgainstReference(DemoSetup& run, const VolumeDemoOptions& o, const VolumeWorld& world,
+                                        const ReferenceSubset& reference,
+                                        std::map<Index, std::vector<double>>& full, ValidationSink& sink) {
+    ReferenceErrors errors;
+    errors.medium = world.medium;
+    errors.medium.lightSamples *= o.referenceMultiplier;
+    errors.medium.stepVoxels /= 4;
+    const VolumeEvaluator refEval(VolumeWorld::create(world.density, errors.medium, world.source),
+                                  o.rig.between(world, o.betweenLights), "volume-reference");
+    const std::vector<Index>& subset = reference.points;
+    const auto t = DemoClock::now();
+    for (Index f = 0; f < reference.frames; ++f) {
+        run.progress("converged reference", static_cast<double>(f), static_cast<double>(reference.frames));
+        std::vector<double> ref(3 * subset.size());
+        evaluateAtSubset(run, refEval, f, subset, ref);
         std::vector<double> fullAt(3 * subset.size());
         for (std::size_t i = 0; i < subset.size(); ++i)
             for (int c = 0; c < 3; ++c)
                 fullAt[3 * i + c] = full[f][static_cast<std::size_t>(3 * subset[i] + c)];
-        refFull.add(fullAt.data(), ref.data(), ref.size());
-        refPm.add(sink.pmAtSubset[f].data(), ref.data(), ref.size());
-        if (f == 0) {
-            // How converged the reference is: its distance from one with twice its shadow rays
-            // and half its step, on the first frame's subset.
-            progress("converged reference (check)", 0, 1);
-            MediumSettings fineMedium = refMedium;
-            fineMedium.lightSamples *= 2;
-            fineMedium.stepVoxels /= 2;
-            const VolumeEvaluator fineEval(VolumeWorld::create(world->density, fineMedium, world->source),
-                                           {refEval.lights()[0]}, "volume-reference-check");
-            std::vector<double> fine(3 * subset.size());
-            arena.execute([&] {
-                tbb::parallel_for(tbb::blocked_range<std::size_t>(0, subset.size(), 16), [&](const auto& r) {
-                    fineEval.evaluate(0, std::span<const Index>(subset.data() + r.begin(), r.size()),
-                                      fine.data() + 3 * r.begin());
-                });
-            });
-            refSelf.add(ref.data(), fine.data(), fine.size());
-        }
+        errors.full.add(fullAt.data(), ref.data(), ref.size());
+        errors.pm.add(sink.pmAtSubset[f].data(), ref.data(), ref.size());
+        if (f == 0) checkReferenceConvergence(run, world, refEval, subset, ref, errors);
     }
-    timings["reference"] = secondsSince(t);
+    run.lap("reference", t);
+    return errors;
+}
 
-    // 7. Cache files and renders from the moving cameras.
-    t = Clock::now();
+/// What the caches and renders step wrote.
+struct WrittenFiles {
     nlohmann::json images = nlohmann::json::array(), vdbs = nlohmann::json::array();
-    std::uint64_t cacheBytes = 0;
-    const auto cameraCount = volumeCameras(*world, 0).size();
+    std::uint64_t cacheBytes = 0;  // of the last PMSC cache written
+};
+
+/// 7. One camera's panel (full | PMSC | |diff| x 10) of a path frame; its entry in "images".
+nlohmann::json renderPanel(DemoSetup& run, const VolumeDemoOptions& o, const VolumeWorld& world,
+                           const scene::Camera& cam, const ScatterCache& fullCache,
+                           const ScatterCache& pmCache, Index pathFrame, const std::string& tag,
+                           CacheState state) {
+    std::vector<Image> imgs;
+    run.arena.execute([&] { imgs = renderVolume(world, cam, {&fullCache, &pmCache}, o.imageSize); });
+    const Image diff = scene::absDifference(imgs[0], imgs[1], 10.0f);
+    const Image panel = scene::sideBySide({&imgs[0], &imgs[1], &diff});
+    const std::string name = cam.name + "_" + tag + ".png";
+    scene::writePng(o.outDir + "/" + name, panel, mediumExposure(imgs[0]));
+    RelError imgErr;
+    std::vector<double> a(imgs[1].rgb.begin(), imgs[1].rgb.end()), b(imgs[0].rgb.begin(), imgs[0].rgb.end());
+    imgErr.add(a.data(), b.data(), a.size());
+    return {{"camera", cam.name},
+            {"path_frame", pathFrame},
+            {"png", name},
+            {"state", toString(state)},
+            {"image_rms_rel_error", imgErr.value()}};
+}
+
+/// 7. Cache files and renders from the moving cameras.
+WrittenFiles writeCachesAndRenders(DemoSetup& run, const VolumeDemoOptions& o, const VolumeWorld& world,
+                                   const VolumeEvaluator& valEval, const ValidationFrames& frames,
+                                   std::map<Index, std::vector<double>>& full, ValidationSink& sink) {
+    const auto t = DemoClock::now();
+    WrittenFiles written;
+    const auto cameraCount = volumeCameras(world, 0).size();
     Index rendered = 0;
-    for (Index f : renderFrames) {
-        const Index pathFrame = f - between;
+    for (Index f : frames.renderFrames) {
+        const Index pathFrame = f - frames.between;
         const auto rec = std::find_if(sink.records.begin(), sink.records.end(),
                                       [&](const auto& r) { return r.frame == f; });
-        const ScatterCache pmCache(world->density, sink.soft[f],
+        const ScatterCache pmCache(world.density, sink.soft[f],
                                    valEval.info(f, std::string(toString(rec->state))));
-        const ScatterCache fullCache(world->density, full[f], valEval.info(f, "full"));
-        cacheBytes = pmCache.memoryBytes();
+        const ScatterCache fullCache(world.density, full[f], valEval.info(f, "full"));
+        written.cacheBytes = pmCache.memoryBytes();
         const std::string tag = frameTag(pathFrame);
         for (const auto& [name, cache] : {std::pair{"pmsc", &pmCache}, std::pair{"full", &fullCache}}) {
             const std::string path = o.outDir + "/cache_" + name + "_" + tag + ".vdb";
             cache->write(path);
-            vdbs.push_back(std::filesystem::path(path).filename().string());
+            written.vdbs.push_back(std::filesystem::path(path).filename().string());
         }
         const double camT = o.pathFrames > 1 ? static_cast<double>(pathFrame) / (o.pathFrames - 1) : 0.0;
-        for (const cornell::Camera& cam : volumeCameras(*world, camT)) {
-            progress("renders", static_cast<double>(rendered++),
-                     static_cast<double>(renderFrames.size() * cameraCount));
-            std::vector<Image> imgs;
-            arena.execute([&] { imgs = renderVolume(*world, cam, {&fullCache, &pmCache}, o.imageSize); });
-            const Image diff = cornell::absDifference(imgs[0], imgs[1], 10.0f);
-            const Image panel = cornell::sideBySide({&imgs[0], &imgs[1], &diff});
-            const std::string name = cam.name + "_" + tag + ".png";
-            cornell::writePng(o.outDir + "/" + name, panel, mediumExposure(imgs[0]));
-            RelError imgErr;
-            std::vector<double> a(imgs[1].rgb.begin(), imgs[1].rgb.end()),
-                b(imgs[0].rgb.begin(), imgs[0].rgb.end());
-            imgErr.add(a.data(), b.data(), a.size());
-            images.push_back({{"camera", cam.name},
-                              {"path_frame", pathFrame},
-                              {"png", name},
-                              {"state", toString(rec->state)},
-                              {"image_rms_rel_error", imgErr.value()}});
+        for (const scene::Camera& cam : volumeCameras(world, camT)) {
+            run.progress("renders", static_cast<double>(rendered++),
+                         static_cast<double>(frames.renderFrames.size() * cameraCount));
+            written.images.push_back(
+                renderPanel(run, o, world, cam, fullCache, pmCache, pathFrame, tag, rec->state));
         }
     }
-    timings["caches_and_renders"] = secondsSince(t);
+    run.lap("caches_and_renders", t);
+    return written;
+}
 
-    // 8. OpenVDB's own renderer on the density, as an independent view of the input: the same
-    // extinction and albedo, a distant light from the first rendered frame's light direction.
-    nlohmann::json vdbRender = nullptr;
-    if (o.vdbRender) {
-        t = Clock::now();
-        progress("vdb_render", 0, 1);
-        const cornell::Camera cam = volumeCameras(*world, 0.5)[0];
-        const VolumeLight& l =
-            lights[static_cast<std::size_t>(renderFrames.empty() ? 0 : *renderFrames.begin())];
-        const Vec3 dir = cornell::normalize(l.position - world->centre);
-        const double s = world->medium.sigmaT;
-        const Rgb& a = world->medium.albedo;
-        const std::string png = o.outDir + "/vdb_render_density.png";
-        std::vector<std::string> argv{"vdb_render",
-                                      o.outDir + "/density.vdb",
-                                      png,
-                                      "-res",
-                                      std::to_string(o.imageSize) + "x" + std::to_string(o.imageSize),
-                                      "-translate",
-                                      triple(cam.eye.x, cam.eye.y, cam.eye.z),
-                                      "-lookat",
-                                      triple(cam.target.x, cam.target.y, cam.target.z),
-                                      "-fov",
-                                      "45",
-                                      "-scatter",
-                                      triple(s * a[0], s * a[1], s * a[2]),
-                                      "-absorb",
-                                      triple(s * (1 - a[0]), s * (1 - a[1]), s * (1 - a[2])),
-                                      "-light",
-                                      triple(dir.x, dir.y, dir.z) + ",1,1,1",
-                                      "-step",
-                                      "0.5",
-                                      "-shadowstep",
-                                      "1",
-                                      "-cpus",
-                                      std::to_string(threads)};
-        const int rc = runProgram(argv);
-        vdbRender = {{"png", rc == 0 ? nlohmann::json("vdb_render_density.png") : nlohmann::json(nullptr)},
-                     {"exit_status", rc},
-                     {"command", argv}};
-        timings["vdb_render"] = secondsSince(t);
-    }
+/// 8. OpenVDB's own renderer on the density, as an independent view of the input: the same
+/// extinction and albedo, a distant light from the first rendered frame's light direction.
+nlohmann::json runVdbRender(DemoSetup& run, const VolumeDemoOptions& o, const VolumeWorld& world,
+                            const ValidationFrames& frames) {
+    if (!o.vdbRender) return nullptr;
+    const auto t = DemoClock::now();
+    run.progress("vdb_render", 0, 1);
+    const scene::Camera cam = volumeCameras(world, 0.5)[0];
+    const VolumeLight& l =
+        frames
+            .lights[static_cast<std::size_t>(frames.renderFrames.empty() ? 0 : *frames.renderFrames.begin())];
+    const Vec3 dir = scene::normalize(l.position - world.centre);
+    const double s = world.medium.sigmaT;
+    const Rgb& a = world.medium.albedo;
+    const std::string png = o.outDir + "/vdb_render_density.png";
+    std::vector<std::string> argv{"vdb_render",
+                                  o.outDir + "/density.vdb",
+                                  png,
+                                  "-res",
+                                  std::to_string(o.imageSize) + "x" + std::to_string(o.imageSize),
+                                  "-translate",
+                                  triple(cam.eye.x, cam.eye.y, cam.eye.z),
+                                  "-lookat",
+                                  triple(cam.target.x, cam.target.y, cam.target.z),
+                                  "-fov",
+                                  "45",
+                                  "-scatter",
+                                  triple(s * a[0], s * a[1], s * a[2]),
+                                  "-absorb",
+                                  triple(s * (1 - a[0]), s * (1 - a[1]), s * (1 - a[2])),
+                                  "-light",
+                                  triple(dir.x, dir.y, dir.z) + ",1,1,1",
+                                  "-step",
+                                  "0.5",
+                                  "-shadowstep",
+                                  "1",
+                                  "-cpus",
+                                  std::to_string(run.threads)};
+    const int rc = runProgram(argv);
+    nlohmann::json vdbRender = {
+        {"png", rc == 0 ? nlohmann::json("vdb_render_density.png") : nlohmann::json(nullptr)},
+        {"exit_status", rc},
+        {"command", argv}};
+    run.lap("vdb_render", t);
+    return vdbRender;
+}
 
-    // 9. The report.
-    nlohmann::json frames = nlohmann::json::array();
-    for (const auto& r : sink.records) {
-        nlohmann::json fr{
-            {"frame", r.frame},           {"kind", r.frame < between ? "between" : "path"},
-            {"state", toString(r.state)}, {"weight", r.weight},
-            {"key_rms", r.keyRms},        {"kelvin", lights[static_cast<std::size_t>(r.frame)].kelvin}};
+/// 9. The report's per-frame table.
+nlohmann::json frameTable(const std::vector<ValidationSink::FrameRecord>& records,
+                          const ValidationFrames& frames) {
+    nlohmann::json table = nlohmann::json::array();
+    for (const auto& r : records) {
+        nlohmann::json fr{{"frame", r.frame},
+                          {"kind", r.frame < frames.between ? "between" : "path"},
+                          {"state", toString(r.state)},
+                          {"weight", r.weight},
+                          {"key_rms", r.keyRms},
+                          {"kelvin", frames.lights[static_cast<std::size_t>(r.frame)].kelvin}};
         if (r.pmRelError >= 0) {
             fr["pm_rel_error"] = r.pmRelError;
             fr["soft_rel_error"] = r.softRelError;
         }
-        frames.push_back(fr);
+        table.push_back(fr);
     }
-    const auto [lo, hi] = world->density.worldBounds();
+    return table;
+}
+
+/// 9. The report: the medium, the model and how it was trained.
+void reportMediumAndModel(nlohmann::json& report, const VolumeDemoOptions& o, const VolumeWorld& world,
+                          Index n, const Trained& trained, const TrainingFrames& training, Index trainFrames,
+                          int threads) {
+    const Model& model = trained.model;
+    const auto [lo, hi] = world.density.worldBounds();
     report["points"] = n;
     report["active_voxels"] = n;
-    report["voxel_size_m"] = world->density.voxelSize();
+    report["voxel_size_m"] = world.density.voxelSize();
     report["bounds_m"] = {{lo.x, lo.y, lo.z}, {hi.x, hi.y, hi.z}};
-    report["source"] = world->source;
-    report["sigma_t_per_m"] = world->medium.sigmaT;
-    report["albedo"] = world->medium.albedo;
-    report["max_density"] = world->density.maxDensity();
-    report["light_samples"] = world->medium.lightSamples;
-    report["step_voxels"] = world->medium.stepVoxels;
-    report["multiple_scattering_octaves"] = world->medium.octaves;
+    report["source"] = world.source;
+    report["sigma_t_per_m"] = world.medium.sigmaT;
+    report["albedo"] = world.medium.albedo;
+    report["max_density"] = world.density.maxDensity();
+    report["light_samples"] = world.medium.lightSamples;
+    report["step_voxels"] = world.medium.stepVoxels;
+    report["multiple_scattering_octaves"] = world.medium.octaves;
     report["key_points"] = model.keyCount();
     report["basis"] = model.basisSize();
     report["shared_channels"] = model.sharedChannels;
     report["train_frames"] = trainFrames;
-    report["train_full_calculations"] = trainCalculations;
+    report["train_full_calculations"] = training.calculations;
+    report["grid_key_points"] = trained.options.gridPoints.size();
+    report["eps_min"] = model.epsMin;
+    report["eps_max"] = model.epsMax;
+    report["tolerance"] = trained.options.tolerance;
+    report["peak_training_radiance"] = trained.peak;
+    report["energy_captured"] = model.energyCaptured();
+    report["training_warnings"] = trained.report.warnings;
+    report["threads"] = threads;
+    report["density_tree_bytes"] = world.density.memoryBytes();
+    report["quick"] = o.quick;
+}
+
+/// 9. The report: speed and errors against the full calculation and the converged reference.
+void reportAccuracy(nlohmann::json& report, const FullFrames& full, const engine::RunStats& stats,
+                    Index testFrames, const ValidationSink& sink, const ValidationFrames& frames,
+                    const Trained& trained, const RelError& valProjection, const ReferenceSubset& reference,
+                    const ReferenceErrors& ref) {
+    const double pmscSecondsPerFrame = stats.wallSeconds / static_cast<double>(testFrames);
     report["test_frames"] = testFrames;
-    report["full_seconds_per_frame"] = fullSecondsPerFrame;
+    report["full_seconds_per_frame"] = full.secondsPerFrame;
     report["pmsc_seconds_per_frame"] = pmscSecondsPerFrame;
-    report["speedup"] = fullSecondsPerFrame / pmscSecondsPerFrame;
+    report["speedup"] = full.secondsPerFrame / pmscSecondsPerFrame;
     report["rms_rel_error"] = sink.pmError.value();
     report["soft_rms_rel_error"] = sink.softError.value();
     report["rms_rel_error_between"] = sink.pmScattered.value();
     report["rms_rel_error_path"] = sink.pmPath.value();
-    report["error_frames"] = fullFrames.size();
-    report["train_projection_rel_error"] = trainProjection.value();
+    report["error_frames"] = frames.fullFrames.size();
+    report["train_projection_rel_error"] = trained.projection.value();
     report["projection_rel_error"] = valProjection.value();
-    {
-        // How far the validation lights are from the training ones (angles seen from the centre).
-        const std::vector<Vec3> dirs = o.rig.trainingDirections();
-        auto dirOf = [&](const VolumeLight& l) { return cornell::normalize(l.position - world->centre); };
-        auto nearestDeg = [&](const Vec3& d, const Vec3* skip) {
-            double best = 1e9;
-            for (const Vec3& t : dirs) {
-                if (skip && t.x == skip->x && t.y == skip->y && t.z == skip->z) continue;
-                best = std::min(
-                    best, std::acos(std::clamp(d.x * t.x + d.y * t.y + d.z * t.z, -1.0, 1.0)) * 180 / M_PI);
-            }
-            return best;
-        };
-        std::vector<double> spacing;
-        for (const Vec3& d : dirs) spacing.push_back(nearestDeg(d, &d));
-        std::sort(spacing.begin(), spacing.end());
-        report["training_spacing_deg_median"] = spacing[spacing.size() / 2];
-        report["training_spacing_deg_max"] = spacing.back();
-        nlohmann::json gaps = nlohmann::json::array();
-        for (Index f = 0; f < between; ++f)
-            gaps.push_back(nearestDeg(dirOf(lights[static_cast<std::size_t>(f)]), nullptr));
-        report["between_nearest_training_deg"] = gaps;
-    }
     report["hit_rate"] = static_cast<double>(stats.hits) / static_cast<double>(testFrames);
     report["hits"] = stats.hits;
     report["blends"] = stats.blends;
     report["misses"] = stats.misses;
-    report["reference_rms_rel_error_full"] = refFull.value();
-    report["reference_rms_rel_error_pm"] = refPm.value();
-    report["reference_ratio_pm_to_full"] = refFull.value() > 0 ? refPm.value() / refFull.value() : 0.0;
-    report["reference_points"] = subset.size();
-    report["reference_self_rel_error"] = refSelf.value();
-    report["reference_light_samples"] = refMedium.lightSamples;
-    report["reference_step_voxels"] = refMedium.stepVoxels;
-    report["reference_frames"] = referenceFrames;
-    report["grid_key_points"] = topt.gridPoints.size();
-    report["eps_min"] = model.epsMin;
-    report["eps_max"] = model.epsMax;
-    report["tolerance"] = topt.tolerance;
-    report["peak_training_radiance"] = peak;
-    report["energy_captured"] = model.energyCaptured();
-    report["training_warnings"] = trep.warnings;
-    report["threads"] = threads;
-    report["density_tree_bytes"] = world->density.memoryBytes();
-    report["cache_tree_bytes"] = cacheBytes;
-    report["quick"] = o.quick;
+    report["reference_rms_rel_error_full"] = ref.full.value();
+    report["reference_rms_rel_error_pm"] = ref.pm.value();
+    report["reference_ratio_pm_to_full"] = ref.full.value() > 0 ? ref.pm.value() / ref.full.value() : 0.0;
+    report["reference_points"] = reference.points.size();
+    report["reference_self_rel_error"] = ref.self.value();
+    report["reference_light_samples"] = ref.medium.lightSamples;
+    report["reference_step_voxels"] = ref.medium.stepVoxels;
+    report["reference_frames"] = reference.frames;
+}
+
+/// 9. The report: how far the validation lights are from the training ones (angles seen from
+/// the centre).
+void reportLightSpacing(nlohmann::json& report, const VolumeDemoOptions& o, const VolumeWorld& world,
+                        const ValidationFrames& frames) {
+    const std::vector<Vec3> dirs = o.rig.trainingDirections();
+    auto dirOf = [&](const VolumeLight& l) { return scene::normalize(l.position - world.centre); };
+    auto nearestDeg = [&](const Vec3& d, const Vec3* skip) {
+        double best = 1e9;
+        for (const Vec3& t : dirs) {
+            if (skip && t.x == skip->x && t.y == skip->y && t.z == skip->z) continue;
+            best = std::min(best,
+                            std::acos(std::clamp(d.x * t.x + d.y * t.y + d.z * t.z, -1.0, 1.0)) * 180 / M_PI);
+        }
+        return best;
+    };
+    std::vector<double> spacing;
+    spacing.reserve(dirs.size());
+    for (const Vec3& d : dirs) spacing.push_back(nearestDeg(d, &d));
+    std::sort(spacing.begin(), spacing.end());
+    report["training_spacing_deg_median"] = spacing[spacing.size() / 2];
+    report["training_spacing_deg_max"] = spacing.back();
+    nlohmann::json gaps = nlohmann::json::array();
+    for (Index f = 0; f < frames.between; ++f)
+        gaps.push_back(nearestDeg(dirOf(frames.lights[static_cast<std::size_t>(f)]), nullptr));
+    report["between_nearest_training_deg"] = gaps;
+}
+
+}  // namespace
+
+nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
+    const auto start = DemoClock::now();
+    checkOptions(o);
+    createOutputFolder(o.outDir, FolderErrorWording::CannotCreate);
+    DemoSetup run(o.threads > 0 ? o.threads : tbb::info::default_concurrency(), o.progress,
+                  "demo volume: interrupted", start);
+
+    const std::shared_ptr<const VolumeWorld> world = makeMedium(run, o);
+    const Index n = static_cast<Index>(world->density.voxelCount());
+    const VolumeEvaluator trainEval(world, o.rig.training(*world), "volume-train");
+    const Index trainFrames = trainEval.frameCount();
+    TrainingFrames training = makeTrainingFrames(run, trainEval, n);
+    const Trained trained = trainModel(run, o, *world, training.q, n);
+
+    const ValidationFrames frames = chooseValidationFrames(o, *world);
+    const VolumeEvaluator valEval(world, frames.lights, "volume");
+    const Index testFrames = valEval.frameCount();
+    FullFrames full = calculateFullFrames(run, valEval, frames.fullFrames, n);
+    const ReferenceSubset reference = chooseReferenceSubset(o, n, frames.between);
+
+    ValidationSink sink("volume", full.values, frames.renderFrames, reference.points, reference.frameSet);
+    sink.scatteredCount = frames.between;
+    const engine::RunStats stats = runThroughEngine(run, trained.model, valEval, sink);
+    // The validation frames' distance from the basis: what M and the training lights allow.
+    RelError valProjection;
+    for (const auto& [f, v] : full.values) addProjectionError(trained.model, v.data(), valProjection);
+    const ReferenceErrors refErrors = measureAgainstReference(run, o, *world, reference, full.values, sink);
+    const WrittenFiles written = writeCachesAndRenders(run, o, *world, valEval, frames, full.values, sink);
+    const nlohmann::json vdbRender = runVdbRender(run, o, *world, frames);
+
+    nlohmann::json report;
+    reportMediumAndModel(report, o, *world, n, trained, training, trainFrames, run.threads);
+    reportAccuracy(report, full, stats, testFrames, sink, frames, trained, valProjection, reference,
+                   refErrors);
+    reportLightSpacing(report, o, *world, frames);
+    report["cache_tree_bytes"] = written.cacheBytes;
     report["engine"] = nlohmann::json::parse(stats.toJson());
-    report["frames"] = frames;
-    report["images"] = images;
-    report["vdb_files"] = vdbs;
+    report["frames"] = frameTable(sink.records, frames);
+    report["images"] = written.images;
+    report["vdb_files"] = written.vdbs;
     report["vdb_render"] = vdbRender;
     rusage usage{};
     getrusage(RUSAGE_SELF, &usage);
     report["peak_rss_mb"] = static_cast<double>(usage.ru_maxrss) / 1024.0;
-    timings["total"] = secondsSince(start);
-    report["seconds"] = timings;
+    report["seconds"] = run.finish();
     writeFileAtomically(o.outDir + "/report.json", report.dump(2) + "\n");
-    progress("done", 1, 1);
+    run.progress("done", 1, 1);
     return report;
 }
 

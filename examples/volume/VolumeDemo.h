@@ -1,7 +1,7 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-#include "examples/volume/VolumeEvaluator.h"
+#include "evaluators/volume/VolumeEvaluator.h"
 
 #include <nlohmann/json.hpp>
 
@@ -12,7 +12,7 @@
 
 namespace pmsc::volume {
 
-/// The settings of `pmsc demo volume` (issue 11).
+/// The settings of `pmsc demo volume` (the volumetric lighting cache).
 struct VolumeDemoOptions {
     std::string outDir;  ///< created if missing; receives density.vdb, cache_*.vdb, *.png, report.json
     /// The mesh the smoke is made of (Debian's assimp-testmodels; any format Assimp reads).
@@ -23,7 +23,7 @@ struct VolumeDemoOptions {
     FogOptions fog;  ///< targetVoxels: active voxels of the demo's smoke (260,000)
     MediumSettings medium;
     VolumeRig rig;  ///< 16 azimuths x 6 elevations = 96 training frames
-    /// M and K: 40 and 250 (was 32 and 200). With 96 training frames and the basis shared by R, G,
+    /// M and K: 40 and 250. With 96 training frames and the basis shared by R, G,
     /// B the validation frames are 0.8% from the basis; M and K are what PMSC pays per frame
     /// (reconstruction reads N M doubles of basis, each key voxel costs a full calculation): 142x,
     /// reference ratio 1.34 (README, "The volumetric lighting cache").

@@ -28,14 +28,14 @@ std::vector<Image> renderVolume(const VolumeWorld& world, const Camera& camera,
                                 const std::vector<const ScatterCache*>& caches, int size) {
     if (size < 1) throw std::invalid_argument("render: image size must be positive");
     std::vector<Image> images(caches.size(), Image(size, size));
-    const Vec3 forward = cornell::normalize(camera.target - camera.eye);
-    const Vec3 right = cornell::normalize(cornell::cross(forward, camera.up));
-    const Vec3 up = cornell::cross(right, forward);
+    const Vec3 forward = scene::normalize(camera.target - camera.eye);
+    const Vec3 right = scene::normalize(scene::cross(forward, camera.up));
+    const Vec3 up = scene::cross(right, forward);
     const double tanHalf = std::tan(0.5 * camera.fovYDegrees * M_PI / 180.0);
     const double sigmaT = world.medium.sigmaT;
     const Rgb albedo = world.medium.albedo;
     const double dt = 0.5 * world.density.voxelSize();
-    const double tMax = 4 * (cornell::length(camera.eye - world.centre) + world.radius);
+    const double tMax = 4 * (scene::length(camera.eye - world.centre) + world.radius);
 
     tbb::parallel_for(tbb::blocked_range<int>(0, size, 2), [&](const tbb::blocked_range<int>& rows) {
         DensityVolume::Tracer tracer(world.density);
@@ -46,7 +46,7 @@ std::vector<Image> renderVolume(const VolumeWorld& world, const Camera& camera,
         for (int y = rows.begin(); y != rows.end(); ++y) {
             for (int x = 0; x < size; ++x) {
                 const double sx = (x + 0.5) / size * 2.0 - 1.0, sy = 1.0 - (y + 0.5) / size * 2.0;
-                const Vec3 d = cornell::normalize(forward + right * (sx * tanHalf) + up * (sy * tanHalf));
+                const Vec3 d = scene::normalize(forward + right * (sx * tanHalf) + up * (sy * tanHalf));
                 tracer.spans(camera.eye, d, tMax, spans);
                 for (auto& l : radiance) l = {0, 0, 0};
                 double trans = 1;

@@ -1,15 +1,15 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-#include "examples/cornell/ImageIO.h"
-#include "examples/volume/VolumeEvaluator.h"
+#include "evaluators/scene/Image.h"
+#include "evaluators/volume/VolumeEvaluator.h"
 
 #include <vector>
 
 namespace pmsc::volume {
 
-using cornell::Camera;
-using cornell::Image;
+using scene::Camera;
+using scene::Image;
 
 /// The demo's three moving cameras at animation time t in [0, 1]: "front" (orbiting slowly at eye
 /// height, 1.9 radii out), "above" (looking down at 55 degrees) and "inside" (in the medium, near

@@ -1,7 +1,7 @@
 // The `pmsc` program end to end: success paths and every kind of bad input, through the real
 // binary (exit codes, the one stderr line, and no output file left behind).
 #include "CliRunner.h"
-#include "examples/synthetic/SyntheticSurface.h"
+#include "evaluators/synthetic/SyntheticSurface.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/NpyIO.h"
 
@@ -13,6 +13,7 @@
 #include <cstring>
 #include <filesystem>
 #include <limits>
+#include <sstream>
 
 namespace {
 
@@ -84,6 +85,32 @@ protected:
 Shot* Cli::shot_ = nullptr;
 TempDir* Cli::modelDir_ = nullptr;
 std::string Cli::model_;
+
+TEST_F(Cli, EvaluatorsListsEveryCalculationOnePerLine) {
+    TempDir dir;
+    const RunResult r = runPmsc(dir, {"evaluators"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    std::vector<std::string> names;
+    std::istringstream lines(r.out);
+    for (std::string line; std::getline(lines, line);) names.push_back(line.substr(0, line.find(' ')));
+    const std::vector<std::string> expected = {"replay", "skin",         "synthetic", "cornell",
+                                               "face",   "face-control", "volume"};
+    EXPECT_EQ(names, expected) << r.out;
+    EXPECT_NE(r.out.find("volume:FILE.vdb[:grid=NAME]"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("synthetic[:grid=G]"), std::string::npos) << r.out;
+    expectFailure(runPmsc(dir, {"evaluators", "--bogus"}), 2, {"evaluators", "--bogus"});
+}
+
+TEST_F(Cli, SyntheticSpecOptionsAreCheckedWithOneLine) {
+    TempDir dir;
+    expectFailure(runPmsc(dir, {"export-frames", "synthetic:grid=1", "--out", dir.file("f.npy")}), 2,
+                  {"synthetic", "grid='1'"});
+    expectFailure(runPmsc(dir, {"export-frames", "synthetic:colour=red", "--out", dir.file("f.npy")}), 2,
+                  {"synthetic", "unknown option 'colour'"});
+    expectFailure(runPmsc(dir, {"export-frames", "synthetic:frames=5:novel=6", "--out", dir.file("f.npy")}),
+                  2, {"novel=6 exceeds frames=5"});
+    EXPECT_TRUE(outputs(dir).empty());
+}
 
 TEST_F(Cli, TrainWritesAModelAndASummary) {
     TempDir dir;
@@ -387,10 +414,9 @@ TEST_F(Cli, UsageMistakes) {
     EXPECT_TRUE(outputs(dir).empty());
 }
 
-// The demo commands parsed numbers with std::stod/std::stol (issue 13): face took "--threads 2.5"
-// as 2 threads and "--regions 1e1" as 10, cornell took " 2" with its blank. They now go through
-// Args' converters like every other command: each is a usage error (exit 2, one line) before any
-// data is read, so no ICT data or scene is needed here.
+// The demo commands parse numbers with Args' converters, as every other command does: face's
+// "--threads 2.5" and "--regions 1e1" and cornell's " 2" (with its blank) are each a usage error
+// (exit 2, one line) before any data is read, so no ICT data or scene is needed here.
 TEST_F(Cli, DemoNumbersGoThroughArgs) {
     TempDir dir;
     const std::vector<std::string> face{"demo", "face", "--data", dir.file("ict"), "--out", dir.file("face")};

@@ -1,4 +1,4 @@
-// `pmsc train --targets` and `pmsc replay` of a cross model (issue 10, cross point multiplication),
+// `pmsc train --targets` and `pmsc replay` of a cross model (cross point multiplication),
 // through the real binary: an exact affine control -> target map comes back to rounding, the report
 // says fail-through is impossible and gives each frame's key error and bound, and bad inputs fail
 // with one line, a non-zero exit code and no output file.

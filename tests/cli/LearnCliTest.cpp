@@ -1,7 +1,7 @@
 // `pmsc learn`, `--keep-misses` (replay and run) and the calibration options of `pmsc train`, through
-// the real binary: success paths, appending across runs, and bad inputs (issue 10).
+// the real binary: success paths, appending across runs, and bad inputs.
 #include "CliRunner.h"
-#include "examples/synthetic/SyntheticSurface.h"
+#include "evaluators/synthetic/SyntheticSurface.h"
 #include "pmsc/KeptFrames.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/NpyIO.h"

@@ -1,5 +1,5 @@
-#include "cli/EvaluatorRegistry.h"
-#include "cli/Replay.h"
+#include "app/Replay.h"
+#include "evaluators/EvaluatorRegistry.h"
 #include "evaluators/ReplayEvaluator.h"
 #include "pmsc/Errors.h"
 #include "pmsc/Training.h"
@@ -44,16 +44,16 @@ TEST(ReplayFrame, HitBlendAndMissProduceTheSoftCachedFrame) {
     const auto rec = recording({2, 2, 2, 1, 0, 0, 1, 0, 0}, 3);
     const pmsc::Model model = tinyModel(0.25, 0.75);
     const pmsc::PointMultiplier pm(model);
-    pmsc::cli::ReplayScratch scratch(model);
+    pmsc::app::ReplayScratch scratch(model);
     std::vector<double> out(3);
 
-    auto row = pmsc::cli::replayFrame(pm, pmsc::SoftCachePolicy(0.25, 0.75), rec, 0, scratch, out.data());
+    auto row = pmsc::app::replayFrame(pm, pmsc::SoftCachePolicy(0.25, 0.75), rec, 0, scratch, out.data());
     EXPECT_EQ(row.decision.state, pmsc::CacheState::Hit);
     EXPECT_NEAR(row.keyRms, 0, 1e-12);
     EXPECT_NEAR(row.pmMaxPointError, 0, 1e-12);
     EXPECT_NEAR(out[2], 2, 1e-12);
 
-    row = pmsc::cli::replayFrame(pm, pmsc::SoftCachePolicy(0.25, 0.75), rec, 1, scratch, out.data());
+    row = pmsc::app::replayFrame(pm, pmsc::SoftCachePolicy(0.25, 0.75), rec, 1, scratch, out.data());
     EXPECT_NEAR(row.keyRms, 0.5, 1e-12);
     EXPECT_EQ(row.decision.state, pmsc::CacheState::Blend);
     EXPECT_NEAR(row.decision.weight, 0.5, 1e-12);
@@ -64,7 +64,7 @@ TEST(ReplayFrame, HitBlendAndMissProduceTheSoftCachedFrame) {
     EXPECT_NEAR(row.pmMaxPointError, 0.5, 1e-12);
     EXPECT_NEAR(row.softMaxPointError, 0.25, 1e-12);
 
-    row = pmsc::cli::replayFrame(pm, pmsc::SoftCachePolicy(0.1, 0.2), rec, 2, scratch, out.data());
+    row = pmsc::app::replayFrame(pm, pmsc::SoftCachePolicy(0.1, 0.2), rec, 2, scratch, out.data());
     EXPECT_EQ(row.decision.state, pmsc::CacheState::Miss);
     EXPECT_EQ(out, (std::vector<double>{1, 0, 0}));
     EXPECT_EQ(row.softMaxPointError, 0);
@@ -73,16 +73,16 @@ TEST(ReplayFrame, HitBlendAndMissProduceTheSoftCachedFrame) {
 TEST(Replay, ReportCountsStatesAndUsesTheOverride) {
     const auto rec = recording({2, 2, 2, 1, 0, 0, 1, 0, 0}, 3);
     const pmsc::Model model = tinyModel(0.25, 0.75);
-    pmsc::cli::ReplayOptions options;
+    pmsc::app::ReplayOptions options;
     options.threads = 1;
-    auto result = pmsc::cli::replay(model, rec, options);
-    auto report = pmsc::cli::replayReport(model, result);
+    auto result = pmsc::app::replay(model, rec, options);
+    auto report = pmsc::app::replayReport(model, result);
     EXPECT_DOUBLE_EQ(report["summary"]["hit_rate"].get<double>(), 1.0 / 3);
     EXPECT_DOUBLE_EQ(report["summary"]["blend_rate"].get<double>(), 2.0 / 3);
     EXPECT_EQ(report["frames"][1]["state"], "blend");
     options.eps = std::make_pair(0.0, 0.0);
-    result = pmsc::cli::replay(model, rec, options);
-    report = pmsc::cli::replayReport(model, result);
+    result = pmsc::app::replay(model, rec, options);
+    report = pmsc::app::replayReport(model, result);
     // Frame 0's key error is zero up to rounding, so only frames 1 and 2 are certain misses.
     EXPECT_EQ(report["frames"][1]["state"], "miss");
     EXPECT_EQ(report["frames"][2]["state"], "miss");
@@ -135,9 +135,9 @@ TEST(Replay, ModelWithRegionsReportsLocalFramesAndWholeFrameFlagRestoresTheOldRo
     pmsc::FrameFile file{pmsc::FrameSet(2, 40, 3), pmsc::NpyDtype::Float64};
     file.frames.values = values;
     const pmsc::evaluators::ReplayEvaluator rec(std::move(file), "test");
-    pmsc::cli::ReplayOptions options;
+    pmsc::app::ReplayOptions options;
     options.threads = 2;
-    auto report = pmsc::cli::replayReport(model, pmsc::cli::replay(model, rec, options));
+    auto report = pmsc::app::replayReport(model, pmsc::app::replay(model, rec, options));
     EXPECT_EQ(report["summary"]["regions"], 4);
     EXPECT_EQ(report["summary"]["local_frames"], 1);
     EXPECT_EQ(report["frames"][0]["regions"], "hhhh");
@@ -149,14 +149,14 @@ TEST(Replay, ModelWithRegionsReportsLocalFramesAndWholeFrameFlagRestoresTheOldRo
     EXPECT_GT(report["frames"][1]["pm_max_point_error"].get<double>(), 0.01);
     EXPECT_EQ(report["summary"]["region_states"][0]["misses"], 1);
     options.localFailThrough = false;  // --whole-frame-fail-through
-    report = pmsc::cli::replayReport(model, pmsc::cli::replay(model, rec, options));
+    report = pmsc::app::replayReport(model, pmsc::app::replay(model, rec, options));
     EXPECT_EQ(report["summary"]["local_frames"], 0);
     EXPECT_EQ(report["frames"][1]["local"], false);
     EXPECT_DOUBLE_EQ(report["frames"][1]["points_evaluated_fraction"].get<double>(), 1.0);
     // A version-1 model's report has none of it.
     pmsc::Model v1 = model;
     v1.regions.reset();
-    report = pmsc::cli::replayReport(v1, pmsc::cli::replay(v1, rec, options));
+    report = pmsc::app::replayReport(v1, pmsc::app::replay(v1, rec, options));
     EXPECT_FALSE(report["summary"].contains("regions"));
     EXPECT_FALSE(report["frames"][1].contains("local"));
 }
@@ -165,17 +165,17 @@ TEST(Replay, CancelFlagStopsWithCancelled) {
     const auto rec = recording({2, 2, 2, 1, 0, 0, 1, 0, 0}, 3);
     const pmsc::Model model = tinyModel(0.25, 0.75);
     std::atomic<bool> cancel{true};
-    pmsc::cli::ReplayOptions options;
+    pmsc::app::ReplayOptions options;
     options.cancel = &cancel;
-    EXPECT_THROW(pmsc::cli::replay(model, rec, options), pmsc::Cancelled);
+    EXPECT_THROW(pmsc::app::replay(model, rec, options), pmsc::Cancelled);
 }
 
 TEST(EvaluatorRegistry, ReplaySpecAndUnknownNames) {
-    EXPECT_THROW(pmsc::cli::makeEvaluator("nosuch:x"), std::invalid_argument);
-    EXPECT_THROW(pmsc::cli::makeEvaluator("replay"), std::invalid_argument);
-    EXPECT_THROW(pmsc::cli::makeEvaluator("replay:/no/such/file.npy"), pmsc::InputError);
+    EXPECT_THROW(pmsc::evaluators::makeEvaluator("nosuch:x"), std::invalid_argument);
+    EXPECT_THROW(pmsc::evaluators::makeEvaluator("replay"), std::invalid_argument);
+    EXPECT_THROW(pmsc::evaluators::makeEvaluator("replay:/no/such/file.npy"), pmsc::InputError);
     try {
-        pmsc::cli::makeEvaluator("nosuch");
+        pmsc::evaluators::makeEvaluator("nosuch");
     } catch (const std::invalid_argument& e) {
         EXPECT_NE(std::string(e.what()).find("known: replay"), std::string::npos) << e.what();
     }

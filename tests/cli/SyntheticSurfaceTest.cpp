@@ -1,4 +1,4 @@
-#include "examples/synthetic/SyntheticSurface.h"
+#include "evaluators/synthetic/SyntheticSurface.h"
 
 #include <gtest/gtest.h>
 

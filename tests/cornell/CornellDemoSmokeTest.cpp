@@ -97,7 +97,7 @@ TEST(CornellDemoQuick, WritesAReportWithinBoundsImagesAndVdbFilesThatVdbPrintLis
     std::filesystem::remove_all(dir);
 }
 
-// Issue 9 at --quick: the scattered lights stay hits both ways; the local change (a cube training
+// Local fail-through at --quick: the scattered lights stay hits both ways; the local change (a cube training
 // never saw) moves the full gather by more than the tolerance, fails some frames as a whole, and
 // every one of them is routed locally: fewer points gathered than a whole-frame fail-through, and
 // no frame over the tolerance.

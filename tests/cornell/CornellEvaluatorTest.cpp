@@ -1,6 +1,6 @@
 // The Cornell evaluator: a point's value must not depend on its company or the thread count
 // (PointEvaluator's contract), and the numbers must behave like light.
-#include "examples/cornell/CornellEvaluator.h"
+#include "evaluators/cornell/CornellEvaluator.h"
 #include "pmsc/Errors.h"
 
 #include <gtest/gtest.h>

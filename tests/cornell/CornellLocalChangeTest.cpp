@@ -1,7 +1,7 @@
-// Issue 9's local change of the Cornell box: the changed scene keeps the original quads first, the
+// The local change of the Cornell box: the changed scene keeps the original quads first, the
 // changed world keeps the cache's points, and the cube acts like an object (it covers the floor
 // under it and throws a contact shadow next to it).
-#include "examples/cornell/CornellEvaluator.h"
+#include "evaluators/cornell/CornellEvaluator.h"
 #include "examples/cornell/CornellLocalChange.h"
 
 #include <gtest/gtest.h>

@@ -1,6 +1,6 @@
 // The OpenVDB lighting cache: a file OpenVDB can read back with every voxel and the metadata,
 // and a world-space lookup that returns what was stored.
-#include "examples/cornell/LightingCacheGrid.h"
+#include "evaluators/cornell/LightingCacheGrid.h"
 
 #include "pmsc/Errors.h"
 

@@ -1,6 +1,6 @@
 // The cache's points: a one-voxel shell over the box's surfaces, each voxel's gather point on a
 // surface inside (or at the edge of) the voxel, never inside a block.
-#include "examples/cornell/SurfaceVoxels.h"
+#include "evaluators/cornell/SurfaceVoxels.h"
 
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-// Local fail-through (issue 9): regions learned in training, per-region decisions in the engine,
+// Local fail-through: regions learned in training, per-region decisions in the engine,
 // only the points of failing regions (and their feather bands) evaluated fully.
 #include "engine/Engine.h"
 #include "pmsc/ModelIO.h"
@@ -88,7 +88,7 @@ const Model& trainedModel() {
             for (Index gx = 2; gx < 40; gx += 6) o.gridPoints.push_back(gy * 40 + gx);
         o.regions.featherFraction = 0.08;
         o.regions.energy = 0.999999;
-        // The first version's key rules: the defaults are set for the ICT face (RegionLearning.h),
+        // Sheet-sized key rules: the defaults are set for the ICT face (RegionLearning.h),
         // where a region holds a few hundred of 26,719 points; on this 1,600-point sheet 12 keys
         // and a 1.5 margin make each of the 9 regions watch most of its neighbours' keys.
         o.regions.minKeys = 6;
@@ -183,7 +183,7 @@ TEST(LocalFailThrough, TrainingLearnsCompactRegionsThatRoundTrip) {
     EXPECT_EQ(back.regions->extraKeyPoints, regions.extraKeyPoints);
 }
 
-/// Region key neighbourhoods, basis share and ratio margin (issue 9's calibration fix): learned
+/// Region key neighbourhoods, basis share and ratio margin: learned
 /// again from the same training with the rules switched, each must change what it claims to.
 TEST(LocalFailThrough, RegionKeysBasisShareAndRatioMarginDoWhatTheySay) {
     const LocalSurface training(150, false, 0.0);
@@ -312,7 +312,7 @@ TEST(LocalFailThrough, EachFailingPointIsEvaluatedOnceAndItsFullValueReachesTheS
         std::vector<double> truth(c.fullPoints.size() * 3);
         novel.evaluate(f, c.fullPoints, truth.data());
         EXPECT_EQ(c.fullValues, truth) << "frame " << f;
-        // Frames where failing regions' fail sets overlap: the old per-region branches posed
+        // Frames where failing regions' fail sets overlap: separate per-region branches would pose
         // the shared points twice.
         Index sum = 0;
         for (Index r = 0; r < regions.regionCount(); ++r)
@@ -429,7 +429,7 @@ TEST(LocalFailThrough, FeatheredBordersHaveNoJumpLargerThanInsideRegions) {
         if (std::count(states.begin(), states.end(), CacheState::Hit) == 0) continue;
         novel.evaluateAll(Index(f), truth.data());
         const Steps s = errorSteps(model, states, frames[f].values, truth);
-        // Known limit (README): next to a region that blends, the two sides' block projections
+        // Known limit (docs/local-fail-through.md): next to a region that blends, the two sides' block projections
         // differ, so the step across the border can exceed the largest step inside a region by a
         // little (1.5x at most on this sheet); without feathering it is many times larger.
         EXPECT_LE(s.border, 2.0 * s.inside + 1e-12) << "frame " << f;

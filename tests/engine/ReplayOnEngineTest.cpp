@@ -1,6 +1,6 @@
 // `pmsc replay` on the engine (cli/Replay.cpp): the same output, bit for bit, as the plain
 // per-frame replayFrame(), and the same at 1 and 2 threads, on a shot with hits, blends and misses.
-#include "cli/Replay.h"
+#include "app/Replay.h"
 #include "evaluators/ReplayEvaluator.h"
 #include "pmsc/NpyIO.h"
 #include "tests/engine/Synthetic.h"
@@ -28,20 +28,20 @@ TEST(ReplayOnEngine, SameBitsAsThePlainLoopAndAtAnyThreadCount) {
 
     // The reference: replayFrame() frame by frame, serially.
     const PointMultiplier pm(model);
-    cli::ReplayScratch scratch(model);
+    app::ReplayScratch scratch(model);
     FrameSet expected(48, model.points, 3);
-    std::vector<cli::ReplayFrame> expectedRows;
+    std::vector<app::ReplayFrame> expectedRows;
     for (Index f = 0; f < 48; ++f)
-        expectedRows.push_back(cli::replayFrame(pm, policy, recorded, f, scratch, expected.frame(f)));
+        expectedRows.push_back(app::replayFrame(pm, policy, recorded, f, scratch, expected.frame(f)));
 
     test::TempDir dir;
     int states[3] = {0, 0, 0};
     for (const int threads : {1, 2}) {
         const std::string path = dir.file("out" + std::to_string(threads) + ".npy");
         NpyFrameWriter out(path, 48, model.points, 3, NpyDtype::Float64);
-        cli::ReplayOptions options;
+        app::ReplayOptions options;
         options.threads = threads;
-        const cli::ReplayResult result = cli::replay(model, recorded, options, &out);
+        const app::ReplayResult result = app::replay(model, recorded, options, &out);
         out.commit();
         const FrameFile written = readFrames(path);
         ASSERT_EQ(written.frames.values.size(), expected.values.size());

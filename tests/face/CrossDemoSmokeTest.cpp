@@ -1,4 +1,4 @@
-// Smoke test of `pmsc demo cross --quick` on the real ICT face (issue 10, cross point
+// Smoke test of `pmsc demo cross --quick` on the real ICT face (cross point
 // multiplication): the demo runs, exits 0, writes a complete report and a cross model whose keys
 // are control points, and its figures are sane (errors finite and under 2% of the head diagonal at
 // the median although the quick model sees only 2 short sequences, a bound that holds on most

@@ -1,4 +1,4 @@
-#include "examples/face/FaceAnimation.h"
+#include "evaluators/face/FaceAnimation.h"
 
 #include <gtest/gtest.h>
 
@@ -68,7 +68,7 @@ TEST(FaceAnimation, NovelControlsMoveOnlyInNovelSequencesAndThroughout) {
     }
 }
 
-/// Mixed sequences (issue 9): appended without changing a frame before them, never split into
+/// Mixed sequences: appended without changing a frame before them, never split into
 /// training, and moving their novel controls for one window of 1-3 s (plus 6-frame ramps) only.
 TEST(FaceAnimation, MixedSequencesMoveNovelControlsForAFewSecondsOnly) {
     FaceAnimationOptions o = small();

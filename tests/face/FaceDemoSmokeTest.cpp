@@ -1,9 +1,9 @@
 // Smoke test of `pmsc demo face --quick` on the real ICT face: the program runs, exits 0, and its
-// report has every field issue 5 asks for, within bounds that hold even for the quick run's
+// report has every documented field, within bounds that hold even for the quick run's
 // undertrained model (3 training sequences): the soft cache keeps every frame under the 1%
 // tolerance by failing through, and catches the novel controls.
 #include "FaceTestData.h"
-#include "examples/face/ObjReader.h"
+#include "evaluators/face/ObjReader.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -104,7 +104,7 @@ TEST(FaceDemoSmoke, QuickRunWritesACompleteReport) {
     }
     EXPECT_TRUE(fs::exists(out / "keys.png"));
     EXPECT_TRUE(fs::exists(out / "frames.csv"));
-    // Local fail-through (issue 9) reported both ways on the three sets; the whole-frame way
+    // Local fail-through reported both ways on the three sets; the whole-frame way
     // evaluates every point of a non-hit frame, and neither way breaks the tolerance.
     const nlohmann::json& local = r.at("local_fail_through");
     for (const char* set : {"validation", "novel", "mixed"}) {

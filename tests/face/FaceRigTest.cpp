@@ -1,5 +1,5 @@
 #include "FaceTestData.h"
-#include "examples/face/FaceRig.h"
+#include "evaluators/face/FaceRig.h"
 
 #include <gtest/gtest.h>
 #include <tbb/parallel_for.h>

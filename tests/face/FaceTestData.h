@@ -1,8 +1,8 @@
 // Shared by the face tests: where the ICT face is, and one rig built once per test program.
 #pragma once
 
-#include "examples/face/FaceRig.h"
-#include "examples/face/IctFace.h"
+#include "evaluators/face/FaceRig.h"
+#include "evaluators/face/IctFace.h"
 #include "tests/common/MissingData.h"
 
 #include <gtest/gtest.h>

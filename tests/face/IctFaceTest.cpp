@@ -1,5 +1,5 @@
 #include "FaceTestData.h"
-#include "examples/face/IctFace.h"
+#include "evaluators/face/IctFace.h"
 #include "pmsc/Errors.h"
 
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// Smoke test of `pmsc demo learn --quick` on the real ICT face (issue 10): the nightly loop runs,
+// Smoke test of `pmsc demo learn --quick` on the real ICT face: the nightly loop runs,
 // exits 0, writes a complete report, and the learned model is a real update of the day-1 one: its
 // frames are the day-1 frames plus the kept ones, its basis is the scratch model's to a fraction of
 // a degree, and no soft-cached frame of the max-rule loop exceeds the tolerance.

@@ -3,9 +3,9 @@
 // `pmsc run` and `pmsc export-frames` as a farm uses them: the real program, run as a child
 // process on a real motion-capture clip from assimp-testmodels, killed with SIGKILL mid-run and
 // resumed; every bad input checked for its exit code, its one stderr line and the absence of any
-// partial file. Figures are printed (and recorded as test properties) for the closing note.
-#include "cli/EvaluatorRegistry.h"
+// partial file. Figures are printed (and recorded as test properties).
 #include "cli/RunCommand.h"
+#include "evaluators/EvaluatorRegistry.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
@@ -366,7 +366,7 @@ TEST_F(FarmRun, SigtermStopsCleanlyWithExitCode130AndKeepsFinishedFrames) {
 TEST_F(FarmRun, PlainProgressLinesWhenNotATerminal) {
     auto args = runArgs(root / "progress", "0-199");
     // --log-every 0: a line at every update, so the test does not depend on how long 200 frames take
-    // (on a fast machine they took under 0.2 s and no line was due: the CI failure of 2026-11-22).
+    // (on a fast machine they take under 0.2 s and no line would be due).
     args.insert(args.end(), {"--log-every", "0"});
     const Result r = pmscRun(args, root / "logs", "progress");
     ASSERT_EQ(r.code, 0) << r.err;
@@ -503,7 +503,7 @@ TEST_F(FarmRun, EvaluatorFailureKeepsEarlierFramesAndReportsTheFrame) {
     o.outDir = out.string();
     o.quiet = true;
     o.threads = 2;
-    const auto inner = pmsc::cli::makeEvaluator(kSpec);  // as the command line makes it
+    const auto inner = pmsc::evaluators::makeEvaluator(kSpec);  // as the command line makes it
     FailingOn failing(*inner, 12);
     try {
         pmsc::cli::runFrames(m, failing, o);

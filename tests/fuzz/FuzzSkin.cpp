@@ -21,7 +21,7 @@ namespace {
 // The formats of the seeds (Debian's assimp-testmodels) and a few more with animation or meshes.
 // Not .smd: Assimp 5.2.5's SMD importer hangs (minutes in snprintf, naming every node up to the
 // largest index a file gives) on a 24 KB file the fuzzer found in seconds; that is Assimp's to
-// fix, and it would stop every run here (README, Fuzzing). Not .md5mesh: its importer dereferences
+// fix, and it would stop every run here (docs/fuzzing.md). Not .md5mesh: its importer dereferences
 // null on assimp-testmodels' own SimpleCube.md5mesh (no .md5anim beside it) and on every mutation of
 // it, so a run spends its time restarting (run-fuzzers.sh sets Assimp's own crashes aside).
 constexpr const char* kExtensions[] = {".bvh", ".x", ".dae", ".gltf", ".glb", ".obj", ".ply", ".fbx"};

@@ -1,4 +1,4 @@
-// The model-file sections of `pmsc learn` (issue 10): LEARNSVD and CALIBRAT round trips and bad bytes.
+// The model-file sections of `pmsc learn`: LEARNSVD and CALIBRAT round trips and bad bytes.
 #include "SmallModel.h"
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"

@@ -125,7 +125,7 @@ TEST(ModelFile, SharedChannelsRoundTripAsVersion3WithTheFlagAndAThirdOfTheBasis)
     EXPECT_EQ(r.mean, m.mean);
     EXPECT_EQ(r.coordCount(), 9);
     EXPECT_EQ(pmsc::encodeModel(r), bytes);
-    // A plain model is still version 1 with 0 there, byte for byte as before issue 11.
+    // A plain model (no flag set) is written as version 1 with 0 there.
     const std::string plain = pmsc::encodeModel(smallModel());
     std::memcpy(&version, plain.data() + 8, 4);
     std::memcpy(&flags, plain.data() + 60, 4);
@@ -147,7 +147,7 @@ TEST(ModelFile, FlagsOnlyInVersion3AndOnlyKnownOnesAndOnlyWithoutSectionsTheyExc
     EXPECT_NE(what.find("m.pmsc: the header's reserved word (offset 60) is 1, not 0, in a version-1 file"),
               std::string::npos)
         << what;
-    // Version 3 without the flag: the per-channel arrays no longer fit the file.
+    // Version 3 without the flag: the reader expects per-channel arrays, which do not fit the file.
     bytes = pmsc::encodeModel(pmsc::test::smallSharedChannelModel());
     poke<std::uint32_t>(bytes, 60, 0);
     reseal(bytes);

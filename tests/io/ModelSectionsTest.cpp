@@ -206,8 +206,8 @@ TEST(ModelSections, ByteReaderNamesTheFieldAndNeverReadsPastTheEnd) {
 
 }  // namespace
 
-// Found by fuzz_model (issue 13): an empty array's data() is null, and the codecs handed it to
-// memcpy with a count of 0 (undefined behaviour; UBSan's nonnull check stops the sanitizer build).
+// An empty array's data() may be null, and the codecs must not hand it to memcpy, even with a
+// count of 0 (undefined behaviour; UBSan's nonnull check stops the sanitizer build; fuzz_model hits it).
 TEST(ModelSections, EmptyArraysWithNullDataAreWrittenAndReadAsNothing) {
     std::string out;
     pmsc::ByteWriter writer(out);

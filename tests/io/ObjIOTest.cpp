@@ -1,5 +1,5 @@
-// The project's one OBJ reader and writer (pmsc/ObjIO.h; issue 13 merged the face rig's, the skin
-// evaluator's and the synthetic ICT frames' copies).
+// The project's one OBJ reader and writer (pmsc/ObjIO.h), which the face rig, the skin
+// evaluator and the synthetic ICT frames share.
 #include "pmsc/Errors.h"
 #include "pmsc/ObjIO.h"
 
@@ -61,9 +61,9 @@ TEST(ObjReader, FaceIndexOutOfRangeAndMissingFileAreInputErrors) {
     }
 }
 
-// The face demo's writer printed "%.6g" and the skin's the shortest exact decimal, so
-// `pmsc run --format obj` was lossy for one evaluator and exact for the other; now there is one
-// writer and every coordinate reads back bit for bit (fails on the former face writer).
+// One writer serves every evaluator and writes each coordinate as the shortest exact decimal,
+// so `pmsc run --format obj` frames read back bit for bit whichever evaluator posed them
+// (a "%.6g" writer fails this test).
 TEST(ObjWriter, CoordinatesReadBackExactlyAndPolygonsAsWritten) {
     ObjMesh quad;
     quad.positions = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0};

@@ -32,7 +32,7 @@ inline pmsc::Model smallModel() {
     return m;
 }
 
-/// smallModel()'s sizes with the channels sharing the basis (issue 11): basis 7 x 3, projector 3 x 3.
+/// smallModel()'s sizes with the channels sharing the basis: basis 7 x 3, projector 3 x 3.
 inline pmsc::Model smallSharedChannelModel() {
     pmsc::Model m = smallModel();
     Eigen::MatrixXd random(7, 3);
@@ -43,7 +43,7 @@ inline pmsc::Model smallSharedChannelModel() {
     return m;
 }
 
-/// smallModel() with two regions (issue 9): points {0,1,2,3} and {4,5,6}, keys {4,0} and {4,6}
+/// smallModel() with two regions: points {0,1,2,3} and {4,5,6}, keys {4,0} and {4,6}
 /// (key numbers {0,1} and {0,2}), local bases of 1 and 2 vectors, feather entries on 3 and 4.
 inline pmsc::Model smallModelWithRegions() {
     pmsc::Model m = smallModel();

@@ -122,7 +122,7 @@ TEST(Calibration, ConformalQuantileIsTheRankOfNPlusOneTimesCoverage) {
 namespace {
 
 // Held-out scores whose ratio E/e is log-normal: most frames near 3, a tail up to ~4x that, as
-// held-out training frames show on the ICT face (issue 10).
+// held-out training frames show on the ICT face.
 pmsc::CalibrationStats lognormalScores(size_t n, unsigned seed) {
     const Eigen::MatrixXd z = pmsc::test::gaussian(static_cast<pmsc::Index>(n), 2, seed);
     pmsc::CalibrationStats s;

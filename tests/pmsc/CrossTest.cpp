@@ -1,4 +1,4 @@
-// Cross point multiplication (issue 10, paper section 7): pmsc/Cross.h.
+// Cross point multiplication (paper section 7): pmsc/Cross.h.
 #include "pmsc/Cross.h"
 
 #include "Synthetic.h"
@@ -110,7 +110,7 @@ double coverageOn(const Model& model, const Eigen::MatrixXd& control, const Eige
 
 // M = 4: the control's keys determine every coordinate of the joint basis (the control moves in 4
 // modes). With M = 8 the 4 extra coordinates are read from the control's noise and the cross-fitted
-// bound falls short (0.86 at 0.9 measured; README, "Cross point multiplication").
+// bound falls short (0.86 at 0.9 measured; docs/face.md, "Cross point multiplication").
 TEST(Cross, BoundCoversFramesTrainingNeverSawAtItsStatedRate) {
     const NonlinearPairs p;
     Eigen::MatrixXd c, t, tc, tt;

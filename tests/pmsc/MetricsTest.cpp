@@ -1,4 +1,4 @@
-// The project's one percentile and largest-point-error definitions (pmsc/Metrics.h, issue 13).
+// The project's one percentile and largest-point-error definitions (pmsc/Metrics.h).
 #include "pmsc/Metrics.h"
 
 #include <gtest/gtest.h>
@@ -9,9 +9,9 @@
 
 namespace {
 
-// Replaces the former cli test "LinearInterpolationBetweenClosestRanks": `pmsc replay` now uses
-// nearest rank, the face demo's definition, so the first sample's p50 is 2 (a value it has),
-// not 2.5, and its p99 and p99.5 are its largest value, not 3.97 and 3.985.
+// Every report (`pmsc replay`, the face demo) uses nearest rank, so the first sample's p50 is
+// 2 (a value it has), not 2.5 as linear interpolation gives, and its p99 and p99.5 are its
+// largest value, not 3.97 and 3.985.
 TEST(Percentiles, NearestRankGivesAValueOfTheSample) {
     const auto p = pmsc::percentiles({4, 1, 3, 2});
     EXPECT_EQ(p.p50, 2);  // ceil(0.5 * 4) = 2nd smallest

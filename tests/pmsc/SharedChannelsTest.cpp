@@ -1,4 +1,4 @@
-// Channels sharing one basis (Model::sharedChannels, TrainingOptions::sharedChannels; issue 11).
+// Channels sharing one basis (Model::sharedChannels, TrainingOptions::sharedChannels).
 #include "pmsc/Calibration.h"
 #include "pmsc/Communicator.h"
 #include "pmsc/Errors.h"

@@ -31,7 +31,7 @@ class ModelTest(TempDirTest):
         self.assertEqual(m.training_report["warnings"], [])
 
     def test_shared_channels_model_is_its_own_arithmetic(self):
-        # Channels sharing the basis (issue 11): basis (N, 1, M), projector (M, K), M x C
+        # Channels sharing the basis: basis (N, 1, M), projector (M, K), M x C
         # coordinates per frame; channel c = mean_c + basis @ coords_c.
         f = self.frames
         m = pmsc.train(f, max_keys=30, basis=6, shared_channels=True, seed=3)

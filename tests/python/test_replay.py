@@ -72,7 +72,7 @@ class ReplayTest(TempDirTest):
                         cli_report = json.load(f)
 
     def test_regions_local_fail_through(self):
-        # A version-2 model with regions (issue 9): frames that do not hit are routed region by region.
+        # A version-2 model with regions: frames that do not hit are routed region by region.
         model = pmsc.train(self.train, max_keys=30, tolerance=0.3, regions=3)
         self.assertGreater(model.info["regions"], 0)
         out, report = pmsc.replay(model, self.test, threads=2)

@@ -11,7 +11,7 @@ import unittest
 import numpy as np
 
 import pmsc
-from pmsc_testing import TempDirTest, synthetic_frames
+from pmsc_testing import TempDirTest, pmsc_binary, run_cli, synthetic_frames
 
 
 class RunTest(TempDirTest):
@@ -119,6 +119,50 @@ class RunTest(TempDirTest):
         finally:
             child.kill()
         self.assertEqual((child.returncode, out.strip()), (0, "interrupted"))
+
+
+class EvaluatorSpecTest(TempDirTest):
+    """Python and the command line offer the same calculations, through one registry."""
+
+    def test_evaluators_are_the_command_lines(self):
+        names = pmsc.evaluators()
+        for name in ("replay", "skin", "synthetic", "cornell", "face", "face-control", "volume"):
+            self.assertIn(name, names)
+        if pmsc_binary() is None:
+            self.skipTest("the pmsc program is not built")
+        listed = [line.split()[0] for line in run_cli("evaluators").stdout.splitlines()]
+        self.assertEqual(names, listed)
+
+    def train_on(self, spec, frames, **options):
+        """A model trained on the spec's first frames, exported by `pmsc export-frames`."""
+        npy = self.path("frames.npy")
+        run_cli("export-frames", spec, "--out", npy, "--frames", f"0-{frames - 1}", "--quiet")
+        return np.load(npy), pmsc.train(np.load(npy), **options)
+
+    def test_run_accepts_the_synthetic_spec(self):
+        if pmsc_binary() is None:
+            self.skipTest("the pmsc program is not built")
+        spec = "synthetic:grid=12:frames=60:seed=3"
+        frames, model = self.train_on(spec, 40, max_keys=24, tolerance=0.3)
+        out, report = pmsc.run(model, spec, range(40, 60), threads=2)
+        self.assertEqual(out.shape, (20, 144, 3))
+        self.assertEqual([row["frame"] for row in report["frames"]], list(range(40, 60)))
+        with self.assertRaises(pmsc.InputError):
+            pmsc.run(model, "synthetic:grid=12:frames=60:bogus=1")
+
+    def test_run_accepts_the_volume_spec_on_a_demo_density(self):
+        if pmsc_binary() is None:
+            self.skipTest("the pmsc program is not built")
+        demo = self.path("volume")
+        run_cli("demo", "volume", "--quick", "--quiet", "--out", demo)
+        spec = "volume:" + os.path.join(demo, "density.vdb") + ":samples=2"
+        frames, model = self.train_on(spec, 24, max_keys=60, tolerance=0.05)
+        out, report = pmsc.run(model, spec, range(24), threads=2)
+        self.assertEqual(out.shape, frames.shape)
+        self.assertEqual(report["summary"]["frames_delivered"], 24)
+        # Frames the model was trained on come back close to the full calculation's values.
+        scale = np.abs(frames).max()
+        self.assertLess(np.abs(out - frames).max() / scale, 0.05)
 
 
 if __name__ == "__main__":

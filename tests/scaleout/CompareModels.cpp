@@ -1,6 +1,6 @@
 // pmsc_scaleout_compare A.pmsc B.pmsc: prints how two models of the same training set compare
 // (M, keys, largest principal angle between the bases, training residuals) and exits 0 when they
-// agree as issue 12 asks (same M and keys, basis angle < 1e-9, residuals within 1e-9 relative),
+// agree (same M and keys, basis angle < 1e-9, residuals within 1e-9 relative),
 // 1 otherwise. Used by the Slurm + MPI test and by hand.
 #include "pmsc/ModelIO.h"
 

@@ -3,7 +3,7 @@
 // the memory they give `pmsc train` without holding them in memory either.
 //
 //   pmsc_scaleout_frames OUT.npy GRID FRAMES [SEED] [float32|float64] [nan=FRAME:POINT]
-#include "examples/synthetic/SyntheticSurface.h"
+#include "evaluators/synthetic/SyntheticSurface.h"
 #include "pmsc/NpyIO.h"
 
 #include <cmath>

@@ -1,4 +1,4 @@
-// Training past one machine (issue 12): out-of-core streaming, several shots as one training set,
+// Training past one machine: out-of-core streaming, several shots as one training set,
 // MPI ranks, and training under an address-space limit smaller than the training matrix. Every
 // path must give the model of in-memory, single-process training: the same M and keys, bases
 // within 1e-9 principal angle, the same largest training residual.
@@ -39,7 +39,7 @@ double basisAngle(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
     return Eigen::JacobiSVD<Eigen::MatrixXd>(r).singularValues()(0);
 }
 
-/// The agreement the issue asks for. Returns a description of the first difference, or "".
+/// The agreement every scale-out path must reach. Returns a description of the first difference, or "".
 void expectSameModel(const Model& a, const Model& b, const std::string& what) {
     SCOPED_TRACE(what);
     ASSERT_EQ(a.basisSize(), b.basisSize()) << "M differs";

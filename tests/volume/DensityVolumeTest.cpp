@@ -1,7 +1,7 @@
 // The density grid: bad inputs (one line each), the ray march against an analytic integral, the
 // smoke made from a mesh, and the cache grid's topology and file round trip.
 #include "VdbFixtures.h"
-#include "examples/volume/DensityVolume.h"
+#include "evaluators/volume/DensityVolume.h"
 #include "pmsc/Errors.h"
 #include "tests/common/MissingData.h"
 

@@ -1,7 +1,7 @@
 // `pmsc demo volume --quick` end to end (the real program, its report, OpenVDB's own vdb_print on
 // a cache file) and the volume evaluator's bad inputs through the command line: one line, exit 2.
 #include "VdbFixtures.h"
-#include "examples/volume/DensityVolume.h"
+#include "evaluators/volume/DensityVolume.h"
 #include "tests/common/MissingData.h"
 
 #include <nlohmann/json.hpp>

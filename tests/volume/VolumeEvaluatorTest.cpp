@@ -1,7 +1,7 @@
 // The full calculation per voxel: physics against closed forms, the march's convergence, the
 // determinism the engine relies on, the colour control, the light rig and the spec's errors.
 #include "VdbFixtures.h"
-#include "examples/volume/VolumeEvaluator.h"
+#include "evaluators/volume/VolumeEvaluator.h"
 #include "pmsc/Errors.h"
 #include "tests/common/MissingData.h"
 
@@ -36,7 +36,7 @@ TEST(VolumeEvaluator, ThinMediumGivesTheUnshadowedClosedFormWithAllOctaves) {
     double rgb[3];
     ev.evaluate(0, std::span<const Index>(&point, 1), rgb);
     const Vec3 p = world->density.voxelPositions()[123];
-    const double d2 = std::pow(cornell::length(l.position - p), 2);
+    const double d2 = std::pow(scene::length(l.position - p), 2);
     for (int c = 0; c < 3; ++c) {
         double sum = 1, w = 1;
         for (int k = 0; k < m.octaves; ++k) sum += (w *= m.octaveScattering * m.albedo[c]);
@@ -62,7 +62,7 @@ TEST(VolumeEvaluator, SingleScatteringInAConstantBoxIsBeersLaw) {
         const Vec3 p = world->density.voxelPositions()[i];
         if (std::abs(p.y) > 0.4 || std::abs(p.z) > 0.4) continue;  // shadow rays leave through the +x face
         // To the box's +x face along the ray, with the last voxel's ramp (half a voxel of density).
-        const double d = cornell::length(l.position - p);
+        const double d = scene::length(l.position - p);
         const double path = (0.5 + 0.5 * 0.05 - p.x) * d / (l.position.x - p.x);
         const double d2 = d * d;
         EXPECT_NEAR(all[3 * i], std::exp(-1.5 * path) / (4 * M_PI * d2), 0.01 * all[3 * i]) << p.x;
@@ -175,8 +175,8 @@ TEST(VolumeLightColour, KelvinGivesWarmAndColdLightOfEqualLuminance) {
 }
 
 double angleDeg(const Vec3& a, const Vec3& b) {
-    return std::acos(std::clamp(cornell::dot(a, b) / (cornell::length(a) * cornell::length(b)), -1.0, 1.0)) *
-           180 / M_PI;
+    return std::acos(std::clamp(scene::dot(a, b) / (scene::length(a) * scene::length(b)), -1.0, 1.0)) * 180 /
+           M_PI;
 }
 
 TEST(VolumeRig, SpiralCoversTheBandEvenlyCyclesColoursAndBetweenFindsItsHoles) {
@@ -195,7 +195,7 @@ TEST(VolumeRig, SpiralCoversTheBandEvenlyCyclesColoursAndBetweenFindsItsHoles) {
     for (std::size_t i = 0; i < lights.size(); ++i) {
         const Vec3 d = lights[i].position - world->centre;
         EXPECT_LT(angleDeg(d, dirs[i]), 1e-6) << i;
-        const double elevation = std::asin(d.y / cornell::length(d)) * 180 / M_PI;
+        const double elevation = std::asin(d.y / scene::length(d)) * 180 / M_PI;
         EXPECT_GE(elevation, 10.0) << i;
         EXPECT_LE(elevation, 70.0) << i;
         ++perKelvin[lights[i].kelvin];
