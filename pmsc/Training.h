@@ -50,7 +50,8 @@ struct TrainingOptions {
     Index calibrationSlices = 5;  ///< leave-one-slice-out folds
     /// How the held-out ratios E/e become eps (Calibration.h).
     CalibrationRule calibrationRule = CalibrationRule::MaxRatio;
-    double calibrationCoverage = 0.9;  ///< 1 - alpha of CalibrationRule::Conformal (docs/learning-and-calibration.md: 0.9 measured)
+    double calibrationCoverage =
+        0.9;  ///< 1 - alpha of CalibrationRule::Conformal (docs/learning-and-calibration.md: 0.9 measured)
 
     // --- learning from misses (`pmsc learn`) ---
     /// r > 0: store what `pmsc learn` needs in the model (Model::learning: the left singular

@@ -2,10 +2,10 @@
 
 #include "engine/Engine.h"
 #include "evaluators/cornell/CornellEvaluator.h"
-#include "examples/cornell/CornellLocalChange.h"
-#include "examples/common/DemoValidation.h"
-#include "evaluators/scene/Image.h"
 #include "evaluators/cornell/LightingCacheGrid.h"
+#include "evaluators/scene/Image.h"
+#include "examples/common/DemoValidation.h"
+#include "examples/cornell/CornellLocalChange.h"
 #include "examples/cornell/Renderer.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"

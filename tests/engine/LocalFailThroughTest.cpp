@@ -429,8 +429,8 @@ TEST(LocalFailThrough, FeatheredBordersHaveNoJumpLargerThanInsideRegions) {
         if (std::count(states.begin(), states.end(), CacheState::Hit) == 0) continue;
         novel.evaluateAll(Index(f), truth.data());
         const Steps s = errorSteps(model, states, frames[f].values, truth);
-        // Known limit (docs/local-fail-through.md): next to a region that blends, the two sides' block projections
-        // differ, so the step across the border can exceed the largest step inside a region by a
+        // Known limit (docs/local-fail-through.md): next to a region that blends, the two sides' block
+        // projections differ, so the step across the border can exceed the largest step inside a region by a
         // little (1.5x at most on this sheet); without feathering it is many times larger.
         EXPECT_LE(s.border, 2.0 * s.inside + 1e-12) << "frame " << f;
         ++checked;
