@@ -11,8 +11,9 @@
 
 namespace pmsc::examples {
 
-// What the demo drivers (`pmsc demo volume`, `learn`, `cross`) set up before their first step:
-// the output folder, the clock and the stage timings, the progress hook, the worker arena.
+// What the demo drivers (`pmsc demo volume`, `cornell`, `face`, `learn`, `cross`) set up before
+// their first step: the output folder, the clock and the stage timings, the progress hook, the
+// worker arena.
 
 /// The clock the demos time their stages with.
 using DemoClock = std::chrono::steady_clock;

@@ -4,6 +4,7 @@
 #include "evaluators/cornell/CornellEvaluator.h"
 #include "evaluators/cornell/LightingCacheGrid.h"
 #include "evaluators/scene/Image.h"
+#include "examples/common/DemoSetup.h"
 #include "examples/common/DemoValidation.h"
 #include "examples/cornell/CornellLocalChange.h"
 #include "examples/cornell/Renderer.h"
@@ -17,7 +18,6 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -28,13 +28,15 @@
 
 namespace pmsc::cornell {
 
+using examples::createOutputFolder;
+using examples::DemoClock;
+using examples::DemoSetup;
+using examples::FolderErrorWording;
 using examples::RelError;
+using examples::secondsSince;
 using examples::ValidationSink;
 
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double secondsSince(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 float exposureFor(const Image& img) {
     double sum = 0;
@@ -51,19 +53,6 @@ std::string frameTag(Index pathFrame) {
 }
 
 // --- the steps of runCornellDemo, in the order it runs them ------------------------------------
-
-// What every step needs: the options, the worker arena and its size, the progress hook, the timings.
-struct DemoRun {
-    const CornellDemoOptions& o;
-    tbb::task_arena& arena;
-    int threads;              // of the arena and the engine
-    nlohmann::json& timings;  // report.json's "seconds"
-
-    // Reports progress; throws Cancelled when the hook asks to stop.
-    void progress(std::string_view stage, double done, double total) const {
-        if (o.progress && !o.progress(stage, done, total)) throw Cancelled("demo cornell: interrupted");
-    }
-};
 
 // A number as a user typed it: 5, not 5.000000.
 std::string shortNumber(double v) {
@@ -98,35 +87,28 @@ void checkOptions(const CornellDemoOptions& o) {
                          ") must be in [1, scattered lights = " + std::to_string(o.scatteredLights) + "]");
 }
 
-void createOutputFolder(const std::string& outDir) {
-    std::error_code ec;
-    std::filesystem::create_directories(outDir, ec);
-    if (ec || !std::filesystem::is_directory(outDir))
-        throw IoError("cannot create " + outDir + ": " + (ec ? ec.message() : "not a directory"));
-}
-
 // 1. The cache's points: surfaces voxelized to about `points` active voxels.
-std::shared_ptr<const CornellWorld> voxelizeBox(const DemoRun& run) {
-    const auto t = Clock::now();
+std::shared_ptr<const CornellWorld> voxelizeBox(DemoSetup& run, const CornellDemoOptions& o) {
+    const auto t = DemoClock::now();
     run.progress("voxelize", 0, 1);
-    auto world = CornellWorld::create(run.o.points);
-    run.timings["voxelize"] = secondsSince(t);
+    auto world = CornellWorld::create(o.points);
+    run.lap("voxelize", t);
     return world;
 }
 
 // 2. Training frames: one point light each on the 12 x 12 grid below the ceiling, by full gathers.
-FrameSet gatherTrainingFrames(const DemoRun& run, const std::shared_ptr<const CornellWorld>& world,
-                              const LightRig& rig) {
+FrameSet gatherTrainingFrames(DemoSetup& run, const CornellDemoOptions& o,
+                              const std::shared_ptr<const CornellWorld>& world, const LightRig& rig) {
     const Index n = static_cast<Index>(world->voxels.size());
-    const CornellEvaluator trainEval(world, rig.trainingLights(), run.o.samples, "cornell-train");
+    const CornellEvaluator trainEval(world, rig.trainingLights(), o.samples, "cornell-train");
     const Index trainFrames = trainEval.frameCount();
-    const auto t = Clock::now();
+    const auto t = DemoClock::now();
     FrameSet q(trainFrames, n, 3);
     for (Index f = 0; f < trainFrames; ++f) {
         run.progress("training frames", static_cast<double>(f), static_cast<double>(trainFrames));
         run.arena.execute([&] { trainEval.evaluateAll(f, q.frame(f)); });
     }
-    run.timings["training_gathers"] = secondsSince(t);
+    run.lap("training_gathers", t);
     return q;
 }
 
@@ -162,9 +144,8 @@ struct TrainedModel {
 
 // 3. Train: basis, key points (seeded with a sparse spatial grid), calibrated eps. Releases the
 // training frames (144 x N x 3 doubles) when done.
-TrainedModel trainModel(const DemoRun& run, const CornellWorld& world, FrameSet q) {
-    const CornellDemoOptions& o = run.o;
-    const auto t = Clock::now();
+TrainedModel trainModel(DemoSetup& run, const CornellDemoOptions& o, const CornellWorld& world, FrameSet q) {
+    const auto t = DemoClock::now();
     TrainedModel trained;
     trained.trainFrames = q.frames;
     trained.peak = peakIrradiance(q);
@@ -191,7 +172,7 @@ TrainedModel trainModel(const DemoRun& run, const CornellWorld& world, FrameSet 
     };
     run.arena.execute([&] { trained.model = train(q, topt, &trained.report); });
     q = FrameSet();  // 144 x N x 3 doubles: not needed any more
-    run.timings["train"] = secondsSince(t);
+    run.lap("train", t);
     trained.tolerance = topt.tolerance;
     trained.gridKeyPoints = topt.gridPoints.size();
     return trained;
@@ -226,11 +207,11 @@ struct FullGathers {
     double secondsPerFrame = 0;
 };
 
-FullGathers gatherFullFrames(const DemoRun& run, const CornellEvaluator& valEval,
+FullGathers gatherFullFrames(DemoSetup& run, const CornellEvaluator& valEval,
                              const std::set<Index>& fullFrames) {
     const Index n = valEval.pointCount();
     FullGathers g;
-    const auto t = Clock::now();
+    const auto t = DemoClock::now();
     Index done = 0;
     for (Index f : fullFrames) {
         run.progress("validation full gathers", static_cast<double>(done++),
@@ -266,7 +247,7 @@ ReferenceSubset chooseReferenceSubset(const CornellDemoOptions& o, Index n, Inde
 }
 
 // 5. The validation frames through the engine: key points, projection, soft cache per frame.
-engine::RunStats runValidationThroughEngine(const DemoRun& run, const Model& model,
+engine::RunStats runValidationThroughEngine(DemoSetup& run, const Model& model,
                                             const CornellEvaluator& valEval, ValidationSink& sink) {
     engine::EngineOptions eopt;
     eopt.threads = run.threads;
@@ -284,17 +265,16 @@ struct ReferenceErrors {
 };
 
 // 6. Converged reference (referenceMultiplier x the samples) on the subset, scattered frames.
-ReferenceErrors measureAgainstConvergedReference(const DemoRun& run,
+ReferenceErrors measureAgainstConvergedReference(DemoSetup& run, const CornellDemoOptions& o,
                                                  const std::shared_ptr<const CornellWorld>& world,
                                                  const LightRig& rig, const ReferenceSubset& reference,
                                                  std::map<Index, std::vector<double>>& full,
                                                  ValidationSink& sink) {
-    const CornellDemoOptions& o = run.o;
     const std::vector<Index>& subset = reference.points;
     const CornellEvaluator refEval(world, rig.scatteredLights(o.scatteredLights),
                                    o.samples * o.referenceMultiplier, "cornell-reference");
     ReferenceErrors errors;
-    const auto t = Clock::now();
+    const auto t = DemoClock::now();
     for (Index f = 0; f < reference.frames; ++f) {
         run.progress("converged reference", static_cast<double>(f), static_cast<double>(reference.frames));
         std::vector<double> ref(3 * subset.size());
@@ -311,23 +291,21 @@ ReferenceErrors measureAgainstConvergedReference(const DemoRun& run,
         errors.full.add(fullAt.data(), ref.data(), ref.size());
         errors.pm.add(sink.pmAtSubset[f].data(), ref.data(), ref.size());
     }
-    run.timings["reference"] = secondsSince(t);
+    run.lap("reference", t);
     return errors;
 }
 
 // One camera's render of a frame with both grids: DIR/CAMERA_TAG.png (full | PMSC | |diff| x 10)
 // and .pfm; returns its entry of "images".
-nlohmann::json renderWithBothGrids(const DemoRun& run, const CornellWorld& world, const Camera& cam,
-                                   const PointLight& light, const LightingCacheGrid& fullGrid,
-                                   const LightingCacheGrid& pmGrid, const std::string& tag, Index pathFrame,
-                                   CacheState state) {
+nlohmann::json renderWithBothGrids(DemoSetup& run, const CornellDemoOptions& o, const CornellWorld& world,
+                                   const Camera& cam, const PointLight& light,
+                                   const LightingCacheGrid& fullGrid, const LightingCacheGrid& pmGrid,
+                                   const std::string& tag, Index pathFrame, CacheState state) {
     std::vector<Image> imgs;
-    run.arena.execute([&] {
-        imgs = renderWithCaches(world, cam, light, {&fullGrid, &pmGrid}, run.o.imageSize);
-    });
+    run.arena.execute([&] { imgs = renderWithCaches(world, cam, light, {&fullGrid, &pmGrid}, o.imageSize); });
     const Image diff = absDifference(imgs[0], imgs[1], 10.0f);
     const Image panel = sideBySide({&imgs[0], &imgs[1], &diff});
-    const std::string base = run.o.outDir + "/" + cam.name + "_" + tag;
+    const std::string base = o.outDir + "/" + cam.name + "_" + tag;
     writePng(base + ".png", panel, exposureFor(imgs[0]));
     writePfm(base + ".pfm", panel);
     RelError imgErr;
@@ -346,11 +324,10 @@ struct WrittenFiles {
 };
 
 // 7. Lighting-cache grids and renders from the moving cameras.
-WrittenFiles writeGridsAndRenders(const DemoRun& run, const CornellWorld& world,
+WrittenFiles writeGridsAndRenders(DemoSetup& run, const CornellDemoOptions& o, const CornellWorld& world,
                                   const ValidationFrames& frames, std::map<Index, std::vector<double>>& full,
                                   ValidationSink& sink) {
-    const CornellDemoOptions& o = run.o;
-    const auto t = Clock::now();
+    const auto t = DemoClock::now();
     WrittenFiles written;
     const auto cameraCount = demoCameras(0).size();
     Index rendered = 0;
@@ -375,12 +352,12 @@ WrittenFiles writeGridsAndRenders(const DemoRun& run, const CornellWorld& world,
         for (const Camera& cam : demoCameras(camT)) {
             run.progress("renders", static_cast<double>(rendered++),
                          static_cast<double>(frames.renderFrames.size() * cameraCount));
-            written.images.push_back(renderWithBothGrids(run, world, cam,
+            written.images.push_back(renderWithBothGrids(run, o, world, cam,
                                                          frames.lights[static_cast<std::size_t>(f)], fullGrid,
                                                          pmGrid, tag, pathFrame, rec->state));
         }
     }
-    run.timings["grids_and_renders"] = secondsSince(t);
+    run.lap("grids_and_renders", t);
     return written;
 }
 
@@ -434,8 +411,8 @@ void reportResults(nlohmann::json& report, const CornellDemoOptions& o, Index n,
 }
 
 // The model and its training, and the set-up of the box.
-void reportModelAndSetUp(nlohmann::json& report, const DemoRun& run, const CornellWorld& world,
-                         const TrainedModel& trained, const LightRig& rig) {
+void reportModelAndSetUp(nlohmann::json& report, const DemoSetup& run, const CornellDemoOptions& o,
+                         const CornellWorld& world, const TrainedModel& trained, const LightRig& rig) {
     const Model& model = trained.model;
     report["bounces"] = 1;
     report["voxel_size_mm"] = world.voxels.voxelSizeMm;
@@ -449,7 +426,7 @@ void reportModelAndSetUp(nlohmann::json& report, const DemoRun& run, const Corne
     report["training_warnings"] = trained.report.warnings;
     report["threads"] = run.threads;
     report["light_below_ceiling_mm"] = rig.belowCeilingMm;
-    report["quick"] = run.o.quick;
+    report["quick"] = o.quick;
 }
 
 }  // namespace
@@ -470,19 +447,17 @@ CornellDemoOptions CornellDemoOptions::quickOptions() {
 }
 
 nlohmann::json runCornellDemo(const CornellDemoOptions& o) {
-    const auto start = Clock::now();
+    const auto start = DemoClock::now();
     checkOptions(o);
-    createOutputFolder(o.outDir);
-    const int threads = o.threads > 0 ? o.threads : tbb::info::default_concurrency();
-    tbb::task_arena arena(threads);
+    createOutputFolder(o.outDir, FolderErrorWording::CannotCreate);
+    DemoSetup run(o.threads > 0 ? o.threads : tbb::info::default_concurrency(), o.progress,
+                  "demo cornell: interrupted", start);
     nlohmann::json report;
-    nlohmann::json timings;
-    const DemoRun run{o, arena, threads, timings};
 
-    const auto world = voxelizeBox(run);
+    const auto world = voxelizeBox(run, o);
     const Index n = static_cast<Index>(world->voxels.size());
     const LightRig rig;
-    const TrainedModel trained = trainModel(run, *world, gatherTrainingFrames(run, world, rig));
+    const TrainedModel trained = trainModel(run, o, *world, gatherTrainingFrames(run, o, world, rig));
 
     const ValidationFrames frames = chooseValidationFrames(o, rig);
     const CornellEvaluator valEval(world, frames.lights, o.samples, "cornell");
@@ -493,35 +468,35 @@ nlohmann::json runCornellDemo(const CornellDemoOptions& o) {
     sink.scatteredCount = frames.scattered;
     const engine::RunStats stats = runValidationThroughEngine(run, trained.model, valEval, sink);
     const ReferenceErrors refErrors =
-        measureAgainstConvergedReference(run, world, rig, reference, gathers.full, sink);
-    const WrittenFiles written = writeGridsAndRenders(run, *world, frames, gathers.full, sink);
+        measureAgainstConvergedReference(run, o, world, rig, reference, gathers.full, sink);
+    const WrittenFiles written = writeGridsAndRenders(run, o, *world, frames, gathers.full, sink);
     if (trained.model.regions) {
-        const auto t = Clock::now();
-        const LocalFailThroughInputs in{.model = trained.model,
-                                        .validation = valEval,
-                                        .scattered = frames.scattered,
-                                        .fullGathers = gathers.full,
-                                        .tolerance = trained.tolerance,
-                                        .changeEdgeMm = o.localChangeMm,
-                                        .changeLights = o.localChangeLights,
-                                        .threads = threads,
-                                        .inArena = [&](const std::function<void()>& f) { arena.execute(f); },
-                                        .progress = [&](std::string_view stage, double done,
-                                                        double total) { run.progress(stage, done, total); }};
+        const auto t = DemoClock::now();
+        const LocalFailThroughInputs in{
+            .model = trained.model,
+            .validation = valEval,
+            .scattered = frames.scattered,
+            .fullGathers = gathers.full,
+            .tolerance = trained.tolerance,
+            .changeEdgeMm = o.localChangeMm,
+            .changeLights = o.localChangeLights,
+            .threads = run.threads,
+            .inArena = [&](const std::function<void()>& f) { run.arena.execute(f); },
+            .progress = [&](std::string_view stage, double done,
+                            double total) { run.progress(stage, done, total); }};
         report["local_fail_through"] = measureLocalFailThrough(in);
-        timings["local_fail_through"] = secondsSince(t);
+        run.lap("local_fail_through", t);
     }
 
     // 8. The report.
     reportResults(report, o, n, trained, valEval.frameCount(), gathers.secondsPerFrame, stats, sink, frames,
                   reference, refErrors);
-    reportModelAndSetUp(report, run, *world, trained, rig);
+    reportModelAndSetUp(report, run, o, *world, trained, rig);
     report["engine"] = nlohmann::json::parse(stats.toJson());
     report["frames"] = frameTable(sink.records, frames.scattered);
     report["images"] = written.images;
     report["vdb_files"] = written.vdbs;
-    timings["total"] = secondsSince(start);
-    report["seconds"] = timings;
+    report["seconds"] = run.finish();
     writeFileAtomically(o.outDir + "/report.json", report.dump(2) + "\n");
     run.progress("done", 1, 1);
     return report;

@@ -18,11 +18,9 @@
 
 #include <algorithm>
 #include <atomic>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <filesystem>
 #include <map>
 #include <memory>
 
@@ -115,7 +113,7 @@ FaceAnimationOptions animationOptionsFor(const FaceDemoOptions& options) {
 }
 
 FaceScene loadFaceScene(const DemoRun& run) {
-    run.step("load", 0, 1);
+    run.setup.progress("load", 0, 1);
     const IctFace face = loadIctFace(run.options.dataDir);
     auto rig = std::make_shared<const FaceRig>(face);
     auto mesh = std::make_shared<const ObjMesh>(face.neutral);
@@ -132,16 +130,6 @@ FaceScene loadFaceScene(const DemoRun& run) {
                      diagonal / 100.0};
 }
 
-// The output folder only once the input is known to be good: a bad --data leaves nothing.
-void createOutputFolder(const std::string& outDir) {
-    namespace fs = std::filesystem;
-    std::error_code ec;
-    fs::create_directories(outDir, ec);
-    if (ec || !fs::is_directory(outDir)) {
-        throw IoError(outDir + ": cannot create the output folder: " + (ec ? ec.message() : "not a folder"));
-    }
-}
-
 SequenceSplit splitSequences(const FaceDemoOptions& options, const FaceAnimation& animation) {
     SequenceSplit split;
     animation.splitOrdinary(options.trainingFraction, options.seed + 4, split.trainingSeqs,
@@ -155,17 +143,18 @@ SequenceSplit splitSequences(const FaceDemoOptions& options, const FaceAnimation
 
 FrameSet poseTrainingFrames(const DemoRun& run, const FaceScene& scene,
                             const std::vector<Index>& trainingFrames) {
-    const Clock::time_point t = Clock::now();
+    const DemoClock::time_point t = DemoClock::now();
     FrameSet training(static_cast<Index>(trainingFrames.size()), scene.n, 3);
     std::atomic<Index> posed{0};
-    run.arena.execute([&] {
+    run.setup.arena.execute([&] {
         tbb::parallel_for(size_t{0}, trainingFrames.size(), [&](size_t i) {
             scene.evaluator.evaluateAll(trainingFrames[i], training.frame(static_cast<Index>(i)));
             ++posed;
         });
     });
-    run.step("pose training", static_cast<double>(posed), static_cast<double>(trainingFrames.size()));
-    run.timings["pose_training"] = seconds(t);
+    run.setup.progress("pose training", static_cast<double>(posed),
+                       static_cast<double>(trainingFrames.size()));
+    run.setup.lap("pose_training", t);
     return training;
 }
 
@@ -173,7 +162,7 @@ FrameSet poseTrainingFrames(const DemoRun& run, const FaceScene& scene,
 // the head diagonal.
 TrainedModel trainModel(const DemoRun& run, const FrameSet& training, double percent) {
     const FaceDemoOptions& options = run.options;
-    const Clock::time_point t = Clock::now();
+    const DemoClock::time_point t = DemoClock::now();
     TrainedModel trained;
     TrainingOptions to;
     to.basis = options.basis;
@@ -187,8 +176,8 @@ TrainedModel trainModel(const DemoRun& run, const FrameSet& training, double per
         return !options.progress ||
                options.progress(std::string("train: ") + std::string(stage), done, total);
     };
-    run.arena.execute([&] { trained.model = train(training, to, &trained.report); });
-    run.timings["train"] = seconds(t);
+    run.setup.arena.execute([&] { trained.model = train(training, to, &trained.report); });
+    run.setup.lap("train", t);
     return trained;
 }
 
@@ -217,7 +206,7 @@ void measureAgainstFullPoses(const DemoRun& run, const FaceScene& scene, const M
     const Index n = scene.n;
     std::atomic<Index> done{0};
     const Index keyCount = model.keyCount();
-    run.arena.execute([&] {
+    run.setup.arena.execute([&] {
         tbb::parallel_for(size_t{0}, records.size(), [&](size_t i) {
             FrameRecord& r = records[i];
             std::vector<double> full(static_cast<size_t>(3 * n)), rec(static_cast<size_t>(3 * n));
@@ -238,7 +227,8 @@ void measureAgainstFullPoses(const DemoRun& run, const FaceScene& scene, const M
             r.softMax = (1.0 - d.weight) * r.pmMax;
             const Index k = ++done;
             if (k % 32 == 0)
-                run.step("ground truth", static_cast<double>(k), static_cast<double>(records.size()));
+                run.setup.progress("ground truth", static_cast<double>(k),
+                                   static_cast<double>(records.size()));
         });
     });
 }
@@ -263,7 +253,7 @@ TestFrames pickShownFrames(const std::vector<FrameRecord>& records) {
 EngineTotals runTestSequencesThroughEngine(const DemoRun& run, const FaceScene& scene, const Model& model,
                                            const SequenceSplit& split, std::vector<FrameRecord>& records,
                                            const TestFrames& sets) {
-    const Clock::time_point t = Clock::now();
+    const DemoClock::time_point t = DemoClock::now();
     std::map<Index, FrameRecord*> byFrame;
     for (FrameRecord& r : records) byFrame[r.frame] = &r;
     std::vector<Index> keep;
@@ -294,11 +284,11 @@ EngineTotals runTestSequencesThroughEngine(const DemoRun& run, const FaceScene& 
                 j["sequence"] = seq.name;
                 totals.runs.push_back(j);
             }
-            run.step("engine", static_cast<double>(++sequencesDone),
-                     static_cast<double>(split.validationSeqs.size() + split.novelSeqs.size()));
+            run.setup.progress("engine", static_cast<double>(++sequencesDone),
+                               static_cast<double>(split.validationSeqs.size() + split.novelSeqs.size()));
         }
     }
-    run.timings["engine"] = seconds(t);
+    run.setup.lap("engine", t);
     for (const FrameRecord& r : records) {
         if (!r.engineSeen)
             ++totals.unseen;
@@ -312,13 +302,13 @@ EngineTotals runTestSequencesThroughEngine(const DemoRun& run, const FaceScene& 
 // Local fail-through: validation sample, novel and mixed sets, both ways.
 nlohmann::json measureLocalFailThrough(const DemoRun& run, const FaceScene& scene, const Model& model,
                                        const SequenceSplit& split) {
-    const Clock::time_point t = Clock::now();
+    const DemoClock::time_point t = DemoClock::now();
     nlohmann::json local = localFailThroughSets(
         model, scene.evaluator, *scene.animation, split.validationSeqs, split.novelSeqs, scene.percent,
         run.options.threads,
-        [&run](std::string_view stage, double done, double total) { run.step(stage, done, total); },
+        [&run](std::string_view stage, double done, double total) { run.setup.progress(stage, done, total); },
         run.options.quick ? 24 : 0);
-    run.timings["local_fail_through"] = seconds(t);
+    run.setup.lap("local_fail_through", t);
     return local;
 }
 
@@ -327,7 +317,7 @@ nlohmann::json measureLocalFailThrough(const DemoRun& run, const FaceScene& scen
 PoseTimings timeFullPoseAgainstPmsc(const DemoRun& run, const FaceScene& scene, const Model& model,
                                     const PointMultiplier& pm,
                                     const std::vector<const FrameRecord*>& validation) {
-    const Clock::time_point t = Clock::now();
+    const DemoClock::time_point t = DemoClock::now();
     PoseTimings pt;
     const Index timed = std::min<Index>(run.options.timingFrames, static_cast<Index>(validation.size()));
     pt.timed = timed;
@@ -340,47 +330,48 @@ PoseTimings timeFullPoseAgainstPmsc(const DemoRun& run, const FaceScene& scene, 
         const Index frame =
             validation[static_cast<size_t>(i * static_cast<Index>(validation.size()) / timed)]->frame;
         double c0 = threadCpuSeconds();
-        Clock::time_point w0 = Clock::now();
+        DemoClock::time_point w0 = DemoClock::now();
         evaluator.evaluateAll(frame, full.data());
         pt.cpuFull += threadCpuSeconds() - c0;
-        pt.wallFull += seconds(w0);
+        pt.wallFull += secondsSince(w0);
         c0 = threadCpuSeconds();
-        w0 = Clock::now();
+        w0 = DemoClock::now();
         evaluator.evaluate(frame, model.keyPoints, keys.data());
         pt.cpuKeys += threadCpuSeconds() - c0;
-        pt.wallKeys += seconds(w0);
+        pt.wallKeys += secondsSince(w0);
         c0 = threadCpuSeconds();
-        w0 = Clock::now();
+        w0 = DemoClock::now();
         pm.project(keys.data(), coords.data());
         volatile double e = pm.keyRmsError(keys.data(), coords.data());
         (void)e;
         pt.cpuProject += threadCpuSeconds() - c0;
-        pt.wallProject += seconds(w0);
+        pt.wallProject += secondsSince(w0);
         c0 = threadCpuSeconds();
-        w0 = Clock::now();
+        w0 = DemoClock::now();
         pm.reconstruct(coords.data(), rec.data());
         pt.cpuReconstruct += threadCpuSeconds() - c0;
-        pt.wallReconstruct += seconds(w0);
-        run.step("timing", static_cast<double>(i + 1), static_cast<double>(timed));
+        pt.wallReconstruct += secondsSince(w0);
+        run.setup.progress("timing", static_cast<double>(i + 1), static_cast<double>(timed));
     }
-    run.timings["timing"] = seconds(t);
+    run.setup.lap("timing", t);
     return pt;
 }
 
 }  // namespace
 
 nlohmann::json runFaceDemo(const FaceDemoOptions& options) {
-    const Clock::time_point start = Clock::now();
+    const DemoClock::time_point start = DemoClock::now();
     checkOptions(options);
-    tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::this_task_arena::max_concurrency());
+    DemoSetup setup(options.threads > 0 ? options.threads : tbb::this_task_arena::max_concurrency(),
+                    options.progress, "demo face", start);
     nlohmann::json report;
-    nlohmann::json timings;
-    const DemoRun run{options, arena, timings, options.outDir + "/"};
+    const DemoRun run{options, setup, options.outDir + "/"};
 
-    Clock::time_point t = Clock::now();
+    DemoClock::time_point t = DemoClock::now();
     const FaceScene scene = loadFaceScene(run);
-    createOutputFolder(options.outDir);
-    timings["load_and_rig"] = seconds(t);
+    // The output folder only once the input is known to be good: a bad --data leaves nothing.
+    examples::createOutputFolder(options.outDir, examples::FolderErrorWording::OutputFolder);
+    setup.lap("load_and_rig", t);
     const SequenceSplit split = splitSequences(options, *scene.animation);
 
     const TrainedModel trained =
@@ -389,10 +380,10 @@ nlohmann::json runFaceDemo(const FaceDemoOptions& options) {
     const PointMultiplier pm(model);
     const SoftCachePolicy policy(model.epsMin, model.epsMax);
 
-    t = Clock::now();
+    t = DemoClock::now();
     std::vector<FrameRecord> records = testFrameRecords(*scene.animation, split);
     measureAgainstFullPoses(run, scene, model, pm, policy, records);
-    timings["ground_truth"] = seconds(t);
+    setup.lap("ground_truth", t);
     const TestFrames sets = pickShownFrames(records);
 
     const EngineTotals engine = runTestSequencesThroughEngine(run, scene, model, split, records, sets);
@@ -406,8 +397,7 @@ nlohmann::json runFaceDemo(const FaceDemoOptions& options) {
     reportAccuracy(report, options, scene, trained, records, sets, engine);
     report["shown_frames"] = written.shown;
     report["files"] = written.files;
-    timings["total"] = seconds(start);
-    report["seconds"] = timings;
+    report["seconds"] = setup.finish();
     writeFileAtomically(run.out + "report.json", report.dump(2) + "\n");
     return report;
 }

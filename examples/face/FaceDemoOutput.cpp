@@ -160,8 +160,8 @@ ErrorSamples collectErrors(const std::vector<FrameRecord>& records, double perce
 WrittenFiles writeFiles(const DemoRun& run, const FaceScene& scene, const Model& model,
                         const PointMultiplier& pm, const std::vector<FrameRecord>& records,
                         const TestFrames& sets, const EngineTotals& engine) {
-    const Clock::time_point t = Clock::now();
-    run.step("write", 0, 1);
+    const DemoClock::time_point t = DemoClock::now();
+    run.setup.progress("write", 0, 1);
     const FacePictures pics{FaceRenderer(scene.rig->topology(), FaceRenderer::ictHiddenVertices(scene.n))};
     WrittenFiles written;
     for (const auto& [label, record] : sets.shown) {
@@ -174,7 +174,7 @@ WrittenFiles writeFiles(const DemoRun& run, const FaceScene& scene, const Model&
     written.files.push_back("face.pmsc");
     writeFramesCsv(run, scene, records);
     written.files.push_back("frames.csv");
-    run.timings["write"] = seconds(t);
+    run.setup.lap("write", t);
     return written;
 }
 

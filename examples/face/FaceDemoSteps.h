@@ -6,6 +6,7 @@
 #include "evaluators/face/FaceAnimation.h"
 #include "evaluators/face/FaceEvaluator.h"
 #include "evaluators/face/FaceRig.h"
+#include "examples/common/DemoSetup.h"
 #include "examples/face/FaceDemo.h"
 #include "pmsc/Errors.h"
 #include "pmsc/Model.h"
@@ -14,11 +15,8 @@
 #include "pmsc/SoftCache.h"
 #include "pmsc/Training.h"
 
-#include <tbb/task_arena.h>
-
 #include <nlohmann/json.hpp>
 
-#include <chrono>
 #include <map>
 #include <memory>
 #include <string>
@@ -28,11 +26,9 @@
 
 namespace pmsc::face::demo {
 
-using Clock = std::chrono::steady_clock;
-
-inline double seconds(Clock::time_point since) {
-    return std::chrono::duration<double>(Clock::now() - since).count();
-}
+using examples::DemoClock;
+using examples::DemoSetup;
+using examples::secondsSince;
 
 inline const char* stateName(CacheState s) {
     return s == CacheState::Hit ? "hit" : s == CacheState::Blend ? "blend" : "miss";
@@ -53,17 +49,12 @@ struct FrameRecord {
     bool engineAgrees = false;
 };
 
-// What every step needs: the options, the progress hook, the worker arena, the timings.
+// What every step needs: the options, the shared set-up (progress hook, worker arena, timings) and
+// the output folder.
 struct DemoRun {
     const FaceDemoOptions& options;
-    tbb::task_arena& arena;
-    nlohmann::json& timings;  // report.json's "seconds"
-    std::string out;          // the output folder with a trailing '/'
-
-    // Reports progress; throws Cancelled when the hook asks to stop.
-    void step(std::string_view stage, double done, double total) const {
-        if (options.progress && !options.progress(stage, done, total)) throw Cancelled("demo face");
-    }
+    DemoSetup& setup;
+    std::string out;  // the output folder with a trailing '/'
 };
 
 // The face, the rig, the animation and the rig as an evaluator.
