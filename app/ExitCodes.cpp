@@ -8,7 +8,7 @@
 
 namespace pmsc::app {
 
-ExitReason exitReason(std::exception_ptr error) {
+ExitReason exitReason(const std::exception_ptr& error) {
     try {
         std::rethrow_exception(error);
     } catch (const Cancelled& e) {

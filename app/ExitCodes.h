@@ -26,6 +26,6 @@ struct ExitReason {
     std::string message;  ///< the one line to print after "pmsc: " (what, with a prefix by kind)
 };
 /// @param error a thrown exception (std::current_exception() in a catch block); never null.
-ExitReason exitReason(std::exception_ptr error);
+ExitReason exitReason(const std::exception_ptr& error);
 
 }  // namespace pmsc::app

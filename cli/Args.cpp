@@ -107,7 +107,7 @@ bool ArgParser::parse(const std::vector<std::string>& args) {
         apply(*p, arg);
     }
     for (const auto& o : options_)
-        if (o.required && !given(o.name)) fail(o.positional ? "missing " + o.name : "missing " + o.name);
+        if (o.required && !given(o.name)) fail("missing " + o.name);
     return true;
 }
 

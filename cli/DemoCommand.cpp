@@ -204,7 +204,7 @@ ReplayResult replayStep(const Model& model, FrameFile test, const DemoFiles& fil
     AtomicFile reportFile(reportPath);
     NpyFrameWriter out(outPath, recorded.frameCount(), recorded.pointCount(), recorded.channelCount(),
                        recorded.dtype());
-    const ReplayResult result = replay(model, recorded, replayOptions, &out);
+    ReplayResult result = replay(model, recorded, replayOptions, &out);
     const std::string json = replayReport(model, result).dump(2) + "\n";
     reportFile.write(json.data(), json.size());
     out.commit();

@@ -60,7 +60,7 @@ std::string systemError(int error) { return std::strerror(error); }
 }  // namespace
 
 FrameOutput::FrameOutput(std::string dir, const std::string& format,
-                         std::vector<std::shared_ptr<const FrameWriter>> writers, Index points,
+                         const std::vector<std::shared_ptr<const FrameWriter>>& writers, Index points,
                          Index channels, NpyDtype dtype)
     : dir_(std::move(dir)), points_(points), channels_(channels), dtype_(dtype) {
     if (format == "npy") {

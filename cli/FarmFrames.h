@@ -53,7 +53,7 @@ public:
     /// @param[in] dtype    element type of .npy frames
     /// @throws UsageError for a format neither npy nor offered (the offered ones are listed).
     FrameOutput(std::string dir, const std::string& format,
-                std::vector<std::shared_ptr<const FrameWriter>> writers, Index points, Index channels,
+                const std::vector<std::shared_ptr<const FrameWriter>>& writers, Index points, Index channels,
                 NpyDtype dtype);
 
     /// The final path of frame `frame`.

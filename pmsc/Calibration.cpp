@@ -22,7 +22,8 @@ Eigen::VectorXd keyRmsFromKeyRows(const Eigen::MatrixXd& qk, const Eigen::Matrix
     Eigen::MatrixXd coords = projector * qk;
     Eigen::MatrixXd r = qk;
     r.noalias() -= bk * coords;
-    const double k = static_cast<double>(qk.rows() / channels);
+    const Index keys = qk.rows() / channels;  // rows are key x channel: exact
+    const double k = static_cast<double>(keys);
     return (r.colwise().squaredNorm().array() / k).sqrt().matrix().transpose();
 }
 

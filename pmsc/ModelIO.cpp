@@ -60,6 +60,7 @@ void decodeSections(std::string_view bytes, const std::string& name, Model& mode
     // Every section takes at least its 16-byte tag and length.
     const std::uint64_t count = table.count("section count", 16);
     std::set<std::string> seen;
+    const std::string readerName = name + ": ";  // + "section 'TAG'": what a section's errors name
     for (std::uint64_t i = 0; i < count; ++i) {
         const std::string where = "section #" + std::to_string(i);
         char tag[8];
@@ -79,9 +80,9 @@ void decodeSections(std::string_view bytes, const std::string& name, Model& mode
                     known += (known.empty() ? "'" : ", '") + tagText(c.tag.data()) + "'";
                 return known;
             }() + ")");
-        if (!seen.insert(std::string(tag, 8)).second) table.fail("section '" + text + "' appears twice");
-        ByteReader reader(table.take(payload, "section '" + text + "' payload"),
-                          name + ": section '" + text + "'");
+        const std::string section = "section '" + text + "'";
+        if (!seen.insert(std::string(tag, 8)).second) table.fail(section + " appears twice");
+        ByteReader reader(table.take(payload, section + " payload"), readerName + section);
         codec->decode(reader, model);
         reader.expectEnd();
     }

@@ -42,7 +42,7 @@ py::object exceptionClass(const char* name) { return py::module_::import("pmsc")
 
 }  // namespace
 
-void setPythonError(std::exception_ptr error, py::object cause) {
+void setPythonError(const std::exception_ptr& error, const py::object& cause) {
     const app::ExitReason reason = app::exitReason(error);
     const char* name = "Error";
     switch (reason.code) {
@@ -69,6 +69,7 @@ void setPythonError(std::exception_ptr error, py::object cause) {
 
 namespace {
 
+// NOLINTNEXTLINE(performance-unnecessary-value-param): the signature pybind11 registers
 void translate(std::exception_ptr p) {
     try {
         std::rethrow_exception(p);

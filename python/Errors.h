@@ -19,7 +19,7 @@ void registerErrors(py::module_& m);
 
 /// Sets the Python error for a pmsc exception: the class by kind, the message exactly as the command
 /// line prints it after "pmsc: " (app::exitReason), and an optional __cause__.
-void setPythonError(std::exception_ptr error, py::object cause = py::none());
+void setPythonError(const std::exception_ptr& error, const py::object& cause = py::none());
 
 /// Runs fn() on a worker thread with the GIL released while this thread waits, checking Python's
 /// signals every 50 ms: Ctrl-C sets `cancel` (the engine then stops within a node body's time) and

@@ -59,7 +59,7 @@ py::array project(const PyModel& self, py::handle keys) {
     return out;
 }
 
-py::object keyError(const PyModel& self, py::handle keys, py::object coords) {
+py::object keyError(const PyModel& self, py::handle keys, const py::object& coords) {
     const Model& m = self.get();
     auto [k, batch] = keyBatch(m, keys);
     py::array_t<double, py::array::c_style> b =
@@ -82,7 +82,7 @@ py::object keyError(const PyModel& self, py::handle keys, py::object coords) {
     return out;
 }
 
-py::array reconstruct(const PyModel& self, py::handle coords, py::object pointsArg) {
+py::array reconstruct(const PyModel& self, py::handle coords, const py::object& pointsArg) {
     const Model& m = self.get();
     auto [b, batch] = coordBatch(m, coords);
     const py::ssize_t frames = batch < 0 ? 1 : batch, mm = m.coordCount();
@@ -157,14 +157,17 @@ void bindModel(py::module_& m) {
             "path"_a, "Writes the model atomically (pmsc.IoError if it cannot).")
         .def_static(
             "from_bytes",
-            [](py::bytes b) { return std::make_shared<PyModel>(decodeModel(std::string(b), "<bytes>")); },
+            [](const py::bytes& b) {
+                return std::make_shared<PyModel>(decodeModel(std::string(b), "<bytes>"));
+            },
             "data"_a, "A model from the bytes of a .pmsc file.")
         .def(
             "to_bytes", [](const PyModel& self) { return py::bytes(encodeModel(self.get())); },
             "The bytes of the model's .pmsc file.")
-        .def(py::pickle(
-            [](const PyModel& self) { return py::bytes(encodeModel(self.get())); },
-            [](py::bytes b) { return std::make_shared<PyModel>(decodeModel(std::string(b), "<pickle>")); }))
+        .def(py::pickle([](const PyModel& self) { return py::bytes(encodeModel(self.get())); },
+                        [](const py::bytes& b) {
+                            return std::make_shared<PyModel>(decodeModel(std::string(b), "<pickle>"));
+                        }))
         .def_property_readonly(
             "points", [](const PyModel& s) { return s.get().points; }, "N")
         .def_property_readonly(
@@ -189,27 +192,27 @@ void bindModel(py::module_& m) {
             "the K key point indices, in selection order (a copy)")
         .def_property_readonly(
             "mean",
-            [](py::object self) {
+            [](const py::object& self) {
                 const Model& m = self.cast<const PyModel&>().get();
                 return readOnlyView(m.mean.data(), {m.points, m.channels}, {m.channels, 1}, self);
             },
             "(N, C) training mean, a read-only view")
         .def_property_readonly(
             "basis",
-            [](py::object self) {
+            [](const py::object& self) {
                 const Model& m = self.cast<const PyModel&>().get();
                 return readOnlyView(m.basis.data(), {m.points, m.basisChannels(), m.basisSize()},
                                     {m.basisChannels(), 1, m.points * m.basisChannels()}, self);
             },
             "(N, C, M) basis vectors, a read-only view ((N, 1, M) when the channels share the basis)")
         .def_property_readonly("singular_values",
-                               [](py::object self) {
+                               [](const py::object& self) {
                                    const Model& m = self.cast<const PyModel&>().get();
                                    return readOnlyView(m.singularValues.data(), {m.basisSize()}, {1}, self);
                                })
         .def_property_readonly(
             "projector",
-            [](py::object self) {
+            [](const py::object& self) {
                 const Model& m = self.cast<const PyModel&>().get();
                 return readOnlyView(m.projector.data(), {m.basisSize(), m.keyCount() * m.basisChannels()},
                                     {1, m.basisSize()}, self);

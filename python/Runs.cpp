@@ -29,7 +29,7 @@ namespace {
 
 py::object jsonToPython(const std::string& text) { return py::module_::import("json").attr("loads")(text); }
 
-std::optional<std::pair<double, double>> epsOf(py::object eps) {
+std::optional<std::pair<double, double>> epsOf(const py::object& eps) {
     if (eps.is_none()) return std::nullopt;
     const auto e = eps.cast<std::pair<double, double>>();
     if (!(e.first >= 0 && e.first <= e.second && std::isfinite(e.second)))
@@ -45,7 +45,8 @@ void checkMatches(const Model& m, const PointEvaluator& e, const std::string& wh
                          std::to_string(m.points) + " points x " + std::to_string(m.channels) + " channels");
 }
 
-py::tuple replayFrames(const PyModel& self, py::handle frames, py::object eps, int threads, bool wholeFrame) {
+py::tuple replayFrames(const PyModel& self, py::handle frames, const py::object& eps, int threads,
+                       bool wholeFrame) {
     const Model& m = self.get();
     if (threads < 0)
         throw InputError("threads: must be >= 0 (0 = every core), got " + std::to_string(threads));
@@ -91,7 +92,7 @@ py::tuple replayFrames(const PyModel& self, py::handle frames, py::object eps, i
 }
 
 /// The frames of a run: a range (step > 0), a count (range(n)), or None (every frame of the evaluator).
-engine::FrameRange frameRange(py::object frames, Index evaluatorFrames) {
+engine::FrameRange frameRange(const py::object& frames, Index evaluatorFrames) {
     if (frames.is_none()) {
         if (evaluatorFrames <= 0) throw InputError("frames: a Python evaluator needs frames=range(...)");
         return {0, evaluatorFrames, 1};
@@ -161,8 +162,8 @@ struct RunEvaluator {
 
 /// A spec ("replay:FILE.npy", "volume:FILE.vdb", ...: the registry the command line uses) or a
 /// Python callable.
-RunEvaluator makeRunEvaluator(const Model& m, py::object evaluator, py::object frames, py::object points,
-                              bool wholeFrame, Index frameCount) {
+RunEvaluator makeRunEvaluator(const Model& m, const py::object& evaluator, const py::object& frames,
+                              const py::object& points, bool wholeFrame, Index frameCount) {
     RunEvaluator r;
     if (py::isinstance<py::str>(evaluator)) {
         const std::string spec = evaluator.cast<std::string>();
@@ -196,7 +197,7 @@ RunEvaluator makeRunEvaluator(const Model& m, py::object evaluator, py::object f
     return r;
 }
 
-NpyDtype outputDtype(py::object dtype) {
+NpyDtype outputDtype(const py::object& dtype) {
     if (dtype.is_none()) return NpyDtype::Float64;
     const py::dtype dt = py::dtype::from_args(dtype);
     if (dt.kind() == 'f' && dt.itemsize() == 4) return NpyDtype::Float32;
@@ -216,9 +217,10 @@ py::list reportRows(const ArraySink& sink) {
     return rows;
 }
 
-py::tuple runEngine(const PyModel& self, py::object evaluator, py::object frames, int threads,
-                    py::object points, py::object eps, const std::string& failure, bool wholeFrame,
-                    Index chunkPoints, py::object dtypeArg, Index maxFramesInFlight, Index frameCount) {
+py::tuple runEngine(const PyModel& self, const py::object& evaluator, const py::object& frames, int threads,
+                    const py::object& points, const py::object& eps, const std::string& failure,
+                    bool wholeFrame, Index chunkPoints, const py::object& dtypeArg, Index maxFramesInFlight,
+                    Index frameCount) {
     const Model& m = self.get();
     if (threads < 0)
         throw InputError("threads: must be >= 0 (0 = every core), got " + std::to_string(threads));

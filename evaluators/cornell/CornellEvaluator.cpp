@@ -145,8 +145,9 @@ std::shared_ptr<const CornellEvaluator::LightPool> CornellEvaluator::lightPool(I
         }
     // Traced in fixed batches of one set, so the pool never depends on how it was scheduled.
     for (std::uint32_t set = 0; set < pool->sets && pool->perSet > 0; ++set)
-        world_->tracer->intersect(std::span<const Ray>(rays.data() + set * pool->perSet, pool->perSet),
-                                  std::span<Hit>(hits.data() + set * pool->perSet, pool->perSet));
+        world_->tracer->intersect(
+            std::span<const Ray>(rays.data() + static_cast<std::size_t>(set) * pool->perSet, pool->perSet),
+            std::span<Hit>(hits.data() + static_cast<std::size_t>(set) * pool->perSet, pool->perSet));
     pool->y.resize(n);
     pool->quad.assign(n, -1);
     const auto& quads = world_->scene.quads();

@@ -62,11 +62,12 @@ EyelidDeformer::EyelidDeformer(const IctFace& face) {
 
 Eigen::Vector3d EyelidDeformer::apply(Index v, const Eigen::Vector3d& q,
                                       const std::array<double, 2>& blink) const {
-    const int e = eye_[static_cast<size_t>(v)];
+    const std::int8_t e = eye_[static_cast<size_t>(v)];  // -1: not an eyelid point
     if (e < 0) return q;
-    const double a = blink[static_cast<size_t>(e)] * angle_[static_cast<size_t>(v)];
+    const auto eye = static_cast<size_t>(static_cast<unsigned char>(e));  // 0 or 1 here
+    const double a = blink[eye] * angle_[static_cast<size_t>(v)];
     if (a == 0.0) return q;
-    const Eigen::Vector3d& c = centres_[static_cast<size_t>(e)];
+    const Eigen::Vector3d& c = centres_[eye];
     double y, z;
     rotateYZ(a, q[1] - c[1], q[2] - c[2], y, z);
     return {q[0], c[1] + y, c[2] + z};

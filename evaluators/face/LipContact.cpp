@@ -73,7 +73,7 @@ LipContact::LipContact(const IctFace& face, const MeshTopology& topology,
     std::vector<std::int32_t> sideTris[2];
     for (size_t t = 0; t < triangles_.size(); ++t) {
         const auto& tri = triangles_[t];
-        const int s0 = side[tri[0]];
+        const std::int8_t s0 = side[tri[0]];  // -1: neither lip
         if (s0 >= 0 && side[tri[1]] == s0 && side[tri[2]] == s0)
             sideTris[s0].push_back(static_cast<std::int32_t>(t));
     }

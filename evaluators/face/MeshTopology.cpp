@@ -38,9 +38,9 @@ MeshTopology::MeshTopology(const ObjMesh& mesh) {
 std::vector<double> MeshTopology::vertexNormals(std::span<const double> positions) const {
     std::vector<double> normals(positions.size(), 0.0);
     for (const auto& t : triangles_) {
-        const double* a = &positions[3 * t[0]];
-        const double* b = &positions[3 * t[1]];
-        const double* c = &positions[3 * t[2]];
+        const double* a = &positions[3 * static_cast<std::size_t>(t[0])];
+        const double* b = &positions[3 * static_cast<std::size_t>(t[1])];
+        const double* c = &positions[3 * static_cast<std::size_t>(t[2])];
         const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
         const double w[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
         const double cross[3] = {u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2],

@@ -74,7 +74,8 @@ SyntheticSurface::Controls SyntheticSurface::controls(Index frame) const {
 void SyntheticSurface::evaluatePoint(const Controls& c, Index point, double* out) const {
     const Index g = options_.grid;
     const double x0 = -1.0 + 2.0 * static_cast<double>(point % g) / static_cast<double>(g - 1);
-    const double y0 = -1.0 + 2.0 * static_cast<double>(point / g) / static_cast<double>(g - 1);
+    const Index row = point / g;  // the grid row: integer division is meant
+    const double y0 = -1.0 + 2.0 * static_cast<double>(row) / static_cast<double>(g - 1);
     double x = x0, y = y0;
     // Global modes: smooth, linear in their controls.
     double z = c.modes[0] * std::sin(M_PI * x0) * std::cos(0.5 * M_PI * y0) + c.modes[1] * x0 * y0 +
