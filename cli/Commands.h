@@ -18,6 +18,7 @@ using namespace pmsc::app;
 int runTrain(const std::vector<std::string>& args);          // cli/TrainCommand.cpp
 int runReplay(const std::vector<std::string>& args);         // cli/ReplayCommand.cpp
 int runInspect(const std::vector<std::string>& args);        // cli/InspectCommand.cpp
+int runReconstruct(const std::vector<std::string>& args);    // cli/ReconstructCommand.cpp
 int runDemo(const std::vector<std::string>& args);           // cli/DemoCommand.cpp
 int runDemoSynthetic(const std::vector<std::string>& args);  // cli/DemoCommand.cpp (examples/synthetic)
 int runLearn(const std::vector<std::string>& args);          // cli/LearnCommand.cpp

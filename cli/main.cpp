@@ -34,6 +34,7 @@ const Command kCommands[] = {
     {"train", "train a model (basis, key points, thresholds) from frames in a .npy file", runTrain},
     {"learn", "update a model with new frames (e.g. kept misses) without its training frames", runLearn},
     {"replay", "replay recorded frames through a model's soft cache and report its errors", runReplay},
+    {"reconstruct", "drive the soft cache pass by pass through files, for a renderer that bakes the points asked", runReconstruct},
     {"inspect", "show a model file: sizes, key points, basis energy, thresholds", runInspect},
     {"demo", "the main demo (the Cornell box); with options, the generated shot of 'demo synthetic'", runDemo},
     {"demo synthetic", "train and replay on a generated shot, and print what the soft cache did", runDemoSynthetic},

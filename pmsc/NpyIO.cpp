@@ -223,7 +223,8 @@ std::string shapeString(const std::vector<std::uint64_t>& shape) {
     return s + ")";
 }
 
-NpyInfo parseInfo(const std::string& path, const ReadFile& file) {
+/// `pointTable`: a (N, C) table is read as one frame (readPointTable).
+NpyInfo parseInfo(const std::string& path, const ReadFile& file, bool pointTable = false) {
     const std::uint64_t size = file.size();
     if (size < kMagicSize + 2) bad(path, "not a .npy file (only " + std::to_string(size) + " bytes)");
     unsigned char prefix[12] = {};
@@ -255,7 +256,7 @@ NpyInfo parseInfo(const std::string& path, const ReadFile& file) {
     file.readAt(headerStart, text.data(), text.size());
     info.dataOffset = headerStart + headerLength;
 
-    const HeaderParser::Fields fields = HeaderParser(path, text).parse();
+    HeaderParser::Fields fields = HeaderParser(path, text).parse();
     if (fields.descr == "<f4" || (fields.descr == "=f4")) {
         info.dtype = NpyDtype::Float32;
     } else if (fields.descr == "<f8" || fields.descr == "=f8") {
@@ -266,6 +267,14 @@ NpyInfo parseInfo(const std::string& path, const ReadFile& file) {
     }
     if (fields.fortranOrder)
         bad(path, "fortran_order is True (pmsc reads C-order arrays; save with numpy.ascontiguousarray)");
+    if (pointTable) {
+        if (fields.shape.size() == 2) {
+            fields.shape.insert(fields.shape.begin(), 1);
+        } else if (fields.shape.size() != 3 || fields.shape[0] != 1) {
+            bad(path, "shape " + shapeString(fields.shape) +
+                          " is not a table of points: expected (points, channels) or (1, points, channels)");
+        }
+    }
     if (fields.shape.size() != 3)
         bad(path, "shape " + shapeString(fields.shape) + " has rank " + std::to_string(fields.shape.size()) +
                       ", expected 3: (frames, points, channels)");
@@ -388,7 +397,17 @@ FrameFile readFrameRange(const std::string& path, Index first, Index count) {
     return out;
 }
 
-MappedFrames::MappedFrames(const std::string& path) : path_(path) {
+FrameFile readPointTable(const std::string& path) {
+    ReadFile file(path);
+    const NpyInfo info = parseInfo(path, file, true);
+    FrameFile out;
+    out.dtype = info.dtype;
+    out.frames = FrameSet(1, info.points, info.channels);
+    readValues(path, file, info, 0, out.frames.values.size(), out.frames.values.data());
+    return out;
+}
+
+MappedFrames::MappedFrames(const std::string& path, ValueCheck check) : path_(path) {
     ReadFile file(path);
     info_ = parseInfo(path, file);
     void* p = ::mmap(nullptr, static_cast<std::size_t>(file.size()), PROT_READ, MAP_PRIVATE, file.fd(), 0);
@@ -397,6 +416,10 @@ MappedFrames::MappedFrames(const std::string& path) : path_(path) {
     mappedBytes_ = static_cast<std::size_t>(file.size());
     // One streaming pass checks every value, as readFrames() does, in chunks of a fixed size: the
     // pages read stay in the page cache (which the kernel may drop), not in this process's heap.
+    if (check == ValueCheck::None) {
+        ::madvise(p, mappedBytes_, MADV_RANDOM);
+        return;
+    }
     try {
         ::madvise(p, mappedBytes_, MADV_SEQUENTIAL);
         const std::uint64_t total = static_cast<std::uint64_t>(info_.frames * info_.points * info_.channels);

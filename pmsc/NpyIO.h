@@ -66,6 +66,11 @@ FrameFile readFrames(const std::string& path);
 /// @throws InputError also when the range is empty or outside [0, F).
 FrameFile readFrameRange(const std::string& path, Index first, Index count);
 
+/// Reads a table of per-point values, such as point positions: a .npy of shape (N, C), or
+/// (1, N, C), float32 or float64, every value finite. Returned as one frame of N points.
+/// @throws InputError as readFrames(), naming the expected shape for any other rank.
+FrameFile readPointTable(const std::string& path);
+
 /// A frames file mapped read-only into memory (mmap), for inputs larger than memory: values
 /// are read where they lie, so the process holds no copy of the file (the page cache holds what
 /// was read, and the kernel may drop it). Opening checks the header as readNpyInfo() and every
@@ -74,8 +79,15 @@ FrameFile readFrameRange(const std::string& path, Index first, Index count);
 /// past the new end raises SIGBUS, as for any mapping).
 class MappedFrames {
 public:
-    /// @throws InputError for everything readFrames() rejects, or if the file cannot be mapped.
-    explicit MappedFrames(const std::string& path);
+    /// Whether opening checks every value for NaN/Inf.
+    enum class ValueCheck : int {
+        AllFinite = 0,  ///< every value must be finite (frames of a shot)
+        None = 1,       ///< values are checked by the reader where it reads them (answers of a pass, where
+                        ///< only the entries asked for are meaningful)
+    };
+    /// @throws InputError for everything readFrames() rejects (the NaN/Inf check only under
+    ///         ValueCheck::AllFinite), or if the file cannot be mapped.
+    explicit MappedFrames(const std::string& path, ValueCheck check = ValueCheck::AllFinite);
     ~MappedFrames();
     MappedFrames(const MappedFrames&) = delete;
     MappedFrames& operator=(const MappedFrames&) = delete;
