@@ -54,7 +54,7 @@ ensure_packages() {
 # on the machine that built it, so it is tuned for it (PMSC_NATIVE; installs and packages are not).
 configure() {
   local dir=$1; shift
-  cmake -S . -B "$dir" -G Ninja -DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DPMSC_NATIVE=ON \
+  cmake -S . -B "$dir" -G Ninja -DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache -DPMSC_NATIVE=ON \
     -DCMAKE_EXPORT_COMPILE_COMMANDS=ON "$@" >/dev/null
 }
 
@@ -80,7 +80,7 @@ check_format() {
 # cost ~25 s each to parse; the checks that matter for them run on the rest of their library).
 run_tidy() {
   local files
-  mapfile -t files < <(git ls-files 'pmsc/*.cpp' 'nodes/*.cpp' 'engine/*.cpp' 'app/*.cpp' 'cli/*.cpp' \
+  mapfile -t files < <(git ls-files 'pmsc/*.cpp' 'nodes/*.cpp' 'engine/*.cpp' 'app/*.cpp' 'capi/*.cpp' 'cli/*.cpp' \
     'evaluators/*.cpp' | xargs grep -LE '#include <(openvdb|embree3|assimp)/')
   run-clang-tidy-14 -quiet -p "$BUILD" -j "$JOBS" "${files[@]}" >"$BUILD/clang-tidy.log" 2>&1 \
     || { grep -E 'warning:|error:' "$BUILD/clang-tidy.log" | sort -u | head -50; die "clang-tidy found problems (full log: $BUILD/clang-tidy.log)"; }
@@ -123,7 +123,7 @@ case "$cmd" in
     ensure_packages; build_release ;;
   package)
     ensure_packages dpkg-dev
-    cmake -S . -B build-package -G Ninja -DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_BUILD_TYPE=Release \
+    cmake -S . -B build-package -G Ninja -DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache -DCMAKE_BUILD_TYPE=Release \
       -DCMAKE_INSTALL_PREFIX=/usr -DPMSC_NATIVE=OFF -DPMSC_BUILD_TESTS=OFF -DPMSC_BUILD_BENCH=OFF >/dev/null
     cmake --build build-package -j "$JOBS"
     (cd build-package && cpack -G DEB) ;;
