@@ -66,12 +66,12 @@ build_release() {
   cmake --build "$BUILD" -j "$JOBS"
 }
 
-# Every tracked .h/.cpp against .clang-format; one line per file that differs.
+# Every tracked .h/.cpp/.c against .clang-format; one line per file that differs.
 check_format() {
   local files bad
-  mapfile -t files < <(git ls-files '*.h' '*.cpp')
+  mapfile -t files < <(git ls-files '*.h' '*.cpp' '*.c')
   if [ "${1:-}" = --fix ]; then clang-format-14 -i "${files[@]}"; return 0; fi
-  bad=$(clang-format-14 --dry-run "${files[@]}" 2>&1 | grep -oE '^[^:]+\.(h|cpp):' | sort -u | tr -d ':') || true
+  bad=$(clang-format-14 --dry-run "${files[@]}" 2>&1 | grep -oE '^[^:]+\.(h|cpp|c):' | sort -u | tr -d ':') || true
   [ -z "$bad" ] || die "these files differ from .clang-format (./pmsc.sh format --fix): $(echo $bad)"
   echo "pmsc.sh: ${#files[@]} files match .clang-format"
 }
@@ -88,10 +88,10 @@ run_tidy() {
 }
 
 run_sanitizers() {
-  # Unit tests (mathematics, file formats) under ASan+UBSan.
+  # Unit tests (mathematics, file formats, the C API) under ASan+UBSan.
   configure build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPMSC_SANITIZE=address,undefined \
     -DPMSC_BUILD_EXAMPLES=OFF -DPMSC_BUILD_BENCH=OFF
-  cmake --build build-asan -j "$JOBS" --target pmsc_unit_tests pmsc_io_tests
+  cmake --build build-asan -j "$JOBS" --target pmsc_unit_tests pmsc_io_tests pmsc_capi_test_model pmsc_capi_bad_inputs
   ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
     ctest --test-dir build-asan -L unit --output-on-failure -j "$JOBS"
   # The engine's tests under ThreadSanitizer.
