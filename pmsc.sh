@@ -54,7 +54,7 @@ ensure_packages() {
 # on the machine that built it, so it is tuned for it (PMSC_NATIVE; installs and packages are not).
 configure() {
   local dir=$1; shift
-  cmake -S . -B "$dir" -G Ninja -DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DPMSC_NATIVE=ON \
+  cmake -S . -B "$dir" -G Ninja -DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache -DPMSC_NATIVE=ON \
     -DCMAKE_EXPORT_COMPILE_COMMANDS=ON "$@" >/dev/null
 }
 
@@ -66,12 +66,12 @@ build_release() {
   cmake --build "$BUILD" -j "$JOBS"
 }
 
-# Every tracked .h/.cpp against .clang-format; one line per file that differs.
+# Every tracked .h/.cpp/.c against .clang-format; one line per file that differs.
 check_format() {
   local files bad
-  mapfile -t files < <(git ls-files '*.h' '*.cpp')
+  mapfile -t files < <(git ls-files '*.h' '*.cpp' '*.c')
   if [ "${1:-}" = --fix ]; then clang-format-14 -i "${files[@]}"; return 0; fi
-  bad=$(clang-format-14 --dry-run "${files[@]}" 2>&1 | grep -oE '^[^:]+\.(h|cpp):' | sort -u | tr -d ':') || true
+  bad=$(clang-format-14 --dry-run "${files[@]}" 2>&1 | grep -oE '^[^:]+\.(h|cpp|c):' | sort -u | tr -d ':') || true
   [ -z "$bad" ] || die "these files differ from .clang-format (./pmsc.sh format --fix): $(echo $bad)"
   echo "pmsc.sh: ${#files[@]} files match .clang-format"
 }
@@ -80,7 +80,7 @@ check_format() {
 # cost ~25 s each to parse; the checks that matter for them run on the rest of their library).
 run_tidy() {
   local files
-  mapfile -t files < <(git ls-files 'pmsc/*.cpp' 'nodes/*.cpp' 'engine/*.cpp' 'app/*.cpp' 'cli/*.cpp' \
+  mapfile -t files < <(git ls-files 'pmsc/*.cpp' 'nodes/*.cpp' 'engine/*.cpp' 'app/*.cpp' 'capi/*.cpp' 'cli/*.cpp' \
     'evaluators/*.cpp' | xargs grep -LE '#include <(openvdb|embree3|assimp)/')
   run-clang-tidy-14 -quiet -p "$BUILD" -j "$JOBS" "${files[@]}" >"$BUILD/clang-tidy.log" 2>&1 \
     || { grep -E 'warning:|error:' "$BUILD/clang-tidy.log" | sort -u | head -50; die "clang-tidy found problems (full log: $BUILD/clang-tidy.log)"; }
@@ -88,10 +88,10 @@ run_tidy() {
 }
 
 run_sanitizers() {
-  # Unit tests (mathematics, file formats) under ASan+UBSan.
+  # Unit tests (mathematics, file formats, the C API) under ASan+UBSan.
   configure build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPMSC_SANITIZE=address,undefined \
     -DPMSC_BUILD_EXAMPLES=OFF -DPMSC_BUILD_BENCH=OFF
-  cmake --build build-asan -j "$JOBS" --target pmsc_unit_tests pmsc_io_tests
+  cmake --build build-asan -j "$JOBS" --target pmsc_unit_tests pmsc_io_tests pmsc_capi_test_model pmsc_capi_bad_inputs
   ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
     ctest --test-dir build-asan -L unit --output-on-failure -j "$JOBS"
   # The engine's tests under ThreadSanitizer.
@@ -123,7 +123,7 @@ case "$cmd" in
     ensure_packages; build_release ;;
   package)
     ensure_packages dpkg-dev
-    cmake -S . -B build-package -G Ninja -DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_BUILD_TYPE=Release \
+    cmake -S . -B build-package -G Ninja -DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache -DCMAKE_BUILD_TYPE=Release \
       -DCMAKE_INSTALL_PREFIX=/usr -DPMSC_NATIVE=OFF -DPMSC_BUILD_TESTS=OFF -DPMSC_BUILD_BENCH=OFF >/dev/null
     cmake --build build-package -j "$JOBS"
     (cd build-package && cpack -G DEB) ;;

@@ -1,4 +1,5 @@
-# cmake -DBUILD_DIR=... -DCONSUMER_DIR=... -DWORK_DIR=... -DGENERATOR=... -DCXX=... [-DPYTHON=... -DPYTHON_DIR=...]
+# cmake -DBUILD_DIR=... -DCONSUMER_DIR=... -DC_CONSUMER_DIR=... -DWORK_DIR=... -DGENERATOR=... -DCXX=... -DCC=...
+#       [-DPYTHON=... -DPYTHON_DIR=...]
 #       -P RunInstallTest.cmake
 file(REMOVE_RECURSE "${WORK_DIR}")
 set(prefix "${WORK_DIR}/prefix")
@@ -15,6 +16,9 @@ run(${CMAKE_COMMAND} --install "${BUILD_DIR}" --prefix "${prefix}")
 if(NOT EXISTS "${prefix}/include/pmsc/PointMultiplier.h")
   message(FATAL_ERROR "install did not put the headers under ${prefix}/include/pmsc")
 endif()
+if(NOT EXISTS "${prefix}/include/pmsc/pmsc.h")
+  message(FATAL_ERROR "install did not put the C API's header at ${prefix}/include/pmsc/pmsc.h")
+endif()
 if(EXISTS "${prefix}/include/examples")
   message(FATAL_ERROR "install put demo headers under ${prefix}/include/examples")
 endif()
@@ -30,6 +34,16 @@ run("${WORK_DIR}/consumer/pmsc_consumer" "${WORK_DIR}/model.pmsc")
 message(STATUS "${last_output}")
 if(NOT last_output MATCHES "pmsc consumer: ok")
   message(FATAL_ERROR "consumer did not report ok: ${last_output}")
+endif()
+
+# The C API from a C-only project (pmsc::c), on the model the C++ consumer wrote.
+run(${CMAKE_COMMAND} -S "${C_CONSUMER_DIR}" -B "${WORK_DIR}/consumer_c" -G "${GENERATOR}"
+    -DCMAKE_BUILD_TYPE=Release -DCMAKE_C_COMPILER=${CC} -DCMAKE_PREFIX_PATH=${prefix})
+run(${CMAKE_COMMAND} --build "${WORK_DIR}/consumer_c")
+run("${WORK_DIR}/consumer_c/pmsc_c_consumer" "${WORK_DIR}/model.pmsc")
+message(STATUS "${last_output}")
+if(NOT last_output MATCHES "pmsc C consumer: ok")
+  message(FATAL_ERROR "C consumer did not report ok: ${last_output}")
 endif()
 
 # The Python module, when built: installed under the prefix and importable from there alone.
