@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Print the headline figures of pmsc's reports as Markdown tables.
 
-Usage: python3 tools/report_tables.py [--no-header] PATH...
+Usage: python3 tools/report_tables.py [--no-header] [--headline] PATH...
 
 Each PATH is a demo's output folder holding report.json (the --out folder of `pmsc demo cornell`,
 `pmsc demo volume`, `pmsc demo face`, `pmsc demo learn`, `pmsc demo cross`, `pmsc demo synthetic`)
@@ -93,7 +93,7 @@ class Rows:
                 return
             value = value / below
             shown = f"`{path}` / `{divide_by}`"
-        self.rows.append((figure, FORMATS[fmt](value), self.command, shown))
+        self.rows.append((figure, FORMATS[fmt](value), self.command, shown, required))
 
 
 # --- the reports ------------------------------------------------------------------------------
@@ -245,7 +245,7 @@ KINDS = [
     ("cross demo", lambda r: isinstance(r.get("speed"), dict) and "speedup_cpu" in r["speed"], cross,
      lambda r, p: f"`pmsc demo cross --data DIR --out {_folder(p)}{_quick(r)}`"),
     ("face demo", lambda r: "novel_nonhit_rate" in r, face,
-     lambda r, p: f"`pmsc demo face --data {r.get('data') or 'DIR'} --out {_folder(p)}{_quick(r)}`"),
+     lambda r, p: f"`pmsc demo face --data DIR --out {_folder(p)}{_quick(r)}`"),
     ("volume demo", lambda r: "reference_ratio_pm_to_full" in r or "active_voxels" in r, volume,
      lambda r, p: f"`pmsc demo volume --out {_folder(p)}{_quick(r)}`"),
     ("Cornell box demo", lambda r: "voxel_size_mm" in r or "samples_per_point" in r, cornell,
@@ -290,13 +290,16 @@ def rows_of(path):
 
 def main(argv):
     args = list(argv)
-    header = True
-    if args and args[0] == "--no-header":
-        header, args = False, args[1:]
+    header, headline = True, False
+    while args and args[0] in ("--no-header", "--headline"):
+        header = header and args[0] != "--no-header"
+        headline = headline or args[0] == "--headline"
+        args = args[1:]
     if not args or any(a in ("-h", "--help") for a in args):
         stream = sys.stdout if args else sys.stderr
-        print("usage: python3 tools/report_tables.py [--no-header] DIR|REPORT.json...\n"
-              "Prints the headline figures of pmsc demo and benchmark reports as one Markdown table.",
+        print("usage: python3 tools/report_tables.py [--no-header] [--headline] DIR|REPORT.json...\n"
+              "Prints the figures of pmsc demo and benchmark reports as one Markdown table;\n"
+              "--headline: only each report's headline figures (the fields it must have).",
               file=stream)
         return 0 if args else EXIT_BAD_INPUT
     try:
@@ -307,8 +310,9 @@ def main(argv):
     if header:
         print("| figure | value | command | report field |")
         print("|---|---|---|---|")
-    for figure, value, command, path in rows:
-        print(f"| {figure} | {value} | {command} | {path} |")
+    for figure, value, command, path, required in rows:
+        if required or not headline:
+            print(f"| {figure} | {value} | {command} | {path} |")
     return 0
 
 

@@ -1,6 +1,7 @@
 // The `pmsc` program end to end: success paths and every kind of bad input, through the real
 // binary (exit codes, the one stderr line, and no output file left behind).
 #include "CliRunner.h"
+#include "SyntheticShot.h"
 #include "evaluators/synthetic/SyntheticSurface.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/NpyIO.h"
@@ -22,27 +23,7 @@ using pmsc::test::RunResult;
 using pmsc::test::TempDir;
 namespace fs = std::filesystem;
 
-/// A small shot: 12 x 12 sheet, 240 training frames (seed 1), 60 test frames (seed 2) whose
-/// last 20 carry motion training never saw.
-struct Shot {
-    TempDir inputs;
-    std::string train = inputs.file("train.npy"), test = inputs.file("test.npy"),
-                test32 = inputs.file("test32.npy");
-    Shot() {
-        pmsc::synthetic::SurfaceOptions o;
-        o.grid = 12;
-        o.frames = 240;
-        o.seed = 1;
-        pmsc::writeFrames(train, pmsc::evaluateFrames(pmsc::synthetic::SyntheticSurface(o), 0, o.frames),
-                          pmsc::NpyDtype::Float64);
-        o.frames = 60;
-        o.seed = 2;
-        o.novelFrames = 20;
-        const auto test = pmsc::evaluateFrames(pmsc::synthetic::SyntheticSurface(o), 0, o.frames);
-        pmsc::writeFrames(this->test, test, pmsc::NpyDtype::Float64);
-        pmsc::writeFrames(test32, test, pmsc::NpyDtype::Float32);
-    }
-};
+using Shot = pmsc::test::SyntheticShot;
 
 /// One shot and one trained model for the whole suite (training is the slow part).
 class Cli : public ::testing::Test {

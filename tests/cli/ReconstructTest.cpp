@@ -2,6 +2,7 @@
 // "renderer" that answers each pass from recorded frames (NaN everywhere it was not asked), must
 // give `pmsc replay`'s output and states byte for byte; and every bad input is one line.
 #include "CliRunner.h"
+#include "SyntheticShot.h"
 #include "evaluators/synthetic/SyntheticSurface.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/NpyIO.h"
@@ -22,25 +23,10 @@ using pmsc::test::RunResult;
 using pmsc::test::TempDir;
 using json = nlohmann::json;
 
-/// A 12 x 12 sheet: 240 training frames, 60 test frames whose last 20 carry motion training never saw.
-struct Shot {
-    TempDir dir;
-    std::string train = dir.file("train.npy"), test = dir.file("test.npy"), plain = dir.file("plain.pmsc"),
-                regions = dir.file("regions.pmsc");
-    pmsc::FrameSet recorded;
-    Shot() {
-        pmsc::synthetic::SurfaceOptions o;
-        o.grid = 12;
-        o.frames = 240;
-        o.seed = 1;
-        pmsc::writeFrames(train, pmsc::evaluateFrames(pmsc::synthetic::SyntheticSurface(o), 0, o.frames),
-                          pmsc::NpyDtype::Float64);
-        o.frames = 60;
-        o.seed = 2;
-        o.novelFrames = 20;
-        recorded = pmsc::evaluateFrames(pmsc::synthetic::SyntheticSurface(o), 0, o.frames);
-        pmsc::writeFrames(test, recorded, pmsc::NpyDtype::Float64);
-    }
+/// The shared generated shot, and the two models the tests drive.
+struct Shot : pmsc::test::SyntheticShot {
+    TempDir& dir = inputs;
+    std::string plain = inputs.file("plain.pmsc"), regions = inputs.file("regions.pmsc");
 };
 
 json readJson(const std::string& path) {
@@ -67,7 +53,8 @@ pmsc::FrameSet answer(const pmsc::FrameSet& frames, const json& report) {
         const Index f = row["frame"].get<Index>();
         for (const auto& p : row["needs"])
             for (Index c = 0; c < frames.channels; ++c)
-                out.frame(f)[p.get<Index>() * frames.channels + c] = frames.frame(f)[p.get<Index>() * frames.channels + c];
+                out.frame(f)[p.get<Index>() * frames.channels + c] =
+                    frames.frame(f)[p.get<Index>() * frames.channels + c];
     }
     return out;
 }
@@ -76,10 +63,11 @@ class Reconstruct : public ::testing::Test {
 protected:
     static void SetUpTestSuite() {
         shot_ = new Shot;
-        for (const auto& [model, extra] : {std::pair{shot_->plain, std::vector<std::string>{}},
-                                           std::pair{shot_->regions, std::vector<std::string>{"--regions", "4"}}}) {
-            std::vector<std::string> args = {"train", "--frames", shot_->train, "--out", model, "--max-keys", "24",
-                                              "--tolerance", "0.1"};
+        for (const auto& [model, extra] :
+             {std::pair{shot_->plain, std::vector<std::string>{}},
+              std::pair{shot_->regions, std::vector<std::string>{"--regions", "4"}}}) {
+            std::vector<std::string> args = {"train",      "--frames", shot_->train,  "--out", model,
+                                             "--max-keys", "24",       "--tolerance", "0.1"};
             args.insert(args.end(), extra.begin(), extra.end());
             const RunResult r = runPmsc(shot_->dir, args);
             ASSERT_EQ(r.exitCode, 0) << r.err;
@@ -88,13 +76,21 @@ protected:
     static void TearDownTestSuite() { delete shot_; }
 
     /// Passes until no frame needs anything; returns how many answers it took.
-    static int drivePasses(const TempDir& dir, const std::string& model, std::vector<std::string> extra = {}) {
+    static int drivePasses(const TempDir& dir, const std::string& model,
+                           std::vector<std::string> extra = {}) {
         const pmsc::Model m = pmsc::readModel(model);
         pmsc::writeFrames(dir.file("keys.npy"), keyValues(shot_->recorded, m), pmsc::NpyDtype::Float64);
         std::vector<std::string> fulls;
         for (int pass = 0; pass < 5; ++pass) {
-            std::vector<std::string> args = {"reconstruct", "--model", model, "--keys", dir.file("keys.npy"),
-                                              "--out", dir.file("out.npy"), "--report", dir.file("passes.json")};
+            std::vector<std::string> args = {"reconstruct",
+                                             "--model",
+                                             model,
+                                             "--keys",
+                                             dir.file("keys.npy"),
+                                             "--out",
+                                             dir.file("out.npy"),
+                                             "--report",
+                                             dir.file("passes.json")};
             for (const auto& f : fulls) args.insert(args.end(), {"--full", f});
             args.insert(args.end(), extra.begin(), extra.end());
             const RunResult r = runPmsc(dir, args);
@@ -109,9 +105,17 @@ protected:
     }
 
     /// pmsc replay on the same frames, and the comparison: output bytes and states.
-    static void expectSameAsReplay(const TempDir& dir, const std::string& model, std::vector<std::string> extra = {}) {
-        std::vector<std::string> args = {"replay", "--model", model, "--frames", shot_->test,
-                                          "--out", dir.file("replay.npy"), "--report", dir.file("replay.json")};
+    static void expectSameAsReplay(const TempDir& dir, const std::string& model,
+                                   std::vector<std::string> extra = {}) {
+        std::vector<std::string> args = {"replay",
+                                         "--model",
+                                         model,
+                                         "--frames",
+                                         shot_->test,
+                                         "--out",
+                                         dir.file("replay.npy"),
+                                         "--report",
+                                         dir.file("replay.json")};
         args.insert(args.end(), extra.begin(), extra.end());
         const RunResult r = runPmsc(dir, args);
         ASSERT_EQ(r.exitCode, 0) << r.err;
@@ -177,9 +181,9 @@ TEST_F(Reconstruct, NeedsAsAPlyPointCloudWithFrameAndIndex) {
     pmsc::FrameSet positions(1, m.points, 3);
     std::copy_n(shot_->recorded.frame(0), m.points * 3, positions.values.data());
     pmsc::writeFrames(dir.file("positions.npy"), positions, pmsc::NpyDtype::Float64);
-    const RunResult r =
-        runPmsc(dir, {"reconstruct", "--model", shot_->plain, "--keys", dir.file("keys.npy"), "--out",
-                      dir.file("out.npy"), "--report", dir.file("r.json"), "--points", dir.file("positions.npy")});
+    const RunResult r = runPmsc(
+        dir, {"reconstruct", "--model", shot_->plain, "--keys", dir.file("keys.npy"), "--out",
+              dir.file("out.npy"), "--report", dir.file("r.json"), "--points", dir.file("positions.npy")});
     ASSERT_EQ(r.exitCode, 0) << r.err;
     const json report = readJson(dir.file("r.json"));
     const Index needed = report["summary"]["points_needed"].get<Index>();
@@ -189,7 +193,7 @@ TEST_F(Reconstruct, NeedsAsAPlyPointCloudWithFrameAndIndex) {
     EXPECT_NE(ply.find(header), std::string::npos);
     const auto end = ply.find("end_header\n");
     ASSERT_NE(end, std::string::npos);
-    EXPECT_EQ(ply.size() - (end + 11), size_t(needed) * 20);  // 3 floats, 2 ints
+    EXPECT_EQ(ply.size() - (end + 11), size_t(needed) * 20);                           // 3 floats, 2 ints
     EXPECT_EQ(pmsc::readNpyInfo(dir.file("out.npy")).dtype, pmsc::NpyDtype::Float32);  // the keys' dtype
 }
 
@@ -198,8 +202,9 @@ TEST_F(Reconstruct, BadInputsAreOneLineAndLeaveNoOutput) {
     const pmsc::Model m = pmsc::readModel(shot_->plain);
     pmsc::writeFrames(dir.file("keys.npy"), keyValues(shot_->recorded, m), pmsc::NpyDtype::Float64);
     const auto run = [&](std::vector<std::string> extra) {
-        std::vector<std::string> args = {"reconstruct", "--model", shot_->plain, "--keys", dir.file("keys.npy"),
-                                          "--out", dir.file("out.npy"), "--report", dir.file("r.json")};
+        std::vector<std::string> args = {"reconstruct",        "--model", shot_->plain,        "--keys",
+                                         dir.file("keys.npy"), "--out",   dir.file("out.npy"), "--report",
+                                         dir.file("r.json")};
         args.insert(args.end(), extra.begin(), extra.end());
         return runPmsc(dir, args);
     };
