@@ -15,7 +15,8 @@
 namespace pmsc::app {
 
 Index PassResult::framesDone() const {
-    return static_cast<Index>(std::count_if(frames.begin(), frames.end(), [](const PassFrame& f) { return f.done; }));
+    return static_cast<Index>(
+        std::count_if(frames.begin(), frames.end(), [](const PassFrame& f) { return f.done; }));
 }
 
 Index PassResult::pointsNeeded() const {
@@ -31,7 +32,7 @@ namespace {
 struct Sources {
     static constexpr std::int8_t kUnknown = -1;
     static constexpr std::int8_t kKey = 0;
-    std::vector<std::int8_t> passOf;      ///< per point: kUnknown, kKey, or the pass (1, 2, ...)
+    std::vector<std::int8_t> passOf;        ///< per point: kUnknown, kKey, or the pass (1, 2, ...)
     std::vector<std::vector<Index>> asked;  ///< asked[j]: the points pass j + 1 asked for, ascending
 };
 
@@ -164,8 +165,9 @@ private:
         std::vector<double> coords(static_cast<size_t>(regions_->coordsSize()));
         std::vector<double> weights(static_cast<size_t>(r));
         for (Index i = 0; i < r; ++i) {
-            const double e = regions_->project(i, keyValues, extraValues.empty() ? nullptr : extraValues.data(),
-                                               coords.data() + regions_->coordsOffset(i));
+            const double e =
+                regions_->project(i, keyValues, extraValues.empty() ? nullptr : extraValues.data(),
+                                  coords.data() + regions_->coordsOffset(i));
             weights[size_t(i)] = regions_->decide(i, e).weight;
         }
         std::vector<double> pointWeights(size_t(model_.points));
@@ -173,7 +175,8 @@ private:
         std::vector<Index> local(size_t(model_.points));
         const Index full = regions_->fullPoints(pointWeights, local.data());
         local.resize(size_t(full));
-        if (double(full) <= regions_->regions().maxLocalFraction * double(model_.points)) return unknown(s, local);
+        if (double(full) <= regions_->regions().maxLocalFraction * double(model_.points))
+            return unknown(s, local);
         return allUnknown(s);
     }
 
@@ -243,7 +246,8 @@ private:
 
 void checkShapes(const Model& model, const FrameSet& keys, std::span<const MappedFrames* const> answers) {
     if (model.cross)
-        throw std::invalid_argument("a cross model has no fail-through to drive pass by pass (use pmsc replay)");
+        throw std::invalid_argument(
+            "a cross model has no fail-through to drive pass by pass (use pmsc replay)");
     if (keys.points != model.keyCount() || keys.channels != model.channels)
         throw InputError("key values have " + std::to_string(keys.points) + " points x " +
                          std::to_string(keys.channels) + " channels, the model has " +
@@ -252,9 +256,10 @@ void checkShapes(const Model& model, const FrameSet& keys, std::span<const Mappe
     for (const MappedFrames* a : answers) {
         const NpyInfo& i = a->info();
         if (i.frames != keys.frames || i.points != model.points || i.channels != model.channels)
-            throw InputError(a->path() + ": shape (" + std::to_string(i.frames) + ", " + std::to_string(i.points) +
-                             ", " + std::to_string(i.channels) + "), expected (" + std::to_string(keys.frames) +
-                             ", " + std::to_string(model.points) + ", " + std::to_string(model.channels) +
+            throw InputError(a->path() + ": shape (" + std::to_string(i.frames) + ", " +
+                             std::to_string(i.points) + ", " + std::to_string(i.channels) + "), expected (" +
+                             std::to_string(keys.frames) + ", " + std::to_string(model.points) + ", " +
+                             std::to_string(model.channels) +
                              "): (frames of the keys, the model's points, channels)");
     }
 }
@@ -273,8 +278,9 @@ void writeEstimates(const Model& model, const FrameSet& keys, const PassResult& 
 
 }  // namespace
 
-PassResult reconstructPasses(const Model& model, const FrameSet& keys, std::span<const MappedFrames* const> answers,
-                             const PassOptions& options, NpyFrameWriter* out) {
+PassResult reconstructPasses(const Model& model, const FrameSet& keys,
+                             std::span<const MappedFrames* const> answers, const PassOptions& options,
+                             NpyFrameWriter* out) {
     checkShapes(model, keys, answers);
     PassResult result;
     result.epsMin = options.eps ? options.eps->first : model.epsMin;
@@ -342,22 +348,23 @@ nlohmann::ordered_json passReport(const Model& model, const PassResult& result) 
     }
     const double count = std::max<double>(1.0, static_cast<double>(result.frames.size()));
     const double allPoints = count * static_cast<double>(model.points);
-    json summary = {{"frames", result.frames.size()},
-                    {"points", model.points},
-                    {"channels", model.channels},
-                    {"key_points", model.keyCount()},
-                    {"eps_min", result.epsMin},
-                    {"eps_max", result.epsMax},
-                    {"local_fail_through", result.localFailThrough},
-                    {"answers_given", result.answersGiven},
-                    {"frames_done", result.framesDone()},
-                    {"complete", result.framesDone() == static_cast<Index>(result.frames.size())},
-                    {"points_needed", result.pointsNeeded()},
-                    {"hit_rate", static_cast<double>(hits) / count},
-                    {"blend_rate", static_cast<double>(blends) / count},
-                    {"miss_rate", static_cast<double>(misses) / count},
-                    {"key_fraction", static_cast<double>(model.keyCount()) / static_cast<double>(model.points)},
-                    {"answered_fraction", static_cast<double>(answered) / allPoints}};
+    json summary = {
+        {"frames", result.frames.size()},
+        {"points", model.points},
+        {"channels", model.channels},
+        {"key_points", model.keyCount()},
+        {"eps_min", result.epsMin},
+        {"eps_max", result.epsMax},
+        {"local_fail_through", result.localFailThrough},
+        {"answers_given", result.answersGiven},
+        {"frames_done", result.framesDone()},
+        {"complete", result.framesDone() == static_cast<Index>(result.frames.size())},
+        {"points_needed", result.pointsNeeded()},
+        {"hit_rate", static_cast<double>(hits) / count},
+        {"blend_rate", static_cast<double>(blends) / count},
+        {"miss_rate", static_cast<double>(misses) / count},
+        {"key_fraction", static_cast<double>(model.keyCount()) / static_cast<double>(model.points)},
+        {"answered_fraction", static_cast<double>(answered) / allPoints}};
     return json{{"summary", summary}, {"frames", frames}};
 }
 

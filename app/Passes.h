@@ -55,24 +55,24 @@ struct PassOptions {
 /// What the passes so far gave for one frame.
 struct PassFrame {
     Index frame = 0;
-    double keyRms = 0;             ///< the key points' RMS error (PointMultiplier::keyRmsError)
-    CacheDecision decision;        ///< the whole frame's hit / blend / miss
-    bool done = false;             ///< every value the soft cache needs is known: the output is final
-    Index passes = 0;              ///< passes beyond the keys this frame asked for and got answered
-    std::vector<Index> needs;      ///< the points the next pass must compute (ascending; empty when done)
-    Index pointsAnswered = 0;      ///< points computed for this frame beyond its keys, all passes
-    bool local = false;            ///< routed region by region (done frames)
-    Index pointsEvaluated = 0;     ///< points whose full value the output used (done frames)
+    double keyRms = 0;          ///< the key points' RMS error (PointMultiplier::keyRmsError)
+    CacheDecision decision;     ///< the whole frame's hit / blend / miss
+    bool done = false;          ///< every value the soft cache needs is known: the output is final
+    Index passes = 0;           ///< passes beyond the keys this frame asked for and got answered
+    std::vector<Index> needs;   ///< the points the next pass must compute (ascending; empty when done)
+    Index pointsAnswered = 0;   ///< points computed for this frame beyond its keys, all passes
+    bool local = false;         ///< routed region by region (done frames)
+    Index pointsEvaluated = 0;  ///< points whose full value the output used (done frames)
     std::vector<CacheState> regionStates;  ///< per region, for done frames of models with regions
 };
 
 struct PassResult {
     double epsMin = 0, epsMax = 0;
-    Index answersGiven = 0;          ///< answer files given (passes already computed)
-    bool localFailThrough = false;   ///< frames are routed region by region when they do not hit
-    std::vector<PassFrame> frames;   ///< in frame order
+    Index answersGiven = 0;         ///< answer files given (passes already computed)
+    bool localFailThrough = false;  ///< frames are routed region by region when they do not hit
+    std::vector<PassFrame> frames;  ///< in frame order
     Index framesDone() const;
-    Index pointsNeeded() const;      ///< the next pass's points, all frames
+    Index pointsNeeded() const;  ///< the next pass's points, all frames
 };
 
 /// Runs the passes: decides each frame from `keys` (F frames x K key points x C channels, model key

@@ -30,7 +30,8 @@ std::optional<ReconstructArgs> parseReconstructArgs(const std::vector<std::strin
     ReconstructArgs a;
     ArgParser parser(
         "reconstruct",
-        "--model MODEL.pmsc --keys KEYS.npy [--full FULL.npy ...] --out OUT.npy --report REPORT.json [options]",
+        "--model MODEL.pmsc --keys KEYS.npy [--full FULL.npy ...] --out OUT.npy --report REPORT.json "
+        "[options]",
         "Drives the soft cache pass by pass through files, for a renderer that bakes values at the\n"
         "points it is given. KEYS.npy holds each frame's values at the model's key points\n"
         "(frames, keys, channels), in the order of `pmsc inspect MODEL --json`'s key_indices. The report\n"
@@ -87,24 +88,26 @@ FrameSet readPositions(const std::string& path, const Model& model) {
     FrameFile table = readPointTable(path);
     if (table.frames.points != model.points || table.frames.channels != 3)
         throw InputError(path + ": positions of " + std::to_string(table.frames.points) + " points x " +
-                         std::to_string(table.frames.channels) + ", expected (" + std::to_string(model.points) +
-                         ", 3): x, y, z of each of the model's points");
+                         std::to_string(table.frames.channels) + ", expected (" +
+                         std::to_string(model.points) + ", 3): x, y, z of each of the model's points");
     return std::move(table.frames);
 }
 
 /// The next pass's needs as one binary PLY point cloud: x, y, z, the frame and the point index.
 std::string needsPly(const app::PassResult& result, const FrameSet& positions) {
     const Index count = result.pointsNeeded();
-    std::string out = "ply\nformat binary_little_endian 1.0\n"
-                      "comment pmsc reconstruct: the points the next pass needs\n"
-                      "element vertex " +
-                      std::to_string(count) +
-                      "\nproperty float x\nproperty float y\nproperty float z\n"
-                      "property int frame\nproperty int index\nend_header\n";
+    std::string out =
+        "ply\nformat binary_little_endian 1.0\n"
+        "comment pmsc reconstruct: the points the next pass needs\n"
+        "element vertex " +
+        std::to_string(count) +
+        "\nproperty float x\nproperty float y\nproperty float z\n"
+        "property int frame\nproperty int index\nend_header\n";
     for (const app::PassFrame& f : result.frames) {
         for (const Index p : f.needs) {
             const double* xyz = positions.frame(0) + p * 3;
-            const float v[3] = {static_cast<float>(xyz[0]), static_cast<float>(xyz[1]), static_cast<float>(xyz[2])};
+            const float v[3] = {static_cast<float>(xyz[0]), static_cast<float>(xyz[1]),
+                                static_cast<float>(xyz[2])};
             const std::int32_t ids[2] = {static_cast<std::int32_t>(f.frame), static_cast<std::int32_t>(p)};
             out.append(reinterpret_cast<const char*>(v), sizeof v);
             out.append(reinterpret_cast<const char*>(ids), sizeof ids);
