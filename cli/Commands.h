@@ -25,6 +25,7 @@ int runLearn(const std::vector<std::string>& args);          // cli/LearnCommand
 int runRun(const std::vector<std::string>& args);            // cli/RunCommand.cpp (render farm)
 int runExportFrames(const std::vector<std::string>& args);   // cli/ExportFramesCommand.cpp
 int runEvaluators(const std::vector<std::string>& args);     // cli/EvaluatorsCommand.cpp
+int runServe(const std::vector<std::string>& args);          // cli/ServeCommand.cpp
 int runDemoCornell(const std::vector<std::string>& args);    // cli/CornellDemoCommand.cpp (examples/cornell)
 int runDemoLearn(const std::vector<std::string>& args);      // cli/LearnDemoCommand.cpp (examples/face)
 int runDemoCross(const std::vector<std::string>& args);      // cli/CrossDemoCommand.cpp (examples/face)

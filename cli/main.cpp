@@ -46,6 +46,7 @@ const Command kCommands[] = {
     {"run", "render-farm task: a frame range through the soft cache, one resumable file per frame", runRun},
     {"export-frames", "write an evaluator's frames (e.g. an animated asset's poses) as training .npy", runExportFrames},
     {"evaluators", "list the calculations --evaluator accepts, with their NAME[:ARGS] syntax", runEvaluators},
+    {"serve", "serve an evaluator over the exec protocol on stdin/stdout (the child of exec:pmsc serve SPEC)", runServe},
 };
 // clang-format on
 

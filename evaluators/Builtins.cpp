@@ -5,6 +5,7 @@
 #include "evaluators/ReplayEvaluator.h"
 #include "evaluators/SkinEvaluator.h"
 #include "evaluators/cornell/CornellEvaluator.h"
+#include "evaluators/exec/ExecEvaluator.h"
 #include "evaluators/face/FaceControlEvaluator.h"
 #include "evaluators/face/FaceEvaluator.h"
 #include "evaluators/synthetic/SyntheticSurface.h"
@@ -45,6 +46,12 @@ EvaluatorRegistry EvaluatorRegistry::withBuiltins() {
            "light scattered at the active voxels of any OpenVDB density grid",
            [](const std::string& a) -> Made {
                return volume::makeVolumeEvaluator(requireArgs("volume", "FILE.vdb", a));
+           }});
+    r.add({"exec", "[timeout=SECONDS:]COMMAND",
+           "your own calculation in a child process that speaks the exec protocol (docs/exec-protocol.md)",
+           [](const std::string& a) -> Made {
+               return std::make_unique<exec::ExecEvaluator>(
+                   exec::parseExecArgs(requireArgs("exec", "COMMAND", a)));
            }});
     return r;
 }

@@ -28,7 +28,7 @@ public:
     /// An empty registry.
     EvaluatorRegistry() = default;
     /// Every calculation pmsc ships, in this order: replay, skin, synthetic, cornell, face,
-    /// face-control, volume (evaluators/Builtins.cpp).
+    /// face-control, volume, exec (evaluators/Builtins.cpp).
     static EvaluatorRegistry withBuiltins();
 
     /// Adds a kind after the others. @throws std::invalid_argument for an empty name, a name

@@ -75,7 +75,7 @@ TEST_F(Cli, EvaluatorsListsEveryCalculationOnePerLine) {
     std::istringstream lines(r.out);
     for (std::string line; std::getline(lines, line);) names.push_back(line.substr(0, line.find(' ')));
     const std::vector<std::string> expected = {"replay", "skin",         "synthetic", "cornell",
-                                               "face",   "face-control", "volume"};
+                                               "face",   "face-control", "volume",    "exec"};
     EXPECT_EQ(names, expected) << r.out;
     EXPECT_NE(r.out.find("volume:FILE.vdb[:grid=NAME]"), std::string::npos) << r.out;
     EXPECT_NE(r.out.find("synthetic[:grid=G]"), std::string::npos) << r.out;

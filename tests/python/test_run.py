@@ -126,7 +126,7 @@ class EvaluatorSpecTest(TempDirTest):
 
     def test_evaluators_are_the_command_lines(self):
         names = pmsc.evaluators()
-        for name in ("replay", "skin", "synthetic", "cornell", "face", "face-control", "volume"):
+        for name in ("replay", "skin", "synthetic", "cornell", "face", "face-control", "volume", "exec"):
             self.assertIn(name, names)
         if pmsc_binary() is None:
             self.skipTest("the pmsc program is not built")

@@ -1,0 +1,80 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include "pmsc/PointEvaluator.h"
+
+#include <chrono>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+namespace pmsc::evaluators::exec {
+
+class ChildProcess;
+
+/// How to run a calculation in a child process.
+struct ExecOptions {
+    std::string command;                         ///< run by /bin/sh -c
+    std::chrono::milliseconds timeout{600'000};  ///< for the hello and for each answer
+};
+
+/// Parses the ARGS of `exec:ARGS`: `[timeout=SECONDS:]COMMAND`. Everything after the options is
+/// the command, colons and spaces included. @throws InputError for an empty command or a bad
+/// timeout.
+ExecOptions parseExecArgs(const std::string& args);
+
+/// A calculation that lives in another program (a renderer's bake, a DCC's rig, a simulation),
+/// run as a child process that speaks the exec protocol (evaluators/exec/ExecProtocol.h,
+/// docs/exec-protocol.md) on its standard input and output.
+///
+/// Children: the constructor starts one and reads its hello (N, C, frames). Each evaluate() takes
+/// an idle child, or starts another when all are busy, so there are as many children as calls run
+/// at once (one per engine worker thread) and each stays alive for the whole run. A request is one
+/// message per node body: the frame and the points (a range when they are consecutive, else a list
+/// of indices), answered by all the values in one message.
+///
+/// Faults: a child that exits, crashes, hangs past the timeout, answers the wrong size or a
+/// non-finite value, or reports an error makes that call throw pmsc::EvaluatorError with one line
+/// naming the command and what went wrong (and the child's last line of standard error). The child
+/// is killed and dropped; the next call starts a fresh one, whose hello must agree with the first.
+/// So the engine's FailurePolicy decides: StopRun ends the run (exit code 3), MarkFailedAndContinue
+/// fails that frame and later frames are served by new children.
+///
+/// Thread-safe; deterministic as far as the child is (values go through unchanged).
+class ExecEvaluator final : public PointEvaluator {
+public:
+    /// Starts the first child and reads its hello. @throws EvaluatorError when it cannot start,
+    /// exits, hangs or says something that is not a version-1 hello.
+    explicit ExecEvaluator(ExecOptions options);
+    ~ExecEvaluator() override;
+
+    std::string name() const override { return "exec"; }
+    Index pointCount() const override { return points_; }
+    Index channelCount() const override { return channels_; }
+    Index frameCount() const override { return frames_; }
+    void evaluate(Index frame, std::span<const Index> points, double* out) const override;
+    void evaluateAll(Index frame, double* out) const override;
+
+    /// Children alive now (idle ones; a busy child is counted by the call using it).
+    std::size_t idleChildren() const;
+    /// Children started so far, the first included (restarts after a fault count too).
+    std::size_t childrenStarted() const;
+    const ExecOptions& options() const { return options_; }
+
+private:
+    struct Hello;
+    std::unique_ptr<ChildProcess> start(Hello& hello) const;
+    std::unique_ptr<ChildProcess> acquire() const;
+    void release(std::unique_ptr<ChildProcess> child) const;
+    void request(Index frame, std::span<const Index> points, bool range, double* out) const;
+    [[noreturn]] void fail(ChildProcess& child, const std::string& what) const;
+
+    ExecOptions options_;
+    Index points_ = 0, channels_ = 0, frames_ = 0;
+    mutable std::mutex mutex_;
+    mutable std::vector<std::unique_ptr<ChildProcess>> idle_;
+    mutable std::size_t started_ = 0;
+};
+
+}  // namespace pmsc::evaluators::exec
