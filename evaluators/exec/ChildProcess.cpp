@@ -79,6 +79,13 @@ ChildProcess::ChildProcess(const std::string& command) {
     if (::socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, pair) != 0)
         throw EvaluatorError(systemError("exec: socketpair"));
     socket_ = pair[0];
+    // Larger buffers let a whole frame of answers (160,000 points x 3 doubles is 3.8 MB) move in
+    // few wake-ups. Best effort: the kernel caps them at net.core.wmem_max / rmem_max.
+    for (const int fd : pair)
+        for (const int option : {SO_SNDBUF, SO_RCVBUF}) {
+            const int bytes = 4 << 20;
+            ::setsockopt(fd, SOL_SOCKET, option, &bytes, sizeof bytes);
+        }
     try {
         errorLog_ = openErrorLog();
     } catch (...) {
