@@ -7,6 +7,7 @@
 
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 
 namespace pmsc::evaluators::exec {
@@ -19,6 +20,13 @@ namespace {
 constexpr std::size_t kErrorLogLimit = 1 << 20;
 /// How long a child that failed gets to exit on its own before it is killed (for its status).
 constexpr std::chrono::milliseconds kExitGrace{500};
+
+/// "2 s", "0.5 s".
+std::string seconds(std::chrono::milliseconds ms) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%g s", static_cast<double>(ms.count()) / 1000.0);
+    return text;
+}
 
 std::string shortCommand(const std::string& command) {
     return command.size() <= 80 ? command : command.substr(0, 77) + "...";
@@ -79,8 +87,7 @@ std::unique_ptr<ChildProcess> ExecEvaluator::start(Hello& hello) const {
     try {
         complete = child->readAll(&wire, sizeof wire, deadline);
     } catch (const EvaluatorError&) {
-        fail(*child,
-             "sent no hello within " + std::to_string(options_.timeout.count() / 1000.0).substr(0, 6) + " s");
+        fail(*child, "sent no hello within " + seconds(options_.timeout));
     }
     if (!complete) fail(*child, child->reap(kExitGrace) + " before its hello");
     if (std::memcmp(wire.magic, kMagic, sizeof kMagic) != 0)
@@ -191,8 +198,7 @@ void ExecEvaluator::request(Index frame, std::span<const Index> points, bool ran
     } catch (const EvaluatorError& e) {
         if (!child) throw;  // the child's own error answer: already released
         if (std::string_view(e.what()) == "timed out")
-            fail(*child, "did not answer within " +
-                             std::to_string(options_.timeout.count() / 1000.0).substr(0, 6) + " s" + during);
+            fail(*child, "did not answer within " + seconds(options_.timeout) + during);
         throw;
     }
     for (std::size_t i = 0; i < values; ++i)
