@@ -5,6 +5,8 @@
 // scene is not documented as safe to read from many threads) and the header stays light.
 #include "evaluators/SkinEvaluator.h"
 
+#include "evaluators/exec/Isolated.h"
+#include "pmsc/ByteIO.h"
 #include "pmsc/Errors.h"
 #include "pmsc/ObjIO.h"
 
@@ -18,6 +20,7 @@
 #include <charconv>
 #include <cmath>
 #include <stdexcept>
+#include <type_traits>
 #include <unordered_map>
 
 namespace pmsc::evaluators {
@@ -135,6 +138,10 @@ struct SkinEvaluator::Data {
     void posePoint(const Pose& pose, Index point, double* out) const;
 
     struct Loader;  // load(), one named step per part of the scene
+
+    /// Everything above as bytes, and back (the import in a child process).
+    std::string pack() const;
+    static std::unique_ptr<Data> unpack(std::string_view bytes, const std::string& where);
 };
 
 SkinEvaluator::Data::Pose SkinEvaluator::Data::pose(Index frame) const {
@@ -247,14 +254,20 @@ SkinOptions parseSkinArgs(const std::string& args) {
         } else if (opt.rfind("animation=", 0) == 0) {
             o.animation = opt.substr(10);
             if (o.animation.empty()) throw InputError("skin: animation= needs a name or an index");
+        } else if (opt.rfind("isolate=", 0) == 0) {
+            const std::string v = opt.substr(8);
+            if (v != "yes" && v != "no") throw InputError("skin: isolate must be yes or no, got '" + v + "'");
+            o.isolate = v == "yes";
         } else if (opt.find('=') != std::string::npos && opt.find('/') == std::string::npos) {
-            throw InputError("skin: unknown option '" + opt + "' (expected fps=F or animation=NAME|INDEX)");
+            throw InputError("skin: unknown option '" + opt +
+                             "' (expected fps=F, animation=NAME|INDEX or isolate=yes|no)");
         } else {
             break;  // part of the path
         }
         rest.resize(colon);
     }
-    if (rest.empty()) throw InputError("skin: no asset given (expected skin:ASSET[:fps=F][:animation=A])");
+    if (rest.empty())
+        throw InputError("skin: no asset given (expected skin:ASSET[:fps=F][:animation=A][:isolate=yes|no])");
     o.path = rest;
     return o;
 }
@@ -547,7 +560,7 @@ void SkinEvaluator::Data::Loader::checkKeyOrder() const {
             throw InputError(where + "animation keys are not in time order");
 }
 
-std::unique_ptr<SkinEvaluator::Data> SkinEvaluator::load(const SkinOptions& options) {
+std::unique_ptr<SkinEvaluator::Data> SkinEvaluator::loadInProcess(const SkinOptions& options) {
     auto d = std::make_unique<SkinEvaluator::Data>();
     d->path = options.path;
     d->fps = options.fps;
@@ -562,6 +575,182 @@ std::unique_ptr<SkinEvaluator::Data> SkinEvaluator::load(const SkinOptions& opti
     loader.checkKeyOrder();
     d->topology = std::make_shared<const ObjMesh>(triangleMesh(d->triangles));
     return d;
+}
+
+// ------------------------------------------------------------------------------------------------
+// The posing arrays as bytes, for an import in a child process. Only the child that just made them
+// writes them, so the reader checks sizes (a child that died mid-write) and not meaning.
+
+namespace {
+
+class Packer {
+public:
+    explicit Packer(std::string& out) : w_(out), out_(out) {}
+    void text(const std::string& s) {
+        w_.u64(s.size());
+        out_.append(s);
+    }
+    template <class T>
+    void scalar(T v) {
+        static_assert(std::is_trivially_copyable_v<T>);
+        out_.append(reinterpret_cast<const char*>(&v), sizeof v);
+    }
+    /// Plain numbers, or Eigen fixed-size objects as their doubles.
+    template <class T>
+    void vec(const std::vector<T>& v) {
+        w_.u64(v.size());
+        for (const T& x : v) {
+            if constexpr (std::is_arithmetic_v<T>) {
+                scalar(x);
+            } else if constexpr (std::is_same_v<T, Eigen::Quaterniond>) {
+                w_.doubles(x.coeffs().data(), 4);
+            } else {
+                w_.doubles(x.data(), static_cast<std::size_t>(T::SizeAtCompileTime));
+            }
+        }
+    }
+
+private:
+    ByteWriter w_;
+    std::string& out_;
+};
+
+class Unpacker {
+public:
+    Unpacker(std::string_view bytes, const std::string& where) : r_(bytes, where + "the importer's answer") {}
+    std::string text() {
+        const auto n = r_.count("text", 1);
+        return std::string(r_.take(n, "text"));
+    }
+    template <class T>
+    T scalar() {
+        T v;
+        const auto bytes = r_.take(sizeof(T), "value");
+        std::memcpy(&v, bytes.data(), sizeof(T));
+        return v;
+    }
+    template <class T>
+    void vec(std::vector<T>& v) {
+        std::size_t size = sizeof(T);
+        if constexpr (std::is_same_v<T, Eigen::Quaterniond>)
+            size = 4 * sizeof(double);
+        else if constexpr (!std::is_arithmetic_v<T>)
+            size = T::SizeAtCompileTime * sizeof(double);
+        v.resize(r_.count("array", size));
+        for (T& x : v) {
+            if constexpr (std::is_arithmetic_v<T>) {
+                x = scalar<T>();
+            } else if constexpr (std::is_same_v<T, Eigen::Quaterniond>) {
+                r_.doubles(x.coeffs().data(), 4, "quaternion");
+            } else {
+                r_.doubles(x.data(), static_cast<std::uint64_t>(T::SizeAtCompileTime), "matrix");
+            }
+        }
+    }
+    std::uint64_t count(std::string_view what, std::uint64_t elementBytes) {
+        return r_.count(what, elementBytes);
+    }
+    void finish() { r_.expectEnd(); }
+
+private:
+    ByteReader r_;
+};
+
+}  // namespace
+
+std::string SkinEvaluator::Data::pack() const {
+    std::string out;
+    Packer p(out);
+    p.text(path);
+    p.text(animationName);
+    p.scalar(fps);
+    p.scalar(ticksPerSecond);
+    p.scalar(frames);
+    p.vec(parent);
+    p.vec(restLocal);
+    p.vec(channelOfNode);
+    p.scalar(static_cast<std::uint64_t>(channels.size()));
+    for (const Channel& c : channels) {
+        p.vec(c.positionTimes);
+        p.vec(c.rotationTimes);
+        p.vec(c.scalingTimes);
+        p.vec(c.positions);
+        p.vec(c.scalings);
+        p.vec(c.rotations);
+    }
+    p.vec(paletteNode);
+    p.vec(paletteOffset);
+    p.vec(influenceStart);
+    p.vec(influenceSlot);
+    p.vec(influenceWeight);
+    p.vec(rest);
+    p.scalar(static_cast<std::uint64_t>(morphs.size()));
+    for (const Morph& m : morphs) {
+        p.scalar(m.targets);
+        p.vec(m.deltas);
+        p.vec(m.defaultWeights);
+        p.vec(m.keyTimes);
+        p.vec(m.keyWeights);
+    }
+    p.scalar(morphTargetCount);
+    p.scalar(bones);
+    p.vec(meshOffsets);
+    p.vec(triangles);
+    return out;
+}
+
+std::unique_ptr<SkinEvaluator::Data> SkinEvaluator::Data::unpack(std::string_view bytes,
+                                                                 const std::string& where) {
+    auto d = std::make_unique<Data>();
+    Unpacker u(bytes, where);
+    d->path = u.text();
+    d->animationName = u.text();
+    d->fps = u.scalar<double>();
+    d->ticksPerSecond = u.scalar<double>();
+    d->frames = u.scalar<Index>();
+    u.vec(d->parent);
+    u.vec(d->restLocal);
+    u.vec(d->channelOfNode);
+    d->channels.resize(u.count("channels", 6 * sizeof(std::uint64_t)));
+    for (Channel& c : d->channels) {
+        u.vec(c.positionTimes);
+        u.vec(c.rotationTimes);
+        u.vec(c.scalingTimes);
+        u.vec(c.positions);
+        u.vec(c.scalings);
+        u.vec(c.rotations);
+    }
+    u.vec(d->paletteNode);
+    u.vec(d->paletteOffset);
+    u.vec(d->influenceStart);
+    u.vec(d->influenceSlot);
+    u.vec(d->influenceWeight);
+    u.vec(d->rest);
+    d->morphs.resize(u.count("morphs", sizeof(Index) + 4 * sizeof(std::uint64_t)));
+    for (Morph& m : d->morphs) {
+        m.targets = u.scalar<Index>();
+        u.vec(m.deltas);
+        u.vec(m.defaultWeights);
+        u.vec(m.keyTimes);
+        u.vec(m.keyWeights);
+    }
+    d->morphTargetCount = u.scalar<Index>();
+    d->bones = u.scalar<Index>();
+    u.vec(d->meshOffsets);
+    u.vec(d->triangles);
+    u.finish();
+    d->topology = std::make_shared<const ObjMesh>(triangleMesh(d->triangles));
+    return d;
+}
+
+std::unique_ptr<SkinEvaluator::Data> SkinEvaluator::load(const SkinOptions& options) {
+    if (!options.isolate) return loadInProcess(options);
+    const std::string where = "skin: " + options.path + ": ";
+    exec::IsolationLimits limits;
+    limits.timeout = std::chrono::milliseconds(static_cast<long long>(options.importTimeoutSeconds * 1000));
+    const std::string bytes =
+        exec::runIsolated([&] { return loadInProcess(options)->pack(); }, where, limits);
+    return Data::unpack(bytes, where);
 }
 
 // ------------------------------------------------------------------------------------------------

@@ -16,10 +16,15 @@ struct SkinOptions {
     std::string path;       ///< any format Assimp reads (glTF 2, FBX, Collada, X, BVH, ...)
     double fps = 24;        ///< frame f is posed at time f / fps seconds of the animation
     std::string animation;  ///< animation name or index; empty = the first one (index 0)
+    /// Import the asset in a forked child process (exec::runIsolated), so an importer that
+    /// crashes, hangs or asks for tens of GB on a damaged file fails with one InputError instead
+    /// of taking the program down. The child sends back only the posing arrays.
+    bool isolate = true;
+    double importTimeoutSeconds = 600;  ///< isolated imports only
 };
 
 /// Parses the ARGS of the command line's `skin:ARGS`:
-/// `ASSET[:fps=F][:animation=NAME|INDEX]`.
+/// `ASSET[:fps=F][:animation=NAME|INDEX][:isolate=yes|no]`.
 /// Options are taken from the end, so a path may itself hold a colon as long
 /// as what follows it is not `fps=` or `animation=`.
 /// @throws InputError for an empty path, a bad number or an unknown option.
@@ -88,6 +93,7 @@ public:
 private:
     struct Data;
     static std::unique_ptr<Data> load(const SkinOptions& options);
+    static std::unique_ptr<Data> loadInProcess(const SkinOptions& options);
     std::unique_ptr<const Data> data_;
 };
 

@@ -52,7 +52,9 @@ bool waitFor(int fd, short events, ChildProcess::Clock::time_point deadline) {
     }
 }
 
-std::string describeStatus(int status) {
+}  // namespace
+
+std::string describeExitStatus(int status) {
     if (WIFEXITED(status)) {
         // The shell reports a command that a signal killed as 128 + the signal.
         const int code = WEXITSTATUS(status);
@@ -71,8 +73,6 @@ std::string describeStatus(int status) {
     }
     return "ended with status " + std::to_string(status);
 }
-
-}  // namespace
 
 ChildProcess::ChildProcess(const std::string& command) {
     int pair[2];
@@ -184,7 +184,7 @@ void ChildProcess::kill() {
     while (::waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
     }
     reaped_ = true;
-    ended_ = describeStatus(status);
+    ended_ = describeExitStatus(status);
 }
 
 std::string ChildProcess::reap(std::chrono::milliseconds grace) {
@@ -196,7 +196,7 @@ std::string ChildProcess::reap(std::chrono::milliseconds grace) {
         const pid_t r = ::waitpid(pid_, &status, WNOHANG);
         if (r == pid_) {
             reaped_ = true;
-            ended_ = describeStatus(status);
+            ended_ = describeExitStatus(status);
             ::kill(-pid_, SIGKILL);  // whatever it left behind in its group
             return ended_;
         }

@@ -8,6 +8,10 @@
 
 namespace pmsc::evaluators::exec {
 
+/// How a child ended, from waitpid's status: "exited with code 1", "was killed by signal 11
+/// (Segmentation fault)"; a shell's 128 + N is named as signal N too.
+std::string describeExitStatus(int status);
+
 /// A command run by `/bin/sh -c`, talking to its parent over one Unix stream socket that is both
 /// its standard input and its standard output. Its standard error goes to an unlinked temporary
 /// file, so a child's traceback never mixes with pmsc's one-line errors; lastErrorLine() reads

@@ -5,6 +5,7 @@
 // or NaN, or exits at start ends the run with exit code 3 and one stderr line, and leaves only
 // the complete frames before the failure.
 #include "tests/cli/CliRunner.h"
+#include "tests/common/MissingData.h"
 
 #include <gtest/gtest.h>
 
@@ -26,6 +27,12 @@ const std::string kFault = kPython + " " + kSource + "/tests/exec/fault_child.py
 std::string bytes(const std::filesystem::path& p) {
     std::ifstream in(p, std::ios::binary);
     return {std::istreambuf_iterator<char>(in), {}};
+}
+
+void expectOneLine(const RunResult& r, int code, const std::string& fragment) {
+    EXPECT_EQ(r.exitCode, code) << r.err;
+    ASSERT_EQ(r.errLines().size(), 1u) << r.err;
+    EXPECT_NE(r.err.find(fragment), std::string::npos) << r.err;
 }
 
 /// The fault child's frames 0-19 exported through exec:, and a model trained on 0-11.
@@ -99,6 +106,41 @@ TEST(ExecCli, EveryChildFaultIsExitCode3AndOneLine) {
         EXPECT_EQ(frames.size(), 5u) << c.mode;
         for (const auto& f : frames) EXPECT_EQ(f.find(".tmp"), std::string::npos) << f;
     }
+}
+
+}  // namespace
+
+namespace {
+
+const std::string kModels = "/usr/share/assimp/models";
+
+TEST(SkinIsolation, ADamagedAssetIsOneLineAndExitCode2AndTheImportIsolatedPosesTheSame) {
+    if (!std::filesystem::exists(kModels + "/X/test.x"))
+        PMSC_MISSING_DATA("assimp-testmodels not found in " << kModels);
+    TempDir dir;
+    // test.x with a vertex count that makes Assimp's X importer reserve 23 GB.
+    std::ifstream in(kModels + "/X/test.x");
+    std::string text{std::istreambuf_iterator<char>(in), {}};
+    const auto at = text.find("        24;");
+    ASSERT_NE(at, std::string::npos);
+    text = text.substr(0, at) + "        1900000000;" + text.substr(at + 11);
+    std::ofstream(dir.file("damaged.x")) << text;
+    const RunResult r =
+        runPmsc(dir, {"export-frames", "skin:" + dir.file("damaged.x"), "--out", dir.file("f.npy")});
+    EXPECT_EQ(r.exitCode, 2) << r.err;
+    ASSERT_EQ(r.errLines().size(), 1u) << r.err;
+    EXPECT_NE(r.err.find("damaged.x"), std::string::npos) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(dir.file("f.npy")));
+
+    const std::string clip = "skin:" + kModels + "/BVH/01_01.bvh:fps=60";
+    for (const std::string isolate : {"yes", "no"}) {
+        const RunResult e = runPmsc(dir, {"export-frames", clip + ":isolate=" + isolate, "--frames", "0-99",
+                                          "--out", dir.file(isolate + ".npy"), "--quiet"});
+        ASSERT_EQ(e.exitCode, 0) << e.err;
+    }
+    EXPECT_EQ(bytes(dir.file("yes.npy")), bytes(dir.file("no.npy")));
+    expectOneLine(runPmsc(dir, {"export-frames", clip + ":isolate=maybe", "--out", dir.file("m.npy")}), 2,
+                  "isolate must be yes or no");
 }
 
 }  // namespace

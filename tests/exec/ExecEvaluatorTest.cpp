@@ -9,6 +9,7 @@
 #include "evaluators/EvaluatorRegistry.h"
 #include "evaluators/ReplayEvaluator.h"
 #include "evaluators/exec/ExecEvaluator.h"
+#include "evaluators/exec/Isolated.h"
 #include "pmsc/Errors.h"
 #include "pmsc/NpyIO.h"
 #include "pmsc/Training.h"
@@ -16,6 +17,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <csignal>
 #include <filesystem>
 #include <numeric>
 #include <random>
@@ -229,6 +231,58 @@ TEST(ExecEvaluator, TheEnginesFailurePoliciesHoldForAChildThatCrashes) {
     } catch (const EvaluatorError& e) {
         expectContains(e.what(), {"frame 5", "killed by signal 11"});
     }
+}
+
+}  // namespace
+}  // namespace pmsc::evaluators::exec
+
+namespace pmsc::evaluators::exec {
+namespace {
+
+std::string isolatedMessage(const std::function<std::string()>& work, IsolationLimits limits = {}) {
+    try {
+        runIsolated(work, "test: ", limits);
+    } catch (const InputError& e) {
+        return e.what();
+    }
+    return "";
+}
+
+TEST(Isolated, ReturnsTheWorksBytesAndItsErrors) {
+    EXPECT_EQ(runIsolated([] { return std::string("posing arrays\0with zeros", 24); }, "test: "),
+              std::string("posing arrays\0with zeros", 24));
+    const std::string big(3 << 20, 'x');  // more than a pipe holds
+    EXPECT_EQ(runIsolated([&] { return big; }, "test: "), big);
+    EXPECT_EQ(isolatedMessage([]() -> std::string { throw InputError("test: has no animation to pose"); }),
+              "test: has no animation to pose");
+}
+
+TEST(Isolated, ACrashAHangAndAnOverAllocationFailOnlyTheChild) {
+    expectContains(isolatedMessage([]() -> std::string {
+                       std::raise(SIGSEGV);
+                       return "";
+                   }),
+                   {"test: the importer crashed", "signal 11"});
+    IsolationLimits quick;
+    quick.timeout = std::chrono::milliseconds(300);
+    const auto start = std::chrono::steady_clock::now();
+    expectContains(isolatedMessage(
+                       []() -> std::string {
+                           std::this_thread::sleep_for(std::chrono::hours(1));
+                           return "";
+                       },
+                       quick),
+                   {"test: the importer did not finish within 0.3 s"});
+    EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(5));
+    IsolationLimits small;
+    small.addressSpace = std::uint64_t{512} << 20;
+    expectContains(isolatedMessage(
+                       []() -> std::string {
+                           std::vector<char> huge(std::size_t{23} << 30, 1);  // what a damaged .x asked for
+                           return std::string(1, huge.back());
+                       },
+                       small),
+                   {"test: the importer ran out of memory (limit 0.5 GiB)"});
 }
 
 }  // namespace

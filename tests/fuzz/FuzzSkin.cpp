@@ -1,9 +1,10 @@
-// libFuzzer target: the Assimp loading path of the `skin:` evaluator (evaluators/SkinEvaluator):
-// Assimp reads the bytes as an asset of the format the first byte picks (by file extension, as a
-// user's file would be), then SkinEvaluator::load() copies the scene into its posing arrays and
-// the first and last frames are posed at every point. The contract: an asset either loads and
-// poses, or the constructor throws pmsc::InputError; nothing crashes, hangs or leaks in our code.
-// Assimp itself is a system library, not instrumented: only our code's coverage guides the search.
+// libFuzzer target: the `skin:` evaluator (evaluators/SkinEvaluator) on any bytes. Assimp reads them
+// as an asset of the format the first byte picks (by file extension, as a user's file would be) in
+// a forked child (the evaluator's default isolate=yes), which sends back the posing arrays; the
+// first and last frames are then posed at every point. The contract: an asset either loads and
+// poses, or the constructor throws pmsc::InputError; nothing crashes, hangs or leaks in pmsc,
+// whatever Assimp does in its child (crash, hang, tens of GB). Assimp itself is a system library,
+// not instrumented: only our code's coverage guides the search.
 #include "evaluators/SkinEvaluator.h"
 #include "pmsc/Errors.h"
 
@@ -45,7 +46,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         std::fclose(f);
     }
     try {
-        evaluators::SkinEvaluator skin(evaluators::SkinOptions{path, 24, ""});
+        evaluators::SkinOptions options{path, 24, ""};
+        options.importTimeoutSeconds = 5;  // a hanging importer is an InputError well inside -timeout
+        evaluators::SkinEvaluator skin(options);
         const Index n = skin.pointCount();
         if (n <= 0 || skin.frameCount() <= 0) std::abort();
         std::vector<Index> points(static_cast<std::size_t>(std::min<Index>(n, 4096)));
