@@ -1,5 +1,6 @@
 // `pmsc train`: frames (.npy) -> model (.pmsc). Sections 3-5 of the paper, plus calibration.
 #include "app/ExitCodes.h"
+#include "app/MemoryLimit.h"
 #include "cli/Args.h"
 #include "cli/Commands.h"
 #include "cli/CrossTrain.h"
@@ -72,15 +73,6 @@ std::string bytesText(double bytes) {
 }
 
 /// Address space this process already uses (VmSize), 0 if unknown.
-std::uint64_t addressSpaceInUse() {
-    std::ifstream status("/proc/self/status");
-    std::string line;
-    while (std::getline(status, line)) {
-        if (line.rfind("VmSize:", 0) == 0) return std::stoull(line.substr(7)) * 1024;
-    }
-    return 0;
-}
-
 /// The whole training set in memory: the shots read one after the other into one FrameSet.
 FrameSet readShots(const std::vector<Shot>& shots) {
     if (shots.size() == 1) return readFrames(shots.front().path).frames;
@@ -116,8 +108,8 @@ ArgParser trainParser(TrainArgs& a) {
         "calibrated by leave-one-slice-out so that a hit's largest point error stays under it.\n"
         "\n"
         "Larger than memory: several --frames files (shots, same points and channels) are one\n"
-        "training set. When it does not fit (--memory-limit, the address-space limit, or half\n"
-        "the machine's memory) or with --out-of-core, the frames are streamed from disk in\n"
+        "training set. When it does not fit (--memory-limit, the memory cgroup's limit, the address-space\n"
+        "limit, or half the machine's memory) or with --out-of-core, the frames are streamed from disk in\n"
         "blocks of points, and memory is bounded by, in doubles (F frames, r = min(max(max\n"
         "basis, block), F), B = --block, K = --max-keys, R = N*C/P rows per rank, b = block rows):\n"
         "  5 F^2 + 3 r F + 2 R r + 4 R B + K C (F + r) + 3 b F, plus 3 N C (r + 1) on rank 0,\n"
@@ -333,12 +325,9 @@ MemoryPlan planMemory(const TrainArgs& a, const TrainSizes& sizes, int ranks) {
     limit = a.memoryLimit;
     limitSource = "--memory-limit";
     if (limit == 0) {
-        rlimit as{};
-        if (getrlimit(RLIMIT_AS, &as) == 0 && as.rlim_cur != RLIM_INFINITY) {
-            const std::uint64_t used = addressSpaceInUse();
-            limit = as.rlim_cur > used ? as.rlim_cur - used : 1;
-            limitSource = "the address-space limit (ulimit -v) less what the program already maps";
-        }
+        const app::MemoryLimit environment = app::environmentMemoryLimit();
+        limit = environment.bytes;
+        limitSource = environment.source;
     }
     auto bound = [&](Index bp) {
         if (options.sharedChannels && c > 1)  // the C=1 training of F*C channel frames, beside the frames
@@ -405,7 +394,8 @@ void printResources(const std::vector<double>& cpuPerRank, std::size_t shots, In
     if (plan.stream) {
         std::cout << "  memory      streamed from disk in blocks of " << plan.blockPoints << " points; bound "
                   << bytesText(static_cast<double>(plan.streamBytes)) << " (rank 0)"
-                  << (plan.limit > 0 ? ", limit " + bytesText(static_cast<double>(plan.limit))
+                  << (plan.limit > 0 ? ", limit " + bytesText(static_cast<double>(plan.limit)) + " (" +
+                                           plan.limitSource + ")"
                                      : std::string())
                   << "\n";
     } else {

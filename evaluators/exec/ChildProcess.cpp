@@ -54,6 +54,20 @@ bool waitFor(int fd, short events, ChildProcess::Clock::time_point deadline) {
 
 }  // namespace
 
+bool writeFully(int fd, const void* bytes, std::size_t size) {
+    const auto* p = static_cast<const char*>(bytes);
+    while (size > 0) {
+        const ssize_t n = ::write(fd, p, size);
+        if (n > 0) {
+            p += n;
+            size -= static_cast<std::size_t>(n);
+        } else if (n < 0 && errno != EINTR) {
+            return false;
+        }
+    }
+    return true;
+}
+
 std::string describeExitStatus(int status) {
     if (WIFEXITED(status)) {
         // The shell reports a command that a signal killed as 128 + the signal.

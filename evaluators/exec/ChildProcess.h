@@ -8,6 +8,10 @@
 
 namespace pmsc::evaluators::exec {
 
+/// Writes all of `bytes` to a descriptor, retrying short writes and EINTR. @return false on an
+/// error (errno says which), for example the reader gone.
+bool writeFully(int fd, const void* bytes, std::size_t size);
+
 /// How a child ended, from waitpid's status: "exited with code 1", "was killed by signal 11
 /// (Segmentation fault)"; a shell's 128 + N is named as signal N too.
 std::string describeExitStatus(int status);

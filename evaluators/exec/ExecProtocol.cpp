@@ -1,6 +1,8 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #include "evaluators/exec/ExecProtocol.h"
 
+#include "evaluators/exec/ChildProcess.h"
+
 #include <unistd.h>
 #include <cerrno>
 #include <cstdio>
@@ -33,16 +35,7 @@ bool readExactly(int fd, void* bytes, std::size_t size) {
 }
 
 void writeExactly(int fd, const void* bytes, std::size_t size) {
-    const auto* p = static_cast<const char*>(bytes);
-    while (size > 0) {
-        const ssize_t n = ::write(fd, p, size);
-        if (n > 0) {
-            p += n;
-            size -= static_cast<std::size_t>(n);
-        } else if (n < 0 && errno != EINTR) {
-            throw std::runtime_error(std::string("write: ") + std::strerror(errno));
-        }
-    }
+    if (!writeFully(fd, bytes, size)) throw std::runtime_error(std::string("write: ") + std::strerror(errno));
 }
 
 /// The points a request names, checked against N (an unknown kind or a bad index is malformed:

@@ -48,16 +48,7 @@ std::string gib(std::uint64_t bytes) {
 }
 
 void writeAll(int fd, const void* bytes, std::size_t size) {
-    const auto* p = static_cast<const char*>(bytes);
-    while (size > 0) {
-        const ssize_t n = ::write(fd, p, size);
-        if (n > 0) {
-            p += n;
-            size -= static_cast<std::size_t>(n);
-        } else if (n < 0 && errno != EINTR) {
-            ::_exit(3);
-        }
-    }
+    if (!writeFully(fd, bytes, size)) ::_exit(3);  // the parent went away: nobody to tell
 }
 
 /// The child's side: run the work, send [u8 ok][u64 length][bytes], leave without running the

@@ -12,9 +12,13 @@
 #include <gtest/gtest.h>
 #include <Eigen/SVD>
 
+#include <sys/stat.h>
+#include <unistd.h>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -296,6 +300,83 @@ TEST(AddressLimit, ATrainingSetTwiceTheLimitTrainsToTheInMemoryModel) {
         runPmsc(dir, {"export-frames", "replay:" + path, "--out", dir.file("copy.npy"), "--quiet"},
                 "prlimit --as=" + std::to_string(limit));
     EXPECT_NE(whole.exitCode, 0) << "reading the whole set fitted in the limit";
+}
+
+/// A fresh memory cgroup limited to `bytes` (v1's memory controller, or v2 with memory enabled for
+/// children), or "" when this machine offers none to root.
+std::string makeMemoryCgroup(std::uint64_t bytes) {
+    std::ifstream mounts("/proc/self/mounts");
+    for (std::string line; std::getline(mounts, line);) {
+        std::istringstream fields(line);
+        std::string device, point, type, options;
+        fields >> device >> point >> type >> options;
+        const bool v1 = type == "cgroup" && ("," + options + ",").find(",memory,") != std::string::npos;
+        bool v2 = false;
+        if (type == "cgroup2") {
+            std::ifstream controllers(point + "/cgroup.subtree_control");
+            std::string text;
+            std::getline(controllers, text);
+            v2 = (" " + text + " ").find(" memory ") != std::string::npos;
+        }
+        if (!v1 && !v2) continue;
+        const std::string dir = point + "/pmsc-test-" + std::to_string(::getpid());
+        if (::mkdir(dir.c_str(), 0755) != 0) continue;
+        std::ofstream(dir + (v1 ? "/memory.limit_in_bytes" : "/memory.max")) << bytes << "\n";
+        if (v1)
+            std::ofstream(dir + "/memory.memsw.limit_in_bytes")
+                << bytes << "\n";  // no swap either, where accounted
+        if (v2) std::ofstream(dir + "/memory.swap.max") << 0 << "\n";
+        return dir;
+    }
+    return "";
+}
+
+TEST(Cgroup, ATrainingSetTwiceTheLimitStreamsInsideAMemoryCgroup) {
+    TempDir dir;
+    const int grid = 230, frames = 600;  // 52,900 points x 3 channels x 600 frames: 762 MB of doubles
+    const std::string path = makeFrames(dir, "big.npy", grid, frames, 7);
+    const double matrixBytes = double(grid) * grid * 3 * frames * 8;
+    const std::uint64_t bound = trainingMemoryBound(Index(grid) * grid, 3, frames, 16, 8, 24, 1, 1, true);
+    // The cgroup: the streaming bound plus 128 MiB for the program itself, blocks and page cache.
+    const std::uint64_t limit = bound + (128u << 20);
+    ASSERT_GE(matrixBytes, 2.0 * double(limit)) << "the test data would not be twice the limit";
+    const std::string cgroup = ::geteuid() == 0 ? makeMemoryCgroup(limit) : "";
+    if (cgroup.empty()) {
+        if (std::getenv("CI"))
+            FAIL() << "no memory cgroup could be made (needs root and a memory controller)";
+        GTEST_SKIP() << "no memory cgroup could be made (needs root and a memory controller)";
+    }
+    std::printf("cgroup %s: limit %.1f MiB (streaming bound %.1f MiB), matrix %.1f MiB (%.2fx)\n",
+                cgroup.c_str(), limit / 1048576.0, bound / 1048576.0, matrixBytes / 1048576.0,
+                matrixBytes / double(limit));
+    // The shell joins the cgroup, then becomes pmsc ($0 "$@": the program and its arguments).
+    const std::string inside = "sh -c 'echo $$ > " + cgroup + "/cgroup.procs && exec \"$0\" \"$@\"'";
+    const std::vector<std::string> options = {"--max-basis", "16", "--block", "8",
+                                              "--max-keys",  "24", "--quiet"};
+    auto limited = options, free = options, forced = options;
+    limited.insert(limited.begin(), {"train", "--frames", path, "--out", dir.file("limited.pmsc")});
+    free.insert(free.begin(),
+                {"train", "--frames", path, "--out", dir.file("free.pmsc"), "--memory-limit", "64G"});
+    forced.insert(forced.begin(),
+                  {"train", "--frames", path, "--out", dir.file("forced.pmsc"), "--memory-limit", "64G"});
+    const RunResult r = runPmsc(dir, limited, inside);
+    // In memory inside the same cgroup: the kernel kills it (what a farm task met without the limit).
+    const RunResult killed = runPmsc(dir, forced, inside);
+    std::ifstream peakFile(cgroup + "/memory.max_usage_in_bytes");
+    double peak = 0;
+    peakFile >> peak;
+    ::rmdir(cgroup.c_str());
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.out.find("streamed from disk"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("cgroup memory limit"), std::string::npos) << r.out;
+    std::printf("%s", r.out.c_str());
+    if (peak > 0)
+        std::printf("cgroup peak usage (resident and page cache) %.1f MiB of %.1f MiB\n", peak / 1048576.0,
+                    limit / 1048576.0);
+    EXPECT_EQ(killed.exitCode, 128 + 9) << "in-memory training fitted in the cgroup: " << killed.err;
+    const RunResult f = runPmsc(dir, free);
+    ASSERT_EQ(f.exitCode, 0) << f.err;
+    expectSameModel(readModel(dir.file("free.pmsc")), readModel(dir.file("limited.pmsc")), "cgroup");
 }
 
 }  // namespace

@@ -1,0 +1,25 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+namespace pmsc::app {
+
+/// How much more memory this process may use, and what says so.
+struct MemoryLimit {
+    std::uint64_t bytes = 0;  ///< 0 = no limit found
+    std::string source;       ///< "the cgroup memory limit (/sys/fs/cgroup/...)", for messages
+};
+
+/// The tightest limit the environment sets on this process, less what is already used under it:
+///  - the address-space limit (`ulimit -v`, RLIMIT_AS) less the address space mapped now;
+///  - the memory cgroup it runs in (Slurm's --mem, a container's limit): cgroup v2's memory.max less
+///    memory.current, and cgroup v1's memory.limit_in_bytes less memory.usage_in_bytes, for its own
+///    cgroup and every ancestor up to the hierarchy's mount point (a parent's limit binds too).
+/// A farm task is held by the cgroup: the kernel kills it past the limit (signal 9) with no error
+/// to catch, so what would not fit must be known before it is allocated.
+/// @param proc, sys  roots of /proc and of the file system (tests give a made-up tree).
+MemoryLimit environmentMemoryLimit(const std::string& proc = "/proc", const std::string& sys = "");
+
+}  // namespace pmsc::app

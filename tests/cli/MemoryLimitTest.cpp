@@ -1,0 +1,75 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+//
+// environmentMemoryLimit() on made-up /proc and cgroup trees: v2 (memory.max, "max", an ancestor's
+// tighter limit), v1 (memory.limit_in_bytes, the "unlimited" value), usage subtracted, no cgroup.
+// tests/scaleout/cgroup-train.sh runs `pmsc train` inside a real memory cgroup.
+#include "app/MemoryLimit.h"
+
+#include "../io/TempDir.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+namespace {
+
+using pmsc::app::environmentMemoryLimit;
+using pmsc::test::TempDir;
+namespace fs = std::filesystem;
+
+void put(const fs::path& file, const std::string& text) {
+    fs::create_directories(file.parent_path());
+    std::ofstream(file) << text;
+}
+
+TEST(MemoryLimit, CgroupV2TakesTheTightestOfTheCgroupAndItsAncestorsLessUsage) {
+    TempDir t;
+    const fs::path root = t.path();
+    put(root / "proc/self/mounts", "proc /proc proc rw 0 0\ncgroup2 /sys/fs/cgroup cgroup2 rw,nosuid 0 0\n");
+    put(root / "proc/self/cgroup", "0::/slurm/job_7/step_0\n");
+    put(root / "sys/fs/cgroup/slurm/job_7/step_0/memory.max", "max\n");
+    put(root / "sys/fs/cgroup/slurm/job_7/step_0/memory.current", "1000\n");
+    put(root / "sys/fs/cgroup/slurm/job_7/memory.max", "524288000\n");
+    put(root / "sys/fs/cgroup/slurm/job_7/memory.current", "24288000\n");
+    put(root / "sys/fs/cgroup/slurm/memory.max", "8589934592\n");
+    const auto limit = environmentMemoryLimit((root / "proc").string(), root.string());
+    EXPECT_EQ(limit.bytes, 500000000u);
+    EXPECT_NE(limit.source.find("job_7/memory.max"), std::string::npos) << limit.source;
+}
+
+TEST(MemoryLimit, CgroupV1ReadsTheMemoryControllersHierarchy) {
+    TempDir t;
+    const fs::path root = t.path();
+    put(root / "proc/self/mounts",
+        "cgroup /sys/fs/cgroup/cpu cgroup rw,relatime,cpu 0 0\ncgroup /sys/fs/cgroup/memory cgroup "
+        "rw,relatime,memory 0 0\n");
+    put(root / "proc/self/cgroup", "5:cpu:/\n4:memory:/farm/task\n0::/\n");
+    put(root / "sys/fs/cgroup/memory/farm/task/memory.limit_in_bytes", "1073741824\n");
+    put(root / "sys/fs/cgroup/memory/farm/task/memory.usage_in_bytes", "73741824\n");
+    put(root / "sys/fs/cgroup/memory/memory.limit_in_bytes", "9223372036854771712\n");
+    EXPECT_EQ(environmentMemoryLimit((root / "proc").string(), root.string()).bytes, 1000000000u);
+}
+
+TEST(MemoryLimit, NoLimitAnywhereIsZero) {
+    TempDir t;
+    const fs::path root = t.path();
+    put(root / "proc/self/mounts", "cgroup2 /sys/fs/cgroup cgroup2 rw 0 0\n");
+    put(root / "proc/self/cgroup", "0::/\n");
+    put(root / "sys/fs/cgroup/memory.max", "max\n");
+    EXPECT_EQ(environmentMemoryLimit((root / "proc").string(), root.string()).bytes, 0u);
+    TempDir empty;
+    EXPECT_EQ(environmentMemoryLimit((empty.path() / "proc").string(), empty.path().string()).bytes, 0u);
+}
+
+TEST(MemoryLimit, UsageAboveTheLimitLeavesOneByteNotNone) {
+    TempDir t;
+    const fs::path root = t.path();
+    put(root / "proc/self/mounts", "cgroup2 /sys/fs/cgroup cgroup2 rw 0 0\n");
+    put(root / "proc/self/cgroup", "0::/full\n");
+    put(root / "sys/fs/cgroup/full/memory.max", "1000\n");
+    put(root / "sys/fs/cgroup/full/memory.current", "5000\n");
+    EXPECT_EQ(environmentMemoryLimit((root / "proc").string(), root.string()).bytes, 1u);
+}
+
+}  // namespace
