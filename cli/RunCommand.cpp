@@ -373,7 +373,8 @@ int runRun(const std::vector<std::string>& args) {
         "output, 130 interrupted (SIGINT/SIGTERM: finished frames are kept).");
     parser.option("--model", "MODEL.pmsc", "model from pmsc train", o.modelPath, true);
     parser.option("--evaluator", "NAME[:ARGS]",
-                  "replay:FILE.npy, skin:ASSET, face:DIR, cornell, volume:FILE.vdb", o.evaluatorSpec, true);
+                  "replay:FILE.npy, skin:ASSET, face:DIR, cornell, volume:FILE.vdb, exec:COMMAND (pmsc evaluators)",
+                  o.evaluatorSpec, true);
     parser.option("--frames", "A-B[:STEP]", "the frames of this task", framesText, true);
     parser.option("--out", "DIR", "output folder (created if missing)", o.outDir, true);
     parser.option(
