@@ -372,9 +372,10 @@ int runRun(const std::vector<std::string>& args) {
         "DIR/pmsc-run.A-B.json. Exit codes: 0 ok, 2 bad input, 3 evaluator failure, 4 cannot write\n"
         "output, 130 interrupted (SIGINT/SIGTERM: finished frames are kept).");
     parser.option("--model", "MODEL.pmsc", "model from pmsc train", o.modelPath, true);
-    parser.option("--evaluator", "NAME[:ARGS]",
-                  "replay:FILE.npy, skin:ASSET, face:DIR, cornell, volume:FILE.vdb, exec:COMMAND (pmsc evaluators)",
-                  o.evaluatorSpec, true);
+    parser.option(
+        "--evaluator", "NAME[:ARGS]",
+        "replay:FILE.npy, skin:ASSET, face:DIR, cornell, volume:FILE.vdb, exec:COMMAND (pmsc evaluators)",
+        o.evaluatorSpec, true);
     parser.option("--frames", "A-B[:STEP]", "the frames of this task", framesText, true);
     parser.option("--out", "DIR", "output folder (created if missing)", o.outDir, true);
     parser.option(
