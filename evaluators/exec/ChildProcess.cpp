@@ -160,7 +160,7 @@ bool ChildProcess::writeAll(const void* bytes, std::size_t size, Clock::time_poi
         }
         if (n < 0 && errno == EINTR) continue;
         if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) {
-            if (!waitFor(socket_, POLLOUT, deadline)) throw EvaluatorError("timed out");
+            if (!waitFor(socket_, POLLOUT, deadline)) throw TimedOut();
             continue;
         }
         if (n < 0 && (errno == EPIPE || errno == ECONNRESET)) return false;
@@ -181,7 +181,7 @@ bool ChildProcess::readAll(void* bytes, std::size_t size, Clock::time_point dead
         if (n == 0) return false;
         if (errno == EINTR) continue;
         if (errno == EAGAIN || errno == EWOULDBLOCK) {
-            if (!waitFor(socket_, POLLIN, deadline)) throw EvaluatorError("timed out");
+            if (!waitFor(socket_, POLLIN, deadline)) throw TimedOut();
             continue;
         }
         if (errno == ECONNRESET) return false;

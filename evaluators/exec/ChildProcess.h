@@ -4,9 +4,15 @@
 #include <sys/types.h>
 #include <chrono>
 #include <cstddef>
+#include <stdexcept>
 #include <string>
 
 namespace pmsc::evaluators::exec {
+
+/// A read or write on a child's socket whose deadline passed.
+struct TimedOut : std::runtime_error {
+    TimedOut() : std::runtime_error("timed out") {}
+};
 
 /// Writes all of `bytes` to a descriptor, retrying short writes and EINTR. @return false on an
 /// error (errno says which), for example the reader gone.
@@ -39,10 +45,10 @@ public:
     ChildProcess& operator=(const ChildProcess&) = delete;
 
     /// Writes all of `bytes`. @return false when the child closed its end (it exited).
-    /// @throws pmsc::EvaluatorError when the deadline passes first.
+    /// @throws TimedOut when the deadline passes first.
     bool writeAll(const void* bytes, std::size_t size, Clock::time_point deadline);
     /// Reads exactly `size` bytes. @return false on end of file first (the child exited or closed
-    /// its output). @throws pmsc::EvaluatorError when the deadline passes first.
+    /// its output). @throws TimedOut when the deadline passes first.
     bool readAll(void* bytes, std::size_t size, Clock::time_point deadline);
 
     /// Kills the process group (SIGKILL) and reaps the child. Idempotent.

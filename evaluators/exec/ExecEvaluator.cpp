@@ -86,7 +86,7 @@ std::unique_ptr<ChildProcess> ExecEvaluator::start(Hello& hello) const {
     bool complete = false;
     try {
         complete = child->readAll(&wire, sizeof wire, deadline);
-    } catch (const EvaluatorError&) {
+    } catch (const TimedOut&) {
         fail(*child, "sent no hello within " + seconds(options_.timeout));
     }
     if (!complete) fail(*child, child->reap(kExitGrace) + " before its hello");
@@ -161,6 +161,7 @@ void ExecEvaluator::request(Index frame, std::span<const Index> points, bool ran
     const auto deadline = Clock::now() + options_.timeout;
     const std::size_t values = points.size() * static_cast<std::size_t>(channels_);
     const std::string during = " during frame " + std::to_string(frame);
+    std::string reported;  // an error the child answered with; it serves on
     try {
         Request req{};
         req.kind = consecutive ? kRequestRange : kRequestList;
@@ -178,28 +179,28 @@ void ExecEvaluator::request(Index frame, std::span<const Index> points, bool ran
         if (resp.status == kResponseError) {
             if (resp.length > kMaxErrorBytes)
                 fail(*child, "answered an error of " + std::to_string(resp.length) + " bytes" + during);
-            std::string text(resp.length, '\0');
-            if (!child->readAll(text.data(), text.size(), deadline))
+            reported.assign(resp.length, '\0');
+            if (!child->readAll(reported.data(), reported.size(), deadline))
                 fail(*child, child->reap(kExitGrace) + during);
-            if (const auto nl = text.find('\n'); nl != std::string::npos) text.resize(nl);
-            // The child said what went wrong and serves on: keep it.
-            release(std::move(child));
-            throw EvaluatorError("exec '" + shortCommand(options_.command) + "': frame " +
-                                 std::to_string(frame) + ": " + text);
+            if (const auto nl = reported.find('\n'); nl != std::string::npos) reported.resize(nl);
+            if (reported.empty()) reported = "(an empty error message)";
+        } else {
+            if (resp.status != kResponseValues || resp.reserved != 0)
+                fail(*child, "answered garbage (status " + std::to_string(resp.status) + ")" + during);
+            if (resp.length != values)
+                fail(*child, "answered " + std::to_string(resp.length) + " values for " +
+                                 std::to_string(points.size()) + " points x " + std::to_string(channels_) +
+                                 " channels" + during);
+            if (!child->readAll(out, values * sizeof(double), deadline))
+                fail(*child, "wrote too few bytes and " + child->reap(kExitGrace) + during);
         }
-        if (resp.status != kResponseValues || resp.reserved != 0)
-            fail(*child, "answered garbage (status " + std::to_string(resp.status) + ")" + during);
-        if (resp.length != values)
-            fail(*child, "answered " + std::to_string(resp.length) + " values for " +
-                             std::to_string(points.size()) + " points x " + std::to_string(channels_) +
-                             " channels" + during);
-        if (!child->readAll(out, values * sizeof(double), deadline))
-            fail(*child, "wrote too few bytes and " + child->reap(kExitGrace) + during);
-    } catch (const EvaluatorError& e) {
-        if (!child) throw;  // the child's own error answer: already released
-        if (std::string_view(e.what()) == "timed out")
-            fail(*child, "did not answer within " + seconds(options_.timeout) + during);
-        throw;
+    } catch (const TimedOut&) {
+        fail(*child, "did not answer within " + seconds(options_.timeout) + during);
+    }
+    if (!reported.empty()) {
+        release(std::move(child));
+        throw EvaluatorError("exec '" + shortCommand(options_.command) + "': frame " + std::to_string(frame) +
+                             ": " + reported);
     }
     for (std::size_t i = 0; i < values; ++i)
         if (!std::isfinite(out[i])) {
