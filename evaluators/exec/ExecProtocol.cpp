@@ -4,11 +4,16 @@
 #include "evaluators/exec/ChildProcess.h"
 
 #include <unistd.h>
+#include <algorithm>
 #include <cerrno>
+#include <condition_variable>
 #include <cstdio>
+#include <deque>
 #include <exception>
 #include <limits>
+#include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 namespace pmsc::evaluators::exec {
@@ -66,6 +71,123 @@ std::vector<Index> requestPoints(int in, const Request& request, Index pointCoun
     return points;
 }
 
+/// Points per block of a streamed answer: 16,384 x 3 doubles is 384 KiB, well inside the socket's
+/// buffer, and small enough that the last block's copy is a sliver of the answer's time.
+constexpr std::size_t kBlockPoints = 16384;
+
+void sendError(int out, std::string error) {
+    if (error.size() > kMaxErrorBytes) error.resize(kMaxErrorBytes);
+    const Response response{kResponseError, 0, error.size()};
+    writeExactly(out, &response, sizeof response);
+    writeExactly(out, error.data(), error.size());
+}
+
+/// Writes blocks of answers on a thread of its own, so a block's copy into the socket overlaps the
+/// calculation of the next one. At most two blocks wait; their buffers are reused.
+class BlockWriter {
+public:
+    explicit BlockWriter(int fd) : fd_(fd), thread_([this] { run(); }) {}
+    ~BlockWriter() {
+        {
+            std::lock_guard lock(mutex_);
+            stop_ = true;
+        }
+        changed_.notify_all();
+        thread_.join();
+    }
+    BlockWriter(const BlockWriter&) = delete;
+    BlockWriter& operator=(const BlockWriter&) = delete;
+
+    /// An empty buffer to fill (a used one when there is one).
+    std::vector<double> buffer() {
+        std::lock_guard lock(mutex_);
+        if (spare_.empty()) return {};
+        std::vector<double> b = std::move(spare_.back());
+        spare_.pop_back();
+        return b;
+    }
+    /// Queues a block. @throws std::runtime_error when a write failed.
+    void submit(std::vector<double> block) {
+        std::unique_lock lock(mutex_);
+        changed_.wait(lock, [&] { return queue_.size() < 2 || !error_.empty(); });
+        if (!error_.empty()) throw std::runtime_error(error_);
+        queue_.push_back(std::move(block));
+        changed_.notify_all();
+    }
+    /// Waits until every queued block is written. @throws std::runtime_error when a write failed.
+    void drain() {
+        std::unique_lock lock(mutex_);
+        changed_.wait(lock, [&] { return (queue_.empty() && !writing_) || !error_.empty(); });
+        if (!error_.empty()) throw std::runtime_error(error_);
+    }
+
+private:
+    void run() {
+        std::unique_lock lock(mutex_);
+        for (;;) {
+            changed_.wait(lock, [&] { return !queue_.empty() || stop_; });
+            if (queue_.empty()) return;
+            std::vector<double> block = std::move(queue_.front());
+            queue_.pop_front();
+            writing_ = true;
+            lock.unlock();
+            const bool ok = writeFully(fd_, block.data(), block.size() * sizeof(double));
+            const int code = errno;
+            lock.lock();
+            writing_ = false;
+            if (!ok && error_.empty()) error_ = std::string("write: ") + std::strerror(code);
+            spare_.push_back(std::move(block));
+            changed_.notify_all();
+        }
+    }
+
+    int fd_;
+    std::mutex mutex_;
+    std::condition_variable changed_;
+    std::deque<std::vector<double>> queue_;
+    std::vector<std::vector<double>> spare_;
+    std::string error_;
+    bool writing_ = false, stop_ = false;
+    std::thread thread_;  // last: starts after the members it uses
+};
+
+/// Answers one request. Decision: the values stream out block by block as they are computed, so
+/// pmsc copies block k while block k+1 is computed and the answer costs little more than its
+/// calculation; a whole-frame evaluator (its full pose shares work between points) answers in one
+/// evaluateAll. An error in the first block is an error response; one after the header has gone
+/// cannot be sent, so serve ends (pmsc then reports a short answer with this program's last words).
+void answer(const PointEvaluator& evaluator, const Request& request, const std::vector<Index>& points,
+            int out, BlockWriter& writer) {
+    const auto channels = static_cast<std::size_t>(evaluator.channelCount());
+    const auto frame = static_cast<Index>(request.frame);
+    const bool all = request.kind == kRequestRange && request.first == 0 &&
+                     points.size() == static_cast<std::size_t>(evaluator.pointCount());
+    const std::size_t block = all && evaluator.failThroughShape().wholeFrame
+                                  ? std::max<std::size_t>(points.size(), 1)
+                                  : kBlockPoints;
+    const Response response{kResponseValues, 0, points.size() * channels};
+    for (std::size_t at = 0; at < points.size() || at == 0; at += block) {
+        const std::size_t count = std::min(block, points.size() - at);
+        std::vector<double> values = writer.buffer();
+        values.resize(count * channels);
+        try {
+            if (count == points.size() && all)
+                evaluator.evaluateAll(frame, values.data());
+            else
+                evaluator.evaluate(frame, std::span<const Index>(points).subspan(at, count), values.data());
+        } catch (const std::exception& e) {
+            if (at > 0)
+                throw std::runtime_error(std::string("frame ") + std::to_string(frame) + ": " + e.what());
+            sendError(out, e.what());
+            return;
+        }
+        if (at == 0) writeExactly(out, &response, sizeof response);
+        writer.submit(std::move(values));
+        if (points.empty()) break;
+    }
+    writer.drain();
+}
+
 }  // namespace
 
 int serve(const PointEvaluator& evaluator, int in, int out) {
@@ -78,34 +200,10 @@ int serve(const PointEvaluator& evaluator, int in, int out) {
         hello.frames = static_cast<std::uint64_t>(evaluator.frameCount());
         writeExactly(out, &hello, sizeof hello);
 
-        const Index channels = evaluator.channelCount();
-        std::vector<double> values;
+        BlockWriter writer(out);
         for (Request request{}; readExactly(in, &request, sizeof request);) {
             const std::vector<Index> points = requestPoints(in, request, evaluator.pointCount());
-            Response response{};
-            std::string error;
-            try {
-                values.resize(points.size() * static_cast<std::size_t>(channels));
-                if (request.kind == kRequestRange && request.first == 0 &&
-                    points.size() == static_cast<std::size_t>(evaluator.pointCount()))
-                    evaluator.evaluateAll(static_cast<Index>(request.frame), values.data());
-                else
-                    evaluator.evaluate(static_cast<Index>(request.frame), points, values.data());
-            } catch (const std::exception& e) {
-                error = e.what();
-            }
-            if (error.empty()) {
-                response.status = kResponseValues;
-                response.length = values.size();
-                writeExactly(out, &response, sizeof response);
-                writeExactly(out, values.data(), values.size() * sizeof(double));
-            } else {
-                if (error.size() > kMaxErrorBytes) error.resize(kMaxErrorBytes);
-                response.status = kResponseError;
-                response.length = error.size();
-                writeExactly(out, &response, sizeof response);
-                writeExactly(out, error.data(), error.size());
-            }
+            answer(evaluator, request, points, out, writer);
         }
         return 0;
     } catch (const std::exception& e) {

@@ -94,6 +94,19 @@ TEST(ExecEvaluator, ServedSyntheticEqualsInProcessBitForBit) {
     EXPECT_EQ(child.childrenStarted(), 1u);
 }
 
+TEST(ExecEvaluator, AnAnswerStreamedInBlocksEqualsInProcessBitForBit) {
+    const std::string spec =
+        "synthetic:grid=190:frames=4:seed=2";  // 36,100 points: three blocks of pmsc serve
+    const auto local = makeEvaluator(spec);
+    ExecEvaluator child(options(kPmsc + " serve " + spec));
+    std::vector<double> a(static_cast<std::size_t>(local->pointCount() * 3)), b(a.size());
+    for (Index f = 0; f < 4; ++f) {
+        local->evaluateAll(f, a.data());
+        child.evaluateAll(f, b.data());
+        ASSERT_EQ(a, b) << "frame " << f;
+    }
+}
+
 TEST(ExecEvaluator, PythonReplayChildEqualsTheReplayEvaluator) {
     const auto dir = std::filesystem::temp_directory_path() / ("pmsc-exec-" + std::to_string(::getpid()));
     std::filesystem::create_directories(dir);
