@@ -140,34 +140,35 @@ void ExecEvaluator::fail(ChildProcess& child, const std::string& what) const {
     throw EvaluatorError(message);
 }
 
-void ExecEvaluator::request(Index frame, std::span<const Index> points, bool range, double* out) const {
+void ExecEvaluator::request(Index frame, std::span<const Index> points, bool wholeFrame, double* out) const {
     if (frame < 0 || frame >= frames_)
         throw std::out_of_range("exec: frame " + std::to_string(frame) + " is not in [0, " +
                                 std::to_string(frames_) + ")");
-    for (const Index p : points)
-        if (p < 0 || p >= points_)
-            throw std::out_of_range("exec: point " + std::to_string(p) + " is not in [0, " +
-                                    std::to_string(points_) + ")");
-    if (points.empty()) return;
-
-    // A run of consecutive points (a fail-through chunk, a whole frame) goes as a range.
-    bool consecutive = range;
-    if (!consecutive) {
+    // A whole frame, or a run of consecutive points (a fail-through chunk), goes as a range.
+    bool consecutive = wholeFrame;
+    if (!wholeFrame) {
+        for (const Index p : points)
+            if (p < 0 || p >= points_)
+                throw std::out_of_range("exec: point " + std::to_string(p) + " is not in [0, " +
+                                        std::to_string(points_) + ")");
+        if (points.empty()) return;
         consecutive = true;
         for (std::size_t i = 1; i < points.size() && consecutive; ++i)
             consecutive = points[i] == points[i - 1] + 1;
     }
+    const auto count = wholeFrame ? static_cast<std::size_t>(points_) : points.size();
+    const Index first = wholeFrame ? 0 : points.front();
     std::unique_ptr<ChildProcess> child = acquire();
     const auto deadline = Clock::now() + options_.timeout;
-    const std::size_t values = points.size() * static_cast<std::size_t>(channels_);
+    const std::size_t values = count * static_cast<std::size_t>(channels_);
     const std::string during = " during frame " + std::to_string(frame);
     std::string reported;  // an error the child answered with; it serves on
     try {
         Request req{};
         req.kind = consecutive ? kRequestRange : kRequestList;
         req.frame = frame;
-        req.count = points.size();
-        req.first = consecutive ? static_cast<std::uint64_t>(points.front()) : 0;
+        req.count = count;
+        req.first = consecutive ? static_cast<std::uint64_t>(first) : 0;
         bool open = child->writeAll(&req, sizeof req, deadline);
         if (open && !consecutive) {
             static_assert(sizeof(Index) == sizeof(std::uint64_t));
@@ -189,7 +190,7 @@ void ExecEvaluator::request(Index frame, std::span<const Index> points, bool ran
                 fail(*child, "answered garbage (status " + std::to_string(resp.status) + ")" + during);
             if (resp.length != values)
                 fail(*child, "answered " + std::to_string(resp.length) + " values for " +
-                                 std::to_string(points.size()) + " points x " + std::to_string(channels_) +
+                                 std::to_string(count) + " points x " + std::to_string(channels_) +
                                  " channels" + during);
             if (!child->readAll(out, values * sizeof(double), deadline))
                 fail(*child, "wrote too few bytes and " + child->reap(kExitGrace) + during);
@@ -204,10 +205,10 @@ void ExecEvaluator::request(Index frame, std::span<const Index> points, bool ran
     }
     for (std::size_t i = 0; i < values; ++i)
         if (!std::isfinite(out[i])) {
-            const std::size_t point = i / static_cast<std::size_t>(channels_);
+            const std::size_t at = i / static_cast<std::size_t>(channels_);
+            const Index point = consecutive ? first + static_cast<Index>(at) : points[at];
             fail(*child, "answered a non-finite value (" + std::to_string(out[i]) + ") for point " +
-                             std::to_string(points[point]) + " channel " + std::to_string(i % channels_) +
-                             during);
+                             std::to_string(point) + " channel " + std::to_string(i % channels_) + during);
         }
     release(std::move(child));
 }
@@ -216,11 +217,7 @@ void ExecEvaluator::evaluate(Index frame, std::span<const Index> points, double*
     request(frame, points, false, out);
 }
 
-void ExecEvaluator::evaluateAll(Index frame, double* out) const {
-    std::vector<Index> all(static_cast<std::size_t>(points_));
-    for (Index i = 0; i < points_; ++i) all[static_cast<std::size_t>(i)] = i;
-    request(frame, all, true, out);
-}
+void ExecEvaluator::evaluateAll(Index frame, double* out) const { request(frame, {}, true, out); }
 
 std::size_t ExecEvaluator::idleChildren() const {
     std::lock_guard lock(mutex_);

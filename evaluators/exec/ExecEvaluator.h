@@ -67,7 +67,8 @@ private:
     std::unique_ptr<ChildProcess> start(Hello& hello) const;
     std::unique_ptr<ChildProcess> acquire() const;
     void release(std::unique_ptr<ChildProcess> child) const;
-    void request(Index frame, std::span<const Index> points, bool range, double* out) const;
+    /// One request: `points`, or every point when `wholeFrame` (then `points` is not read).
+    void request(Index frame, std::span<const Index> points, bool wholeFrame, double* out) const;
     [[noreturn]] void fail(ChildProcess& child, const std::string& what) const;
 
     ExecOptions options_;
