@@ -80,12 +80,30 @@ void workers(benchmark::State& state) {
 // ratios from their medians. The child's time depends on both cores, which a virtual machine's
 // neighbours disturb now and then; one long run per case put a disturbance on one side of the ratio
 // (single 3 s runs scattered from 0.98 to 1.13 at 160,000 points).
-BENCHMARK(inProcess)->Arg(55)->Arg(400)->Unit(benchmark::kMillisecond)->MinTime(0.5)->Repetitions(7)
-    ->ReportAggregatesOnly(true)->UseRealTime();
-BENCHMARK(inChild)->Arg(55)->Arg(400)->Unit(benchmark::kMillisecond)->MinTime(0.5)->Repetitions(7)
-    ->ReportAggregatesOnly(true)->UseRealTime();
-BENCHMARK(workers)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->MinTime(0.5)->Repetitions(5)
-    ->ReportAggregatesOnly(true)->UseRealTime();
+BENCHMARK(inProcess)
+    ->Arg(55)
+    ->Arg(400)
+    ->Unit(benchmark::kMillisecond)
+    ->MinTime(0.5)
+    ->Repetitions(7)
+    ->ReportAggregatesOnly(true)
+    ->UseRealTime();
+BENCHMARK(inChild)
+    ->Arg(55)
+    ->Arg(400)
+    ->Unit(benchmark::kMillisecond)
+    ->MinTime(0.5)
+    ->Repetitions(7)
+    ->ReportAggregatesOnly(true)
+    ->UseRealTime();
+BENCHMARK(workers)
+    ->Arg(1)
+    ->Arg(2)
+    ->Unit(benchmark::kMillisecond)
+    ->MinTime(0.5)
+    ->Repetitions(5)
+    ->ReportAggregatesOnly(true)
+    ->UseRealTime();
 
 /// Each benchmark's median real time per iteration (its only run's without repetitions), by name
 /// and argument, for the ratios printed after the run.
