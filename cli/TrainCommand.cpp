@@ -110,10 +110,11 @@ ArgParser trainParser(TrainArgs& a) {
         "Larger than memory: several --frames files (shots, same points and channels) are one\n"
         "training set. When it does not fit (--memory-limit, the memory cgroup's limit, the address-space\n"
         "limit, or half the machine's memory) or with --out-of-core, the frames are streamed from disk in\n"
-        "blocks of points, and memory is bounded by, in doubles (F frames, r = min(max(max\n"
-        "basis, block), F), B = --block, K = --max-keys, R = N*C/P rows per rank, b = block rows):\n"
+        "blocks of points, and memory is bounded by, in doubles (F frames, r = max(M, block), at most\n"
+        "F, B = --block, K = --max-keys, R = N*C/P rows per rank, b = block rows):\n"
         "  5 F^2 + 3 r F + 2 R r + 4 R B + K C (F + r) + 3 b F, plus 3 N C (r + 1) on rank 0,\n"
-        "never N*C*F. --memory-limit fails at once when even one point per block cannot fit.\n"
+        "never N*C*F. M is checked against the limit once the first pass has told it, and capped to\n"
+        "fit with a warning. --memory-limit fails at once when even one point per block cannot fit.\n"
         "Under MPI (mpirun -n P pmsc train ..., or srun --mpi=pmix) each of the P ranks reads\n"
         "only its share of the points; rank 0 writes the model. Started plainly, one process.");
     parser.option(
@@ -329,17 +330,16 @@ MemoryPlan planMemory(const TrainArgs& a, const TrainSizes& sizes, int ranks) {
         limit = environment.bytes;
         limitSource = environment.source;
     }
-    auto bound = [&](Index bp) {
+    auto bound = [&](Index r, Index bp) {
         if (options.sharedChannels && c > 1)  // the C=1 training of F*C channel frames, beside the frames
-            return trainingMemoryBound(n, 1, f * c, options.maxBasis, options.block, options.maxKeys, bp,
-                                       ranks, /*rootRank=*/true) +
+            return trainingMemoryBound(n, 1, f * c, r, options.block, options.maxKeys, bp, ranks,
+                                       /*rootRank=*/true) +
                    static_cast<std::uint64_t>(8) * static_cast<std::uint64_t>(n * c * f);
-        return trainingMemoryBound(n, c, f, options.maxBasis, options.block, options.maxKeys, bp, ranks,
-                                   /*rootRank=*/true);
+        return trainingMemoryBound(n, c, f, r, options.block, options.maxKeys, bp, ranks, /*rootRank=*/true);
     };
     const double physical =
         static_cast<double>(sysconf(_SC_PHYS_PAGES)) * static_cast<double>(sysconf(_SC_PAGESIZE));
-    plan.inMemoryBytes = bound(0);
+    plan.inMemoryBytes = bound(options.maxBasis, 0);
     plan.stream = ranks > 1 || a.outOfCore || (limit > 0 && plan.inMemoryBytes > limit) ||
                   (limit == 0 && static_cast<double>(plan.inMemoryBytes) > physical / 2);
     if (plan.stream && options.sharedChannels)
@@ -347,17 +347,28 @@ MemoryPlan planMemory(const TrainArgs& a, const TrainSizes& sizes, int ranks) {
                          std::string(ranks > 1 ? "MPI started several ranks"
                                                : "the frames do not fit in memory (or the limit)"));
     if (!plan.stream) return plan;
+    // Decision: reserve for --max-basis when the limit holds it, as before any data is read nothing
+    // says M will be smaller. When it does not, reserve only for the Varimax block (or --basis)
+    // and let blocks of points take at most a quarter of the limit: M is known after the first
+    // pass, and training checks the bound at M then and caps M to the limit with a warning
+    // (TrainingOptions::memoryLimit). So streaming never refuses data that need fewer basis
+    // vectors than --max-basis, and never needs more memory than training them in memory.
+    Index planBasis = options.maxBasis;
+    if (limit > 0 && bound(planBasis, 1) > limit)
+        planBasis = std::max({options.basis, options.block, options.learnRank});
+    const bool reserved = planBasis == options.maxBasis;
     const Index defaultPoints = std::max<Index>(1, (Index{64} << 20) / (c * f * 8));
     Index bp = a.blockPoints > 0 ? a.blockPoints : defaultPoints;
     if (limit > 0) {
-        const double perPoint = static_cast<double>(bound(2)) - static_cast<double>(bound(1));
-        const double fixed = static_cast<double>(bound(1)) - perPoint;
+        const double perPoint =
+            static_cast<double>(bound(planBasis, 2)) - static_cast<double>(bound(planBasis, 1));
+        const double fixed = static_cast<double>(bound(planBasis, 1)) - perPoint;
         if (fixed + perPoint > static_cast<double>(limit)) {
             throw InputError("train: " + limitSource + " " + bytesText(static_cast<double>(limit)) +
                              " cannot be met: streaming training of " + std::to_string(f) + " frames x " +
                              std::to_string(n) + " points x " + std::to_string(c) +
                              " channels needs at least " + bytesText(fixed + perPoint) +
-                             " (lower --max-basis/--max-keys, or use more MPI ranks)");
+                             " (lower --max-keys or --block, or use more MPI ranks)");
         }
         const Index fits = static_cast<Index>((static_cast<double>(limit) - fixed) / perPoint);
         if (a.blockPoints > 0 && a.blockPoints > fits) {
@@ -365,10 +376,12 @@ MemoryPlan planMemory(const TrainArgs& a, const TrainSizes& sizes, int ranks) {
                              limitSource + " " + bytesText(static_cast<double>(limit)) + " (at most " +
                              std::to_string(fits) + ")");
         }
-        bp = std::min(bp, fits);
+        const Index quarter =
+            std::max<Index>(1, static_cast<Index>(static_cast<double>(limit) / 4 / perPoint));
+        bp = std::min(bp, reserved || a.blockPoints > 0 ? fits : std::min(fits, quarter));
     }
     plan.blockPoints = std::min(bp, std::max<Index>(1, n));
-    plan.streamBytes = bound(plan.blockPoints);
+    plan.streamBytes = bound(planBasis, plan.blockPoints);
     return plan;
 }
 
@@ -425,7 +438,8 @@ int trainModel(TrainArgs& a) {
         sizes.n = shots.front().info.points;
         sizes.c = shots.front().info.channels;
         for (const Shot& s : shots) sizes.f += s.info.frames;
-        const MemoryPlan plan = planMemory(a, sizes, comm.size());
+        MemoryPlan plan = planMemory(a, sizes, comm.size());
+        if (!options.sharedChannels) options.memoryLimit = plan.limit;  // training caps M to it
 
         Progress progress("train", !a.quiet && root);
         options.progress = [&](std::string_view stage, double done, double total) {
@@ -443,6 +457,10 @@ int trainModel(TrainArgs& a) {
         }
         const std::vector<double> cpuPerRank = cpuSecondsPerRank(comm);
         if (!root) return kExitOk;
+        if (plan.stream)  // the bound at the basis training settled on
+            plan.streamBytes = trainingMemoryBound(
+                sizes.n, sizes.c, sizes.f, std::max({model.basisSize(), options.block, options.learnRank}),
+                options.block, options.maxKeys, plan.blockPoints, comm.size(), /*rootRank=*/true);
         writeModel(outPath, model);
         progress.finish();
         const double seconds =

@@ -274,6 +274,9 @@ struct Trainer {
     void chooseBasisSize();
     /// M from the largest point error of each basis size (--basis-max-error).
     void basisSizeFromPointErrors();
+    /// The most columns of U (`wanted`, or fewer) that options.memoryLimit holds at this block
+    /// size, with a warning when it is fewer. @throws InputError when not even the Varimax block fits.
+    Index basisColumnsThatFit(Index wanted, const char* rule);
     /// Key points (section 4) by teleconnection.
     void teleconnectionKeys();
     /// Key points (section 4) by Q-DEIM, on rank 0.
@@ -336,6 +339,34 @@ void Trainer::subspace() {
     progress("svd", 1, 1);
 }
 
+Index Trainer::basisColumnsThatFit(Index wanted, const char* rule) {
+    if (options.memoryLimit == 0) return wanted;
+    // In memory the frames are one block of every row (the bound counts them as such).
+    const bool inMemory = dynamic_cast<const MatrixBlocks*>(&q) != nullptr;
+    const Index blockPoints = inMemory ? 0 : q.blockPoints();
+    const auto bound = [&](Index r) {
+        return trainingMemoryBound(n, channels, f, r, options.block, options.maxKeys, blockPoints,
+                                   comm.size(),
+                                   /*rootRank=*/true);  // every rank takes the same decision
+    };
+    const Index least = std::min(std::max(options.block, options.learnRank), wanted);
+    if (bound(wanted) <= options.memoryLimit) return wanted;
+    if (bound(least) > options.memoryLimit)
+        throw InputError("train: the memory limit " + std::to_string(options.memoryLimit >> 20) +
+                         " MiB cannot hold even " + std::to_string(least) + " basis vectors of " +
+                         std::to_string(n) + " points x " + std::to_string(channels) + " channels (needs " +
+                         std::to_string(bound(least) >> 20) + " MiB); lower --block or raise the limit");
+    Index lo = least, hi = wanted;  // bound(lo) fits, bound(hi) does not
+    while (hi - lo > 1) {
+        const Index mid = lo + (hi - lo) / 2;
+        (bound(mid) <= options.memoryLimit ? lo : hi) = mid;
+    }
+    report.warnings.push_back(std::string(rule) + " asks for " + std::to_string(wanted) +
+                              " basis vectors; the memory limit holds " + std::to_string(lo) +
+                              " (raise the limit for the rest)");
+    return lo;
+}
+
 void Trainer::chooseBasisSize() {
     if (options.basis > 0) {
         m = std::min(options.basis, available);
@@ -354,9 +385,18 @@ void Trainer::chooseBasisSize() {
                                       " basis vectors (captured " + num(got) + "); raise --max-basis?");
         }
     } else {
+        available = basisColumnsThatFit(available, "--basis-max-error");
         basisSizeFromPointErrors();
     }
     report.requestedBasis = m;
+    // Decision: the memory is checked here, after the Gram pass has told M and before U and the
+    // basis (the arrays of N*C x M) exist, so streaming reserves for the basis the data need;
+    // the plan made before training reserved only for the Varimax block.
+    if (options.basis > 0 || options.energy > 0 || options.basisMaxError <= 0) {
+        const Index columns = basisColumnsThatFit(std::max({m, options.block, options.learnRank}),
+                                                  options.basis > 0 ? "--basis" : "the energy rule");
+        m = std::min(m, columns);
+    }
     formLeftVectors(q, svd, std::max(m, options.block));
     basis = svd.u.leftCols(m);
 }

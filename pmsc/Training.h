@@ -9,6 +9,7 @@
 #include "pmsc/RegionLearning.h"
 #include "pmsc/RowBlocks.h"
 
+#include <cstdint>
 #include <functional>
 #include <stdexcept>
 #include <string>
@@ -29,6 +30,10 @@ struct TrainingOptions {
     double basisMaxError = 0;       ///< smallest M whose largest point projection error <= this (data units)
     Index maxBasis = 256;           ///< cap on M, whatever the rule (and the SVD's target rank)
     double defaultEnergy = 0.9999;  ///< used when none of the three above is set
+    /// Bytes training may hold (per rank, trainingMemoryBound()); 0 = none. Once the Gram pass has
+    /// told how many basis vectors the rule above needs, M is capped (with a warning) where the
+    /// bound at M would pass it: the memory follows the basis the data need, not maxBasis.
+    std::uint64_t memoryLimit = 0;
 
     // --- key points (section 4) ---
     Selector selector = Selector::Teleconnection;

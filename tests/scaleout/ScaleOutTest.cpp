@@ -99,6 +99,59 @@ TEST(OutOfCore, StreamedBlocksTrainTheInMemoryModel) {
     }
 }
 
+TEST(OutOfCore, TheMemoryLimitCapsTheBasisOnceTheDataTellM) {
+    TempDir dir;
+    const std::string path = makeFrames(dir, "cap.npy", 20, 90, 5);
+    TrainingOptions o = smallOptions();
+    o.maxBasis = 256;  // the default: the memory must follow M, not this
+    o.energy = 0.999999;
+    o.block = 4;  // so the data's M (9 here) is above the Varimax block, whose vectors are always formed
+    const Model free = train(readFrames(path).frames, o);
+    const Index m = free.basisSize();
+    ASSERT_GT(m, o.block + 2) << "the data need too few basis vectors for this test";
+    const Index bp = 64;
+    auto bound = [&](Index r) { return trainingMemoryBound(400, 3, 90, r, o.block, o.maxKeys, bp, 1, true); };
+    {
+        // Exactly what the data's M needs: the same model, no warning.
+        TrainingOptions limited = o;
+        limited.memoryLimit = bound(m);
+        NpyBlocks blocks(openShots({path}), {0, 400}, bp);
+        SingleProcess one;
+        TrainingReport report;
+        expectSameModel(free, train(blocks, one, limited, &report), "limit at M");
+        for (const auto& w : report.warnings) EXPECT_EQ(w.find("memory limit"), std::string::npos) << w;
+        EXPECT_GT(bound(o.maxBasis), limited.memoryLimit) << "the limit would have held --max-basis";
+    }
+    {
+        // Two vectors fewer fit: M is capped there, with a warning naming the limit.
+        TrainingOptions limited = o;
+        limited.memoryLimit = bound(m - 2);
+        NpyBlocks blocks(openShots({path}), {0, 400}, bp);
+        SingleProcess one;
+        TrainingReport report;
+        const Model capped = train(blocks, one, limited, &report);
+        EXPECT_EQ(capped.basisSize(), m - 2);
+        bool warned = false;
+        for (const auto& w : report.warnings)
+            warned = warned || w.find("the memory limit holds") != std::string::npos;
+        EXPECT_TRUE(warned);
+    }
+    {
+        // Not even the Varimax block fits: one line, before the basis is formed.
+        TrainingOptions limited = o;
+        limited.memoryLimit = bound(o.block) - 1;
+        NpyBlocks blocks(openShots({path}), {0, 400}, bp);
+        SingleProcess one;
+        try {
+            train(blocks, one, limited);
+            FAIL() << "a limit below the Varimax block trained";
+        } catch (const InputError& e) {
+            EXPECT_NE(std::string(e.what()).find("cannot hold even 4 basis vectors"), std::string::npos)
+                << e.what();
+        }
+    }
+}
+
 TEST(OutOfCore, Float32ShotsStreamLikeInMemory) {
     TempDir dir;
     const std::string path = makeFrames(dir, "train32.npy", 20, 90, 3, "float32");
@@ -377,6 +430,32 @@ TEST(Cgroup, ATrainingSetTwiceTheLimitStreamsInsideAMemoryCgroup) {
     const RunResult f = runPmsc(dir, free);
     ASSERT_EQ(f.exitCode, 0) << f.err;
     expectSameModel(readModel(dir.file("free.pmsc")), readModel(dir.file("limited.pmsc")), "cgroup");
+
+    // Default options (--max-basis 256) in a cgroup of half what in-memory training of these frames
+    // needs at the basis they need: the plan reserves for that basis, not for 256, so it streams.
+    const RunResult d = runPmsc(dir, {"train", "--frames", path, "--out", dir.file("defaults-free.pmsc"),
+                                      "--memory-limit", "64G", "--quiet"});
+    ASSERT_EQ(d.exitCode, 0) << d.err;
+    const Model defaults = readModel(dir.file("defaults-free.pmsc"));
+    const TrainingOptions o;
+    const std::uint64_t inMemory =
+        trainingMemoryBound(Index(grid) * grid, 3, frames, std::max(defaults.basisSize(), o.block), o.block,
+                            o.maxKeys, 0, 1, true);
+    const std::string half = makeMemoryCgroup(inMemory / 2);
+    ASSERT_FALSE(half.empty());
+    const RunResult h =
+        runPmsc(dir, {"train", "--frames", path, "--out", dir.file("defaults-half.pmsc"), "--quiet"},
+                "sh -c 'echo $$ > " + half + "/cgroup.procs && exec \"$0\" \"$@\"'");
+    std::ifstream halfPeakFile(half + "/memory.max_usage_in_bytes");
+    double halfPeak = 0;
+    halfPeakFile >> halfPeak;
+    ::rmdir(half.c_str());
+    ASSERT_EQ(h.exitCode, 0) << h.err;
+    EXPECT_NE(h.out.find("streamed from disk"), std::string::npos) << h.out;
+    std::printf("defaults: M = %lld, in memory %.1f MiB, cgroup %.1f MiB, peak %.1f MiB\n%s",
+                static_cast<long long>(defaults.basisSize()), inMemory / 1048576.0, inMemory / 2 / 1048576.0,
+                halfPeak / 1048576.0, h.out.c_str());
+    expectSameModel(defaults, readModel(dir.file("defaults-half.pmsc")), "defaults in half the memory");
 }
 
 }  // namespace
