@@ -1,6 +1,7 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <string>
 
@@ -21,5 +22,14 @@ struct MemoryLimit {
 /// to catch, so what would not fit must be known before it is allocated.
 /// @param proc, sys  roots of /proc and of the file system (tests give a made-up tree).
 MemoryLimit environmentMemoryLimit(const std::string& proc = "/proc", const std::string& sys = "");
+
+/// What a run's frame buffers (engine::EngineOptions::memoryLimit) may take of `limit`, the memory
+/// left once the model and the evaluator are loaded: half. Decision: the other half is for what
+/// the engine does not count, the evaluator's per-call workspace (a gather's paths, a rig's
+/// pose), the output writer and the allocator's slack. 0 stays 0 (no limit); a limit already
+/// used up gives 1 byte, which the engine refuses with one line.
+inline std::uint64_t frameBufferBudget(std::uint64_t limit) {
+    return limit == 0 ? 0 : std::max<std::uint64_t>(1, limit / 2);
+}
 
 }  // namespace pmsc::app

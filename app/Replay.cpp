@@ -136,6 +136,7 @@ ReplayResult replay(const Model& model, const PointEvaluator& recorded, const Re
     engineOptions.keepPointMultiplication = true;  // the report needs PM's error on every frame
     engineOptions.cancel = options.cancel;
     engineOptions.localFailThrough = options.localFailThrough;
+    engineOptions.memoryLimit = options.memoryLimit;
     if (options.progress) {
         engineOptions.progress = [&](const engine::Progress& p) {
             options.progress(p.framesDone, p.framesTotal);
@@ -147,6 +148,7 @@ ReplayResult replay(const Model& model, const PointEvaluator& recorded, const Re
     const engine::RunStats stats = engine.run({0, frames, 1}, sink);
     result.threads = stats.threads;
     result.localFailThrough = engine.localFailThrough();
+    result.framesInFlight = stats.maxFramesInFlight;
     result.seconds = stats.wallSeconds;
     return result;
 }

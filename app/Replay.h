@@ -39,6 +39,8 @@ struct ReplayOptions {
     int threads = 0;
     /// Local fail-through for models with regions (`--whole-frame-fail-through` turns it off).
     bool localFailThrough = true;
+    /// Bytes the frames in flight may hold (engine::EngineOptions::memoryLimit); 0 = no limit.
+    std::uint64_t memoryLimit = 0;
     /// Set by another thread (SIGINT) to stop; replay() then throws pmsc::Cancelled.
     const std::atomic<bool>* cancel = nullptr;
     /// Called now and then with (frames done, frames total), from one thread at a time.
@@ -57,6 +59,7 @@ struct ReplayResult {
     double seconds = 0;               ///< wall time of the per-frame loop (input already read)
     int threads = 0;                  ///< worker threads allowed
     bool localFailThrough = false;    ///< frames were routed region by region when they did not hit
+    Index framesInFlight = 0;         ///< the engine's bound (cut by ReplayOptions::memoryLimit)
 };
 
 /// Per-worker buffers, sized for one frame of a model.

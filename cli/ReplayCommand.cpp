@@ -1,5 +1,6 @@
 // `pmsc replay`: recorded frames through a model's soft cache, with a report of what it did.
 #include "app/ExitCodes.h"
+#include "app/MemoryLimit.h"
 #include "app/Replay.h"
 #include "cli/Args.h"
 #include "cli/Commands.h"
@@ -161,6 +162,8 @@ int replayRecorded(const ReplayArgs& a, const Model& model) {
                      "model=" + modelPath + " frames=" + framesPath);
         options.keep = &*keep;
     }
+    // The farm's limit (memory cgroup, ulimit -v), read with the model and the frames mapped.
+    options.memoryLimit = app::frameBufferBudget(app::environmentMemoryLimit().bytes);
     Progress progress("replay", !a.quiet);
     options.cancel = &interruptFlag();
     options.progress = [&](Index done, Index total) {

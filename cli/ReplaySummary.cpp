@@ -35,7 +35,7 @@ void printReplaySummary(std::ostream& out, const Model& model, const app::Replay
         << model.channels << " through M = " << model.basisSize() << ", K = " << model.keyCount()
         << " keys in " << fmt("%.3f", result.seconds) << " s ("
         << fmt("%.1f", frames / std::max(result.seconds, 1e-9)) << " frames/s, " << result.threads
-        << " threads)\n";
+        << " threads, " << result.framesInFlight << " frames in flight)\n";
     out << "  eps         [" << fmt("%.6g", result.epsMin) << ", " << fmt("%.6g", result.epsMax)
         << "] key RMS ("
         << (epsOverridden         ? "--eps"

@@ -3,6 +3,7 @@
 #include "cli/RunCommand.h"
 
 #include "app/ExitCodes.h"
+#include "app/MemoryLimit.h"
 #include "cli/Args.h"
 #include "cli/Commands.h"
 #include "cli/CrossRun.h"
@@ -176,6 +177,7 @@ EngineOutcome runEngineGroups(const Model& model, const PointEvaluator& evaluato
     engineOptions.threads = options.threads;
     engineOptions.cancel = options.cancel;
     engineOptions.localFailThrough = !options.wholeFrameFailThrough;
+    engineOptions.memoryLimit = options.memoryLimit;
     Progress progress("run", !options.quiet, options.logSeconds);
     Index doneBefore = 0;
     auto lastShown = Clock::now() - std::chrono::seconds(1);
@@ -267,6 +269,7 @@ nlohmann::json statsJson(const Model& model, const RunOptions& options, const Fr
     j["out"] = options.outDir;
     j["format"] = output.extension().substr(1);
     j["threads"] = options.threads;
+    j["frame_buffer_budget_bytes"] = options.memoryLimit;
     j["force"] = options.force;
     j["frames_evaluated"] = report.evaluated;
     j["frames_skipped"] = report.skipped;
@@ -417,6 +420,8 @@ int runRun(const std::vector<std::string>& args) {
 
     const Model model = readModel(o.modelPath);
     const std::unique_ptr<PointEvaluator> evaluator = evaluators::makeEvaluator(o.evaluatorSpec);
+    // The farm's limit (memory cgroup, ulimit -v), read with the model and the evaluator loaded.
+    o.memoryLimit = app::frameBufferBudget(app::environmentMemoryLimit().bytes);
     if (model.cross) {
         // Cross point multiplication: the evaluator is the control's; targets are written.
         const RunReport r = runCrossFrames(model, *evaluator, o);

@@ -21,6 +21,7 @@ struct RunOptions {
     NpyDtype dtype = NpyDtype::Float64;  ///< of .npy frames
     std::string statsPath;               ///< empty: OUT/pmsc-run.<A-B>.json
     int threads = 0;                     ///< 0: every core
+    std::uint64_t memoryLimit = 0;       ///< bytes the frames in flight may hold; 0 = no limit
     bool force = false;                  ///< redo frames whose output is already valid
     bool quiet = false;                  ///< no progress display
     bool wholeFrameFailThrough = false;  ///< models with regions: no local fail-through

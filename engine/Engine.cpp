@@ -143,6 +143,21 @@ struct Engine::Impl {
           maxInFlight(options.maxFramesInFlight > 0 ? options.maxFramesInFlight : 2 * Index(threads)),
           arena(threads) {
         if (m.regions && options.localFailThrough && plan.allPoints && shape.cheapSubsets) regions.emplace(m);
+        if (options.memoryLimit > 0) fitFramesInFlight();
+    }
+
+    /// Cuts maxInFlight to the frame buffers options.memoryLimit holds, measured on the first slot.
+    void fitFramesInFlight() {
+        takeSlots(1);
+        const std::uint64_t perFrame = pool.front()->bytes();
+        const auto fit = static_cast<Index>(options.memoryLimit / perFrame);
+        if (fit < 1) {
+            throw InputError("engine: the memory limit of " + std::to_string(options.memoryLimit >> 10) +
+                             " KiB cannot hold one frame in flight (" + std::to_string(perFrame >> 10) +
+                             " KiB: " + std::to_string(plan.outputCount()) + " points x " +
+                             std::to_string(model.channels) + " channels and their workspace)");
+        }
+        maxInFlight = std::min(maxInFlight, fit);
     }
 
     /// Validates what the members' constructors do not, before any of them runs.
@@ -186,6 +201,10 @@ Engine::~Engine() = default;
 
 const RunStats& Engine::lastStats() const { return impl_->last; }
 const EngineOptions& Engine::options() const { return impl_->options; }
+std::uint64_t Engine::frameBytes() const {
+    impl_->takeSlots(1);
+    return impl_->pool.front()->bytes();
+}
 const std::vector<Index>& Engine::outputPoints() const { return impl_->plan.outputPoints; }
 bool Engine::localFailThrough() const { return impl_->regions.has_value(); }
 

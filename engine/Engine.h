@@ -9,6 +9,7 @@
 #include "pmsc/PointEvaluator.h"
 
 #include <atomic>
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <optional>
@@ -39,6 +40,10 @@ struct EngineOptions {
     /// Frames between the source and the sink at once; 0 = 2 x threads. Memory is
     /// this many frame buffers, however long the range.
     Index maxFramesInFlight = 0;
+    /// Bytes the frame buffers may hold; 0 = no limit. The frames in flight are cut to what fits
+    /// (at least one): a farm task's memory cgroup then bounds the run however many threads the
+    /// node has. The engine's constructor throws InputError when not even one frame fits.
+    std::uint64_t memoryLimit = 0;
     FailurePolicy failurePolicy = FailurePolicy::StopRun;
     /// Output points per fail-through branch; 0 = automatic: about 64 branches per frame, at
     /// least 256 points each. The automatic size depends on the point count only, never on the
@@ -98,6 +103,9 @@ public:
     /// Stats of the last run, also when it threw.
     const RunStats& lastStats() const;
     const EngineOptions& options() const;
+    /// Bytes one frame in flight holds (its buffers); the memory of a run is about this times
+    /// RunStats::maxFramesInFlight, beside the model and the evaluator.
+    std::uint64_t frameBytes() const;
     /// Points of each output frame (all N, or EngineOptions::pointsWanted).
     const std::vector<Index>& outputPoints() const;
     /// Whether runs route frames region by region (a model with regions, and the options and the

@@ -31,6 +31,13 @@ void FrameSlot::enableRegions(const RegionMultiplier& regions, Index points, Ind
     localFull.assign(size_t(points * c), 0.0);
 }
 
+std::size_t FrameSlot::bytes() const {
+    const auto of = [](const auto& v) { return v.capacity() * sizeof(v[0]); };
+    return sizeof(*this) + of(keyValues) + of(coords) + of(values) + of(scratch) + of(pmValues) +
+           of(regionKeyValues) + of(regionCoords) + of(regionKeyErrors) + of(regionStates) +
+           of(regionWeights) + of(pointWeights) + of(localPoints) + of(localFull);
+}
+
 Index FrameSlot::liveCount() { return gLiveSlots.load(std::memory_order_relaxed); }
 
 void FrameSlot::reset(Index sequenceNumber, Index frameNumber) {

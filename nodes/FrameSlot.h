@@ -30,6 +30,8 @@ struct FrameSlot {
     FrameSlot(const FrameSlot&) = delete;
     FrameSlot& operator=(const FrameSlot&) = delete;
 
+    /// Bytes the slot's buffers hold (what one more frame in flight costs).
+    std::size_t bytes() const;
     /// Prepares the slot for a new frame (keeps the buffers' memory).
     void reset(Index sequenceNumber, Index frameNumber);
 

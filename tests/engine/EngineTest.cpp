@@ -113,6 +113,36 @@ TEST_F(Fixture, NeverHasMoreFramesInFlightThanTheBound) {
     }
 }
 
+TEST_F(Fixture, AMemoryLimitCutsTheFramesInFlightAndNotTheResults) {
+    EngineOptions o = options(2);
+    o.maxFramesInFlight = 8;
+    Engine free(model, evaluator, o);
+    CheckingSink expected;
+    RunStats freeStats;
+    withWatchdog(60, "run", [&] { freeStats = free.run({0, 40, 1}, expected); });
+    EXPECT_EQ(freeStats.maxFramesInFlight, 8);
+    // Room for three frame buffers and a half: three in flight, the same frames out.
+    const std::uint64_t perFrame = free.frameBytes();
+    ASSERT_GT(perFrame, std::uint64_t(model.points * model.channels * 8));
+    o.memoryLimit = perFrame * 7 / 2;
+    Engine limited(model, evaluator, o);
+    CheckingSink got;
+    RunStats stats;
+    withWatchdog(60, "run", [&] { stats = limited.run({0, 40, 1}, got); });
+    EXPECT_EQ(stats.maxFramesInFlight, 3);
+    EXPECT_LE(stats.peakFramesInFlight, 3);
+    EXPECT_EQ(got.frames, expected.frames);
+    EXPECT_EQ(got.values, expected.values);
+    o.memoryLimit = perFrame - 1;  // not one frame
+    try {
+        Engine none(model, evaluator, o);
+        FAIL() << "an engine whose limit holds no frame was made";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("cannot hold one frame in flight"), std::string::npos)
+            << e.what();
+    }
+}
+
 TEST_F(Fixture, AnExceptionOnARandomFrameEndsTheRunWithFrameAndNode) {
     std::mt19937 rng(1234);
     for (int trial = 0; trial < 6; ++trial) {

@@ -458,5 +458,49 @@ TEST(Cgroup, ATrainingSetTwiceTheLimitStreamsInsideAMemoryCgroup) {
     expectSameModel(defaults, readModel(dir.file("defaults-half.pmsc")), "defaults in half the memory");
 }
 
+TEST(Cgroup, ReplayCutsItsFramesInFlightToTheCgroup) {
+    TempDir dir;
+    const int grid = 230, frames = 40;  // 52,900 points x 3: a frame's buffers are about 4 MB
+    const std::string path = makeFrames(dir, "shot.npy", grid, frames, 3);
+    const RunResult t =
+        runPmsc(dir, {"train", "--frames", path, "--out", dir.file("m.pmsc"), "--max-basis", "16", "--block",
+                      "8", "--max-keys", "24", "--memory-limit", "64G", "--quiet"});
+    ASSERT_EQ(t.exitCode, 0) << t.err;
+    auto inFlight = [](const std::string& out) {
+        const auto at = out.find(" frames in flight)");
+        if (at == std::string::npos) return -1;
+        const auto start = out.rfind(", ", at);
+        return std::stoi(out.substr(start + 2, at - start - 2));
+    };
+    const std::vector<std::string> replay = {"replay",    "--model", dir.file("m.pmsc"), "--frames", path,
+                                             "--threads", "8",       "--quiet"};
+    auto free = replay, limited = replay;
+    free.insert(free.end(), {"--report", dir.file("free.json")});
+    limited.insert(limited.end(), {"--report", dir.file("limited.json")});
+    const RunResult f = runPmsc(dir, free);
+    ASSERT_EQ(f.exitCode, 0) << f.err;
+    EXPECT_EQ(inFlight(f.out), 16) << f.out;  // 2 x threads
+    const std::string cgroup = ::geteuid() == 0 ? makeMemoryCgroup(64u << 20) : "";
+    if (cgroup.empty()) {
+        if (std::getenv("CI"))
+            FAIL() << "no memory cgroup could be made (needs root and a memory controller)";
+        GTEST_SKIP() << "no memory cgroup could be made (needs root and a memory controller)";
+    }
+    const RunResult r =
+        runPmsc(dir, limited, "sh -c 'echo $$ > " + cgroup + "/cgroup.procs && exec \"$0\" \"$@\"'");
+    ::rmdir(cgroup.c_str());
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    std::printf("%s", r.out.c_str());
+    EXPECT_GE(inFlight(r.out), 1) << r.out;
+    EXPECT_LT(inFlight(r.out), 16) << r.out;
+    // The same decisions, frame by frame: the frames in flight change nothing but memory.
+    std::ifstream a(dir.file("free.json")), b(dir.file("limited.json"));
+    std::stringstream ta, tb;
+    ta << a.rdbuf();
+    tb << b.rdbuf();
+    const auto framesOf = [](const std::string& text) { return text.substr(text.find("\"frames\": [")); };
+    EXPECT_EQ(framesOf(ta.str()), framesOf(tb.str()));
+}
+
 }  // namespace
 }  // namespace pmsc::test
