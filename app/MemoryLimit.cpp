@@ -68,6 +68,16 @@ std::string cgroupPath(const std::string& proc, bool v2) {
     return "";
 }
 
+/// A field of a cgroup's memory.stat ("inactive_file 123"), 0 when absent.
+std::uint64_t statField(const fs::path& file, const std::string& name) {
+    std::ifstream in(file);
+    std::string key;
+    std::uint64_t value = 0;
+    while (in >> key >> value)
+        if (key == name) return value;
+    return 0;
+}
+
 void tighten(MemoryLimit& best, std::uint64_t bytes, const std::string& source) {
     if (best.bytes == 0 || bytes < best.bytes) best = {bytes == 0 ? 1 : bytes, source};
 }
@@ -83,6 +93,11 @@ void cgroupLimits(const Mount& mount, const std::string& path, MemoryLimit& best
         std::uint64_t limit = 0, usage = 0;
         if (readBytes(dir / limitFile, limit) && limit < kUnlimited) {
             readBytes(dir / usageFile, usage);
+            // Usage counts the page cache; its inactive part (a shot read once) is reclaimed before
+            // the kernel kills anything, so it is room, not use.
+            const std::uint64_t reclaimable =
+                statField(dir / "memory.stat", mount.v2 ? "inactive_file" : "total_inactive_file");
+            usage -= std::min(usage, reclaimable);
             tighten(best, limit > usage ? limit - usage : 0,
                     std::string("the cgroup memory limit (") + (dir / limitFile).string() + ")");
         }

@@ -17,7 +17,9 @@ struct MemoryLimit {
 ///  - the address-space limit (`ulimit -v`, RLIMIT_AS) less the address space mapped now;
 ///  - the memory cgroup it runs in (Slurm's --mem, a container's limit): cgroup v2's memory.max less
 ///    memory.current, and cgroup v1's memory.limit_in_bytes less memory.usage_in_bytes, for its own
-///    cgroup and every ancestor up to the hierarchy's mount point (a parent's limit binds too).
+///    cgroup and every ancestor up to the hierarchy's mount point (a parent's limit binds too);
+///    the inactive page cache (memory.stat's inactive_file, v1 total_inactive_file) does not count
+///    as used, since the kernel reclaims it before it kills.
 /// A farm task is held by the cgroup: the kernel kills it past the limit (signal 9) with no error
 /// to catch, so what would not fit must be known before it is allocated.
 /// @param proc, sys  roots of /proc and of the file system (tests give a made-up tree).

@@ -6,7 +6,7 @@
 //    and at 160,000 points (400 x 400): exec_over_in_process per size (goal at 160,000: <= 1.10);
 //  - a child that costs about 1 ms a request (pmsc_exec_ripple --work-us 1000), 200 requests from
 //    2 worker threads against 1: workers_2_over_1 throughput (goal >= 1.8 on two free cores).
-// Prints one JSON object after the benchmarks (about 40 s). Run: build/bin/pmsc_exec_bench
+// Prints one JSON object after the benchmarks (about 30 s). Run: build/bin/pmsc_exec_bench
 #include "evaluators/EvaluatorRegistry.h"
 #include "evaluators/exec/ExecEvaluator.h"
 
@@ -78,8 +78,8 @@ void workers(benchmark::State& state) {
 
 // Decision: 7 repetitions of 0.5 s, run in random interleaved order (main turns it on), and the
 // ratios from their medians. The child's time depends on both cores, which a virtual machine's
-// neighbours disturb now and then; one long run per case put a disturbance on one side of the ratio
-// (single 3 s runs scattered from 0.98 to 1.13 at 160,000 points).
+// neighbours disturb now and then; interleaved repetitions put a disturbance on both sides of a
+// ratio, and the median drops the repetition it hit.
 BENCHMARK(inProcess)
     ->Arg(55)
     ->Arg(400)

@@ -23,6 +23,7 @@
 #include <ctime>
 #include <fstream>
 #include <iostream>
+#include <limits>
 #include <memory>
 #include <optional>
 
@@ -317,7 +318,8 @@ struct MemoryPlan {
 };
 
 /// Decides in memory or streamed, and how large a block; fails at once when the limit cannot be met.
-MemoryPlan planMemory(const TrainArgs& a, const TrainSizes& sizes, int ranks) {
+MemoryPlan planMemory(const TrainArgs& a, const TrainSizes& sizes, Communicator& comm) {
+    const int ranks = comm.size();
     const TrainingOptions& options = a.options;
     const Index n = sizes.n, c = sizes.c, f = sizes.f;
     MemoryPlan plan;
@@ -329,6 +331,17 @@ MemoryPlan planMemory(const TrainArgs& a, const TrainSizes& sizes, int ranks) {
         const app::MemoryLimit environment = app::environmentMemoryLimit();
         limit = environment.bytes;
         limitSource = environment.source;
+    }
+    // Every rank plans with the smallest limit of all (each reads its own cgroup and usage), so
+    // they take the same decisions and meet in the same collectives. The exchange is as doubles:
+    // whole bytes up to 2^53 (8 PiB) are exact.
+    if (ranks > 1) {
+        double tightest = limit == 0 ? -std::numeric_limits<double>::infinity() : -static_cast<double>(limit);
+        maxOverRanks(comm, &tightest, 1);
+        if (std::isfinite(tightest) && static_cast<std::uint64_t>(-tightest) != limit) {
+            limit = static_cast<std::uint64_t>(-tightest);
+            limitSource = "the tightest memory limit of the MPI ranks";
+        }
     }
     auto bound = [&](Index r, Index bp) {
         if (options.sharedChannels && c > 1)  // the C=1 training of F*C channel frames, beside the frames
@@ -353,10 +366,10 @@ MemoryPlan planMemory(const TrainArgs& a, const TrainSizes& sizes, int ranks) {
     // pass, and training checks the bound at M then and caps M to the limit with a warning
     // (TrainingOptions::memoryLimit). So streaming never refuses data that need fewer basis
     // vectors than --max-basis, and never needs more memory than training them in memory.
-    Index planBasis = options.maxBasis;
+    Index planBasis = std::max(options.maxBasis, options.learnRank);
     if (limit > 0 && bound(planBasis, 1) > limit)
         planBasis = std::max({options.basis, options.block, options.learnRank});
-    const bool reserved = planBasis == options.maxBasis;
+    const bool reserved = planBasis >= options.maxBasis;
     const Index defaultPoints = std::max<Index>(1, (Index{64} << 20) / (c * f * 8));
     Index bp = a.blockPoints > 0 ? a.blockPoints : defaultPoints;
     if (limit > 0) {
@@ -438,7 +451,7 @@ int trainModel(TrainArgs& a) {
         sizes.n = shots.front().info.points;
         sizes.c = shots.front().info.channels;
         for (const Shot& s : shots) sizes.f += s.info.frames;
-        MemoryPlan plan = planMemory(a, sizes, comm.size());
+        MemoryPlan plan = planMemory(a, sizes, comm);
         if (!options.sharedChannels) options.memoryLimit = plan.limit;  // training caps M to it
 
         Progress progress("train", !a.quiet && root);

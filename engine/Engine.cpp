@@ -25,6 +25,7 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cstdio>
 #include <optional>
 #include <span>
 #include <string>
@@ -117,6 +118,7 @@ struct Engine::Impl {
     std::optional<RegionMultiplier> regions;  ///< set when frames are routed region by region
     int threads;
     Index maxInFlight;
+    std::uint64_t slotBytes = 0;  ///< FrameSlot::bytes() of one slot
     tbb::task_arena arena;
     std::vector<std::unique_ptr<FrameSlot>> pool;  ///< frame slots, reused run after run
 #if defined(__SANITIZE_THREAD__)
@@ -143,19 +145,25 @@ struct Engine::Impl {
           maxInFlight(options.maxFramesInFlight > 0 ? options.maxFramesInFlight : 2 * Index(threads)),
           arena(threads) {
         if (m.regions && options.localFailThrough && plan.allPoints && shape.cheapSubsets) regions.emplace(m);
+        // The first frame's buffers are made now, to measure what a frame in flight costs.
+        takeSlots(1);
+        slotBytes = pool.front()->bytes();
         if (options.memoryLimit > 0) fitFramesInFlight();
     }
 
-    /// Cuts maxInFlight to the frame buffers options.memoryLimit holds, measured on the first slot.
+    /// Cuts maxInFlight to the frame buffers options.memoryLimit holds.
     void fitFramesInFlight() {
-        takeSlots(1);
-        const std::uint64_t perFrame = pool.front()->bytes();
-        const auto fit = static_cast<Index>(options.memoryLimit / perFrame);
+        const auto fit = static_cast<Index>(options.memoryLimit / slotBytes);
         if (fit < 1) {
-            throw InputError("engine: the memory limit of " + std::to_string(options.memoryLimit >> 10) +
-                             " KiB cannot hold one frame in flight (" + std::to_string(perFrame >> 10) +
-                             " KiB: " + std::to_string(plan.outputCount()) + " points x " +
-                             std::to_string(model.channels) + " channels and their workspace)");
+            char text[200];
+            std::snprintf(
+                text, sizeof text,
+                "engine: %.1f MiB for frame buffers cannot hold one frame in flight (%.1f MiB: %lld "
+                "points x %lld channels and their workspace); give the task more memory",
+                static_cast<double>(options.memoryLimit) / 1048576.0,
+                static_cast<double>(slotBytes) / 1048576.0, static_cast<long long>(plan.outputCount()),
+                static_cast<long long>(model.channels));
+            throw InputError(text);
         }
         maxInFlight = std::min(maxInFlight, fit);
     }
@@ -201,10 +209,7 @@ Engine::~Engine() = default;
 
 const RunStats& Engine::lastStats() const { return impl_->last; }
 const EngineOptions& Engine::options() const { return impl_->options; }
-std::uint64_t Engine::frameBytes() const {
-    impl_->takeSlots(1);
-    return impl_->pool.front()->bytes();
-}
+std::uint64_t Engine::frameBytes() const { return impl_->slotBytes; }
 const std::vector<Index>& Engine::outputPoints() const { return impl_->plan.outputPoints; }
 bool Engine::localFailThrough() const { return impl_->regions.has_value(); }
 

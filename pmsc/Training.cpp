@@ -339,6 +339,14 @@ void Trainer::subspace() {
     progress("svd", 1, 1);
 }
 
+namespace {
+std::string mebibytes(std::uint64_t bytes) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%.1f MiB", static_cast<double>(bytes) / 1048576.0);
+    return text;
+}
+}  // namespace
+
 Index Trainer::basisColumnsThatFit(Index wanted, const char* rule) {
     if (options.memoryLimit == 0) return wanted;
     // In memory the frames are one block of every row (the bound counts them as such).
@@ -352,18 +360,18 @@ Index Trainer::basisColumnsThatFit(Index wanted, const char* rule) {
     const Index least = std::min(std::max(options.block, options.learnRank), wanted);
     if (bound(wanted) <= options.memoryLimit) return wanted;
     if (bound(least) > options.memoryLimit)
-        throw InputError("train: the memory limit " + std::to_string(options.memoryLimit >> 20) +
-                         " MiB cannot hold even " + std::to_string(least) + " basis vectors of " +
-                         std::to_string(n) + " points x " + std::to_string(channels) + " channels (needs " +
-                         std::to_string(bound(least) >> 20) + " MiB); lower --block or raise the limit");
+        throw InputError("train: the memory limit " + mebibytes(options.memoryLimit) + " cannot hold even " +
+                         std::to_string(least) + " basis vectors of " + std::to_string(n) + " points x " +
+                         std::to_string(channels) + " channels (needs " + mebibytes(bound(least)) +
+                         "); lower --block, --learn-rank, --max-keys or --block-points, or raise the limit");
     Index lo = least, hi = wanted;  // bound(lo) fits, bound(hi) does not
     while (hi - lo > 1) {
         const Index mid = lo + (hi - lo) / 2;
         (bound(mid) <= options.memoryLimit ? lo : hi) = mid;
     }
-    report.warnings.push_back(std::string(rule) + " asks for " + std::to_string(wanted) +
+    report.warnings.push_back(std::string(rule) + " " + std::to_string(wanted) +
                               " basis vectors; the memory limit holds " + std::to_string(lo) +
-                              " (raise the limit for the rest)");
+                              " (raise it, or lower --block-points to leave the basis more)");
     return lo;
 }
 
@@ -385,7 +393,7 @@ void Trainer::chooseBasisSize() {
                                       " basis vectors (captured " + num(got) + "); raise --max-basis?");
         }
     } else {
-        available = basisColumnsThatFit(available, "--basis-max-error");
+        available = basisColumnsThatFit(available, "--basis-max-error would measure up to");
         basisSizeFromPointErrors();
     }
     report.requestedBasis = m;
@@ -393,8 +401,9 @@ void Trainer::chooseBasisSize() {
     // basis (the arrays of N*C x M) exist, so streaming reserves for the basis the data need;
     // the plan made before training reserved only for the Varimax block.
     if (options.basis > 0 || options.energy > 0 || options.basisMaxError <= 0) {
-        const Index columns = basisColumnsThatFit(std::max({m, options.block, options.learnRank}),
-                                                  options.basis > 0 ? "--basis" : "the energy rule");
+        const Index columns =
+            basisColumnsThatFit(std::max({m, options.block, options.learnRank}),
+                                options.basis > 0 ? "--basis asks for" : "the energy rule asks for");
         m = std::min(m, columns);
     }
     formLeftVectors(q, svd, std::max(m, options.block));

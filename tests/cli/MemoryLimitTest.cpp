@@ -72,4 +72,26 @@ TEST(MemoryLimit, UsageAboveTheLimitLeavesOneByteNotNone) {
     EXPECT_EQ(environmentMemoryLimit((root / "proc").string(), root.string()).bytes, 1u);
 }
 
+TEST(MemoryLimit, InactivePageCacheIsRoomNotUse) {
+    TempDir t;
+    const fs::path root = t.path();
+    put(root / "proc/self/mounts", "cgroup2 /sys/fs/cgroup cgroup2 rw 0 0\n");
+    put(root / "proc/self/cgroup", "0::/task\n");
+    put(root / "sys/fs/cgroup/task/memory.max", "1000000\n");
+    put(root / "sys/fs/cgroup/task/memory.current", "900000\n");
+    put(root / "sys/fs/cgroup/task/memory.stat",
+        "anon 100000\nfile 800000\nactive_file 200000\ninactive_file 600000\n");
+    EXPECT_EQ(environmentMemoryLimit((root / "proc").string(), root.string()).bytes, 700000u);
+    // v1 names it total_inactive_file (the cgroup and its children).
+    TempDir v1;
+    const fs::path r1 = v1.path();
+    put(r1 / "proc/self/mounts", "cgroup /sys/fs/cgroup/memory cgroup rw,memory 0 0\n");
+    put(r1 / "proc/self/cgroup", "4:memory:/task\n");
+    put(r1 / "sys/fs/cgroup/memory/task/memory.limit_in_bytes", "1000000\n");
+    put(r1 / "sys/fs/cgroup/memory/task/memory.usage_in_bytes", "900000\n");
+    put(r1 / "sys/fs/cgroup/memory/task/memory.stat",
+        "cache 800000\ninactive_file 5\ntotal_inactive_file 600000\n");
+    EXPECT_EQ(environmentMemoryLimit((r1 / "proc").string(), r1.string()).bytes, 700000u);
+}
+
 }  // namespace

@@ -479,7 +479,7 @@ TEST(Cgroup, ReplayCutsItsFramesInFlightToTheCgroup) {
     limited.insert(limited.end(), {"--report", dir.file("limited.json")});
     const RunResult f = runPmsc(dir, free);
     ASSERT_EQ(f.exitCode, 0) << f.err;
-    EXPECT_EQ(inFlight(f.out), 16) << f.out;  // 2 x threads
+    EXPECT_GT(inFlight(f.out), 8) << f.out;  // 2 x threads where memory allows
     const std::string cgroup = ::geteuid() == 0 ? makeMemoryCgroup(64u << 20) : "";
     if (cgroup.empty()) {
         if (std::getenv("CI"))
@@ -492,7 +492,7 @@ TEST(Cgroup, ReplayCutsItsFramesInFlightToTheCgroup) {
     ASSERT_EQ(r.exitCode, 0) << r.err;
     std::printf("%s", r.out.c_str());
     EXPECT_GE(inFlight(r.out), 1) << r.out;
-    EXPECT_LT(inFlight(r.out), 16) << r.out;
+    EXPECT_LT(inFlight(r.out), inFlight(f.out)) << r.out;
     // The same decisions, frame by frame: the frames in flight change nothing but memory.
     std::ifstream a(dir.file("free.json")), b(dir.file("limited.json"));
     std::stringstream ta, tb;
