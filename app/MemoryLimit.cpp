@@ -78,8 +78,8 @@ std::uint64_t statField(const fs::path& file, const std::string& name) {
     return 0;
 }
 
-void tighten(MemoryLimit& best, std::uint64_t bytes, const std::string& source) {
-    if (best.bytes == 0 || bytes < best.bytes) best = {bytes == 0 ? 1 : bytes, source};
+void tighten(MemoryLimit& best, std::uint64_t bytes, const std::string& source, bool addressSpace = false) {
+    if (best.bytes == 0 || bytes < best.bytes) best = {bytes == 0 ? 1 : bytes, source, addressSpace};
 }
 
 /// The cgroup's own limit and every ancestor's, each less its usage.
@@ -114,7 +114,7 @@ MemoryLimit environmentMemoryLimit(const std::string& proc, const std::string& s
     if (sys.empty() && ::getrlimit(RLIMIT_AS, &as) == 0 && as.rlim_cur != RLIM_INFINITY) {
         const std::uint64_t used = addressSpaceInUse(proc);
         tighten(best, as.rlim_cur > used ? as.rlim_cur - used : 0,
-                "the address-space limit (ulimit -v) less what the program already maps");
+                "the address-space limit (ulimit -v) less what the program already maps", true);
     }
     for (const Mount& mount : memoryMounts(proc, sys)) {
         const std::string path = cgroupPath(proc, mount.v2);

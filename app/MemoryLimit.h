@@ -9,8 +9,9 @@ namespace pmsc::app {
 
 /// How much more memory this process may use, and what says so.
 struct MemoryLimit {
-    std::uint64_t bytes = 0;  ///< 0 = no limit found
-    std::string source;       ///< "the cgroup memory limit (/sys/fs/cgroup/...)", for messages
+    std::uint64_t bytes = 0;    ///< 0 = no limit found
+    std::string source;         ///< "the cgroup memory limit (/sys/fs/cgroup/...)", for messages
+    bool addressSpace = false;  ///< the limit is ulimit -v's: address space, not resident memory
 };
 
 /// The tightest limit the environment sets on this process, less what is already used under it:
@@ -26,12 +27,21 @@ struct MemoryLimit {
 MemoryLimit environmentMemoryLimit(const std::string& proc = "/proc", const std::string& sys = "");
 
 /// What a run's frame buffers (engine::EngineOptions::memoryLimit) may take of `limit`, the memory
-/// left once the model and the evaluator are loaded: half. Decision: the other half is for what
-/// the engine does not count, the evaluator's per-call workspace (a gather's paths, a rig's
-/// pose), the output writer and the allocator's slack. 0 stays 0 (no limit); a limit already
-/// used up gives 1 byte, which the engine refuses with one line.
-inline std::uint64_t frameBufferBudget(std::uint64_t limit) {
-    return limit == 0 ? 0 : std::max<std::uint64_t>(1, limit / 2);
+/// left once the model and the evaluator are loaded, with `threads` workers about to start: half.
+/// Decision: the other half is for what the engine does not count, the evaluator's per-call
+/// workspace (a gather's paths, a rig's pose), the output writer and the allocator's slack. Under
+/// an address-space limit each worker first reserves its stack and a malloc arena (8 + 64 MiB of
+/// address space with glibc), so those come off before halving. No limit stays 0; a limit used up
+/// gives 1 byte, which the engine refuses with one line.
+inline std::uint64_t frameBufferBudget(const MemoryLimit& limit, int threads) {
+    if (limit.bytes == 0) return 0;
+    std::uint64_t left = limit.bytes;
+    if (limit.addressSpace) {
+        const std::uint64_t perThread = std::uint64_t{72} << 20;
+        const std::uint64_t workers = perThread * static_cast<std::uint64_t>(std::max(threads, 1));
+        left = left > workers ? left - workers : 0;
+    }
+    return std::max<std::uint64_t>(1, left / 2);
 }
 
 }  // namespace pmsc::app

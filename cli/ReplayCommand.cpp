@@ -13,6 +13,7 @@
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
 
+#include <tbb/info.h>
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -163,7 +164,9 @@ int replayRecorded(const ReplayArgs& a, const Model& model) {
         options.keep = &*keep;
     }
     // The farm's limit (memory cgroup, ulimit -v), read with the model and the frames mapped.
-    options.memoryLimit = app::frameBufferBudget(app::environmentMemoryLimit().bytes);
+    options.memoryLimit =
+        app::frameBufferBudget(app::environmentMemoryLimit(),
+                               options.threads > 0 ? options.threads : tbb::info::default_concurrency());
     Progress progress("replay", !a.quiet);
     options.cancel = &interruptFlag();
     options.progress = [&](Index done, Index total) {

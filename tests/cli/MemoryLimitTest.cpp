@@ -94,4 +94,16 @@ TEST(MemoryLimit, InactivePageCacheIsRoomNotUse) {
     EXPECT_EQ(environmentMemoryLimit((r1 / "proc").string(), r1.string()).bytes, 700000u);
 }
 
+TEST(MemoryLimit, FrameBuffersGetHalfOfWhatIsLeftLessTheWorkersAddressSpace) {
+    using pmsc::app::frameBufferBudget;
+    using pmsc::app::MemoryLimit;
+    constexpr std::uint64_t MiB = std::uint64_t{1} << 20;
+    EXPECT_EQ(frameBufferBudget(MemoryLimit{}, 8), 0u);  // no limit
+    EXPECT_EQ(frameBufferBudget(MemoryLimit{1000 * MiB, "cgroup", false}, 8), 500 * MiB);
+    // ulimit -v: each of the 8 workers reserves 72 MiB of address space first.
+    EXPECT_EQ(frameBufferBudget(MemoryLimit{1000 * MiB, "ulimit -v", true}, 8), (1000 - 576) * MiB / 2);
+    EXPECT_EQ(frameBufferBudget(MemoryLimit{500 * MiB, "ulimit -v", true}, 8), 1u);  // used up: refused
+    EXPECT_EQ(frameBufferBudget(MemoryLimit{1, "cgroup", false}, 1), 1u);
+}
+
 }  // namespace
