@@ -80,30 +80,16 @@ void workers(benchmark::State& state) {
 // ratios from their medians. The child's time depends on both cores, which a virtual machine's
 // neighbours disturb now and then; interleaved repetitions put a disturbance on both sides of a
 // ratio, and the median drops the repetition it hit.
-BENCHMARK(inProcess)
-    ->Arg(55)
-    ->Arg(400)
-    ->Unit(benchmark::kMillisecond)
-    ->MinTime(0.5)
-    ->Repetitions(7)
-    ->ReportAggregatesOnly(true)
-    ->UseRealTime();
-BENCHMARK(inChild)
-    ->Arg(55)
-    ->Arg(400)
-    ->Unit(benchmark::kMillisecond)
-    ->MinTime(0.5)
-    ->Repetitions(7)
-    ->ReportAggregatesOnly(true)
-    ->UseRealTime();
-BENCHMARK(workers)
-    ->Arg(1)
-    ->Arg(2)
-    ->Unit(benchmark::kMillisecond)
-    ->MinTime(0.5)
-    ->Repetitions(5)
-    ->ReportAggregatesOnly(true)
-    ->UseRealTime();
+void medianOfRepetitions(benchmark::internal::Benchmark* b, int repetitions) {
+    b->Unit(benchmark::kMillisecond)
+        ->MinTime(0.5)
+        ->Repetitions(repetitions)
+        ->ReportAggregatesOnly(true)
+        ->UseRealTime();
+}
+BENCHMARK(inProcess)->Arg(55)->Arg(400)->Apply([](auto* b) { medianOfRepetitions(b, 7); });
+BENCHMARK(inChild)->Arg(55)->Arg(400)->Apply([](auto* b) { medianOfRepetitions(b, 7); });
+BENCHMARK(workers)->Arg(1)->Arg(2)->Apply([](auto* b) { medianOfRepetitions(b, 5); });
 
 /// Each benchmark's median real time per iteration (its only run's without repetitions), by name
 /// and argument, for the ratios printed after the run.

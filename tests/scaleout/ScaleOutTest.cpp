@@ -384,6 +384,20 @@ std::string makeMemoryCgroup(std::uint64_t bytes) {
     return "";
 }
 
+/// A shell that joins `cgroup`, then becomes pmsc ($0 "$@": the program and its arguments).
+std::string insideCgroup(const std::string& cgroup) {
+    return "sh -c 'echo $$ > " + cgroup + "/cgroup.procs && exec \"$0\" \"$@\"'";
+}
+
+/// The cgroup's peak usage (v1; 0 where the file is missing), then the cgroup removed.
+double peakAndRemove(const std::string& cgroup) {
+    std::ifstream file(cgroup + "/memory.max_usage_in_bytes");
+    double peak = 0;
+    file >> peak;
+    ::rmdir(cgroup.c_str());
+    return peak;
+}
+
 TEST(Cgroup, ATrainingSetTwiceTheLimitStreamsInsideAMemoryCgroup) {
     TempDir dir;
     const int grid = 230, frames = 600;  // 52,900 points x 3 channels x 600 frames: 762 MB of doubles
@@ -402,8 +416,7 @@ TEST(Cgroup, ATrainingSetTwiceTheLimitStreamsInsideAMemoryCgroup) {
     std::printf("cgroup %s: limit %.1f MiB (streaming bound %.1f MiB), matrix %.1f MiB (%.2fx)\n",
                 cgroup.c_str(), limit / 1048576.0, bound / 1048576.0, matrixBytes / 1048576.0,
                 matrixBytes / double(limit));
-    // The shell joins the cgroup, then becomes pmsc ($0 "$@": the program and its arguments).
-    const std::string inside = "sh -c 'echo $$ > " + cgroup + "/cgroup.procs && exec \"$0\" \"$@\"'";
+    const std::string inside = insideCgroup(cgroup);
     const std::vector<std::string> options = {"--max-basis", "16", "--block", "8",
                                               "--max-keys",  "24", "--quiet"};
     auto limited = options, free = options, forced = options;
@@ -415,10 +428,7 @@ TEST(Cgroup, ATrainingSetTwiceTheLimitStreamsInsideAMemoryCgroup) {
     const RunResult r = runPmsc(dir, limited, inside);
     // In memory inside the same cgroup: the kernel kills it (what a farm task met without the limit).
     const RunResult killed = runPmsc(dir, forced, inside);
-    std::ifstream peakFile(cgroup + "/memory.max_usage_in_bytes");
-    double peak = 0;
-    peakFile >> peak;
-    ::rmdir(cgroup.c_str());
+    const double peak = peakAndRemove(cgroup);
     ASSERT_EQ(r.exitCode, 0) << r.err;
     EXPECT_NE(r.out.find("streamed from disk"), std::string::npos) << r.out;
     EXPECT_NE(r.out.find("cgroup memory limit"), std::string::npos) << r.out;
@@ -445,11 +455,8 @@ TEST(Cgroup, ATrainingSetTwiceTheLimitStreamsInsideAMemoryCgroup) {
     ASSERT_FALSE(half.empty());
     const RunResult h =
         runPmsc(dir, {"train", "--frames", path, "--out", dir.file("defaults-half.pmsc"), "--quiet"},
-                "sh -c 'echo $$ > " + half + "/cgroup.procs && exec \"$0\" \"$@\"'");
-    std::ifstream halfPeakFile(half + "/memory.max_usage_in_bytes");
-    double halfPeak = 0;
-    halfPeakFile >> halfPeak;
-    ::rmdir(half.c_str());
+                insideCgroup(half));
+    const double halfPeak = peakAndRemove(half);
     ASSERT_EQ(h.exitCode, 0) << h.err;
     EXPECT_NE(h.out.find("streamed from disk"), std::string::npos) << h.out;
     std::printf("defaults: M = %lld, in memory %.1f MiB, cgroup %.1f MiB, peak %.1f MiB\n%s",
@@ -486,9 +493,8 @@ TEST(Cgroup, ReplayCutsItsFramesInFlightToTheCgroup) {
             FAIL() << "no memory cgroup could be made (needs root and a memory controller)";
         GTEST_SKIP() << "no memory cgroup could be made (needs root and a memory controller)";
     }
-    const RunResult r =
-        runPmsc(dir, limited, "sh -c 'echo $$ > " + cgroup + "/cgroup.procs && exec \"$0\" \"$@\"'");
-    ::rmdir(cgroup.c_str());
+    const RunResult r = runPmsc(dir, limited, insideCgroup(cgroup));
+    peakAndRemove(cgroup);
     ASSERT_EQ(r.exitCode, 0) << r.err;
     std::printf("%s", r.out.c_str());
     EXPECT_GE(inFlight(r.out), 1) << r.out;
