@@ -2,6 +2,8 @@
 #include "app/MemoryLimit.h"
 
 #include <sys/resource.h>
+#include <tbb/info.h>
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -121,6 +123,18 @@ MemoryLimit environmentMemoryLimit(const std::string& proc, const std::string& s
         if (!path.empty()) cgroupLimits(mount, path, best);
     }
     return best;
+}
+
+std::uint64_t frameBufferBudget(const MemoryLimit& limit, int threads) {
+    if (limit.bytes == 0) return 0;
+    std::uint64_t left = limit.bytes;
+    if (limit.addressSpace) {
+        const int workers = threads > 0 ? threads : tbb::info::default_concurrency();
+        const std::uint64_t reserved =
+            (std::uint64_t{72} << 20) * static_cast<std::uint64_t>(std::max(workers, 1));
+        left = left > reserved ? left - reserved : 0;
+    }
+    return std::max<std::uint64_t>(1, left / 2);
 }
 
 }  // namespace pmsc::app

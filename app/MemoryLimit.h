@@ -1,7 +1,6 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-#include <algorithm>
 #include <cstdint>
 #include <string>
 
@@ -27,21 +26,12 @@ struct MemoryLimit {
 MemoryLimit environmentMemoryLimit(const std::string& proc = "/proc", const std::string& sys = "");
 
 /// What a run's frame buffers (engine::EngineOptions::memoryLimit) may take of `limit`, the memory
-/// left once the model and the evaluator are loaded, with `threads` workers about to start: half.
-/// Decision: the other half is for what the engine does not count, the evaluator's per-call
-/// workspace (a gather's paths, a rig's pose), the output writer and the allocator's slack. Under
-/// an address-space limit each worker first reserves its stack and a malloc arena (8 + 64 MiB of
-/// address space with glibc), so those come off before halving. No limit stays 0; a limit used up
-/// gives 1 byte, which the engine refuses with one line.
-inline std::uint64_t frameBufferBudget(const MemoryLimit& limit, int threads) {
-    if (limit.bytes == 0) return 0;
-    std::uint64_t left = limit.bytes;
-    if (limit.addressSpace) {
-        const std::uint64_t perThread = std::uint64_t{72} << 20;
-        const std::uint64_t workers = perThread * static_cast<std::uint64_t>(std::max(threads, 1));
-        left = left > workers ? left - workers : 0;
-    }
-    return std::max<std::uint64_t>(1, left / 2);
-}
+/// left once the model and the evaluator are loaded, with `threads` workers about to start (0 =
+/// every core, as the engine counts them): half. Decision: the other half is for what the engine
+/// does not count, the evaluator's per-call workspace (a gather's paths, a rig's pose), the output
+/// writer and the allocator's slack. Under an address-space limit each worker first reserves its
+/// stack and a malloc arena (8 + 64 MiB of address space with glibc), so those come off before
+/// halving. No limit stays 0; a limit used up gives 1 byte, which the engine refuses with one line.
+std::uint64_t frameBufferBudget(const MemoryLimit& limit, int threads);
 
 }  // namespace pmsc::app

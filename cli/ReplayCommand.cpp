@@ -13,7 +13,6 @@
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
 
-#include <tbb/info.h>
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -164,9 +163,7 @@ int replayRecorded(const ReplayArgs& a, const Model& model) {
         options.keep = &*keep;
     }
     // The farm's limit (memory cgroup, ulimit -v), read with the model and the frames mapped.
-    options.memoryLimit =
-        app::frameBufferBudget(app::environmentMemoryLimit(),
-                               options.threads > 0 ? options.threads : tbb::info::default_concurrency());
+    options.memoryLimit = app::frameBufferBudget(app::environmentMemoryLimit(), options.threads);
     Progress progress("replay", !a.quiet);
     options.cancel = &interruptFlag();
     options.progress = [&](Index done, Index total) {

@@ -17,7 +17,6 @@
 #include "pmsc/ModelIO.h"
 #include "pmsc/Training.h"  // pmsc::Cancelled
 
-#include <tbb/info.h>
 #include <nlohmann/json.hpp>
 
 #include <chrono>
@@ -422,8 +421,7 @@ int runRun(const std::vector<std::string>& args) {
     const Model model = readModel(o.modelPath);
     const std::unique_ptr<PointEvaluator> evaluator = evaluators::makeEvaluator(o.evaluatorSpec);
     // The farm's limit (memory cgroup, ulimit -v), read with the model and the evaluator loaded.
-    o.memoryLimit = app::frameBufferBudget(app::environmentMemoryLimit(),
-                                           o.threads > 0 ? o.threads : tbb::info::default_concurrency());
+    o.memoryLimit = app::frameBufferBudget(app::environmentMemoryLimit(), o.threads);
     if (model.cross) {
         // Cross point multiplication: the evaluator is the control's; targets are written.
         const RunReport r = runCrossFrames(model, *evaluator, o);

@@ -470,10 +470,7 @@ int trainModel(TrainArgs& a) {
         }
         const std::vector<double> cpuPerRank = cpuSecondsPerRank(comm);
         if (!root) return kExitOk;
-        if (plan.stream)  // the bound at the basis training settled on
-            plan.streamBytes = trainingMemoryBound(
-                sizes.n, sizes.c, sizes.f, std::max({model.basisSize(), options.block, options.learnRank}),
-                options.block, options.maxKeys, plan.blockPoints, comm.size(), /*rootRank=*/true);
+        if (plan.stream) plan.streamBytes = report.memoryBound;  // at the basis training settled on
         writeModel(outPath, model);
         progress.finish();
         const double seconds =

@@ -274,6 +274,9 @@ struct Trainer {
     void chooseBasisSize();
     /// M from the largest point error of each basis size (--basis-max-error).
     void basisSizeFromPointErrors();
+    /// trainingMemoryBound() with r columns of U formed, at this block size; rank 0's, which every
+    /// rank uses so that all take the same decisions.
+    std::uint64_t memoryBound(Index r) const;
     /// The most columns of U (`wanted`, or fewer) that options.memoryLimit holds at this block
     /// size, with a warning when it is fewer. @throws InputError when not even the Varimax block fits.
     Index basisColumnsThatFit(Index wanted, const char* rule);
@@ -347,27 +350,26 @@ std::string mebibytes(std::uint64_t bytes) {
 }
 }  // namespace
 
-Index Trainer::basisColumnsThatFit(Index wanted, const char* rule) {
-    if (options.memoryLimit == 0) return wanted;
+std::uint64_t Trainer::memoryBound(Index r) const {
     // In memory the frames are one block of every row (the bound counts them as such).
     const bool inMemory = dynamic_cast<const MatrixBlocks*>(&q) != nullptr;
-    const Index blockPoints = inMemory ? 0 : q.blockPoints();
-    const auto bound = [&](Index r) {
-        return trainingMemoryBound(n, channels, f, r, options.block, options.maxKeys, blockPoints,
-                                   comm.size(),
-                                   /*rootRank=*/true);  // every rank takes the same decision
-    };
+    return trainingMemoryBound(n, channels, f, r, options.block, options.maxKeys,
+                               inMemory ? 0 : q.blockPoints(), comm.size(), /*rootRank=*/true);
+}
+
+Index Trainer::basisColumnsThatFit(Index wanted, const char* rule) {
+    if (options.memoryLimit == 0) return wanted;
     const Index least = std::min(std::max(options.block, options.learnRank), wanted);
-    if (bound(wanted) <= options.memoryLimit) return wanted;
-    if (bound(least) > options.memoryLimit)
+    if (memoryBound(wanted) <= options.memoryLimit) return wanted;
+    if (memoryBound(least) > options.memoryLimit)
         throw InputError("train: the memory limit " + mebibytes(options.memoryLimit) + " cannot hold even " +
                          std::to_string(least) + " basis vectors of " + std::to_string(n) + " points x " +
-                         std::to_string(channels) + " channels (needs " + mebibytes(bound(least)) +
+                         std::to_string(channels) + " channels (needs " + mebibytes(memoryBound(least)) +
                          "); lower --block, --learn-rank, --max-keys or --block-points, or raise the limit");
-    Index lo = least, hi = wanted;  // bound(lo) fits, bound(hi) does not
+    Index lo = least, hi = wanted;  // memoryBound(lo) fits, memoryBound(hi) does not
     while (hi - lo > 1) {
         const Index mid = lo + (hi - lo) / 2;
-        (bound(mid) <= options.memoryLimit ? lo : hi) = mid;
+        (memoryBound(mid) <= options.memoryLimit ? lo : hi) = mid;
     }
     report.warnings.push_back(std::string(rule) + " " + std::to_string(wanted) +
                               " basis vectors; the memory limit holds " + std::to_string(lo) +
@@ -376,7 +378,9 @@ Index Trainer::basisColumnsThatFit(Index wanted, const char* rule) {
 }
 
 void Trainer::chooseBasisSize() {
+    const char* rule = nullptr;  // the rule that chose M from the singular values alone
     if (options.basis > 0) {
+        rule = "--basis asks for";
         m = std::min(options.basis, available);
         if (m < std::min(options.basis, cap)) {
             report.warnings.push_back("basis " + std::to_string(options.basis) + " reduced to " +
@@ -385,6 +389,7 @@ void Trainer::chooseBasisSize() {
                                       "non-negligible singular values");
         }
     } else if (options.energy > 0 || options.basisMaxError <= 0) {
+        rule = "the energy rule asks for";
         const double e = options.energy > 0 ? options.energy : options.defaultEnergy;
         m = basisSizeForEnergy(svd.sigma.head(available), model.totalEnergy, e);
         const double got = svd.sigma.head(m).squaredNorm() / model.totalEnergy;
@@ -398,14 +403,12 @@ void Trainer::chooseBasisSize() {
     }
     report.requestedBasis = m;
     // Decision: the memory is checked here, after the Gram pass has told M and before U and the
-    // basis (the arrays of N*C x M) exist, so streaming reserves for the basis the data need;
-    // the plan made before training reserved only for the Varimax block.
-    if (options.basis > 0 || options.energy > 0 || options.basisMaxError <= 0) {
-        const Index columns =
-            basisColumnsThatFit(std::max({m, options.block, options.learnRank}),
-                                options.basis > 0 ? "--basis asks for" : "the energy rule asks for");
-        m = std::min(m, columns);
-    }
+    // basis (the arrays of N*C x M) exist, so a limit that cannot hold --max-basis still holds the
+    // basis the data need (the plan made before training then reserved only the Varimax block).
+    if (rule) m = std::min(m, basisColumnsThatFit(std::max({m, options.block, options.learnRank}), rule));
+    // --basis-max-error formed `available` columns of U to measure them.
+    report.memoryBound =
+        memoryBound(std::max({m, options.block, options.learnRank, rule ? Index{0} : available}));
     formLeftVectors(q, svd, std::max(m, options.block));
     basis = svd.u.leftCols(m);
 }

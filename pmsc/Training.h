@@ -107,6 +107,8 @@ struct TrainingReport {
     CalibrationStats calibration;
     int ranks = 1;          ///< processes the rows of Q were split across (MPI ranks)
     Index blockPoints = 0;  ///< points per block of Q read at a time (this rank)
+    /// trainingMemoryBound() at the basis vectors formed (max(M, block, learn rank)), rank 0's.
+    std::uint64_t memoryBound = 0;
 };
 
 /// Trains a model from frames: mean removal, truncated SVD, key-point selection,

@@ -12,6 +12,8 @@
 #include <exception>
 #include <limits>
 #include <mutex>
+#include <numeric>
+#include <span>
 #include <string>
 #include <thread>
 #include <vector>
@@ -43,32 +45,53 @@ void writeExactly(int fd, const void* bytes, std::size_t size) {
     if (!writeFully(fd, bytes, size)) throw std::runtime_error(std::string("write: ") + std::strerror(errno));
 }
 
+/// The points a request names: a range (first, count), or a list of indices. A range is never
+/// spelled out as indices beyond the block being computed: a whole frame of 160,000 points would
+/// otherwise cost 1.3 MB of indices on every request.
+struct Asked {
+    Index first = 0;
+    std::size_t count = 0;
+    std::vector<Index> list;  ///< a list request's indices; empty for a range
+    bool isRange = true;
+
+    /// The indices of points [at, at + n), written to `scratch` for a range.
+    std::span<const Index> block(std::size_t at, std::size_t n, std::vector<Index>& scratch) const {
+        if (!isRange) return std::span<const Index>(list).subspan(at, n);
+        scratch.resize(n);
+        std::iota(scratch.begin(), scratch.end(), first + static_cast<Index>(at));
+        return scratch;
+    }
+};
+
 /// The points a request names, checked against N (an unknown kind or a bad index is malformed:
 /// the stream cannot be trusted past it).
-std::vector<Index> requestPoints(int in, const Request& request, Index pointCount) {
+Asked requestPoints(int in, const Request& request, Index pointCount) {
     const auto n = static_cast<std::uint64_t>(pointCount);
     if (request.count > n)
         throw std::runtime_error("a request asks for " + std::to_string(request.count) + " points of " +
                                  std::to_string(n));
-    std::vector<Index> points(request.count);
+    Asked asked;
+    asked.count = request.count;
     if (request.kind == kRequestRange) {
         if (request.first > n - request.count)
             throw std::runtime_error("a range request goes past the last point");
-        for (std::uint64_t i = 0; i < request.count; ++i) points[i] = static_cast<Index>(request.first + i);
-        return points;
+        asked.first = static_cast<Index>(request.first);
+        return asked;
     }
     if (request.kind != kRequestList)
         throw std::runtime_error("unknown request kind " + std::to_string(request.kind));
+    asked.isRange = false;
     std::vector<std::uint64_t> wire(request.count);
     if (request.count > 0 && !readExactly(in, wire.data(), wire.size() * sizeof(std::uint64_t)))
         throw std::runtime_error("a list request ended before its indices");
+    asked.list.resize(request.count);
     for (std::uint64_t i = 0; i < request.count; ++i) {
         if (wire[i] >= n)
             throw std::runtime_error("point index " + std::to_string(wire[i]) + " is not below " +
                                      std::to_string(n));
-        points[i] = static_cast<Index>(wire[i]);
+        asked.list[i] = static_cast<Index>(wire[i]);
     }
-    return points;
+    return asked;
 }
 
 /// Points per block of a streamed answer: 16,384 x 3 doubles is 384 KiB, well inside the socket's
@@ -156,25 +179,26 @@ private:
 /// calculation; a whole-frame evaluator (its full pose shares work between points) answers in one
 /// evaluateAll. An error in the first block is an error response; one after the header has gone
 /// cannot be sent, so serve ends (pmsc then reports a short answer with this program's last words).
-void answer(const PointEvaluator& evaluator, const Request& request, const std::vector<Index>& points,
-            int out, BlockWriter& writer) {
+void answer(const PointEvaluator& evaluator, const Request& request, const Asked& points, int out,
+            BlockWriter& writer) {
     const auto channels = static_cast<std::size_t>(evaluator.channelCount());
     const auto frame = static_cast<Index>(request.frame);
-    const bool all = request.kind == kRequestRange && request.first == 0 &&
-                     points.size() == static_cast<std::size_t>(evaluator.pointCount());
+    const bool all = points.isRange && points.first == 0 &&
+                     points.count == static_cast<std::size_t>(evaluator.pointCount());
     const std::size_t block = all && evaluator.failThroughShape().wholeFrame
-                                  ? std::max<std::size_t>(points.size(), 1)
+                                  ? std::max<std::size_t>(points.count, 1)
                                   : kBlockPoints;
-    const Response response{kResponseValues, 0, points.size() * channels};
-    for (std::size_t at = 0; at < points.size() || at == 0; at += block) {
-        const std::size_t count = std::min(block, points.size() - at);
+    const Response response{kResponseValues, 0, points.count * channels};
+    std::vector<Index> indices;  // a range's block, spelled out
+    for (std::size_t at = 0; at < points.count || at == 0; at += block) {
+        const std::size_t count = std::min(block, points.count - at);
         std::vector<double> values = writer.buffer();
         values.resize(count * channels);
         try {
-            if (count == points.size() && all)
+            if (count == points.count && all)
                 evaluator.evaluateAll(frame, values.data());
             else
-                evaluator.evaluate(frame, std::span<const Index>(points).subspan(at, count), values.data());
+                evaluator.evaluate(frame, points.block(at, count, indices), values.data());
         } catch (const std::exception& e) {
             if (at > 0)
                 throw std::runtime_error(std::string("frame ") + std::to_string(frame) + ": " + e.what());
@@ -183,7 +207,7 @@ void answer(const PointEvaluator& evaluator, const Request& request, const std::
         }
         if (at == 0) writeExactly(out, &response, sizeof response);
         writer.submit(std::move(values));
-        if (points.empty()) break;
+        if (points.count == 0) break;
     }
     writer.drain();
 }
@@ -202,8 +226,7 @@ int serve(const PointEvaluator& evaluator, int in, int out) {
 
         BlockWriter writer(out);
         for (Request request{}; readExactly(in, &request, sizeof request);) {
-            const std::vector<Index> points = requestPoints(in, request, evaluator.pointCount());
-            answer(evaluator, request, points, out, writer);
+            answer(evaluator, request, requestPoints(in, request, evaluator.pointCount()), out, writer);
         }
         return 0;
     } catch (const std::exception& e) {
