@@ -19,6 +19,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <numbers>
 #include <stdexcept>
 #include <type_traits>
 #include <unordered_map>
@@ -41,6 +42,13 @@ Affine compose(const Affine& a, const Affine& b) {  // a * b as 4x4 matrices
     r.leftCols<3>() = a.leftCols<3>() * b.leftCols<3>();
     r.col(3) = a.leftCols<3>() * b.col(3) + a.col(3);
     return r;
+}
+
+Affine inverseAffine(const Affine& a) {
+    Affine inv;
+    inv.leftCols<3>() = a.leftCols<3>().inverse();
+    inv.col(3) = -inv.leftCols<3>() * a.col(3);
+    return inv;
 }
 
 Affine identityAffine() {
@@ -91,6 +99,9 @@ struct SkinEvaluator::Data {
     std::vector<int> parent;
     std::vector<Affine> restLocal;
     std::vector<int> channelOfNode;  // -1: no channel, the node keeps restLocal
+    // SkinOptions::rootSpace: the root joint (-1: scene space) and its rest global transform.
+    int rootNode = -1;
+    Affine rootRest = Affine::Zero();
 
     struct Channel {
         std::vector<double> positionTimes, rotationTimes, scalingTimes;
@@ -170,12 +181,16 @@ SkinEvaluator::Data::Pose SkinEvaluator::Data::pose(Index frame) const {
         global[n] = parent[n] < 0 ? local : compose(global[static_cast<std::size_t>(parent[n])], local);
     }
 
+    // Root space: every transform taken back by the root joint's motion from its rest place.
+    Affine toRoot = identityAffine();
+    if (rootNode >= 0) toRoot = compose(rootRest, inverseAffine(global[static_cast<std::size_t>(rootNode)]));
     Pose p;
     p.palette.resize(paletteNode.size());
     for (std::size_t i = 0; i < paletteNode.size(); ++i)
         p.palette[i] = paletteNode[i] < 0
                            ? paletteOffset[i]
-                           : compose(global[static_cast<std::size_t>(paletteNode[i])], paletteOffset[i]);
+                           : compose(toRoot, compose(global[static_cast<std::size_t>(paletteNode[i])],
+                                                     paletteOffset[i]));
 
     p.morphWeights.resize(morphs.size());
     for (std::size_t m = 0; m < morphs.size(); ++m) {
@@ -254,20 +269,33 @@ SkinOptions parseSkinArgs(const std::string& args) {
         } else if (opt.rfind("animation=", 0) == 0) {
             o.animation = opt.substr(10);
             if (o.animation.empty()) throw InputError("skin: animation= needs a name or an index");
+        } else if (opt.rfind("body=", 0) == 0) {
+            const std::string v = opt.substr(5);
+            if (v != "tubes" && v != "asset")
+                throw InputError("skin: body must be tubes or asset, got '" + v + "'");
+            o.tubes = v == "tubes";
+        } else if (opt.rfind("space=", 0) == 0) {
+            const std::string v = opt.substr(6);
+            if (v != "root" && v != "scene")
+                throw InputError("skin: space must be root or scene, got '" + v + "'");
+            o.rootSpace = v == "root";
         } else if (opt.rfind("isolate=", 0) == 0) {
             const std::string v = opt.substr(8);
             if (v != "yes" && v != "no") throw InputError("skin: isolate must be yes or no, got '" + v + "'");
             o.isolate = v == "yes";
         } else if (opt.find('=') != std::string::npos && opt.find('/') == std::string::npos) {
-            throw InputError("skin: unknown option '" + opt +
-                             "' (expected fps=F, animation=NAME|INDEX or isolate=yes|no)");
+            throw InputError(
+                "skin: unknown option '" + opt +
+                "' (expected fps=F, animation=NAME|INDEX, isolate=yes|no, body=tubes or space=root)");
         } else {
             break;  // part of the path
         }
         rest.resize(colon);
     }
     if (rest.empty())
-        throw InputError("skin: no asset given (expected skin:ASSET[:fps=F][:animation=A][:isolate=yes|no])");
+        throw InputError(
+            "skin: no asset given (expected "
+            "skin:ASSET[:fps=F][:animation=A][:isolate=yes|no][:body=tubes][:space=root])");
     o.path = rest;
     return o;
 }
@@ -290,6 +318,8 @@ struct SkinEvaluator::Data::Loader {
     void flattenNodes();
     void readNodeChannels();
     void readMeshes();
+    void dressSkeleton();
+    void findRootJoint();
     void readInfluences(const aiMesh& mesh, unsigned meshIndex);
     void readFaces(const aiMesh& mesh, Index offset);
     void readMorphTargets(const aiMesh& mesh, unsigned meshIndex);
@@ -303,10 +333,16 @@ namespace {
 /// Assimp's scene of `path`, triangulated for the .obj faces (it keeps the vertex arrays); nothing
 /// that merges, splits or reorders vertices, so points are the vertices as the importer delivers
 /// them. @throws InputError with Assimp's message.
-const aiScene& importScene(Assimp::Importer& importer, const std::string& path, const std::string& where) {
+const aiScene& importScene(Assimp::Importer& importer, const std::string& path, const std::string& where,
+                           bool tubes) {
     const aiScene* scene = importer.ReadFile(path, aiProcess_Triangulate | aiProcess_ValidateDataStructure);
-    if (scene && scene->mNumMeshes == 0)  // Assimp flags such a scene incomplete, without a message
-        throw InputError(where + "has no vertices (no mesh in the scene)");
+    if (scene && scene->mNumMeshes == 0) {  // Assimp flags such a scene incomplete, without a message
+        if (!tubes)
+            throw InputError(
+                where + "has no vertices (no mesh in the scene; :body=tubes dresses a skeleton in tubes)");
+        if (!scene->mRootNode) throw InputError(where + "has neither a mesh nor a skeleton");
+        return *scene;
+    }
     if (!scene || !scene->mRootNode || (scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE)) {
         std::string why = oneLine(importer.GetErrorString());
         throw InputError(where + "Assimp cannot read it: " + (why.empty() ? "incomplete scene" : why));
@@ -441,6 +477,96 @@ void SkinEvaluator::Data::Loader::readMeshes() {
     }
 }
 
+void SkinEvaluator::Data::Loader::findRootJoint() {
+    const auto it =
+        std::find_if(d.channelOfNode.begin(), d.channelOfNode.end(), [](int c) { return c >= 0; });
+    if (it == d.channelOfNode.end()) throw InputError(where + "space=root: no node is animated");
+    d.rootNode = static_cast<int>(it - d.channelOfNode.begin());
+    std::vector<Affine> global(static_cast<std::size_t>(d.rootNode) + 1);
+    for (std::size_t i = 0; i < global.size(); ++i)
+        global[i] = d.parent[i] < 0 ? d.restLocal[i]
+                                    : compose(global[static_cast<std::size_t>(d.parent[i])], d.restLocal[i]);
+    d.rootRest = global.back();
+}
+
+// The tube body of SkinOptions::tubes: built in the rest pose of the node
+// transforms, every vertex skinned to the joints whose motion moves it.
+void SkinEvaluator::Data::Loader::dressSkeleton() {
+    constexpr int kRings = 8, kAround = 12;
+    constexpr double kRadius = 0.15, kBlend = 0.25;
+    const std::size_t n = d.parent.size();
+    std::vector<Affine> global(n);
+    for (std::size_t i = 0; i < n; ++i)
+        global[i] = d.parent[i] < 0 ? d.restLocal[i]
+                                    : compose(global[static_cast<std::size_t>(d.parent[i])], d.restLocal[i]);
+    Eigen::Vector3d lo = global[0].col(3), hi = lo;
+    for (const Affine& g : global) {
+        lo = lo.cwiseMin(g.col(3));
+        hi = hi.cwiseMax(g.col(3));
+    }
+    const double minLength = 1e-6 * std::max((hi - lo).norm(), 1e-300);
+
+    std::unordered_map<int, std::int32_t> slotOfNode;
+    auto slot = [&](int node) {
+        auto [it, added] = slotOfNode.emplace(node, static_cast<std::int32_t>(d.paletteNode.size()));
+        if (added) {
+            d.paletteNode.push_back(node);
+            d.paletteOffset.push_back(inverseAffine(global[static_cast<std::size_t>(node)]));
+            ++d.bones;
+        }
+        return it->second;
+    };
+
+    d.influenceStart.assign(1, 0);
+    for (std::size_t i = 0; i < n; ++i) {
+        const int p = d.parent[i];
+        if (p < 0) continue;
+        const Eigen::Vector3d a = global[static_cast<std::size_t>(p)].col(3), b = global[i].col(3);
+        const Eigen::Vector3d axis = b - a;
+        const double length = axis.norm();
+        if (!(length > minLength)) continue;
+        // Two unit vectors across the bone.
+        const Eigen::Vector3d dir = axis / length;
+        const Eigen::Vector3d helper =
+            std::abs(dir.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+        const Eigen::Vector3d u = dir.cross(helper).normalized(), v = dir.cross(u);
+        const int grand = d.parent[static_cast<std::size_t>(p)];
+        const auto first = static_cast<Index>(d.rest.size() / 3);
+        for (int r = 0; r < kRings; ++r) {
+            const double t = static_cast<double>(r) / (kRings - 1);
+            // Weights: the bone's own joint, half and half with the neighbour at each end.
+            std::vector<std::pair<std::int32_t, double>> w{{slot(p), 1.0}};
+            if (t > 1 - kBlend) w.push_back({slot(static_cast<int>(i)), 0.5 * (t - (1 - kBlend)) / kBlend});
+            if (t < kBlend && grand >= 0) w.push_back({slot(grand), 0.5 * (kBlend - t) / kBlend});
+            double own = 1;
+            for (std::size_t k = 1; k < w.size(); ++k) own -= w[k].second;
+            w[0].second = own;
+            for (int k = 0; k < kAround; ++k) {
+                const double phi = 2 * std::numbers::pi * k / kAround;
+                const Eigen::Vector3d x =
+                    a + t * axis + kRadius * length * (std::cos(phi) * u + std::sin(phi) * v);
+                d.rest.insert(d.rest.end(), {x.x(), x.y(), x.z()});
+                for (const auto& [s, weight] : w) {
+                    if (weight <= 0) continue;
+                    d.influenceSlot.push_back(s);
+                    d.influenceWeight.push_back(weight);
+                }
+                d.influenceStart.push_back(static_cast<Index>(d.influenceSlot.size()));
+            }
+        }
+        for (int r = 0; r + 1 < kRings; ++r)
+            for (int k = 0; k < kAround; ++k) {
+                const Index v00 = first + r * kAround + k, v01 = first + r * kAround + (k + 1) % kAround;
+                const Index v10 = v00 + kAround, v11 = v01 + kAround;
+                d.triangles.insert(d.triangles.end(), {v00, v10, v11, v00, v11, v01});
+            }
+    }
+    if (d.rest.empty())
+        throw InputError(where + "has no bone to dress in tubes (every joint sits on its parent)");
+    d.meshOffsets = {0, d.points()};
+    d.morphs.resize(1);
+}
+
 void SkinEvaluator::Data::Loader::readInfluences(const aiMesh& mesh, unsigned meshIndex) {
     // Influences gathered per vertex, then normalized so weights sum to 1 (exporters round
     // weights; an unnormalized sum would scale the character away from its bones).
@@ -566,11 +692,15 @@ std::unique_ptr<SkinEvaluator::Data> SkinEvaluator::loadInProcess(const SkinOpti
     d->fps = options.fps;
     const std::string where = "skin: " + options.path + ": ";
     Assimp::Importer importer;  // owns the scene until the end of loading
-    Data::Loader loader(importScene(importer, options.path, where), *d, where);
+    Data::Loader loader(importScene(importer, options.path, where, options.tubes), *d, where);
     loader.pickAnimation(options.animation);
     loader.flattenNodes();
     loader.readNodeChannels();
-    loader.readMeshes();
+    if (options.rootSpace) loader.findRootJoint();
+    if (options.tubes)
+        loader.dressSkeleton();
+    else
+        loader.readMeshes();
     loader.readMorphChannels();
     loader.checkKeyOrder();
     d->topology = std::make_shared<const ObjMesh>(triangleMesh(d->triangles));
@@ -669,6 +799,8 @@ std::string SkinEvaluator::Data::pack() const {
     p.vec(parent);
     p.vec(restLocal);
     p.vec(channelOfNode);
+    p.scalar(rootNode);
+    p.vec(std::vector<Affine>{rootRest});
     p.scalar(static_cast<std::uint64_t>(channels.size()));
     for (const Channel& c : channels) {
         p.vec(c.positionTimes);
@@ -711,6 +843,12 @@ std::unique_ptr<SkinEvaluator::Data> SkinEvaluator::Data::unpack(std::string_vie
     u.vec(d->parent);
     u.vec(d->restLocal);
     u.vec(d->channelOfNode);
+    d->rootNode = u.scalar<int>();
+    std::vector<Affine> rootRest;
+    u.vec(rootRest);
+    if (rootRest.size() != 1 || d->rootNode < -1 || d->rootNode >= static_cast<int>(d->parent.size()))
+        throw InputError(where + "the importer's answer has a bad root joint");
+    d->rootRest = rootRest[0];
     d->channels.resize(u.count("channels", 6 * sizeof(std::uint64_t)));
     for (Channel& c : d->channels) {
         u.vec(c.positionTimes);

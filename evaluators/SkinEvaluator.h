@@ -21,10 +21,20 @@ struct SkinOptions {
     /// of taking the program down. The child sends back only the posing arrays.
     bool isolate = true;
     double importTimeoutSeconds = 600;  ///< isolated imports only
+    /// Dress the asset's skeleton in a body of tubes, one around each bone, skinned to it and
+    /// blended across each joint, in place of the asset's meshes: for motion capture (a BVH has
+    /// joints and motion; Assimp gives it only a display mesh of one rigid pyramid per bone).
+    /// Off by default: points a user did not model should be asked for. See SkinEvaluator.
+    bool tubes = false;
+    /// Pose in the frame of the root joint (the first animated node, depth-first), held at its
+    /// rest place: the character's own motion without where it walks or turns, as a deformation
+    /// cache stores it (the rig's world transform is one rigid motion applied after). Off by
+    /// default (the scene's root space).
+    bool rootSpace = false;
 };
 
 /// Parses the ARGS of the command line's `skin:ARGS`:
-/// `ASSET[:fps=F][:animation=NAME|INDEX][:isolate=yes|no]`.
+/// `ASSET[:fps=F][:animation=NAME|INDEX][:isolate=yes|no][:body=tubes][:space=root]`.
 /// Options are taken from the end, so a path may itself hold a colon as long
 /// as what follows it is not `fps=` or `animation=`.
 /// @throws InputError for an empty path, a bad number or an unknown option.
@@ -55,6 +65,14 @@ SkinOptions parseSkinArgs(const std::string& args);
 ///    mesh's node rigidly;
 ///  - an unskinned mesh: p = G_node v, the node being the first (depth-first,
 ///    pre-order) that references the mesh, identity if none does.
+///  - body=tubes: one mesh of tubes in place of the asset's meshes. Every bone (a joint and its parent
+///    joint apart by more than 1e-6 of the skeleton's size, in the rest pose of the node
+///    transforms) gets a tube of 8 rings x 12 vertices from the parent joint to the joint, radius
+///    0.15 of its length, skinned to the parent joint; its last quarter blends linearly towards
+///    the child joint and its first quarter towards the grandparent joint (half and half at the
+///    joint itself), so bending a joint bends the tubes that meet there as flesh would, not as
+///    rigid sticks. The skeleton's own motion is what a real capture gives; the tubes only make
+///    it points.
 /// Frames: 0 .. floor(duration_seconds * fps), so the last key is reached.
 ///
 /// Thread safety: immutable after construction; evaluate() may run from any

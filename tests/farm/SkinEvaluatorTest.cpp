@@ -10,6 +10,8 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -326,6 +328,14 @@ TEST(SkinEvaluator, ParsesOptionsFromTheEndOfTheSpec) {
     EXPECT_THROW(pmsc::evaluators::parseSkinArgs("a.gltf:fps=x"), pmsc::InputError);
     EXPECT_THROW(pmsc::evaluators::parseSkinArgs("a.gltf:speed=2"), pmsc::InputError);
     EXPECT_THROW(pmsc::evaluators::parseSkinArgs(""), pmsc::InputError);
+    o = pmsc::evaluators::parseSkinArgs("clip.bvh:fps=30:body=tubes:space=root");
+    EXPECT_EQ(o.path, "clip.bvh");
+    EXPECT_TRUE(o.tubes);
+    EXPECT_TRUE(o.rootSpace);
+    EXPECT_FALSE(pmsc::evaluators::parseSkinArgs("clip.bvh").tubes);
+    EXPECT_FALSE(pmsc::evaluators::parseSkinArgs("clip.bvh").rootSpace);
+    EXPECT_THROW(pmsc::evaluators::parseSkinArgs("clip.bvh:body=sticks"), pmsc::InputError);
+    EXPECT_THROW(pmsc::evaluators::parseSkinArgs("clip.bvh:space=world"), pmsc::InputError);
 }
 
 // --- real characters --------------------------------------------------------------------------------
@@ -424,6 +434,41 @@ TEST(SkinEvaluatorOnTestModels, AssetWithoutAnimationIsRejected) {
     } catch (const pmsc::InputError& e) {
         EXPECT_NE(std::string(e.what()).find("has no animation"), std::string::npos) << e.what();
     }
+}
+
+// A CMU motion-capture clip dressed in tubes: every bone of length > 0 gets 8 rings of 12 points.
+// Root space is one rigid motion of the scene-space pose per frame (the root joint's, undone), which
+// takes away where the character walks.
+TEST(SkinEvaluatorOnTestModels, MotionCaptureDressedInTubesFollowsTheSkeletonInRootSpace) {
+    REQUIRE_MODEL(path, "BVH/01_01.bvh");
+    auto scene = pmsc::evaluators::makeSkinEvaluator(path + ":fps=30:body=tubes");
+    auto root = pmsc::evaluators::makeSkinEvaluator(path + ":fps=30:body=tubes:space=root");
+    EXPECT_EQ(scene->pointCount(), 27 * 96);  // the CMU skeleton's bones with a length
+    EXPECT_EQ(root->pointCount(), scene->pointCount());
+    EXPECT_EQ(scene->frameCount(), 688);  // 2752 frames at 120 Hz = 22.93 s at 30 fps
+    EXPECT_EQ(static_cast<Index>(scene->triangles().size()), 27 * 7 * 12 * 2 * 3);
+    const Index n = scene->pointCount();
+    auto centroid = [&](const std::vector<double>& p) {
+        return Eigen::Map<const Eigen::Matrix3Xd>(p.data(), 3, n).rowwise().mean().eval();
+    };
+    const Eigen::Vector3d sceneStart = centroid(evaluateAll(*scene, 0)),
+                          rootStart = centroid(evaluateAll(*root, 0));
+    double sceneTravel = 0, rootTravel = 0;
+    for (Index f = 1; f < scene->frameCount(); f += 40) {
+        const auto a = evaluateAll(*scene, f), b = evaluateAll(*root, f);
+        const Eigen::Map<const Eigen::Matrix3Xd> pa(a.data(), 3, n), pb(b.data(), 3, n);
+        const Eigen::Matrix4d rigid = Eigen::umeyama(pa, pb, /*with_scaling=*/false);
+        const Eigen::Matrix3Xd moved =
+            (rigid.topLeftCorner<3, 3>() * pa).colwise() + rigid.topRightCorner<3, 1>();
+        EXPECT_LT((moved - pb).cwiseAbs().maxCoeff(), 1e-9) << "frame " << f << ": not one rigid motion";
+        sceneTravel = std::max(sceneTravel, (centroid(a) - sceneStart).norm());
+        rootTravel = std::max(rootTravel, (centroid(b) - rootStart).norm());
+    }
+    EXPECT_GT(sceneTravel, 10.0) << "the clip walks";
+    EXPECT_LT(rootTravel, 0.25 * sceneTravel) << "root space keeps the body where it stands";
+    expectSubsetsMatchFullPose(*root);
+    // Without body=tubes the clip is Assimp's display mesh (one pyramid per bone).
+    EXPECT_NE(pmsc::evaluators::makeSkinEvaluator(path)->pointCount(), n);
 }
 
 // --- .obj frames --------------------------------------------------------------------------------------
