@@ -110,7 +110,7 @@ public:
         row.frame = frame;
         std::vector<double> coords(size_t(model_.coordCount()));
         multiplier_.project(keyValues, coords.data());
-        row.keyRms = multiplier_.keyRmsError(keyValues, coords.data());
+        row.keyRms = multiplier_.keyError(keyValues, coords.data());
         row.decision = policy_.decide(row.keyRms);
         if (row.decision.state == CacheState::Hit) {
             row.done = true;
@@ -229,7 +229,7 @@ public:
     void write(const engine::FrameResult& r) override {
         const Index frame = evaluator_.fileFrame(r.frame);
         PassFrame& row = result_.frames[size_t(frame)];
-        if (r.state != row.decision.state || r.keyRmsError != row.keyRms)
+        if (r.state != row.decision.state || r.keyError != row.keyRms)
             throw std::logic_error("pmsc reconstruct: frame " + std::to_string(frame) +
                                    ": the engine decided otherwise than the passes (an internal error)");
         row.local = r.local;

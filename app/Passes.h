@@ -55,7 +55,7 @@ struct PassOptions {
 /// What the passes so far gave for one frame.
 struct PassFrame {
     Index frame = 0;
-    double keyRms = 0;          ///< the key points' RMS error (PointMultiplier::keyRmsError)
+    double keyRms = 0;          ///< the key points' RMS error (PointMultiplier::keyError)
     CacheDecision decision;     ///< the whole frame's hit / blend / miss
     bool done = false;          ///< every value the soft cache needs is known: the output is final
     Index passes = 0;           ///< passes beyond the keys this frame asked for and got answered

@@ -25,7 +25,7 @@ ReplayFrame replayFrame(const PointMultiplier& multiplier, const SoftCachePolicy
     row.frame = frame;
     recorded.evaluate(frame, model.keyPoints, s.keys.data());
     multiplier.project(s.keys.data(), s.coords.data());
-    row.keyRms = multiplier.keyRmsError(s.keys.data(), s.coords.data());
+    row.keyRms = multiplier.keyError(s.keys.data(), s.coords.data());
     row.decision = policy.decide(row.keyRms);
     // Replay exists to measure: the PM result and the recorded frame are needed for the errors
     // whatever the decision, so both are computed even where a production run would skip one.
@@ -71,7 +71,7 @@ public:
     void write(const engine::FrameResult& r) override {
         ReplayFrame& row = result_.frames[static_cast<std::size_t>(r.sequence)];
         row.frame = r.frame;
-        row.keyRms = r.keyRmsError;
+        row.keyRms = r.keyError;
         row.decision = CacheDecision{r.state, r.weight};
         // The recorded frame is the reference for both errors, whatever the decision. A miss
         // already holds it: the fail-through read exactly the recorded values.
@@ -100,8 +100,7 @@ public:
         row.softMaxPointError = maxPointError(r.values.data(), full, n, c);
         if (out_) out_->writeFrame(r.sequence, r.values.data());
         if (frameOut_) frameOut_(r.sequence, r.values.data());
-        if (keep_ && !r.failed && r.state != CacheState::Hit)
-            keep_->add(r.frame, r.state, r.keyRmsError, full);
+        if (keep_ && !r.failed && r.state != CacheState::Hit) keep_->add(r.frame, r.state, r.keyError, full);
     }
 
 private:

@@ -22,7 +22,7 @@ namespace pmsc::app {
 /// What replaying one frame through the soft cache gave (a row of the report).
 struct ReplayFrame {
     Index frame = 0;
-    double keyRms = 0;             ///< PointMultiplier::keyRmsError of the recorded key values
+    double keyRms = 0;             ///< PointMultiplier::keyError of the recorded key values
     CacheDecision decision;        ///< section 5: hit, blend (with the weight of the full result) or miss
     double pmMaxPointError = 0;    ///< largest point error of the PM reconstruction alone
     double softMaxPointError = 0;  ///< largest point error of the soft-cached output

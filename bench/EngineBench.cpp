@@ -66,7 +66,7 @@ void plainLoop(const Model& model, const PointEvaluator& e, const PointMultiplie
     for (Index f = 0; f < frames; ++f) {
         e.evaluate(f, model.keyPoints, keys.data());
         pm.project(keys.data(), coords.data());
-        const double err = pm.keyRmsError(keys.data(), coords.data());
+        const double err = pm.keyError(keys.data(), coords.data());
         const CacheDecision d = policy.decide(err);
         if (d.state == CacheState::Hit) {
             pm.reconstruct(coords.data(), out.data());
@@ -83,7 +83,7 @@ void plainLoop(const Model& model, const PointEvaluator& e, const PointMultiplie
         r.frame = f;
         r.state = d.state;
         r.weight = d.weight;
-        r.keyRmsError = err;
+        r.keyError = err;
         r.values = out;
         sink.write(r);
     }

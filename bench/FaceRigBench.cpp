@@ -108,7 +108,7 @@ void BM_FacePmsc(benchmark::State& state) {
     for (auto _ : state) {
         s.evaluator->evaluate(s.frames[i++ % s.frames.size()], s.model.keyPoints, keys.data());
         pm.project(keys.data(), coords.data());
-        benchmark::DoNotOptimize(pm.keyRmsError(keys.data(), coords.data()));
+        benchmark::DoNotOptimize(pm.keyError(keys.data(), coords.data()));
         pm.reconstruct(coords.data(), out.data());
         benchmark::DoNotOptimize(out.data());
     }

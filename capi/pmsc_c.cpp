@@ -300,7 +300,7 @@ pmsc_status pmsc_multiplier_key_error(const pmsc_multiplier* multiplier, const d
         const pmsc_multiplier& m = notNull(multiplier, "multiplier");
         requireBuffer(key_values, "key_values", key_value_count, keyValueCount(modelOf(m)), "K*C");
         requireBuffer(coords, "coords", coord_count, size(modelOf(m).coordCount()), "the coordinate count");
-        notNull(key_error, "key_error") = m.multiplier.keyRmsError(key_values, coords);
+        notNull(key_error, "key_error") = m.multiplier.keyError(key_values, coords);
     });
 }
 

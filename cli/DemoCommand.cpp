@@ -67,7 +67,7 @@ Speed measureSpeed(const PointEvaluator& evaluator, const Model& model, Index fr
             evaluator.evaluate(f, model.keyPoints, keys.data());
             auto t2 = Clock::now();
             multiplier.project(keys.data(), coords.data());
-            sink += multiplier.keyRmsError(keys.data(), coords.data());
+            sink += multiplier.keyError(keys.data(), coords.data());
             multiplier.reconstruct(coords.data(), out.data());
             auto t3 = Clock::now();
             s.fullMs += std::chrono::duration<double, std::milli>(t1 - t0).count();

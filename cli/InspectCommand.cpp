@@ -72,6 +72,7 @@ void printModelJson(const Model& model, const ModelFileFacts& file) {
                                                model.singularValues.data() + model.singularValues.size());
     j["eps_min"] = model.epsMin;
     j["eps_max"] = model.epsMax;
+    j["key_error"] = toString(model.keyErrorNorm);
     j["tolerance"] = model.tolerance;
     j["train_max_point_residual"] = model.trainMaxPointResidual;
     j["key_indices"] = std::vector<long long>(model.keyPoints.begin(), model.keyPoints.end());
@@ -138,7 +139,8 @@ void printModelText(const Model& model, const ModelFileFacts& file) {
         std::cout << " " << model.keyPoints[i];
     }
     std::cout << "\n  eps           [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax)
-              << "] key RMS error (data units)\n";
+              << "] " << (model.keyErrorNorm == KeyErrorNorm::Largest ? "largest key error" : "key RMS error")
+              << " (data units)\n";
     std::cout << "  tolerance     "
               << (model.tolerance > 0 ? fmt("%.6g", model.tolerance) + " (eps calibrated for it)"
                                       : std::string("none (eps from the training frames)"))

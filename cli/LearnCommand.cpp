@@ -77,8 +77,8 @@ int runLearn(const std::vector<std::string>& args) {
                   [&](const std::string& v) { options.basis = parseIndex("--basis", v, 1); });
     parser.option("--rank", "R", "rank the incremental state keeps (default: the model's)",
                   [&](const std::string& v) { options.maxRank = parseIndex("--rank", v, 1); });
-    parser.option("--calibration", "RULE", "max or conformal (default: the rule the model was calibrated by)",
-                  rule);
+    parser.option("--calibration", "RULE",
+                  "threshold, max or conformal (default: the rule the model was calibrated by)", rule);
     parser.option("--coverage", "C",
                   "coverage of the conformal rule, in (0, 1) (default: the model's, else 0.9)",
                   [&](const std::string& v) {
@@ -91,12 +91,10 @@ int runLearn(const std::vector<std::string>& args) {
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
     if (!rule.empty()) {
-        if (rule == "max")
-            options.rule = CalibrationRule::MaxRatio;
-        else if (rule == "conformal")
-            options.rule = CalibrationRule::Conformal;
+        if (const auto r = calibrationRuleNamed(rule))
+            options.rule = *r;
         else
-            parser.fail("--calibration: '" + rule + "' is not max or conformal");
+            parser.fail("--calibration: '" + rule + "' is not threshold, max or conformal");
     }
     std::vector<std::string> paths;
     try {

@@ -76,20 +76,20 @@ public:
         FrameRecord& rec = records_[static_cast<std::size_t>((r.frame - span_.first) / span_.step)];
         rec.state = std::string(toString(r.state));
         rec.weight = r.weight;
-        rec.keyRms = r.keyRmsError;
+        rec.keyRms = r.keyError;
         rec.keysFinite = r.keysFinite;
         rec.writeSeconds = since(start);
         writeSeconds += rec.writeSeconds;
         ++written;
         if (keep_ && !r.failed && r.state != CacheState::Hit) {
             if (r.state == CacheState::Miss) {
-                keep_->add(r.frame, r.state, r.keyRmsError, r.values.data());
+                keep_->add(r.frame, r.state, r.keyError, r.values.data());
             } else {
                 // A blend's output mixes in PM; the full values it was blended with are not kept by
                 // the engine, so they are evaluated again (blends are the rare frames in the band).
                 full_.resize(r.values.size());
                 evaluator_.evaluateAll(r.frame, full_.data());
-                keep_->add(r.frame, r.state, r.keyRmsError, full_.data());
+                keep_->add(r.frame, r.state, r.keyError, full_.data());
             }
         }
     }

@@ -92,7 +92,8 @@ FrameSet readShots(const std::vector<Shot>& shots) {
 /// What `pmsc train` was asked; the training settings themselves are in `options`.
 struct TrainArgs {
     std::vector<std::string> framePaths;
-    std::string outPath, selector = "teleconnection", rule = "max", targetsPath;
+    std::string outPath, selector = "teleconnection", rule = "conformal", targetsPath;
+    std::string keyError;  // empty: TrainingOptions decides (largest, rms with shared channels)
     std::uint64_t memoryLimit = 0;
     Index blockPoints = 0;
     bool outOfCore = false, sharedChannels = false, quiet = false;
@@ -167,10 +168,17 @@ void declareCalibrationOptions(ArgParser& parser, TrainArgs& a) {
                   "leave-one-slice-out folds for --tolerance (default " +
                       std::to_string(options.calibrationSlices) + ")",
                   [&](const std::string& v) { options.calibrationSlices = parseIndex("--slices", v, 2); });
-    parser.option("--calibration", "RULE",
-                  "how --tolerance sets eps: max (largest held-out error ratio, default) or conformal "
-                  "(its quantile at --coverage: P(hit over tolerance) <= 1 - coverage)",
-                  a.rule);
+    parser.option(
+        "--calibration", "RULE",
+        "how --tolerance sets eps: conformal (tolerance / the held-out error ratios' quantile at "
+        "--coverage: P(hit over tolerance) <= 1 - coverage, default), max (tolerance / the largest "
+        "held-out ratio) or threshold (the largest held-out key error with no held-out frame over the "
+        "tolerance at or below it)",
+        a.rule);
+    parser.option("--key-error", "NORM",
+                  "the key error eps apply to: largest (the largest key's error, default) or rms (the "
+                  "paper's RMS over the keys; the default with --shared-channels)",
+                  a.keyError);
     parser.option("--coverage", "C",
                   "coverage of --calibration conformal, in (0, 1) (default " +
                       std::to_string(options.calibrationCoverage).substr(0, 4) + ")",
@@ -255,7 +263,7 @@ void checkTrainArgs(const ArgParser& parser, TrainArgs& a) {
     if (!a.targetsPath.empty()) {
         if (a.framePaths.size() != 1) parser.fail("--targets takes exactly one --frames file (the control)");
         for (const char* o : {"--regions", "--feather", "--region-keys", "--learn-rank", "--calibration",
-                              "--memory-limit", "--out-of-core", "--block-points"})
+                              "--key-error", "--memory-limit", "--out-of-core", "--block-points"})
             if (parser.given(o))
                 parser.fail(std::string(o) +
                             " does not apply to a cross model (--targets): it has no fail-through, "
@@ -277,13 +285,18 @@ void checkTrainArgs(const ArgParser& parser, TrainArgs& a) {
         parser.fail("--selector: '" + selector + "' is not teleconnection or qdeim");
     }
 
-    if (rule == "max") {
-        options.calibrationRule = CalibrationRule::MaxRatio;
-    } else if (rule == "conformal") {
-        options.calibrationRule = CalibrationRule::Conformal;
-    } else {
-        parser.fail("--calibration: '" + rule + "' is not max or conformal");
-    }
+    if (const auto r = calibrationRuleNamed(rule))
+        options.calibrationRule = *r;
+    else
+        parser.fail("--calibration: '" + rule + "' is not threshold, max or conformal");
+    if (a.keyError == "largest")
+        options.keyErrorNorm = KeyErrorNorm::Largest;
+    else if (a.keyError == "rms")
+        options.keyErrorNorm = KeyErrorNorm::Rms;
+    else if (!a.keyError.empty())
+        parser.fail("--key-error: '" + a.keyError + "' is not largest or rms");
+    if (options.keyErrorNorm == KeyErrorNorm::Largest && a.sharedChannels)
+        parser.fail("--key-error largest needs channels of their own (not --shared-channels)");
     if (parser.given("--coverage") && options.calibrationRule != CalibrationRule::Conformal)
         parser.fail("--coverage needs --calibration conformal");
     if ((parser.given("--calibration") || parser.given("--coverage")) && !(options.tolerance > 0))

@@ -20,15 +20,21 @@ void printTrainSummary(std::ostream& out, const std::string& modelPath, const Fr
         << report.iterations << " rounds)\n";
     out << "  residual    largest point error of PM on the training frames: "
         << fmt("%.6g", model.trainMaxPointResidual) << "\n";
+    const std::string measure = model.keyErrorNorm == KeyErrorNorm::Largest ? "largest key error" : "key RMS";
     if (model.tolerance > 0) {
-        out << "  eps         [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax)
-            << "] key RMS, calibrated for tolerance " << fmt("%.6g", model.tolerance) << " ("
+        out << "  eps         [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax) << "] "
+            << measure << ", calibrated for tolerance " << fmt("%.6g", model.tolerance) << " ("
             << report.calibration.slices
-            << " held-out slices, point error <= " << fmt("%.4g", report.calibration.ratio)
-            << " x key RMS)\n";
+            << " held-out slices, point error <= " << fmt("%.4g", report.calibration.ratio) << " x "
+            << measure << "; blend band " << fmt("%.3g", model.epsMax / model.epsMin) << "x)\n";
         const CalibrationStats& c = report.calibration;
         if (c.rule == CalibrationRule::Conformal) {
             out << "  rule        conformal: ratio quantile at coverage " << fmt("%.4g", c.coverage) << " of "
+                << c.usableFrames << " held-out frames (largest ratio " << fmt("%.4g", c.maxRatio)
+                << ", eps_min would be " << fmt("%.6g", c.maxRatio > 0 ? model.tolerance / c.maxRatio : 0.0)
+                << " under --calibration max)\n";
+        } else if (c.rule == CalibrationRule::Threshold) {
+            out << "  rule        threshold: no frame over the tolerance at or below eps_min among "
                 << c.usableFrames << " held-out frames (largest ratio " << fmt("%.4g", c.maxRatio)
                 << ", eps_min would be " << fmt("%.6g", c.maxRatio > 0 ? model.tolerance / c.maxRatio : 0.0)
                 << " under --calibration max)\n";
@@ -42,8 +48,8 @@ void printTrainSummary(std::ostream& out, const std::string& modelPath, const Fr
             out << "\n";
         }
     } else {
-        out << "  eps         [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax)
-            << "] key RMS, from the training frames (no --tolerance: not calibrated)\n";
+        out << "  eps         [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax) << "] "
+            << measure << ", from the training frames (no --tolerance: not calibrated)\n";
     }
     for (const auto& w : report.warnings) out << "  warning: " << w << "\n";
 }

@@ -19,8 +19,7 @@ void FrameSetSink::write(const FrameResult& frame) {
         throw std::out_of_range("FrameSetSink: frame " + std::to_string(frame.sequence) + " beyond the " +
                                 std::to_string(values_.frames) + " frames it holds");
     }
-    info_.push_back(
-        {frame.frame, frame.failed, frame.state, frame.weight, frame.keyRmsError, frame.keysFinite});
+    info_.push_back({frame.frame, frame.failed, frame.state, frame.weight, frame.keyError, frame.keysFinite});
     if (frame.failed) return;  // the frame's values stay zero
     if (static_cast<Index>(frame.values.size()) != values_.rows()) {
         throw std::invalid_argument("FrameSetSink: frame of " + std::to_string(frame.values.size()) +

@@ -20,7 +20,7 @@ public:
         bool failed = false;
         CacheState state = CacheState::Hit;
         double weight = 0;
-        double keyRmsError = 0;
+        double keyError = 0;
         bool keysFinite = true;
     };
 

@@ -9,13 +9,13 @@ namespace pmsc::nodes {
 Route ErrorMonitor::operator()(FrameSlot& slot) const {
     if (slot.failed()) return Route::Done;
     if (!slot.keysFinite) {
-        slot.keyRmsError = std::numeric_limits<double>::quiet_NaN();
+        slot.keyError = std::numeric_limits<double>::quiet_NaN();
         slot.decision = CacheDecision{CacheState::Miss, 1.0};
         slot.pointsEvaluated = Index(slot.values.size()) / pm_.model().channels;
         return Route::FailThrough;
     }
-    slot.keyRmsError = pm_.keyRmsError(slot.keyValues.data(), slot.coords.data());
-    slot.decision = policy_.decide(slot.keyRmsError);
+    slot.keyError = pm_.keyError(slot.keyValues.data(), slot.coords.data());
+    slot.decision = policy_.decide(slot.keyError);
     if (slot.decision.state == CacheState::Hit) {
         slot.pointsEvaluated = 0;
         return Route::Reconstruct;

@@ -22,7 +22,7 @@ struct FrameResult {
 
     CacheState state = CacheState::Hit;  ///< section 5 decision
     double weight = 0;                   ///< weight of the full result in values
-    double keyRmsError = 0;              ///< the key points' RMS error (NaN if keys not finite)
+    double keyError = 0;                 ///< the key points' RMS error (NaN if keys not finite)
     bool keysFinite = true;              ///< false: NaN/Inf in key values forced a full evaluation
 
     std::span<const Index> points;   ///< the output's points (all N, or the wanted subset)

@@ -44,7 +44,7 @@ void FrameSlot::reset(Index sequenceNumber, Index frameNumber) {
     sequence = sequenceNumber;
     frame = frameNumber;
     keysFinite = true;
-    keyRmsError = 0;
+    keyError = 0;
     decision = CacheDecision{};
     pmValid = false;
     local = false;

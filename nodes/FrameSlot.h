@@ -49,7 +49,7 @@ struct FrameSlot {
     std::vector<double> keyValues;  ///< K*C, model key order, channel-minor
     bool keysFinite = true;         ///< false forces a fail-through of every point
     std::vector<double> coords;     ///< Model::coordCount() pose-space coordinates
-    double keyRmsError = 0;         ///< section 5's key-point error (NaN if keys not finite)
+    double keyError = 0;            ///< section 5's key-point error (NaN if keys not finite)
     CacheDecision decision;         ///< hit / blend / miss and the weight of the full result
 
     std::vector<double> values;    ///< output: plan.outputCount() * C

@@ -32,7 +32,7 @@ void OrderedSink::operator()(FrameSlot& slot) {
     } else {
         result.state = slot.decision.state;
         result.weight = slot.decision.weight;
-        result.keyRmsError = slot.keyRmsError;
+        result.keyError = slot.keyError;
         result.keysFinite = slot.keysFinite;
         result.points = plan_.outputPoints;
         result.values = slot.values;

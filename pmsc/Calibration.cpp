@@ -5,39 +5,51 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
 namespace pmsc {
 
+double keyErrorOfResidual(const Eigen::Ref<const Eigen::VectorXd>& residual, Index channels,
+                          KeyErrorNorm norm) {
+    const Index keys = residual.size() / channels;  // rows are key x channel: exact
+    if (norm == KeyErrorNorm::Rms) return std::sqrt(residual.squaredNorm() / static_cast<double>(keys));
+    double largest = 0;
+    for (Index k = 0; k < keys; ++k)
+        largest = std::max(largest, residual.segment(k * channels, channels).squaredNorm());
+    return std::sqrt(largest);
+}
+
 Eigen::VectorXd keyRmsPerFrame(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::MatrixXd& basis,
                                Index channels, const std::vector<Index>& keys,
-                               const Eigen::MatrixXd& projector) {
+                               const Eigen::MatrixXd& projector, KeyErrorNorm norm) {
     return keyRmsFromKeyRows(gatherKeyRows(q, channels, keys), gatherKeyRows(basis, channels, keys), channels,
-                             projector);
+                             projector, norm);
 }
 
 Eigen::VectorXd keyRmsFromKeyRows(const Eigen::MatrixXd& qk, const Eigen::MatrixXd& bk, Index channels,
-                                  const Eigen::MatrixXd& projector) {
+                                  const Eigen::MatrixXd& projector, KeyErrorNorm norm) {
     Eigen::MatrixXd coords = projector * qk;
     Eigen::MatrixXd r = qk;
     r.noalias() -= bk * coords;
-    const Index keys = qk.rows() / channels;  // rows are key x channel: exact
-    const double k = static_cast<double>(keys);
-    return (r.colwise().squaredNorm().array() / k).sqrt().matrix().transpose();
+    Eigen::VectorXd e(r.cols());
+    for (Index j = 0; j < r.cols(); ++j) e[j] = keyErrorOfResidual(r.col(j), channels, norm);
+    return e;
 }
 
 CalibrationStats thresholdsFromTraining(const Eigen::Ref<const Eigen::MatrixXd>& q,
                                         const Eigen::MatrixXd& basis, Index channels,
-                                        const std::vector<Index>& keys, const Eigen::MatrixXd& projector) {
+                                        const std::vector<Index>& keys, const Eigen::MatrixXd& projector,
+                                        KeyErrorNorm norm) {
     return thresholdsFromKeyRows(gatherKeyRows(q, channels, keys), gatherKeyRows(basis, channels, keys),
-                                 channels, projector);
+                                 channels, projector, norm);
 }
 
 CalibrationStats thresholdsFromKeyRows(const Eigen::MatrixXd& qk, const Eigen::MatrixXd& bk, Index channels,
-                                       const Eigen::MatrixXd& projector) {
+                                       const Eigen::MatrixXd& projector, KeyErrorNorm norm) {
     CalibrationStats s;
-    const Eigen::VectorXd e = keyRmsFromKeyRows(qk, bk, channels, projector);
+    const Eigen::VectorXd e = keyRmsFromKeyRows(qk, bk, channels, projector, norm);
     s.epsMin = e.size() > 0 ? e.maxCoeff() : 0.0;
     s.epsMax = 1.5 * s.epsMin;
     s.keyRms.assign(e.data(), e.data() + e.size());
@@ -47,7 +59,7 @@ CalibrationStats thresholdsFromKeyRows(const Eigen::MatrixXd& qk, const Eigen::M
 CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index channels,
                            const std::vector<Index>& keys, Index basisSize, double tolerance, Index slices,
                            const SvdOptions&, const Eigen::MatrixXd* gram, CalibrationRule rule,
-                           double coverage) {
+                           double coverage, KeyErrorNorm norm) {
     if (gram && (gram->rows() != q.cols() || gram->cols() != q.cols())) {
         throw std::invalid_argument("calibrate: Gram matrix is not F x F");
     }
@@ -56,7 +68,7 @@ CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index cha
     MatrixBlocks blocks(q, channels, /*centre=*/false);
     SingleProcess one;
     return calibrate(blocks, one, gatherKeyRows(q, channels, keys), keys, basisSize, tolerance, slices,
-                     gram ? *gram : gramMatrix(q), rule, coverage);
+                     gram ? *gram : gramMatrix(q), rule, coverage, 1, norm);
 }
 
 namespace {
@@ -106,6 +118,7 @@ Eigen::MatrixXd heldInGram(const Eigen::MatrixXd& gram, Index first, Index last)
 
 /// The cross-fitting folds: what they share, and the tally of folds with a smaller basis.
 struct Folds {
+    KeyErrorNorm norm;
     RowBlocks& q;
     Communicator& comm;
     const Eigen::MatrixXd& keyRows;
@@ -117,8 +130,9 @@ struct Folds {
     Eigen::MatrixXd uBlock, residual;  // block buffers, reused fold after fold
 
     Folds(RowBlocks& blocks, Communicator& communicator, const Eigen::MatrixXd& rowsAtKeys,
-          const std::vector<Index>& keyPoints, const Eigen::MatrixXd& gramMatrix, Index m)
-        : q(blocks),
+          const std::vector<Index>& keyPoints, const Eigen::MatrixXd& gramMatrix, Index m, KeyErrorNorm n)
+        : norm(n),
+          q(blocks),
           comm(communicator),
           keyRows(rowsAtKeys),
           keys(keyPoints),
@@ -182,7 +196,7 @@ void Folds::score(Index first, Index last, CalibrationStats& s) {
     maxOverRanks(comm, pointErr.data(), static_cast<std::size_t>(out));
     for (Index j = 0; j < out; ++j) {
         s.frames.push_back(first + j);
-        s.keyRms.push_back(std::sqrt(heldOutK.col(j).squaredNorm() / static_cast<double>(keys.size())));
+        s.keyRms.push_back(keyErrorOfResidual(heldOutK.col(j), channels, norm));
         s.maxPointError.push_back(pointErr[j]);
     }
 }
@@ -219,15 +233,20 @@ void foldGroups(CalibrationStats& s, Index group) {
 
 CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::MatrixXd& keyRows,
                            const std::vector<Index>& keys, Index basisSize, double tolerance, Index slices,
-                           const Eigen::MatrixXd& gram, CalibrationRule rule, double coverage, Index group) {
+                           const Eigen::MatrixXd& gram, CalibrationRule rule, double coverage, Index group,
+                           KeyErrorNorm norm) {
     const Index f = q.frames();
     checkCalibrationArguments(f, group, tolerance, slices, basisSize, gram, rule, coverage);
+    // A frame's largest key over its C channel frames is not a function of their own largest keys.
+    if (group > 1 && norm == KeyErrorNorm::Largest)
+        throw std::invalid_argument(
+            "calibrate: the largest-key error is for models whose channels do not share the basis");
     const Index groups = f / group;
     CalibrationStats s;
     s.tolerance = tolerance;
     s.slices = slices;
     s.frames.reserve(static_cast<size_t>(f));
-    Folds folds(q, comm, keyRows, keys, gram, basisSize);
+    Folds folds(q, comm, keyRows, keys, gram, basisSize, norm);
     for (Index slice = 0; slice < slices; ++slice) {
         const Index first = group * (slice * groups / slices);
         const Index last = group * ((slice + 1) * groups / slices);  // exclusive
@@ -244,7 +263,22 @@ CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::Matrix
 }
 
 const char* toString(CalibrationRule rule) {
-    return rule == CalibrationRule::Conformal ? "conformal" : "max";
+    switch (rule) {
+        case CalibrationRule::Conformal:
+            return "conformal";
+        case CalibrationRule::Threshold:
+            return "threshold";
+        case CalibrationRule::MaxRatio:
+            break;
+    }
+    return "max";
+}
+
+std::optional<CalibrationRule> calibrationRuleNamed(const std::string& name) {
+    for (CalibrationRule r :
+         {CalibrationRule::MaxRatio, CalibrationRule::Conformal, CalibrationRule::Threshold})
+        if (name == toString(r)) return r;
+    return std::nullopt;
 }
 
 namespace {
@@ -277,6 +311,39 @@ double conformalQuantile(std::vector<double> values, double coverage) {
     if (rank < 1) rank = 1;
     if (rank > n) return values.back();
     return values[static_cast<std::size_t>(rank) - 1];
+}
+
+namespace {
+
+/// CalibrationRule::Threshold: the largest held-out key error with no frame over T at or below it,
+/// at least `floor` (the MaxRatio eps_min, which no frame over T is below).
+double heldOutThreshold(const CalibrationStats& s, double tolerance, double floor, double blind) {
+    double crossing = std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < s.keyRms.size(); ++i)
+        if (s.keyRms[i] > blind && !(s.maxPointError[i] <= tolerance))
+            crossing = std::min(crossing, s.keyRms[i]);
+    double eps = floor;
+    if (!std::isfinite(crossing)) return eps;  // no held-out frame crossed T: the linear bound extrapolates
+    for (double e : s.keyRms)
+        if (e < crossing) eps = std::max(eps, e);
+    return eps;
+}
+
+}  // namespace
+
+double blendBand(std::vector<double> ratios, double ratio) {
+    // Decision: the band spans the key errors over which held-out frames cross the tolerance:
+    // from eps_min = T / r, where the frame of ratio r (the rule's) reaches T, to where the median
+    // frame does, T / r_50 = (r / r_50) eps_min. Below 1.5 (the paper's hand-picked [0.1, 0.15])
+    // a frame would jump from PM to the full calculation over a key error change too small to
+    // hide in an animation; above 2 a blend's (1 - w) E could exceed T under the bound E <= r e
+    // (Calibration.h). With the largest-key error the spread is narrow (motion capture: 1.75).
+    if (ratios.empty() || !(ratio > 0)) return 2.0;
+    std::nth_element(ratios.begin(), ratios.begin() + static_cast<std::ptrdiff_t>(ratios.size() / 2),
+                     ratios.end());
+    const double median = ratios[ratios.size() / 2];
+    if (!(median > 0)) return 2.0;
+    return std::clamp(ratio / median, 1.5, 2.0);
 }
 
 void setThresholds(CalibrationStats& s, double tolerance, CalibrationRule rule, double coverage) {
@@ -316,6 +383,8 @@ void setThresholds(CalibrationStats& s, double tolerance, CalibrationRule rule, 
                               std::to_string(coverage) + "; used the largest ratio");
         }
     }
+    if (rule == CalibrationRule::Threshold && !ratios.empty() && ratio > 0)
+        ratio = tolerance / heldOutThreshold(s, tolerance, tolerance / ratio, blind);
     s.ratio = ratio;
     if (s.blindFrames > 0) {
         s.notes.push_back("calibration: " + std::to_string(s.blindFrames) +
@@ -342,7 +411,8 @@ void setThresholds(CalibrationStats& s, double tolerance, CalibrationRule rule, 
         return;
     }
     s.epsMin = tolerance / ratio;
-    s.epsMax = 2 * s.epsMin;
+    s.band = blendBand(ratios, ratio);
+    s.epsMax = s.band * s.epsMin;
 }
 
 }  // namespace pmsc

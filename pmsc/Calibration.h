@@ -3,11 +3,13 @@
 
 #include "pmsc/Communicator.h"
 #include "pmsc/FrameSet.h"
+#include "pmsc/KeyError.h"
 #include "pmsc/RowBlocks.h"
 #include "pmsc/Subspace.h"
 
 #include <Eigen/Core>
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -25,11 +27,28 @@ enum class CalibrationRule : int {
     /// P(E > r e) <= alpha, so P(a frame is a hit or a blend AND its soft-cached error exceeds T)
     /// <= alpha (a hit has e <= T / r; a blend's (1 - w) E stays under T when E <= r e, as for
     /// MaxRatio). With n < 1/alpha - 1 the quantile does not exist and r = the largest ratio.
+    /// The default of `pmsc train` (coverage 0.9), with the largest-key error (KeyErrorNorm): on
+    /// real motion capture replayed through a range-of-motion model it keeps every frame under T and
+    /// gets 86-100% of the best single threshold's hits where MaxRatio gets 0-93%
+    /// (docs/calibration.md).
     Conformal = 1,
+    /// The held-out frames' own best threshold: eps_min = the largest held-out key error e_f such
+    /// that every held-out frame with a key error at or below it had E <= T (and never below the
+    /// MaxRatio answer T / max E/e, which every held-out frame also obeys). Promise: the MaxRatio
+    /// promise on the held-out frames (every one under eps_min had E <= T), without the linear
+    /// bound's extrapolation from frames far below T: a frame whose E/e is large but whose E is
+    /// small (an error the keys barely see, too small to matter) no longer sets eps for every
+    /// frame. When no held-out frame exceeded T, the linear bound (MaxRatio) extrapolates. Sharp
+    /// but without margin: on motion capture at a tight tolerance it lets frames of the real takes
+    /// over T (docs/calibration.md), where Conformal does not.
+    Threshold = 2,
 };
 
-/// "max" / "conformal"
+/// "max" / "conformal" / "threshold"
 const char* toString(CalibrationRule rule);
+
+/// The rule a name gives ("max", "conformal", "threshold"), or nothing.
+std::optional<CalibrationRule> calibrationRuleNamed(const std::string& name);
 
 /// What calibration measured, so a user (and `pmsc train`) can see why eps came out as it did.
 struct CalibrationStats {
@@ -43,6 +62,7 @@ struct CalibrationStats {
     double coverage = 0;                ///< 1 - alpha of the conformal rule; 0 for MaxRatio
     double maxRatio = 0;                ///< max_f E_f / e_f, whatever the rule (the MaxRatio answer)
     Index usableFrames = 0;             ///< n: held-out frames whose ratio entered the rule
+    double band = 2;                    ///< eps_max / eps_min (blendBand)
     std::vector<Index> frames;          ///< held-out frame indices, ascending
     std::vector<double> keyRms;         ///< e_f: key RMS error of each held-out frame
     std::vector<double> maxPointError;  ///< E_f: largest point error of PM on it
@@ -59,7 +79,7 @@ struct CalibrationStats {
 /// frames are correlated: holding out a slice approximates holding out a whole sequence, as a
 /// random split would not. For each slice the mean and the M-basis are recomputed from the other
 /// frames, the keys are kept, and each held-out frame f gives its key RMS e_f
-/// (PointMultiplier::keyRmsError) and the largest point error E_f of PM.
+/// (PointMultiplier::keyError) and the largest point error E_f of PM.
 ///
 /// Model: E <= r e with r = max_f E_f / e_f. eps_min = T / r, so every held-out frame under
 /// eps_min had error <= T. eps_max = 2 eps_min: under the same bound the soft-cached error
@@ -78,13 +98,23 @@ struct CalibrationStats {
 CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index channels,
                            const std::vector<Index>& keys, Index basisSize, double tolerance, Index slices,
                            const SvdOptions& svd = {}, const Eigen::MatrixXd* gram = nullptr,
-                           CalibrationRule rule = CalibrationRule::MaxRatio, double coverage = 0.9);
+                           CalibrationRule rule = CalibrationRule::MaxRatio, double coverage = 0.9,
+                           KeyErrorNorm norm = KeyErrorNorm::Rms);
+
+/// The width eps_max / eps_min of the blend band from the held-out ratios and the rule's ratio r:
+/// r / (their median), within [1.5, 2] (the reasons are next to the code); 2 without ratios.
+double blendBand(std::vector<double> ratios, double ratio);
+
+/// The key error of one frame's key residual (K*C rows, key-major, channel-minor) by `norm`, as
+/// PointMultiplier::keyError computes it at run time.
+double keyErrorOfResidual(const Eigen::Ref<const Eigen::VectorXd>& residual, Index channels,
+                          KeyErrorNorm norm);
 
 /// Sets s.ratio, s.epsMin, s.epsMax (and s.rule, s.coverage, s.tolerance, s.maxRatio,
 /// s.usableFrames, s.blindFrames, notes) from the held-out scores s.keyRms / s.maxPointError:
-/// eps_min = T / r, eps_max = 2 eps_min, r by `rule` (CalibrationRule). Frames whose key error is
-/// at rounding level (e <= 1e-9 max E) say nothing and are left out (counted as blind when their
-/// E > 0). Used by calibrate() and by `pmsc learn`, which scores frames of its own.
+/// eps_min = T / r, eps_max = band * eps_min (blendBand), r by `rule` (CalibrationRule). Frames whose key
+/// error is at rounding level (e <= 1e-9 max E) say nothing and are left out (counted as blind when their E >
+/// 0). Used by calibrate() and by `pmsc learn`, which scores frames of its own.
 /// @throws std::invalid_argument unless tolerance > 0 and 0 < coverage < 1 (Conformal).
 void setThresholds(CalibrationStats& s, double tolerance, CalibrationRule rule, double coverage);
 
@@ -108,25 +138,27 @@ double conformalQuantile(std::vector<double> values, double coverage);
 CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::MatrixXd& keyRows,
                            const std::vector<Index>& keys, Index basisSize, double tolerance, Index slices,
                            const Eigen::MatrixXd& gram, CalibrationRule rule = CalibrationRule::MaxRatio,
-                           double coverage = 0.9, Index group = 1);
+                           double coverage = 0.9, Index group = 1, KeyErrorNorm norm = KeyErrorNorm::Rms);
 
-/// Key RMS error (PointMultiplier::keyRmsError) of every column of a mean-removed matrix `q`
+/// Key RMS error (PointMultiplier::keyError) of every column of a mean-removed matrix `q`
 /// under the model's basis and key projector: e_t = sqrt((1/K) ||(I - B_K P) Q_K[:,t]||^2).
 Eigen::VectorXd keyRmsPerFrame(const Eigen::Ref<const Eigen::MatrixXd>& q, const Eigen::MatrixXd& basis,
                                Index channels, const std::vector<Index>& keys,
-                               const Eigen::MatrixXd& projector);
+                               const Eigen::MatrixXd& projector, KeyErrorNorm norm = KeyErrorNorm::Rms);
 
 /// The uncalibrated rule (Training.h): eps_min = the largest key RMS seen on the training frames,
 /// eps_max = 1.5 eps_min, the ratio of the paper's hand-picked [0.1, 0.15] (section 7).
 CalibrationStats thresholdsFromTraining(const Eigen::Ref<const Eigen::MatrixXd>& q,
                                         const Eigen::MatrixXd& basis, Index channels,
-                                        const std::vector<Index>& keys, const Eigen::MatrixXd& projector);
+                                        const std::vector<Index>& keys, const Eigen::MatrixXd& projector,
+                                        KeyErrorNorm norm = KeyErrorNorm::Rms);
 
 /// The two above from the key rows alone (Q_K: K*C x F, B_K: K*C x M), which is all they read:
 /// the distributed training has them replicated on every rank.
 Eigen::VectorXd keyRmsFromKeyRows(const Eigen::MatrixXd& qk, const Eigen::MatrixXd& bk, Index channels,
-                                  const Eigen::MatrixXd& projector);
+                                  const Eigen::MatrixXd& projector, KeyErrorNorm norm = KeyErrorNorm::Rms);
 CalibrationStats thresholdsFromKeyRows(const Eigen::MatrixXd& qk, const Eigen::MatrixXd& bk, Index channels,
-                                       const Eigen::MatrixXd& projector);
+                                       const Eigen::MatrixXd& projector,
+                                       KeyErrorNorm norm = KeyErrorNorm::Rms);
 
 }  // namespace pmsc

@@ -114,6 +114,7 @@ Model trainCross(const FrameSet& control, const FrameSet& target, const CrossOpt
     to.keyCandidates = nc;
     to.tolerance = 0;  // no eps: a cross model has no fail-through to calibrate
     to.regions.count = 0;
+    to.keyErrorNorm = KeyErrorNorm::Rms;  // the bound below is calibrated on the key RMS
     SingleProcess one;
     Model model = train(*q, one, to, &report.training);
     model.tolerance = options.training.tolerance;
@@ -176,7 +177,7 @@ CrossMultiplier::Result CrossMultiplier::apply(const double* keyValues, double* 
     Eigen::VectorXd coords(model_.coordCount());
     pm_.project(keyValues, coords.data());
     Result r;
-    r.keyRms = pm_.keyRmsError(keyValues, coords.data());
+    r.keyRms = pm_.keyError(keyValues, coords.data());
     r.bound = state_.bound(r.keyRms);
     pm_.reconstructRange(coords.data(), state_.controlPoints, targetPoints(), target);
     return r;

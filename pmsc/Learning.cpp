@@ -40,18 +40,18 @@ void checkFrames(const Model& model, const FrameSet& frames) {
     }
 }
 
-// Key RMS (PointMultiplier::keyRmsError) and largest point error of PM of every column of a
-// mean-removed matrix under a basis and a key projector.
+// Key error (PointMultiplier::keyError, by `norm`) and largest point error of PM of every column
+// of a mean-removed matrix under a basis and a key projector.
 void scoreFrames(const Eigen::Ref<const Eigen::MatrixXd>& centered, const Eigen::MatrixXd& basis,
                  const Eigen::MatrixXd& projector, Index channels, const std::vector<Index>& keys,
-                 std::vector<double>& keyRms, std::vector<double>& maxPointError) {
+                 KeyErrorNorm norm, std::vector<double>& keyRms, std::vector<double>& maxPointError) {
     const Eigen::MatrixXd coords = projector * gatherKeyRows(centered, channels, keys);
     Eigen::MatrixXd residual = centered;
     residual.noalias() -= basis * coords;
     const Eigen::VectorXd pointErr = maxPointNormPerColumn(residual, channels);
     const Eigen::MatrixXd keyResidual = gatherKeyRows(residual, channels, keys);
     for (Index j = 0; j < centered.cols(); ++j) {
-        keyRms.push_back(std::sqrt(keyResidual.col(j).squaredNorm() / static_cast<double>(keys.size())));
+        keyRms.push_back(keyErrorOfResidual(keyResidual.col(j), channels, norm));
         maxPointError.push_back(pointErr[j]);
     }
 }
@@ -73,7 +73,8 @@ void checkLearnInput(const Model& model, const FrameSet& newFrames, const LearnO
 double oldModelKeyRmsMax(const Model& model, const Eigen::Map<const Eigen::MatrixXd>& fresh) {
     std::vector<double> e, E;
     const Eigen::MatrixXd centered = fresh.colwise() - model.mean;
-    scoreFrames(centered, model.basis, model.projector, model.channels, model.keyPoints, e, E);
+    scoreFrames(centered, model.basis, model.projector, model.channels, model.keyPoints, model.keyErrorNorm,
+                e, E);
     return *std::max_element(e.begin(), e.end());
 }
 
@@ -166,6 +167,7 @@ Model learnedCore(const Model& model, const SubspaceUpdate& u, const std::vector
     out.channels = model.channels;
     out.trainFrames = u.state.frames;
     out.selector = model.selector;
+    out.keyErrorNorm = model.keyErrorNorm;
     out.mean = u.state.mean;
     out.basis = u.basis;
     out.singularValues = u.state.sigma.head(u.basisSize);
@@ -179,8 +181,8 @@ Model learnedCore(const Model& model, const SubspaceUpdate& u, const std::vector
 /// Step 3, cross-fitting: each slice of the new frames is scored by a model that never saw it
 /// (the old state updated with the other slices; the new keys).
 CalibrationStats crossFitNewFrames(const SubspaceUpdate& u, const Eigen::Map<const Eigen::MatrixXd>& fresh,
-                                   Index channels, const std::vector<Index>& keys, Index slices,
-                                   const auto& progress) {
+                                   Index channels, KeyErrorNorm norm, const std::vector<Index>& keys,
+                                   Index slices, const auto& progress) {
     const Index m = fresh.cols();
     CalibrationStats scores;
     for (Index slice = 0; slice < slices; ++slice) {
@@ -196,7 +198,8 @@ CalibrationStats crossFitNewFrames(const SubspaceUpdate& u, const Eigen::Map<con
         const Eigen::MatrixXd foldBasis = fold.u.leftCols(foldM);
         const Eigen::MatrixXd foldProjector = makeProjector(foldBasis, channels, keys);
         const Eigen::MatrixXd heldOut = fresh.middleCols(first, last - first).colwise() - fold.mean;
-        scoreFrames(heldOut, foldBasis, foldProjector, channels, keys, scores.keyRms, scores.maxPointError);
+        scoreFrames(heldOut, foldBasis, foldProjector, channels, keys, norm, scores.keyRms,
+                    scores.maxPointError);
         for (Index j = first; j < last; ++j) scores.frames.push_back(j);
         progress("calibration", static_cast<double>(slice + 1), static_cast<double>(slices));
     }
@@ -214,7 +217,7 @@ void calibrateLearned(const Model& model, const SubspaceUpdate& u,
     CalibrationStats scores;
     const Index slices = std::min(options.slices, m);
     if (slices >= 2) {
-        scores = crossFitNewFrames(u, fresh, model.channels, keys, slices, progress);
+        scores = crossFitNewFrames(u, fresh, model.channels, model.keyErrorNorm, keys, slices, progress);
         setThresholds(scores, model.tolerance, rule, coverage);
         report.calibrationRatioNew = scores.ratio;
     } else {
@@ -258,7 +261,8 @@ CalibrationRecord learnThresholds(const Model& model, const SubspaceUpdate& u,
                                   LearnReport& report, const auto& progress) {
     const Eigen::MatrixXd centeredNew = fresh.colwise() - out.mean;
     std::vector<double> eNew, bigENew;
-    scoreFrames(centeredNew, out.basis, out.projector, model.channels, keys, eNew, bigENew);
+    scoreFrames(centeredNew, out.basis, out.projector, model.channels, keys, model.keyErrorNorm, eNew,
+                bigENew);
     report.newFramesMaxPointError = *std::max_element(bigENew.begin(), bigENew.end());
     // Decision: the training residual field becomes the largest point error on the frames of
     // this update (the earlier frames are not kept; docs/learning-and-calibration.md says so).

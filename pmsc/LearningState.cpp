@@ -56,7 +56,8 @@ CalibrationRecord CalibrationRecord::from(const CalibrationStats& s) {
 }
 
 void CalibrationRecord::validate() const {
-    if (rule != CalibrationRule::MaxRatio && rule != CalibrationRule::Conformal)
+    if (rule != CalibrationRule::MaxRatio && rule != CalibrationRule::Conformal &&
+        rule != CalibrationRule::Threshold)
         invalid("calibration record: unknown rule " + std::to_string(static_cast<int>(rule)));
     if (rule == CalibrationRule::Conformal && !(coverage > 0 && coverage < 1))
         invalid("calibration record: coverage must be in (0, 1)");

@@ -16,6 +16,8 @@ bool allFinite(const Eigen::Ref<const Eigen::MatrixXd>& m) { return m.allFinite(
 
 }  // namespace
 
+const char* toString(KeyErrorNorm norm) { return norm == KeyErrorNorm::Largest ? "largest" : "rms"; }
+
 double Model::energyCaptured() const {
     // An all-zero training set has nothing to capture; reporting 1 keeps "fraction captured"
     // meaningful (nothing was lost) instead of dividing by zero.

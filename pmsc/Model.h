@@ -3,6 +3,7 @@
 
 #include "pmsc/CrossState.h"
 #include "pmsc/FrameSet.h"
+#include "pmsc/KeyError.h"
 #include "pmsc/LearningState.h"
 #include "pmsc/Regions.h"
 
@@ -23,8 +24,8 @@ enum class Selector : int {
 /// A trained point-multiplication model: everything the runtime needs.
 ///
 /// Units: eps are in the data's units. The key error they are compared with is
-/// the RMS over key points of each key point's Euclidean error over its channels
-/// (see PointMultiplier::keyRmsError), so a threshold reads like a point error.
+/// the model's KeyErrorNorm of each key point's Euclidean error over its channels
+/// (see PointMultiplier::keyError), so a threshold reads like a point error.
 struct Model {
     Index points = 0;       ///< N
     Index channels = 0;     ///< C
@@ -50,6 +51,8 @@ struct Model {
     Eigen::MatrixXd projector;
 
     Selector selector = Selector::Teleconnection;
+    /// The measure eps applies to (section KEYERROR of a version-2 file; absent = Rms).
+    KeyErrorNorm keyErrorNorm = KeyErrorNorm::Rms;
     double epsMin = 0;     ///< soft cache: at or below, a hit (section 5)
     double epsMax = 0;     ///< soft cache: at or above, a miss
     double tolerance = 0;  ///< calibration target (largest point error of a hit); 0 = not calibrated

@@ -2,11 +2,29 @@
 
 #include "pmsc/Cross.h"
 #include "pmsc/LearningSections.h"
+#include "pmsc/Model.h"
 #include "pmsc/Regions.h"
 
 #include <cstdio>
 
 namespace pmsc {
+
+namespace {
+
+// KEYERROR: the key error norm eps applies to (Model::keyErrorNorm), one u32. Absent = Rms, the
+// measure of every model written without it.
+ModelSectionCodec keyErrorSectionCodec() {
+    return {{'K', 'E', 'Y', 'E', 'R', 'R', 'O', 'R'},
+            [](const Model& m) { return m.keyErrorNorm != KeyErrorNorm::Rms; },
+            [](const Model& m, ByteWriter& out) { out.u32(static_cast<std::uint32_t>(m.keyErrorNorm)); },
+            [](ByteReader& in, Model& m) {
+                const std::uint32_t v = in.u32("key error norm");
+                if (v > 1) in.fail("key error norm " + std::to_string(v) + " is not 0 (rms) or 1 (largest)");
+                m.keyErrorNorm = static_cast<KeyErrorNorm>(v);
+            }};
+}
+
+}  // namespace
 
 std::span<const ModelSectionCodec> modelSectionCodecs() {
     // One line per feature. The order is the order of the sections in a written file.
@@ -15,6 +33,7 @@ std::span<const ModelSectionCodec> modelSectionCodecs() {
         learningSectionCodec(),     // LEARNSVD (`pmsc learn`)
         calibrationSectionCodec(),  // CALIBRAT (`pmsc learn`)
         crossSectionCodec(),        // CROSSPM (cross point multiplication)
+        keyErrorSectionCodec(),     // KEYERROR (the largest key as the soft cache's measure)
     };
     return codecs;
 }

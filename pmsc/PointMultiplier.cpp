@@ -102,7 +102,7 @@ void PointMultiplier::project(const double* keyValues, double* coords) const {
     b -= projectedKeyMean_;
 }
 
-double PointMultiplier::keyRmsError(const double* keyValues, const double* coords) const {
+double PointMultiplier::keyError(const double* keyValues, const double* coords) const {
     const Index kc = keyMean_.size();
     const Index m = model_.basisSize();
     const Index keys = model_.keyCount();
@@ -113,16 +113,20 @@ double PointMultiplier::keyRmsError(const double* keyValues, const double* coord
         // Same measure as below (RMS over keys of the Euclidean error over channels); the key
         // basis is K x M, shared by the channels, and the coordinates are M x C.
         const Index c = model_.channels;
-        double sum = 0;
+        double sum = 0, largest = 0;
         for (Index i = 0; i < keys; ++i) {
+            double key = 0;
             for (Index ch = 0; ch < c; ++ch) {
                 double predicted = keyMean_[i * c + ch];
                 for (Index j = 0; j < m; ++j) predicted += keyBasis_(i, j) * coords[j * c + ch];
                 const double r = keyValues[i * c + ch] - predicted;
-                sum += r * r;
+                key += r * r;
             }
+            sum += key;
+            largest = std::max(largest, key);
         }
-        return std::sqrt(sum / static_cast<double>(keys));
+        return model_.keyErrorNorm == KeyErrorNorm::Largest ? std::sqrt(largest)
+                                                            : std::sqrt(sum / static_cast<double>(keys));
     }
     // Decision (Model.h): RMS over key points of each point's Euclidean error over its channels,
     // so the number reads like a point error in data units and eps can be compared with the
@@ -134,7 +138,10 @@ double PointMultiplier::keyRmsError(const double* keyValues, const double* coord
     constexpr Index kBlock = 256;
     double predicted[kBlock];
     const double* basis = keyBasis_.data();
-    double sum = 0;
+    // The largest key needs whole keys: a key's C residuals are summed (across blocks when a
+    // block boundary splits them) before the max.
+    const Index c = model_.channels;
+    double sum = 0, largest = 0, key = 0;
     for (Index x0 = 0; x0 < kc; x0 += kBlock) {
         const Index n = std::min(kBlock, kc - x0);
         for (Index i = 0; i < n; ++i) predicted[i] = keyMean_[x0 + i];
@@ -146,9 +153,15 @@ double PointMultiplier::keyRmsError(const double* keyValues, const double* coord
         for (Index i = 0; i < n; ++i) {
             const double r = keyValues[x0 + i] - predicted[i];
             sum += r * r;
+            key += r * r;
+            if ((x0 + i + 1) % c == 0) {
+                largest = std::max(largest, key);
+                key = 0;
+            }
         }
     }
-    return std::sqrt(sum / static_cast<double>(keys));
+    return model_.keyErrorNorm == KeyErrorNorm::Largest ? std::sqrt(largest)
+                                                        : std::sqrt(sum / static_cast<double>(keys));
 }
 
 void PointMultiplier::reconstruct(const double* coords, double* out) const {

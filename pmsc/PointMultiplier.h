@@ -25,10 +25,10 @@ public:
     /// Pose-space coordinates b = P (k - mean_K).
     void project(const double* keyValues, double* coords) const;
 
-    /// RMS over key points of the Euclidean norm (over channels) of the key
-    /// residual k - (mean_K + B_K b). Data units. Returns NaN if any key value is
-    /// not finite.
-    double keyRmsError(const double* keyValues, const double* coords) const;
+    /// The model's key error (Model::keyErrorNorm): the RMS over key points, or the largest, of
+    /// the Euclidean norm (over channels) of each key's residual k - (mean_K + B_K b). Data units.
+    /// Returns NaN if any key value is not finite.
+    double keyError(const double* keyValues, const double* coords) const;
 
     /// All N points: out = mean + B b (N*C doubles).
     void reconstruct(const double* coords, double* out) const;

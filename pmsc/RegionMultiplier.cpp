@@ -66,8 +66,8 @@ double RegionMultiplier::project(Index r, const double* keyValues, const double*
     return std::sqrt(residual.squaredNorm() / double(g.keys.size()));
 }
 
-CacheDecision RegionMultiplier::decide(Index r, double keyRmsError) const {
-    return policies_[size_t(r)].decide(keyRmsError);
+CacheDecision RegionMultiplier::decide(Index r, double keyError) const {
+    return policies_[size_t(r)].decide(keyError);
 }
 
 void RegionMultiplier::pointWeights(std::span<const double> regionWeights, double* weights) const {

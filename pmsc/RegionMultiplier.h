@@ -28,7 +28,7 @@ public:
     Index coordsOffset(Index r) const { return coordsOffset_[size_t(r)]; }
 
     /// Region r's coordinates b_r = P_r (k_r - mean_{K_r}) and returns its key RMS error (the
-    /// frame's measure, PointMultiplier::keyRmsError, over the region's keys). NaN if a key value
+    /// frame's measure, PointMultiplier::keyError, over the region's keys). NaN if a key value
     /// of the region is not finite. `regionKeyValues`: the values of LocalRegions::extraKeyPoints
     /// (E*C; may be null when the model has none).
     double project(Index r, const double* keyValues, const double* regionKeyValues, double* coords) const;
@@ -36,7 +36,7 @@ public:
     /// hit as a whole.
     const std::vector<Index>& regionKeyPoints() const { return regions_.extraKeyPoints; }
     /// The region's soft-cache decision for its key error (its own calibrated thresholds).
-    CacheDecision decide(Index r, double keyRmsError) const;
+    CacheDecision decide(Index r, double keyError) const;
 
     /// w_p for every point (N doubles) from the regions' full-result weights (Regions.h).
     void pointWeights(std::span<const double> regionWeights, double* weights) const;

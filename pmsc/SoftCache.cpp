@@ -25,15 +25,15 @@ SoftCachePolicy::SoftCachePolicy(double epsMin, double epsMax) : epsMin_(epsMin)
     }
 }
 
-CacheDecision SoftCachePolicy::decide(double keyRmsError) const {
+CacheDecision SoftCachePolicy::decide(double keyError) const {
     // A non-finite key error means the key values themselves are broken (or the projection
     // blew up): the PM result cannot be trusted, so fail through entirely.
-    if (!std::isfinite(keyRmsError)) return {CacheState::Miss, 1.0};
-    if (keyRmsError <= epsMin_) return {CacheState::Hit, 0.0};
+    if (!std::isfinite(keyError)) return {CacheState::Miss, 1.0};
+    if (keyError <= epsMin_) return {CacheState::Hit, 0.0};
     // Checked after the hit test so that epsMin == epsMax is a hard switch at that value.
-    if (keyRmsError >= epsMax_) return {CacheState::Miss, 1.0};
+    if (keyError >= epsMax_) return {CacheState::Miss, 1.0};
     // Strictly inside (epsMin, epsMax), so epsMax > epsMin and the weight is in (0, 1).
-    const double w = (keyRmsError - epsMin_) / (epsMax_ - epsMin_);
+    const double w = (keyError - epsMin_) / (epsMax_ - epsMin_);
     return {CacheState::Blend, w};
 }
 

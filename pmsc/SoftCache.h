@@ -29,7 +29,7 @@ public:
     /// @throws std::invalid_argument unless 0 <= epsMin <= epsMax, both finite.
     SoftCachePolicy(double epsMin, double epsMax);
 
-    CacheDecision decide(double keyRmsError) const;
+    CacheDecision decide(double keyError) const;
     double epsMin() const { return epsMin_; }
     double epsMax() const { return epsMax_; }
 

@@ -67,7 +67,8 @@ void validateOptions(const TrainingOptions& o, Index points, Index frames) {
         badOption("calibration slices must be in [2, " + std::to_string(groups) + "], got " +
                   std::to_string(o.calibrationSlices));
     }
-    if (o.calibrationRule != CalibrationRule::MaxRatio && o.calibrationRule != CalibrationRule::Conformal) {
+    if (o.calibrationRule != CalibrationRule::MaxRatio && o.calibrationRule != CalibrationRule::Conformal &&
+        o.calibrationRule != CalibrationRule::Threshold) {
         badOption("unknown calibration rule " + std::to_string(static_cast<int>(o.calibrationRule)));
     }
     if (o.calibrationRule == CalibrationRule::Conformal &&
@@ -159,6 +160,9 @@ Model trainSharedChannels(const FrameSet& frames, const TrainingOptions& options
     }
     TrainingOptions one = options;
     one.sharedChannels = false;
+    if (options.keyErrorNorm == KeyErrorNorm::Largest)
+        throw InputError("train: the largest-key error needs channels of their own (not --shared-channels)");
+    one.keyErrorNorm = KeyErrorNorm::Rms;
     // A frame's channels are held out together: held in, its other channels would tell the fold
     // most of what it is asked to predict. (The C=1 training then checks --slices against the F
     // groups, with the same message as for any model.)
@@ -188,7 +192,7 @@ Model trainSharedChannels(const FrameSet& frames, const TrainingOptions& options
                 keys[static_cast<std::size_t>(i * c + ch)] =
                     in[model.keyPoints[static_cast<std::size_t>(i)] * c + ch];
         pm.project(keys.data(), coords.data());
-        keyErrors[static_cast<std::size_t>(t)] = pm.keyRmsError(keys.data(), coords.data());
+        keyErrors[static_cast<std::size_t>(t)] = pm.keyError(keys.data(), coords.data());
         pm.reconstruct(coords.data(), values.data());
         for (Index p = 0; p < n; ++p) {
             double e = 0;
@@ -312,6 +316,7 @@ void Trainer::meanAndGram() {
     model.channels = channels;
     model.trainFrames = f;
     model.selector = options.selector;
+    model.keyErrorNorm = options.keyErrorNorm.value_or(KeyErrorNorm::Largest);
     progress("mean", 1, 1);
     progress("svd", 0, 1);
     gram = gramOf(q, comm);
@@ -534,10 +539,12 @@ void Trainer::thresholds() {
     if (options.tolerance > 0) {
         report.calibration =
             calibrate(q, comm, keyRows, keys, m, options.tolerance, options.calibrationSlices, gram,
-                      options.calibrationRule, options.calibrationCoverage, options.calibrationGroup);
+                      options.calibrationRule, options.calibrationCoverage, options.calibrationGroup,
+                      model.keyErrorNorm);
         model.tolerance = options.tolerance;
     } else {
-        report.calibration = thresholdsFromKeyRows(keyRows, basisKeyRows, channels, model.projector);
+        report.calibration =
+            thresholdsFromKeyRows(keyRows, basisKeyRows, channels, model.projector, model.keyErrorNorm);
     }
     for (const auto& note : report.calibration.notes) report.warnings.push_back(note);
     model.epsMin = report.calibration.epsMin;

@@ -11,6 +11,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -54,7 +55,11 @@ struct TrainingOptions {
     double tolerance = 0;         ///< largest point error a hit may have (data units); 0 = no calibration
     Index calibrationSlices = 5;  ///< leave-one-slice-out folds
     /// How the held-out ratios E/e become eps (Calibration.h).
-    CalibrationRule calibrationRule = CalibrationRule::MaxRatio;
+    CalibrationRule calibrationRule = CalibrationRule::Conformal;
+    /// The key error eps apply to (Model::keyErrorNorm). Unset: the largest key, or the RMS when
+    /// the channels share the basis (a frame's C channel frames are calibrated as one, which the
+    /// largest key does not allow). Local fail-through regions measure their keys by the RMS.
+    std::optional<KeyErrorNorm> keyErrorNorm;
     double calibrationCoverage =
         0.9;  ///< 1 - alpha of CalibrationRule::Conformal (docs/learning-and-calibration.md: 0.9 measured)
 
@@ -74,7 +79,7 @@ struct TrainingOptions {
     /// are points as before. eps are calibrated per frame, not per channel frame: a frame's
     /// channels stay in one calibration slice (calibrationGroup), and each held-out frame has one
     /// ratio, the bound sqrt(sum_c E_c^2) on its Euclidean point error over its Euclidean key
-    /// error (PointMultiplier::keyRmsError, what the runtime compares with eps), so the conformal
+    /// error (PointMultiplier::keyError, what the runtime compares with eps), so the conformal
     /// rule's coverage counts frames; without a tolerance eps are the training frames' largest
     /// Euclidean key error.
     /// In memory and on one process only, without regions, learning or cross targets.

@@ -75,8 +75,7 @@ py::object keyError(const PyModel& self, py::handle keys, const py::object& coor
     double* o = out.mutable_data();
     {
         py::gil_scoped_release nogil;
-        for (py::ssize_t f = 0; f < frames; ++f)
-            o[f] = self.multiplier->keyRmsError(in + f * kc, bc + f * mm);
+        for (py::ssize_t f = 0; f < frames; ++f) o[f] = self.multiplier->keyError(in + f * kc, bc + f * mm);
     }
     if (batch < 0) return py::float_(o[0]);
     return out;
@@ -123,6 +122,7 @@ py::dict modelInfo(const Model& m) {
     d["train_frames"] = m.trainFrames;
     d["eps_min"] = m.epsMin;
     d["eps_max"] = m.epsMax;
+    d["key_error"] = toString(m.keyErrorNorm);
     d["tolerance"] = m.tolerance;
     d["energy_captured"] = m.energyCaptured();
     d["train_max_point_residual"] = m.trainMaxPointResidual;

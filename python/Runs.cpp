@@ -134,7 +134,7 @@ public:
 
     void write(const engine::FrameResult& r) override {
         Row& row = rows_[static_cast<std::size_t>(r.sequence)];
-        row = {r.frame, r.state, r.weight, r.keyRmsError, r.failed, r.local, r.pointsEvaluated, r.error};
+        row = {r.frame, r.state, r.weight, r.keyError, r.failed, r.local, r.pointsEvaluated, r.error};
         const std::size_t at = static_cast<std::size_t>(r.sequence) * values_;
         if (!r.failed) {
             storeValues(data_, dtype_, at, r.values.data(), values_);

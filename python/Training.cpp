@@ -87,18 +87,18 @@ Selector selectorOf(const std::string& s) {
 }
 
 CalibrationRule ruleOf(const std::string& s) {
-    if (s == "max") return CalibrationRule::MaxRatio;
-    if (s == "conformal") return CalibrationRule::Conformal;
-    throw InputError("calibration: '" + s + "' is not max or conformal");
+    if (const auto r = calibrationRuleNamed(s)) return *r;
+    throw InputError("calibration: '" + s + "' is not threshold, max or conformal");
 }
 
 std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energy, double basisError,
                                     Index maxBasis, double maxError, Index maxKeys, Index block,
                                     std::vector<Index> fiducials, std::vector<Index> gridPoints,
                                     const std::string& selector, double tolerance, Index slices,
-                                    const std::string& calibration, double coverage, Index learnRank,
-                                    unsigned seed, int powerIterations, Index regions, double feather,
-                                    Index regionKeys, bool sharedChannels, py::object progress) {
+                                    const std::string& calibration, double coverage,
+                                    const std::string& keyError, Index learnRank, unsigned seed,
+                                    int powerIterations, Index regions, double feather, Index regionKeys,
+                                    bool sharedChannels, py::object progress) {
     TrainingOptions o;
     o.basis = basis;
     o.energy = energy;
@@ -114,6 +114,12 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     o.calibrationSlices = slices;
     o.calibrationRule = ruleOf(calibration);
     o.calibrationCoverage = coverage;
+    if (keyError == "largest")
+        o.keyErrorNorm = KeyErrorNorm::Largest;
+    else if (keyError == "rms")
+        o.keyErrorNorm = KeyErrorNorm::Rms;
+    else if (!keyError.empty())
+        throw InputError("key_error: '" + keyError + "' is not largest or rms");
     o.learnRank = learnRank;
     o.seed = seed;
     o.powerIterations = powerIterations;
@@ -126,7 +132,7 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     if (regions < 0) throw InputError("regions: must be >= 0 (0 = none), got " + std::to_string(regions));
     if (!(feather >= 0 && feather <= 0.5))
         throw InputError("feather: must be in [0, 0.5], got " + std::to_string(feather));
-    if (calibration != "max" && !(tolerance > 0))
+    if (calibration != "conformal" && !(tolerance > 0))
         throw InputError("calibration and coverage need a tolerance");
 
     TrainingFrames t = trainingFrames(frames);
@@ -193,10 +199,10 @@ void bindTraining(py::module_& m) {
         "train", &trainModel, "frames"_a, py::kw_only(), "basis"_a = 0, "energy"_a = 0.0,
         "basis_error"_a = 0.0, "max_basis"_a = 256, "max_error"_a = 0.0, "max_keys"_a = 200, "block"_a = 16,
         "fiducials"_a = std::vector<Index>{}, "grid_points"_a = std::vector<Index>{},
-        "selector"_a = "teleconnection", "tolerance"_a = 0.0, "slices"_a = 5, "calibration"_a = "max",
-        "coverage"_a = 0.9, "learn_rank"_a = 0, "seed"_a = 20070101u, "power_iterations"_a = 2,
-        "regions"_a = 0, "feather"_a = 0.03, "region_keys"_a = 4, "shared_channels"_a = false,
-        "progress"_a = py::none(),
+        "selector"_a = "teleconnection", "tolerance"_a = 0.0, "slices"_a = 5, "calibration"_a = "conformal",
+        "coverage"_a = 0.9, "key_error"_a = "", "learn_rank"_a = 0, "seed"_a = 20070101u,
+        "power_iterations"_a = 2, "regions"_a = 0, "feather"_a = 0.03, "region_keys"_a = 4,
+        "shared_channels"_a = false, "progress"_a = py::none(),
         "Trains a model as `pmsc train` does (same options, same model bytes). frames: an array (F, N, C), a "
         ".npy path, or a list of them (shots). progress(stage, done, total) may return False to cancel.");
 }

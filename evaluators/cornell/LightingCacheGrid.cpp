@@ -71,7 +71,7 @@ LightingCacheGrid::LightingCacheGrid(const SurfaceVoxels& voxels, std::span<cons
                                           meta.lightPosition.x, meta.lightPosition.y, meta.lightPosition.z)));
     g.insertMeta("cache_state", openvdb::StringMetadata(meta.state));
     g.insertMeta("full_weight", openvdb::DoubleMetadata(meta.weight));
-    g.insertMeta("key_rms_error", openvdb::DoubleMetadata(meta.keyRmsError));
+    g.insertMeta("key_rms_error", openvdb::DoubleMetadata(meta.keyError));
     g.insertMeta("quantity", openvdb::StringMetadata("one-bounce indirect irradiance, RGB"));
     g.insertMeta("units", openvdb::StringMetadata("world: mm"));
 }
@@ -131,7 +131,7 @@ CacheMetadata LightingCacheGrid::metadata() const {
         m.lightPosition = {lp.x(), lp.y(), lp.z()};
         m.state = g.metaValue<std::string>("cache_state");
         m.weight = g.metaValue<double>("full_weight");
-        m.keyRmsError = g.metaValue<double>("key_rms_error");
+        m.keyError = g.metaValue<double>("key_rms_error");
     } catch (const std::exception& e) {
         throw InputError(std::string("lighting cache: metadata missing or of the wrong type: ") + e.what());
     }

@@ -17,7 +17,7 @@ struct CacheMetadata {
     Vec3 lightPosition;          ///< millimetres
     std::string state = "miss";  ///< section 5: "hit", "blend", "miss" (or "full" for a reference)
     double weight = 1;           ///< weight of the full result in the values (0 hit .. 1 miss)
-    double keyRmsError = 0;      ///< the key points' RMS error of the frame (data units)
+    double keyError = 0;         ///< the key points' RMS error of the frame (data units)
 };
 
 /// The lighting cache of one frame: an OpenVDB Vec3SGrid named "indirect" whose active voxels

@@ -55,7 +55,7 @@ public:
     void write(const engine::FrameResult& r) override {
         if (r.failed)
             throw EvaluatorError(name_ + ": frame " + std::to_string(r.frame) + " failed: " + r.error);
-        FrameRecord rec{r.frame, r.state, r.weight, r.keyRmsError};
+        FrameRecord rec{r.frame, r.state, r.weight, r.keyError};
         // Point multiplication proper (what a hit delivers), even on frames the soft cache
         // sent to the full gather: the error of the model itself, not flattered by misses.
         const double* pm = r.pmValues.empty() ? r.values.data() : r.pmValues.data();

@@ -63,7 +63,7 @@ public:
         FrameRecord* rec = records_.at(r.frame);
         rec->engineSeen = true;
         rec->engineAgrees = r.state == rec->state &&
-                            std::memcmp(&r.keyRmsError, &rec->keyRms, sizeof(double)) == 0 &&
+                            std::memcmp(&r.keyError, &rec->keyRms, sizeof(double)) == 0 &&
                             r.weight == rec->weight;
         if (std::find(keep_.begin(), keep_.end(), r.frame) != keep_.end()) {
             kept_[r.frame].assign(r.values.begin(), r.values.end());
@@ -217,7 +217,7 @@ void measureAgainstFullPoses(const DemoRun& run, const FaceScene& scene, const M
                 for (int c = 0; c < 3; ++c) keys[3 * k + c] = full[3 * model.keyPoints[k] + c];
             }
             pm.project(keys.data(), coords.data());
-            r.keyRms = pm.keyRmsError(keys.data(), coords.data());
+            r.keyRms = pm.keyError(keys.data(), coords.data());
             pm.reconstruct(coords.data(), rec.data());
             const CacheDecision d = policy.decide(r.keyRms);
             r.state = d.state;
@@ -342,7 +342,7 @@ PoseTimings timeFullPoseAgainstPmsc(const DemoRun& run, const FaceScene& scene, 
         c0 = threadCpuSeconds();
         w0 = DemoClock::now();
         pm.project(keys.data(), coords.data());
-        volatile double e = pm.keyRmsError(keys.data(), coords.data());
+        volatile double e = pm.keyError(keys.data(), coords.data());
         (void)e;
         pt.cpuProject += threadCpuSeconds() - c0;
         pt.wallProject += secondsSince(w0);

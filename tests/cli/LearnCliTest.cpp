@@ -176,7 +176,7 @@ TEST_F(LearnCli, BadInputsFailWithOneLineAndLeaveFilesAlone) {
                        work.file("m2.pmsc"), "--calibration", "median"});
     expectFailure(r, 2, {"--calibration", "median"});
     r = runPmsc(work, {"train", "--frames", dir_->file("train.npy"), "--out", work.file("t.pmsc"),
-                       "--tolerance", "0.02", "--coverage", "0.9"});
+                       "--tolerance", "0.02", "--calibration", "max", "--coverage", "0.9"});
     expectFailure(r, 2, {"--coverage", "conformal"});
     r = runPmsc(work, {"train", "--frames", dir_->file("train.npy"), "--out", work.file("t.pmsc"),
                        "--tolerance", "0.02", "--calibration", "conformal", "--coverage", "1"});

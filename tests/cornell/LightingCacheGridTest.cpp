@@ -39,7 +39,7 @@ TEST(LightingCacheGrid, RoundTripKeepsVoxelsValuesAndMetadata) {
     EXPECT_EQ(m.frame, 42);
     EXPECT_EQ(m.state, "blend");
     EXPECT_DOUBLE_EQ(m.weight, 0.375);
-    EXPECT_DOUBLE_EQ(m.keyRmsError, 0.0123);
+    EXPECT_DOUBLE_EQ(m.keyError, 0.0123);
     EXPECT_DOUBLE_EQ(m.lightPosition.x, 100.5);
     EXPECT_DOUBLE_EQ(m.lightPosition.y, 488.8);
     EXPECT_DOUBLE_EQ(m.lightPosition.z, 200.25);

@@ -119,7 +119,7 @@ TEST_F(Nodes, ErrorMonitorRoutesByTheSoftCachePolicy) {
     EXPECT_EQ(monitor(slot), Route::FailThrough);
     EXPECT_EQ(slot.decision.state, CacheState::Miss);
     EXPECT_EQ(slot.decision.weight, 1.0);
-    EXPECT_TRUE(std::isnan(slot.keyRmsError));
+    EXPECT_TRUE(std::isnan(slot.keyError));
     slot.fail("keys", "boom");
     EXPECT_EQ(monitor(slot), Route::Done);
 }

@@ -181,7 +181,7 @@ inline SoftCachePolicy syntheticPolicy(const Model& model, const SyntheticEvalua
             for (Index c = 0; c < model.channels; ++c)
                 k[size_t(i * model.channels + c)] = e.value(f, model.keyPoints[size_t(i)], c);
         pm.project(k.data(), b.data());
-        return pm.keyRmsError(k.data(), b.data());
+        return pm.keyError(k.data(), b.data());
     };
     double blendMax = 0, missMin = std::numeric_limits<double>::max();
     for (Index f = 1; f < std::min<Index>(e.frameCount(), 200); f += 4)
@@ -204,7 +204,7 @@ inline std::vector<double> referenceFrame(const Model& model, const SyntheticEva
         for (Index ch = 0; ch < c; ++ch)
             k[size_t(i * c + ch)] = e.value(frame, model.keyPoints[size_t(i)], ch);
     pm.project(k.data(), b.data());
-    const CacheDecision d = policy.decide(pm.keyRmsError(k.data(), b.data()));
+    const CacheDecision d = policy.decide(pm.keyError(k.data(), b.data()));
     if (decisionOut) *decisionOut = d;
     std::vector<double> pmv(size_t(model.points * c)), out(size_t(model.points * c));
     pm.reconstruct(b.data(), pmv.data());

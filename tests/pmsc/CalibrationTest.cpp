@@ -50,7 +50,8 @@ TEST(Calibration, RecoversTheKnownErrorRatioAndSetsEps) {
     const pmsc::CalibrationStats s = pmsc::calibrate(d.q, 3, d.keys, 4, tolerance, 5);
     EXPECT_NEAR(s.ratio, d.ratio, 1e-3 * d.ratio);
     EXPECT_NEAR(s.epsMin, tolerance / s.ratio, 1e-15);
-    EXPECT_DOUBLE_EQ(s.epsMax, 2 * s.epsMin);
+    EXPECT_DOUBLE_EQ(s.band, 1.5) << "one ratio for every frame: the narrowest band";
+    EXPECT_DOUBLE_EQ(s.epsMax, 1.5 * s.epsMin);
     ASSERT_EQ(s.frames.size(), 100u);
     ASSERT_EQ(s.keyRms.size(), 100u);
     for (size_t i = 0; i < s.frames.size(); ++i) EXPECT_EQ(s.frames[i], static_cast<pmsc::Index>(i));
@@ -110,6 +111,52 @@ TEST(Calibration, RejectsBadArguments) {
     EXPECT_THROW(pmsc::calibrate(d.q, 3, d.keys, 4, 0.1, 101), std::invalid_argument);
 }
 
+namespace {
+pmsc::CalibrationStats scores(std::vector<double> e, std::vector<double> bigE) {
+    pmsc::CalibrationStats s;
+    s.keyRms = std::move(e);
+    s.maxPointError = std::move(bigE);
+    return s;
+}
+}  // namespace
+
+// The threshold rule is the held-out frames' own best threshold, never below the max rule's.
+TEST(Calibration, ThresholdRuleIsTheHeldOutBestThreshold) {
+    // T = 5: frames over T at e = 3 and e = 6; the largest e below 3 is 2. Ratios 1, 1, 3.33, ...
+    pmsc::CalibrationStats s = scores({1, 2, 3, 4, 5, 6}, {1, 2, 10, 3, 4, 20});
+    pmsc::setThresholds(s, 5.0, pmsc::CalibrationRule::Threshold, 0.9);
+    EXPECT_DOUBLE_EQ(s.epsMin, 2.0);
+    EXPECT_DOUBLE_EQ(s.ratio, 2.5);
+    EXPECT_NEAR(s.maxRatio, 10.0 / 3.0, 1e-12);
+    pmsc::CalibrationStats max = scores({1, 2, 3, 4, 5, 6}, {1, 2, 10, 3, 4, 20});
+    pmsc::setThresholds(max, 5.0, pmsc::CalibrationRule::MaxRatio, 0.9);
+    EXPECT_DOUBLE_EQ(max.epsMin, 1.5) << "T / the largest ratio";
+    // No held-out frame over T: the linear bound extrapolates, as the max rule does.
+    s = scores({1, 2}, {1, 3});
+    pmsc::setThresholds(s, 5.0, pmsc::CalibrationRule::Threshold, 0.9);
+    EXPECT_DOUBLE_EQ(s.epsMin, 5.0 / 1.5);
+    // The lowest crossing below every other frame: the max rule's eps, the floor.
+    s = scores({1, 0.5}, {0.5, 10});
+    pmsc::setThresholds(s, 5.0, pmsc::CalibrationRule::Threshold, 0.9);
+    EXPECT_DOUBLE_EQ(s.epsMin, 0.25);
+    EXPECT_STREQ(pmsc::toString(pmsc::CalibrationRule::Threshold), "threshold");
+    EXPECT_EQ(pmsc::calibrationRuleNamed("threshold"), pmsc::CalibrationRule::Threshold);
+    EXPECT_EQ(pmsc::calibrationRuleNamed("max"), pmsc::CalibrationRule::MaxRatio);
+    EXPECT_FALSE(pmsc::calibrationRuleNamed("median").has_value());
+}
+
+TEST(Calibration, BlendBandSpansTheRuleRatioToTheMedianWithinOneAndAHalfAndTwo) {
+    EXPECT_DOUBLE_EQ(pmsc::blendBand({1, 1, 1.8, 1.9}, 1.8), 1.5);  // median 1.8: clamped up
+    EXPECT_DOUBLE_EQ(pmsc::blendBand({1, 1, 1, 1.7, 1.75}, 1.75), 1.75);
+    EXPECT_DOUBLE_EQ(pmsc::blendBand({1, 1, 1, 5}, 5), 2.0);
+    EXPECT_DOUBLE_EQ(pmsc::blendBand({}, 5), 2.0);
+    pmsc::CalibrationStats s = scores({1, 1, 1, 1, 1}, {1, 1, 1, 1.7, 1.75});
+    pmsc::setThresholds(s, 3.5, pmsc::CalibrationRule::MaxRatio, 0.9);
+    EXPECT_DOUBLE_EQ(s.epsMin, 2.0);
+    EXPECT_DOUBLE_EQ(s.band, 1.75);
+    EXPECT_DOUBLE_EQ(s.epsMax, 3.5);
+}
+
 TEST(Calibration, ConformalQuantileIsTheRankOfNPlusOneTimesCoverage) {
     std::vector<double> v;
     for (int i = 19; i >= 1; --i) v.push_back(i);        // 1..19, unsorted
@@ -147,7 +194,7 @@ TEST(Calibration, ConformalRuleKeepsItsCoverageOnFreshFramesAndWastesFewerHits) 
     EXPECT_EQ(conformal.maxRatio, max.ratio);
     EXPECT_LT(conformal.ratio, max.ratio);
     EXPECT_NEAR(conformal.epsMin, tolerance / conformal.ratio, 1e-15);
-    EXPECT_DOUBLE_EQ(conformal.epsMax, 2 * conformal.epsMin);
+    EXPECT_DOUBLE_EQ(conformal.epsMax, conformal.band * conformal.epsMin);
     EXPECT_GT(conformal.epsMin, max.epsMin);
 
     // Fresh frames from the same distribution: the bound E <= r e fails on about 1 - coverage of

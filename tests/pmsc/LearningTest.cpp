@@ -56,7 +56,7 @@ Errors errorsOn(const pmsc::Model& model, const pmsc::FrameSet& frames) {
                 keys[static_cast<size_t>(k * kChannels + c)] =
                     full[model.keyPoints[static_cast<size_t>(k)] * kChannels + c];
         pm.project(keys.data(), coords.data());
-        const double rms = pm.keyRmsError(keys.data(), coords.data());
+        const double rms = pm.keyError(keys.data(), coords.data());
         e.keyRmsMax = std::max(e.keyRmsMax, rms);
         e.keyRmsMean += rms / static_cast<double>(frames.frames);
         pm.reconstruct(coords.data(), out.data());

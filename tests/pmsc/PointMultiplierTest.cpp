@@ -1,11 +1,14 @@
 #include "pmsc/PointMultiplier.h"
 
 #include "Synthetic.h"
+#include "pmsc/Calibration.h"
+#include "pmsc/ModelIO.h"
 
 #include <gtest/gtest.h>
 
 #include <Eigen/QR>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -53,7 +56,7 @@ TEST(PointMultiplier, FrameInSubspaceIsReconstructedExactlyFromItsKeys) {
     Eigen::VectorXd out(150);
     pm.reconstruct(coords.data(), out.data());
     EXPECT_LT((out - frame).cwiseAbs().maxCoeff(), 1e-10);
-    EXPECT_LT(pm.keyRmsError(keys.data(), coords.data()), 1e-10);
+    EXPECT_LT(pm.keyError(keys.data(), coords.data()), 1e-10);
 }
 
 TEST(PointMultiplier, KeyRmsIsRmsOverKeysOfPerPointEuclideanError) {
@@ -71,7 +74,36 @@ TEST(PointMultiplier, KeyRmsIsRmsOverKeysOfPerPointEuclideanError) {
     for (pmsc::Index p : model.keyPoints) sum += (frame - predicted).segment(p * 3, 3).squaredNorm();
     const double expected = std::sqrt(sum / 5.0);
     EXPECT_GT(expected, 1e-4);
-    EXPECT_NEAR(pm.keyRmsError(keys.data(), coords.data()), expected, 1e-12);
+    EXPECT_NEAR(pm.keyError(keys.data(), coords.data()), expected, 1e-12);
+}
+
+// The largest-key norm, over more keys than one block of the key basis (256 rows), so keys whose
+// channels straddle a block boundary count whole; and the KEYERROR section keeps the norm.
+TEST(PointMultiplier, LargestKeyErrorIsTheLargestKeysEuclideanError) {
+    std::vector<pmsc::Index> keys(100);
+    std::iota(keys.begin(), keys.end(), pmsc::Index(0));
+    pmsc::Model model = makeModel(150, 3, 5, keys);
+    model.keyErrorNorm = pmsc::KeyErrorNorm::Largest;
+    const pmsc::PointMultiplier pm(model);
+    Eigen::VectorXd frame = model.mean + model.basis * pmsc::test::gaussian(5, 1, 12).col(0);
+    frame += 0.01 * pmsc::test::gaussian(450, 1, 13).col(0);
+    frame.segment(85 * 3, 3) += Eigen::Vector3d(0.3, -0.2, 0.1);  // key 85: rows 255..257, across the block
+    const std::vector<double> k = keyValuesOf(model, frame);
+    Eigen::VectorXd coords(5);
+    pm.project(k.data(), coords.data());
+    const Eigen::VectorXd residual = frame - (model.mean + model.basis * coords);
+    double largest = 0;
+    for (pmsc::Index p : model.keyPoints) largest = std::max(largest, residual.segment(p * 3, 3).norm());
+    EXPECT_NEAR(pm.keyError(k.data(), coords.data()), largest, 1e-12);
+    EXPECT_NEAR(
+        pmsc::keyErrorOfResidual(pmsc::gatherKeyRows(residual, 3, keys), 3, pmsc::KeyErrorNorm::Largest),
+        largest, 1e-12);
+
+    const pmsc::Model back = pmsc::decodeModel(pmsc::encodeModel(model), "test");
+    EXPECT_EQ(back.keyErrorNorm, pmsc::KeyErrorNorm::Largest);
+    model.keyErrorNorm = pmsc::KeyErrorNorm::Rms;
+    EXPECT_EQ(pmsc::modelFormatVersion(model), 1u) << "an RMS model needs no section";
+    EXPECT_EQ(pmsc::decodeModel(pmsc::encodeModel(model), "test").keyErrorNorm, pmsc::KeyErrorNorm::Rms);
 }
 
 TEST(PointMultiplier, KeyRmsIsNaNForNonFiniteKeyValue) {
@@ -80,11 +112,11 @@ TEST(PointMultiplier, KeyRmsIsNaNForNonFiniteKeyValue) {
     std::vector<double> keys(9, 1.0);
     Eigen::VectorXd coords(3);
     pm.project(keys.data(), coords.data());
-    EXPECT_TRUE(std::isfinite(pm.keyRmsError(keys.data(), coords.data())));
+    EXPECT_TRUE(std::isfinite(pm.keyError(keys.data(), coords.data())));
     keys[4] = std::numeric_limits<double>::infinity();
-    EXPECT_TRUE(std::isnan(pm.keyRmsError(keys.data(), coords.data())));
+    EXPECT_TRUE(std::isnan(pm.keyError(keys.data(), coords.data())));
     keys[4] = std::numeric_limits<double>::quiet_NaN();
-    EXPECT_TRUE(std::isnan(pm.keyRmsError(keys.data(), coords.data())));
+    EXPECT_TRUE(std::isnan(pm.keyError(keys.data(), coords.data())));
 }
 
 TEST(PointMultiplier, PointsAndRangeAgreeWithFullReconstruction) {

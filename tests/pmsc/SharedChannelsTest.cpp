@@ -161,11 +161,11 @@ TEST(SharedChannels, ProjectReconstructAndKeyErrorAgreeWithTheFormulas) {
     }
     const double expected = std::sqrt(sum / static_cast<double>(k));
     EXPECT_GT(expected, 1e-6);
-    EXPECT_NEAR(pm.keyRmsError(keys.data(), coords.data()), expected, 1e-12 + 1e-9 * expected);
+    EXPECT_NEAR(pm.keyError(keys.data(), coords.data()), expected, 1e-12 + 1e-9 * expected);
     keysOf(model, frame.data());
     std::vector<double> bad = keys;
     bad[4] = std::nan("");
-    EXPECT_TRUE(std::isnan(pm.keyRmsError(bad.data(), coords.data())));
+    EXPECT_TRUE(std::isnan(pm.keyError(bad.data(), coords.data())));
 }
 
 TEST(SharedChannels, CalibratedEpsBoundTheEuclideanPointErrorOfTheTrainingFrames) {
@@ -182,7 +182,7 @@ TEST(SharedChannels, CalibratedEpsBoundTheEuclideanPointErrorOfTheTrainingFrames
         const std::vector<double> keys = keysOf(model, q.frame(f));
         std::vector<double> coords(static_cast<size_t>(model.coordCount())), out(600);
         pm.project(keys.data(), coords.data());
-        if (pm.keyRmsError(keys.data(), coords.data()) > model.epsMin) continue;
+        if (pm.keyError(keys.data(), coords.data()) > model.epsMin) continue;
         ++hits;
         pm.reconstruct(coords.data(), out.data());
         for (Index p = 0; p < 200; ++p) {
@@ -207,7 +207,7 @@ TEST(SharedChannels, UncalibratedEpsAreTheTrainingFramesLargestEuclideanKeyError
         const std::vector<double> keys = keysOf(model, q.frame(f));
         std::vector<double> coords(static_cast<size_t>(model.coordCount()));
         pm.project(keys.data(), coords.data());
-        largest = std::max(largest, pm.keyRmsError(keys.data(), coords.data()));
+        largest = std::max(largest, pm.keyError(keys.data(), coords.data()));
     }
     EXPECT_GT(largest, 1e-6);
     EXPECT_NEAR(model.epsMin, largest, 1e-12 * largest);

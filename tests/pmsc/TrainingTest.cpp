@@ -223,7 +223,9 @@ TEST(Training, ToleranceCalibratesEps) {
     EXPECT_EQ(model.tolerance, 1e-3);
     ASSERT_GT(report.calibration.ratio, 0.0);
     EXPECT_DOUBLE_EQ(model.epsMin, 1e-3 / report.calibration.ratio);
-    EXPECT_DOUBLE_EQ(model.epsMax, 2 * model.epsMin);
+    EXPECT_DOUBLE_EQ(model.epsMax, report.calibration.band * model.epsMin);
+    EXPECT_GE(report.calibration.band, 1.5);
+    EXPECT_LE(report.calibration.band, 2.0);
     EXPECT_EQ(report.calibration.frames.size(), 90u);
     EXPECT_EQ(report.calibration.slices, 3);
 }

@@ -45,7 +45,7 @@ int main(int argc, char** argv) {
         for (std::size_t i = 0; i < model.keyPoints.size(); ++i)
             for (int c = 0; c < 3; ++c) keys[i * 3 + c] = frame[model.keyPoints[i] * 3 + c];
         pm.project(keys.data(), coords.data());
-        const double err = pm.keyRmsError(keys.data(), coords.data());
+        const double err = pm.keyError(keys.data(), coords.data());
         pm.reconstruct(coords.data(), out.data());
         double worst = 0;
         for (pmsc::Index i = 0; i < points * 3; ++i) worst = std::max(worst, std::abs(out[i] - frame[i]));
