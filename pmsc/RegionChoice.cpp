@@ -1,0 +1,91 @@
+#include "pmsc/RegionChoice.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <functional>
+#include <vector>
+
+namespace pmsc {
+
+namespace {
+
+// Decision: the constants of the rule, measured (docs/local-fail-through.md, "Regions by
+// default", has the tables and the commands).
+constexpr double kMostMotion = 0.1;
+constexpr double kMostSupport = 0.25;
+constexpr double kFeatherTimesSqrtR = 0.25;
+constexpr Index kPointsPerRegion = 167;
+constexpr Index kMostRegions = 160;
+constexpr Index kFewestRegions = 8;
+
+std::string percent(double share) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%.1f%%", 100.0 * share);
+    return buf;
+}
+
+}  // namespace
+
+double basisSupport(const Model& model) {
+    const Eigen::MatrixXd loadings = rotatedLoadings(model);
+    const Index n = loadings.rows();
+    double weighted = 0, total = 0;
+    std::vector<double> energy(static_cast<size_t>(n));
+    for (Index j = 0; j < loadings.cols(); ++j) {
+        for (Index p = 0; p < n; ++p) energy[size_t(p)] = loadings(p, j) * loadings(p, j);
+        std::sort(energy.begin(), energy.end(), std::greater<>());
+        double all = 0;
+        for (const double e : energy) all += e;
+        if (!(all > 0)) continue;
+        Index need = 0;
+        for (double sum = 0; need < n && sum < 0.9 * all; ++need) sum += energy[size_t(need)];
+        weighted += all * static_cast<double>(need) / static_cast<double>(n);
+        total += all;
+    }
+    return total > 0 ? weighted / total : 1.0;
+}
+
+RegionChoice chooseRegions(const Model& model, const RegionOptions& options, double tolerance,
+                           double rmsMotion) {
+    RegionChoice choice;
+    if (!(tolerance > 0)) {
+        choice.reason = "none: without --tolerance a region's thresholds route no novel frame locally";
+        return choice;
+    }
+    if (options.positions.size() == 0 && model.channels != 3) {
+        choice.reason = "none: no point positions (" + std::to_string(model.channels) + "-channel data)";
+        return choice;
+    }
+    if (options.positions.size() == 0) {
+        const Eigen::MatrixXd mean = Eigen::Map<const Eigen::MatrixXd>(model.mean.data(), 3, model.points);
+        const double diagonal = (mean.rowwise().maxCoeff() - mean.rowwise().minCoeff()).norm();
+        if (!(rmsMotion <= kMostMotion * diagonal)) {
+            choice.reason = "none: the values move by " + percent(diagonal > 0 ? rmsMotion / diagonal : 1.0) +
+                            " of their mean's extent (RMS), over " + percent(kMostMotion) +
+                            ": not point positions";
+            return choice;
+        }
+    }
+    choice.support = basisSupport(model);
+    const std::string support = "a motion moves " + percent(choice.support) + " of the points";
+    if (choice.support > kMostSupport) {
+        choice.reason = "none: " + support + " (over " + percent(kMostSupport) +
+                        "): the data pose whole, a miss is cheapest whole";
+        return choice;
+    }
+    const Index r = std::min(kMostRegions, model.points / kPointsPerRegion);
+    if (r < kFewestRegions) {
+        choice.reason = "none: " + std::to_string(model.points) + " points make fewer than " +
+                        std::to_string(kFewestRegions) + " regions of " + std::to_string(kPointsPerRegion);
+        return choice;
+    }
+    choice.count = r;
+    choice.featherFraction = kFeatherTimesSqrtR / std::sqrt(static_cast<double>(r));
+    choice.reason = std::to_string(r) + ", feather " + percent(choice.featherFraction) + " (" + support +
+                    "; " + std::to_string(model.points) + " points, " + std::to_string(kPointsPerRegion) +
+                    " a region, at most " + std::to_string(kMostRegions) + ")";
+    return choice;
+}
+
+}  // namespace pmsc
