@@ -89,6 +89,14 @@ FrameSet readShots(const std::vector<Shot>& shots) {
     return all;
 }
 
+/// The library's defaults, and regions chosen from the data unless told (RegionChoice.h).
+TrainingOptions defaultTrainingOptions() {
+    TrainingOptions options;
+    options.regions.automatic = true;
+    options.regions.frameStride = 3;
+    return options;
+}
+
 /// What `pmsc train` was asked; the training settings themselves are in `options`.
 struct TrainArgs {
     std::vector<std::string> framePaths;
@@ -96,7 +104,7 @@ struct TrainArgs {
     std::uint64_t memoryLimit = 0;
     Index blockPoints = 0;
     bool outOfCore = false, sharedChannels = false, quiet = false;
-    TrainingOptions options;
+    TrainingOptions options = defaultTrainingOptions();
 };
 
 /// The parser with the command's description and its inputs and output (--frames, --out).
@@ -208,15 +216,25 @@ void declareScaleOptions(ArgParser& parser, TrainArgs& a) {
                   "points per block read when streaming (default: ~64 MiB blocks, "
                   "fewer under --memory-limit)",
                   [&](const std::string& v) { a.blockPoints = parseIndex("--block-points", v, 1); });
-    parser.option("--regions", "R",
-                  "learn R regions for local fail-through (a version-2 model): only the regions\n"
-                  "that blend or miss go to the full calculation. Needs 3-channel (position) data",
-                  [&](const std::string& v) { options.regions.count = parseIndex("--regions", v, 1); });
+    parser.option("--regions", "R|auto|0",
+                  "regions for local fail-through (a version-2 model): only the regions that blend or\n"
+                  "miss go to the full calculation. auto (default): R from the data where they pay\n"
+                  "(--tolerance, 3-channel positions, motions that move parts, not the whole), else none;\n"
+                  "R: learn R regions; 0: none",
+                  [&](const std::string& v) {
+                      options.regions.automatic = v == "auto";
+                      if (v == "auto") return;
+                      if (v.empty() || v.find_first_not_of("0123456789") != std::string::npos)
+                          throw UsageError("--regions: '" + v + "' is not auto or a region count (0 = none)");
+                      options.regions.count = parseIndex("--regions", v, 0);
+                  });
     parser.option("--feather", "F",
-                  "feather width of region borders, fraction of the bounding-box diagonal (default " +
+                  "feather width of region borders, fraction of the bounding-box diagonal (default: "
+                  "0.25 / sqrt(R) with --regions auto, else " +
                       std::to_string(options.regions.featherFraction) + ")",
                   [&](const std::string& v) {
                       options.regions.featherFraction = parseDouble("--feather", v, 0.0, 0.5);
+                      options.regions.automaticFeather = false;
                   });
     parser.option(
         "--region-keys", "N",
@@ -224,6 +242,12 @@ void declareScaleOptions(ArgParser& parser, TrainArgs& a) {
         "keys among its points, evaluated only for frames that miss as a whole (default " +
             std::to_string(options.regions.ownKeys) + "; 0 = none)",
         [&](const std::string& v) { options.regions.ownKeys = parseIndex("--region-keys", v, 0, 1000); });
+    parser.option("--region-stride", "S",
+                  "regions learn their bases and thresholds from every S-th training frame (default " +
+                      std::to_string(options.regions.frameStride) + ")",
+                  [&](const std::string& v) {
+                      options.regions.frameStride = parseIndex("--region-stride", v, 1, 1000);
+                  });
     parser.option(
         "--targets", "TARGET.npy",
         "cross point multiplication (paper section 7): frame f of --frames (the control) and frame f of\n"
@@ -243,19 +267,21 @@ void checkTrainArgs(const ArgParser& parser, TrainArgs& a) {
     TrainingOptions& options = a.options;
     const std::string &selector = a.selector, &rule = a.rule;
     if (a.sharedChannels) {
-        for (const char* o : {"--targets", "--regions", "--feather", "--region-keys", "--learn-rank",
-                              "--memory-limit", "--out-of-core", "--block-points"})
+        for (const char* o : {"--targets", "--regions", "--feather", "--region-keys", "--region-stride",
+                              "--learn-rank", "--memory-limit", "--out-of-core", "--block-points"})
             if (parser.given(o))
                 parser.fail(std::string(o) +
                             " does not combine with --shared-channels in this version (shared-channel "
                             "models are trained in memory on one process, without regions, learning or cross "
                             "targets)");
         options.sharedChannels = true;
+        options.regions.automatic = false;
     }
     if (!a.targetsPath.empty()) {
         if (a.framePaths.size() != 1) parser.fail("--targets takes exactly one --frames file (the control)");
-        for (const char* o : {"--regions", "--feather", "--region-keys", "--learn-rank", "--calibration",
-                              "--memory-limit", "--out-of-core", "--block-points"})
+        options.regions.automatic = false;
+        for (const char* o : {"--regions", "--feather", "--region-keys", "--region-stride", "--learn-rank",
+                              "--calibration", "--memory-limit", "--out-of-core", "--block-points"})
             if (parser.given(o))
                 parser.fail(std::string(o) +
                             " does not apply to a cross model (--targets): it has no fail-through, "
