@@ -236,7 +236,7 @@ void declareScaleOptions(ArgParser& parser, TrainArgs& a) {
     parser.option("--feather", "F",
                   "feather width of region borders, fraction of the bounding-box diagonal (default: "
                   "0.25 / sqrt(R) with --regions auto, else " +
-                      std::to_string(options.regions.featherFraction) + ")",
+                      fmt("%g", options.regions.featherFraction) + ")",
                   [&](const std::string& v) {
                       options.regions.featherFraction = parseDouble("--feather", v, 0.0, 0.5);
                       options.regions.automaticFeather = false;
