@@ -274,7 +274,7 @@ void checkTrainArgs(const ArgParser& parser, TrainArgs& a) {
     if (a.sharedChannels) {
         for (const char* o : {"--targets", "--regions", "--feather", "--region-keys", "--region-stride",
                               "--learn-rank", "--memory-limit", "--out-of-core", "--block-points"})
-            if (parser.given(o))
+            if (parser.given(o) && !(o == std::string("--regions") && options.regions.count == 0))
                 parser.fail(std::string(o) +
                             " does not combine with --shared-channels in this version (shared-channel "
                             "models are trained in memory on one process, without regions, learning or cross "
@@ -287,7 +287,7 @@ void checkTrainArgs(const ArgParser& parser, TrainArgs& a) {
         options.regions.automatic = false;
         for (const char* o : {"--regions", "--feather", "--region-keys", "--region-stride", "--learn-rank",
                               "--calibration", "--memory-limit", "--out-of-core", "--block-points"})
-            if (parser.given(o))
+            if (parser.given(o) && !(o == std::string("--regions") && options.regions.count == 0))
                 parser.fail(std::string(o) +
                             " does not apply to a cross model (--targets): it has no fail-through, "
                             "and is trained in memory on one process");

@@ -138,6 +138,10 @@ TEST_F(Cli, TrainRegionsAreChosenUnlessToldAndBadValuesFail) {
     ASSERT_EQ(r.exitCode, 0) << r.err;
     EXPECT_EQ(r.out.find("regions "), std::string::npos) << r.out;
     EXPECT_FALSE(pmsc::readModel(dir.file("off.pmsc")).regions.has_value());
+    // No regions combine with shared channels (which have none); a count does not.
+    r = train("shared.pmsc", {"--regions", "0", "--shared-channels"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_FALSE(pmsc::readModel(dir.file("shared.pmsc")).regions.has_value());
 
     TempDir bad;
     const auto fails = [&](std::initializer_list<std::string> more,
@@ -149,6 +153,7 @@ TEST_F(Cli, TrainRegionsAreChosenUnlessToldAndBadValuesFail) {
     fails({"--regions", "many"}, {"--regions", "'many' is not auto or a region count"});
     fails({"--regions", "-1"}, {"--regions", "'-1' is not auto or a region count"});
     fails({"--regions", "auto", "--region-stride", "0"}, {"--region-stride", "out of range"});
+    fails({"--regions", "2", "--shared-channels"}, {"--regions does not combine with --shared-channels"});
     EXPECT_TRUE(outputs(bad).empty());
 }
 
