@@ -577,6 +577,7 @@ void Trainer::regions() {
             report.regions = "none: regions are learned in memory on one process";
             return;
         }
+        // RMS over points and frames of a point's motion about its mean (read for 3-channel data only).
         const Eigen::MatrixXd& all = inMemory->matrix();
         const double rmsMotion =
             std::sqrt(all.squaredNorm() / static_cast<double>(std::max<Index>(1, all.size() / 3)));
