@@ -51,6 +51,7 @@ void printTrainSummary(std::ostream& out, const std::string& modelPath, const Fr
         out << "  eps         [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax) << "] "
             << measure << ", from the training frames (no --tolerance: not calibrated)\n";
     }
+    if (!report.regions.empty()) out << "  regions     " << report.regions << "\n";
     for (const auto& w : report.warnings) out << "  warning: " << w << "\n";
 }
 

@@ -6,12 +6,17 @@
 #include <Eigen/QR>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <exception>
+#include <functional>
 #include <limits>
+#include <mutex>
 #include <numeric>
 #include <stdexcept>
 #include <string>
+#include <thread>
 
 namespace pmsc {
 
@@ -24,19 +29,9 @@ namespace {
 /// Step 1: each point's loading pattern on the Varimax-rotated leading factors (N x J).
 Eigen::MatrixXd loadingPatterns(const Model& model) {
     const Index n = model.points;
-    const Index c = model.channels;
-    const Index j = std::min<Index>(24, model.basisSize());
-    Eigen::MatrixXd loadings = model.basis.leftCols(j) * model.singularValues.head(j).asDiagonal();
-    VarimaxOptions vo;
-    vo.maxIterations = 100;
-    vo.tolerance = 1e-7;
-    const Eigen::MatrixXd rotated = j > 1 ? varimax(loadings, vo).rotated : loadings;
-    Eigen::MatrixXd pattern(n, j);
+    Eigen::MatrixXd pattern = rotatedLoadings(model);
     Eigen::VectorXd norms(n);
-    for (Index p = 0; p < n; ++p) {
-        for (Index f = 0; f < j; ++f) pattern(p, f) = rotated.block(p * c, f, c, 1).norm();
-        norms[p] = pattern.row(p).norm();
-    }
+    for (Index p = 0; p < n; ++p) norms[p] = pattern.row(p).norm();
     // Nearly still points: their pattern is noise, so it counts less (down to nothing).
     std::vector<double> sorted(norms.data(), norms.data() + n);
     std::nth_element(sorted.begin(), sorted.begin() + n / 2, sorted.end());
@@ -158,6 +153,8 @@ void checkRegionInput(const Eigen::Ref<const Eigen::MatrixXd>& q, const Model& m
                   std::to_string(options.maxLocalFraction));
     if (!(options.energy > 0 && options.energy <= 1)) badOption("energy must be in (0, 1]");
     if (options.minKeys < 1) badOption("min keys must be >= 1");
+    if (options.frameStride < 1)
+        badOption("frame stride must be >= 1, got " + std::to_string(options.frameStride));
     if (!(options.keyRadius >= 0)) badOption("key radius must be >= 0");
     if (!(options.basisShare > 0 && options.basisShare <= 1)) badOption("basis share must be in (0, 1]");
     if (!(options.ratioMargin >= 1)) badOption("ratio margin must be >= 1");
@@ -241,9 +238,9 @@ void chooseRegionKeys(Region& g, Index ri, const Model& model, const LocalRegion
 }
 
 /// The region's rows of q: its points, then its keys that lie outside it; `keyLocal` gets the
-/// position of each key among them.
+/// position of each key among them. Every `stride`-th frame (column) only.
 Eigen::MatrixXd regionRows(const Eigen::Ref<const Eigen::MatrixXd>& q, const Region& g, const Model& model,
-                           const LocalRegions& out, std::vector<Index>& keyLocal) {
+                           const LocalRegions& out, Index stride, std::vector<Index>& keyLocal) {
     const Index c = model.channels;
     std::vector<Index> local = g.points;
     for (const Index key : g.keys) {
@@ -256,8 +253,11 @@ Eigen::MatrixXd regionRows(const Eigen::Ref<const Eigen::MatrixXd>& q, const Reg
             local.push_back(p);
         }
     }
-    Eigen::MatrixXd qr(Index(local.size()) * c, q.cols());
-    for (size_t i = 0; i < local.size(); ++i) qr.middleRows(Index(i) * c, c) = q.middleRows(local[i] * c, c);
+    const Index frames = (q.cols() + stride - 1) / stride;
+    Eigen::MatrixXd qr(Index(local.size()) * c, frames);
+    for (size_t i = 0; i < local.size(); ++i)
+        for (Index f = 0; f < frames; ++f)
+            qr.block(Index(i) * c, f, c, 1) = q.block(local[i] * c, f * stride, c, 1);
     return qr;
 }
 
@@ -325,7 +325,44 @@ bool fitRegion(Region& g, Index ri, const Eigen::MatrixXd& qr, const std::vector
     return capped;
 }
 
+/// Runs `work` on min(cores, jobs) threads (this one included) and waits for all of them; the
+/// first exception thrown on any of them is rethrown here.
+void runOnEveryCore(const std::function<void()>& work, Index jobs) {
+    const Index threads =
+        std::clamp<Index>(Index(std::thread::hardware_concurrency()), 1, std::max<Index>(1, jobs));
+    std::exception_ptr failed;
+    std::mutex failedLock;
+    auto guarded = [&] {
+        try {
+            work();
+        } catch (...) {
+            const std::lock_guard<std::mutex> hold(failedLock);
+            if (!failed) failed = std::current_exception();
+        }
+    };
+    std::vector<std::thread> pool;
+    for (Index t = 1; t < threads; ++t) pool.emplace_back(guarded);
+    guarded();
+    for (std::thread& t : pool) t.join();
+    if (failed) std::rethrow_exception(failed);
+}
+
 }  // namespace
+
+Eigen::MatrixXd rotatedLoadings(const Model& model) {
+    const Index n = model.points;
+    const Index c = model.channels;
+    const Index j = std::min<Index>(24, model.basisSize());
+    Eigen::MatrixXd loadings = model.basis.leftCols(j) * model.singularValues.head(j).asDiagonal();
+    VarimaxOptions vo;
+    vo.maxIterations = 100;
+    vo.tolerance = 1e-7;
+    const Eigen::MatrixXd rotated = j > 1 ? varimax(loadings, vo).rotated : loadings;
+    Eigen::MatrixXd norms(n, j);
+    for (Index p = 0; p < n; ++p)
+        for (Index f = 0; f < j; ++f) norms(p, f) = rotated.block(p * c, f, c, 1).norm();
+    return norms;
+}
 
 LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Model& model,
                           const RegionOptions& options, double tolerance, Index slices, const SvdOptions& svd,
@@ -354,15 +391,19 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
     for (Index p = 0; p < n; ++p) out.regions[size_t(regionOf[size_t(p)])].points.push_back(p);
     if (options.ownKeys > 0) addRegionKeys(q, model, options, regionOf, pos, out);
 
-    // Steps 3-4: keys, local basis, projector, thresholds.
-    Index smallBases = 0;
-    for (Index ri = 0; ri < r; ++ri) {
-        Region& g = out.regions[size_t(ri)];
-        chooseRegionKeys(g, ri, model, out, options, regionOf, pos, diagonal);
-        std::vector<Index> keyLocal;  // position of each key in the region's rows
-        const Eigen::MatrixXd qr = regionRows(q, g, model, out, keyLocal);
-        if (fitRegion(g, ri, qr, keyLocal, model, options, tolerance, slices, svd)) ++smallBases;
-    }
+    // Steps 3-4: keys, local basis, projector, thresholds; the regions are independent, so they
+    // are learned on every core (each region's result does not depend on the thread count).
+    std::atomic<Index> next{0}, smallBases{0};
+    auto learnSome = [&] {
+        for (Index ri = next++; ri < r; ri = next++) {
+            Region& g = out.regions[size_t(ri)];
+            chooseRegionKeys(g, ri, model, out, options, regionOf, pos, diagonal);
+            std::vector<Index> keyLocal;  // position of each key in the region's rows
+            const Eigen::MatrixXd qr = regionRows(q, g, model, out, options.frameStride, keyLocal);
+            if (fitRegion(g, ri, qr, keyLocal, model, options, tolerance, slices, svd)) ++smallBases;
+        }
+    };
+    runOnEveryCore(learnSome, r);
     if (notes && smallBases > 0)
         notes->push_back("regions: " + std::to_string(smallBases) + " of " + std::to_string(r) +
                          " regions' local bases were capped by their share of key values");

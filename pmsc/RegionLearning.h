@@ -15,6 +15,12 @@ namespace pmsc {
 /// model is then a version-1 model).
 struct RegionOptions {
     Index count = 0;  ///< R, the number of regions wanted (fewer if clustering leaves some empty)
+    /// count == 0 and automatic: training chooses R from the data, or none where regions do not
+    /// pay (chooseRegions in RegionChoice.h; `pmsc train`'s default).
+    bool automatic = false;
+    /// With automatic: the feather width comes with R (RegionChoice::featherFraction) instead of
+    /// featherFraction. `pmsc train` clears it when --feather is given.
+    bool automaticFeather = true;
     /// Feather width as a fraction of the positions' bounding-box diagonal (Regions.h).
     double featherFraction = 0.03;
     /// Fraction of N above which a frame fails through whole (LocalRegions::maxLocalFraction).
@@ -66,7 +72,16 @@ struct RegionOptions {
     /// the training mean when C == 3 (a face's rest shape); otherwise regions cannot be learned.
     Eigen::MatrixXd positions;
     int kmeansIterations = 30;
+    /// Regions' bases and calibration learn from every frameStride-th training frame (1 = all).
+    /// Neighbouring frames of an animation are nearly alike; the cost of a region's calibration
+    /// grows with the square and cube of the frames (its Gram matrix, its folds' eigensolvers).
+    Index frameStride = 1;
 };
+
+/// The leading (at most 24) basis vectors scaled by their singular values, Varimax-rotated as
+/// key selection rotates them (section 4): per point and rotated factor, the norm of the point's
+/// loading over the channels (N x J). Rotated factors are local where the data's motions are.
+Eigen::MatrixXd rotatedLoadings(const Model& model);
 
 /// Learns the regions of a trained model: the model's core (mean, basis, keys) must be final.
 ///

@@ -5,6 +5,7 @@
 #include "pmsc/KeyPointSelector.h"
 #include "pmsc/PointMultiplier.h"
 #include "pmsc/QDeim.h"
+#include "pmsc/RegionChoice.h"
 #include "pmsc/RowBlockOps.h"
 #include "pmsc/Subspace.h"
 
@@ -575,13 +576,30 @@ void Trainer::learningState() {
 
 void Trainer::regions() {
     // They are learned from the whole mean-removed matrix, so only in-memory, one-process
-    // training learns them (checked before any work, at the top).
+    // training learns them (checked before any work, at the top, when asked for by count).
+    RegionOptions chosen = options.regions;
+    if (chosen.count == 0) {  // automatic
+        const auto* inMemory = dynamic_cast<const MatrixBlocks*>(&q);
+        if (comm.size() != 1 || inMemory == nullptr) {
+            report.regions = "none: regions are learned in memory on one process";
+            return;
+        }
+        // RMS over points and frames of a point's motion about its mean (read for 3-channel data only).
+        const Eigen::MatrixXd& all = inMemory->matrix();
+        const double rmsMotion =
+            std::sqrt(all.squaredNorm() / static_cast<double>(std::max<Index>(1, all.size() / 3)));
+        const RegionChoice choice = chooseRegions(model, chosen, options.tolerance, rmsMotion);
+        report.regions = choice.reason;
+        if (choice.count == 0) return;
+        chosen.count = choice.count;
+        if (chosen.automaticFeather) chosen.featherFraction = choice.featherFraction;
+    }
     progress("regions", 0, 1);
     const auto& inMemory = dynamic_cast<const MatrixBlocks&>(q);
     SvdOptions svdOptions;
     svdOptions.seed = options.seed;
     svdOptions.powerIterations = options.powerIterations;
-    model.regions = learnRegions(inMemory.matrix(), model, options.regions, options.tolerance,
+    model.regions = learnRegions(inMemory.matrix(), model, chosen, options.tolerance,
                                  options.calibrationSlices, svdOptions, &report.warnings);
     progress("regions", 1, 1);
 }
@@ -627,7 +645,7 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
     // --- The (N*C)-row arrays go to rank 0, which writes the model.
     t.model.basis = gatherRowsTo(comm, t.basis, t.rows, 0);
     t.model.mean = gatherRowsTo(comm, q.mean(), t.rows, 0);
-    if (options.regions.count > 0) t.regions();
+    if (options.regions.count > 0 || options.regions.automatic) t.regions();
     if (comm.rank() == 0) t.model.validate();
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return std::move(t.model);

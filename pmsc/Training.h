@@ -114,6 +114,8 @@ struct TrainingReport {
     Index blockPoints = 0;  ///< points per block of Q read at a time (this rank)
     /// trainingMemoryBound() at the basis vectors formed (max(M, block, learn rank)), rank 0's.
     std::uint64_t memoryBound = 0;
+    /// RegionOptions::automatic: the regions chosen and why (RegionChoice::reason); empty otherwise.
+    std::string regions;
 };
 
 /// Trains a model from frames: mean removal, truncated SVD, key-point selection,

@@ -112,6 +112,51 @@ TEST_F(Cli, TrainWritesAModelAndASummary) {
     EXPECT_EQ(outputs(dir), std::vector<std::string>{"m.pmsc"});
 }
 
+// --regions: auto by default (the synthetic surface deforms whole, so it gets no regions, and the
+// summary says why), a count learns that many, 0 learns none; a bad value is one line.
+TEST_F(Cli, TrainRegionsAreChosenUnlessToldAndBadValuesFail) {
+    TempDir dir;
+    const auto train = [&](const std::string& name, std::initializer_list<std::string> more) {
+        std::vector<std::string> args{"train",      "--frames", shot_->train,  "--out", dir.file(name),
+                                      "--max-keys", "24",       "--tolerance", "0.02"};
+        args.insert(args.end(), more);
+        return runPmsc(dir, args);
+    };
+    RunResult r = train("auto.pmsc", {});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.out.find("regions     none: a motion moves"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("the data pose whole"), std::string::npos) << r.out;
+    EXPECT_FALSE(pmsc::readModel(dir.file("auto.pmsc")).regions.has_value());
+
+    r = train("three.pmsc", {"--regions", "3", "--feather", "0.05"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const pmsc::Model three = pmsc::readModel(dir.file("three.pmsc"));
+    ASSERT_TRUE(three.regions.has_value());
+    EXPECT_LE(three.regions->regionCount(), 3);
+
+    r = train("off.pmsc", {"--regions", "0"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_EQ(r.out.find("regions "), std::string::npos) << r.out;
+    EXPECT_FALSE(pmsc::readModel(dir.file("off.pmsc")).regions.has_value());
+    // No regions combine with shared channels (which have none); a count does not.
+    r = train("shared.pmsc", {"--regions", "0", "--shared-channels"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_FALSE(pmsc::readModel(dir.file("shared.pmsc")).regions.has_value());
+
+    TempDir bad;
+    const auto fails = [&](std::initializer_list<std::string> more,
+                           std::initializer_list<std::string> fragments) {
+        std::vector<std::string> args{"train", "--frames", shot_->train, "--out", bad.file("m.pmsc")};
+        args.insert(args.end(), more);
+        expectFailure(runPmsc(bad, args), 2, fragments);
+    };
+    fails({"--regions", "many"}, {"--regions", "'many' is not auto or a region count"});
+    fails({"--regions", "-1"}, {"--regions", "'-1' is not auto or a region count"});
+    fails({"--regions", "auto", "--region-stride", "0"}, {"--region-stride", "out of range"});
+    fails({"--regions", "2", "--shared-channels"}, {"--regions does not combine with --shared-channels"});
+    EXPECT_TRUE(outputs(bad).empty());
+}
+
 TEST_F(Cli, TrainSeedsFiducials) {
     TempDir dir;
     const auto model = dir.file("m.pmsc");
