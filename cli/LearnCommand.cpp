@@ -73,8 +73,19 @@ int runLearn(const std::vector<std::string>& args) {
     parser.option("--frames", "NEW.npy[,MORE.npy]", "new frames, one or more .npy files (comma-separated)",
                   framesText, true);
     parser.option("--out", "NEW_MODEL.pmsc", "updated model to write (atomically)", outPath, true);
-    parser.option("--basis", "M", "basis size after the update (default: the model's M)",
+    parser.option("--basis", "M",
+                  "basis size after the update (default: by the training's energy rule on all frames seen, "
+                  "when the model stores it; else the model's M)",
                   [&](const std::string& v) { options.basis = parseIndex("--basis", v, 1); });
+    parser.option(
+        "--energy", "E",
+        "M after the update = the smallest capturing this fraction of all frames' energy, in (0, 1] "
+        "(default: the training's rule)",
+        [&](const std::string& v) {
+            const double e = parseDouble("--energy", v, 0.0, 1.0);
+            if (!(e > 0)) throw UsageError("--energy: must be in (0, 1], got " + v);
+            options.energy = e;
+        });
     parser.option("--rank", "R", "rank the incremental state keeps (default: the model's)",
                   [&](const std::string& v) { options.maxRank = parseIndex("--rank", v, 1); });
     parser.option("--calibration", "RULE", "max or conformal (default: the rule the model was calibrated by)",
@@ -86,8 +97,11 @@ int runLearn(const std::vector<std::string>& args) {
                       if (!(c > 0 && c < 1)) throw UsageError("--coverage: must be in (0, 1), got " + v);
                       options.coverage = c;
                   });
-    parser.option("--slices", "S", "cross-fitting folds over the new frames (default 5)",
-                  [&](const std::string& v) { options.slices = parseIndex("--slices", v, 2); });
+    parser.option(
+        "--slices", "S",
+        "cross-fitting folds over the new frames (default: slices as large as the training's on all frames "
+        "seen, (n + m) / S frames, at least one)",
+        [&](const std::string& v) { options.slices = parseIndex("--slices", v, 2); });
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
     if (!rule.empty()) {
