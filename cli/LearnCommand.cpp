@@ -104,6 +104,7 @@ int runLearn(const std::vector<std::string>& args) {
         [&](const std::string& v) { options.slices = parseIndex("--slices", v, 2); });
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
+    if (options.basis > 0 && options.energy > 0) parser.fail("--basis and --energy both set M: give one");
     if (!rule.empty()) {
         if (rule == "max")
             options.rule = CalibrationRule::MaxRatio;
@@ -152,8 +153,10 @@ int runLearn(const std::vector<std::string>& args) {
               << ")\n";
     std::cout << "  frames      " << model.trainFrames << " -> " << learned.trainFrames << " (update "
               << learned.learning->updates << ")\n";
-    std::cout << "  basis       M = " << report.basisBefore << " -> " << report.basisAfter << ", state rank "
-              << report.rankBefore << " -> " << report.rankAfter << ", captures "
+    std::cout << "  basis       M = " << report.basisBefore << " -> " << report.basisAfter
+              << (report.basisEnergy > 0 ? " (energy rule " + fmt("%.6g", report.basisEnergy) + ")"
+                                         : std::string(" (fixed)"))
+              << ", state rank " << report.rankBefore << " -> " << report.rankAfter << ", captures "
               << fmt("%.4f", 100.0 * learned.energyCaptured()) << "% of all frames' energy; largest angle to "
               << "the old basis " << fmt("%.3g", report.largestAngle * 180.0 / 3.141592653589793) << " deg\n";
     std::cout << "  key points  K = " << learned.keyCount() << ", " << report.keysKept

@@ -68,6 +68,8 @@ void checkLearnInput(const Model& model, const FrameSet& newFrames, const LearnO
         throw std::invalid_argument("learn: basis and rank must be >= 0");
     if (!(options.energy >= 0 && options.energy <= 1))
         throw std::invalid_argument("learn: energy must be in (0, 1] (0 = the model's rule)");
+    if (options.basis > 0 && options.energy > 0)
+        throw std::invalid_argument("learn: a basis size and an energy rule both set M: give one");
     if (options.slices < 0 || options.slices == 1)
         throw std::invalid_argument("learn: slices must be >= 2 (0 = the training's slice size)");
 }
@@ -143,6 +145,7 @@ void updateState(const Model& model, const Eigen::Map<const Eigen::MatrixXd>& fr
     u.state = updateInSpan(u.before, u.span, fresh, allColumns(fresh.cols()), u.svdOptions);
     report.rankAfter = u.state.rank();
     const Index wantedM = chooseLearnedBasis(model, options, report, u);
+    report.basisEnergy = u.energy;
     report.tailNorm = u.state.tailNorm();
     u.basisSize = std::min(wantedM, u.state.rank());
     if (u.basisSize < wantedM) {

@@ -38,6 +38,7 @@ struct LearnReport {
     Index newFrames = 0;
     Index rankBefore = 0, rankAfter = 0;
     Index basisBefore = 0, basisAfter = 0;
+    double basisEnergy = 0;                 ///< the energy rule M was chosen by; 0: M fixed
     Index keysKept = 0;                     ///< keys of the old model that are keys again
     double largestAngle = 0;                ///< largest principal angle between the old and the new M-basis
     double tailNorm = 0;                    ///< IncrementalSubspace::tailNorm() after the update

@@ -181,6 +181,9 @@ TEST_F(LearnCli, BadInputsFailWithOneLineAndLeaveFilesAlone) {
         expectFailure(r, 2, {"--energy"});
     }
     r = runPmsc(work, {"learn", "--model", dir_->file("m.pmsc"), "--frames", dir_->file("test.npy"), "--out",
+                       work.file("m2.pmsc"), "--energy", "0.99", "--basis", "4"});
+    expectFailure(r, 2, {"--basis", "--energy"});
+    r = runPmsc(work, {"learn", "--model", dir_->file("m.pmsc"), "--frames", dir_->file("test.npy"), "--out",
                        work.file("m2.pmsc"), "--slices", "1"});
     expectFailure(r, 2, {"--slices"});
     EXPECT_FALSE(fs::exists(work.file("m2.pmsc")));

@@ -191,6 +191,9 @@ TEST(Learning, TheEnergyRuleChoosesMAgainAsTrainingWould) {
     EXPECT_LT(pmsc::learn(old, misses, lower).basisSize(), learned.basisSize());
     lower.energy = 1.5;
     EXPECT_THROW(pmsc::learn(old, misses, lower), std::invalid_argument);
+    lower.energy = 0.9;
+    lower.basis = 3;
+    EXPECT_THROW(pmsc::learn(old, misses, lower), std::invalid_argument);
 }
 
 TEST(Learning, NewFramesAreHeldOutInSlicesOfTheTrainingsSize) {
