@@ -73,8 +73,19 @@ int runLearn(const std::vector<std::string>& args) {
     parser.option("--frames", "NEW.npy[,MORE.npy]", "new frames, one or more .npy files (comma-separated)",
                   framesText, true);
     parser.option("--out", "NEW_MODEL.pmsc", "updated model to write (atomically)", outPath, true);
-    parser.option("--basis", "M", "basis size after the update (default: the model's M)",
+    parser.option("--basis", "M",
+                  "basis size after the update (default: by the training's energy rule on all frames seen, "
+                  "when the model stores it; else the model's M)",
                   [&](const std::string& v) { options.basis = parseIndex("--basis", v, 1); });
+    parser.option(
+        "--energy", "E",
+        "M after the update = the smallest capturing this fraction of all frames' energy, in (0, 1] "
+        "(default: the training's rule)",
+        [&](const std::string& v) {
+            const double e = parseDouble("--energy", v, 0.0, 1.0);
+            if (!(e > 0)) throw UsageError("--energy: must be in (0, 1], got " + v);
+            options.energy = e;
+        });
     parser.option("--rank", "R", "rank the incremental state keeps (default: the model's)",
                   [&](const std::string& v) { options.maxRank = parseIndex("--rank", v, 1); });
     parser.option("--calibration", "RULE",
@@ -86,10 +97,14 @@ int runLearn(const std::vector<std::string>& args) {
                       if (!(c > 0 && c < 1)) throw UsageError("--coverage: must be in (0, 1), got " + v);
                       options.coverage = c;
                   });
-    parser.option("--slices", "S", "cross-fitting folds over the new frames (default 5)",
-                  [&](const std::string& v) { options.slices = parseIndex("--slices", v, 2); });
+    parser.option(
+        "--slices", "S",
+        "cross-fitting folds over the new frames (default: slices as large as the training's on all frames "
+        "seen, (n + m) / S frames, at least one)",
+        [&](const std::string& v) { options.slices = parseIndex("--slices", v, 2); });
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
+    if (options.basis > 0 && options.energy > 0) parser.fail("--basis and --energy both set M: give one");
     if (!rule.empty()) {
         if (const auto r = calibrationRuleNamed(rule))
             options.rule = *r;
@@ -136,8 +151,10 @@ int runLearn(const std::vector<std::string>& args) {
               << ")\n";
     std::cout << "  frames      " << model.trainFrames << " -> " << learned.trainFrames << " (update "
               << learned.learning->updates << ")\n";
-    std::cout << "  basis       M = " << report.basisBefore << " -> " << report.basisAfter << ", state rank "
-              << report.rankBefore << " -> " << report.rankAfter << ", captures "
+    std::cout << "  basis       M = " << report.basisBefore << " -> " << report.basisAfter
+              << (report.basisEnergy > 0 ? " (energy rule " + fmt("%.6g", report.basisEnergy) + ")"
+                                         : std::string(" (fixed)"))
+              << ", state rank " << report.rankBefore << " -> " << report.rankAfter << ", captures "
               << fmt("%.4f", 100.0 * learned.energyCaptured()) << "% of all frames' energy; largest angle to "
               << "the old basis " << fmt("%.3g", report.largestAngle * 180.0 / 3.141592653589793) << " deg\n";
     std::cout << "  key points  K = " << learned.keyCount() << ", " << report.keysKept

@@ -37,16 +37,119 @@ void IncrementalSubspace::validate() const {
     if (!mean.allFinite() || !u.allFinite()) bad("mean or basis holds NaN or Inf");
 }
 
+namespace {
+
+void checkUpdate(const IncrementalSubspace& s, const Eigen::Ref<const Eigen::MatrixXd>& newFrames,
+                 const IncrementalSvdOptions& options) {
+    if (newFrames.rows() != s.mean.size()) {
+        throw std::invalid_argument("incremental SVD: new frames have " + std::to_string(newFrames.rows()) +
+                                    " values each, the subspace " + std::to_string(s.mean.size()));
+    }
+    if (newFrames.cols() < 1) throw std::invalid_argument("incremental SVD: no new frames");
+    if (options.maxRank < 0) throw std::invalid_argument("incremental SVD: max rank must be >= 0");
+}
+
+/// Projects span(U) out of h twice (one classical Gram-Schmidt pass leaves an O(eps cond)
+/// component in U's directions; the second brings it to rounding); returns U^T h (before).
+Eigen::MatrixXd projectOut(const Eigen::MatrixXd& u, Eigen::MatrixXd& h) {
+    Eigen::MatrixXd l = Eigen::MatrixXd::Zero(u.cols(), h.cols());
+    for (int pass = 0; pass < 2 && u.cols() > 0; ++pass) {
+        const Eigen::MatrixXd c = u.transpose() * h;
+        h.noalias() -= u * c;
+        l += c;
+    }
+    return l;
+}
+
+/// H = J K from the eigen-decomposition of the small Gram matrix H^T H = V diag(lambda) V^T:
+/// J = H V_k lambda_k^{-1/2} (= H * toJ), K = lambda_k^{1/2} V_k^T, keeping the k directions whose
+/// singular value sqrt(lambda) exceeds 1e-7 of the data's scale (below that the Gram matrix's
+/// rounding, ~1e-16 of the largest lambda, would make them noise; their energy is under 1e-14 of
+/// the total). Decision: a Gram eigenproblem rather than a pivoted QR of the tall H: one symmetric
+/// rank-k product (BLAS 3) instead of a column-by-column Householder sweep, about 10x faster at the
+/// face's size; the orthogonality lost by squaring is restored by reorthonormalize().
+struct GramFactor {
+    Eigen::MatrixXd toJ;  ///< cols(H) x k
+    Eigen::MatrixXd k;    ///< k x cols(H)
+};
+
+GramFactor factorOutside(const Eigen::MatrixXd& h, double sigmaMax, const IncrementalSvdOptions& options) {
+    const Index c = h.cols();
+    Eigen::MatrixXd gram(c, c);
+    gram.setZero();
+    gram.selfadjointView<Eigen::Lower>().rankUpdate(h.transpose());
+    // (the eigensolver reads the lower triangle only)
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(gram);
+    const Eigen::VectorXd& lambda = eig.eigenvalues();  // ascending
+    const double scale = std::max(std::sqrt(std::max(0.0, lambda[c - 1])), sigmaMax);
+    const double keepAbove = std::max(1e-7, options.dropRelative) * scale;
+    Index k = 0;
+    while (k < c && lambda[c - 1 - k] > 0 && std::sqrt(lambda[c - 1 - k]) > keepAbove) ++k;
+    const Eigen::MatrixXd vk = eig.eigenvectors().rightCols(k).rowwise().reverse();  // descending
+    Eigen::VectorXd rootLambda(k);
+    for (Index i = 0; i < k; ++i) rootLambda[i] = std::sqrt(lambda[c - 1 - i]);
+    GramFactor f;
+    f.toJ = vk * rootLambda.cwiseInverse().asDiagonal();
+    f.k = rootLambda.asDiagonal() * vk.transpose();
+    return f;
+}
+
+/// The leading left singular vectors of the core (those over options.dropRelative of the largest,
+/// at most options.maxRank), their singular values, and the energy of the rest.
+struct CoreSvd {
+    Eigen::MatrixXd u;
+    Eigen::VectorXd sigma;
+    double discarded = 0;
+};
+
+CoreSvd truncatedCoreSvd(const Eigen::MatrixXd& core, const IncrementalSvdOptions& options) {
+    Eigen::BDCSVD<Eigen::MatrixXd> svd(core, Eigen::ComputeThinU);
+    const Eigen::VectorXd& sv = svd.singularValues();
+    const double drop = options.dropRelative * (sv.size() > 0 ? sv[0] : 0.0);
+    Index keep = 0;
+    while (keep < sv.size() && sv[keep] > drop) ++keep;
+    if (options.maxRank > 0) keep = std::min(keep, options.maxRank);
+    CoreSvd out;
+    for (Index i = keep; i < sv.size(); ++i) out.discarded += sv[i] * sv[i];
+    out.u = svd.matrixU().leftCols(keep);
+    out.sigma = sv.head(keep);
+    return out;
+}
+
+/// U' = [U J] U~ = U U~_top + H (toJ U~_bottom): J is applied, never stored.
+Eigen::MatrixXd rotateInto(const Eigen::MatrixXd& u, const Eigen::MatrixXd& h, const Eigen::MatrixXd& toJ,
+                           const Eigen::MatrixXd& coreU) {
+    const Index r = u.cols(), k = toJ.cols();
+    Eigen::MatrixXd out(u.rows(), coreU.cols());
+    out.noalias() = u * coreU.topRows(r);
+    if (k > 0) {
+        const Eigen::MatrixXd toH = toJ * coreU.bottomRows(k);
+        out.noalias() += h * toH;
+    }
+    return out;
+}
+
+/// Re-orthonormalizes U' (Cholesky QR, then the SVD of R diag(sigma)): keeps U' orthonormal to
+/// rounding over many nightly updates whatever J lost to the Gram matrix.
+void reorthonormalize(Eigen::MatrixXd& u, Eigen::VectorXd& sigma) {
+    if (u.cols() == 0) return;
+    Eigen::MatrixXd g = u.transpose() * u;
+    Eigen::LLT<Eigen::MatrixXd> llt(g);
+    if (llt.info() != Eigen::Success) return;
+    const Eigen::MatrixXd rFactor = llt.matrixU();
+    const Eigen::MatrixXd q = llt.matrixU().solve<Eigen::OnTheRight>(u);
+    Eigen::JacobiSVD<Eigen::MatrixXd> small(rFactor * sigma.asDiagonal(), Eigen::ComputeFullU);
+    u.noalias() = q * small.matrixU();
+    sigma = small.singularValues();
+}
+
+}  // namespace
+
 void updateSubspace(IncrementalSubspace& s, const Eigen::Ref<const Eigen::MatrixXd>& newFrames,
                     const IncrementalSvdOptions& options) {
+    checkUpdate(s, newFrames, options);
     const Index rows = s.mean.size();
     const Index m = newFrames.cols();
-    if (newFrames.rows() != rows) {
-        throw std::invalid_argument("incremental SVD: new frames have " + std::to_string(newFrames.rows()) +
-                                    " values each, the subspace " + std::to_string(rows));
-    }
-    if (m < 1) throw std::invalid_argument("incremental SVD: no new frames");
-    if (options.maxRank < 0) throw std::invalid_argument("incremental SVD: max rank must be >= 0");
     const Index r = s.rank();
     const double n = static_cast<double>(s.frames);
     const double md = static_cast<double>(m);
@@ -61,80 +164,81 @@ void updateSubspace(IncrementalSubspace& s, const Eigen::Ref<const Eigen::Matrix
     h.col(m) = std::sqrt(n * md / (n + md)) * (meanNew - s.mean);
     const double addedEnergy = h.squaredNorm();
 
-    // Component of B^ outside span(U), projected out twice (one classical Gram-Schmidt pass
-    // leaves an O(eps cond) component in U's directions; the second brings it to rounding).
-    Eigen::MatrixXd l = Eigen::MatrixXd::Zero(r, m + 1);
-    for (int pass = 0; pass < 2 && r > 0; ++pass) {
-        const Eigen::MatrixXd c = s.u.transpose() * h;
-        h.noalias() -= s.u * c;
-        l += c;
-    }
-    // H = J K from the eigen-decomposition of the small Gram matrix H^T H = V diag(lambda) V^T:
-    // J = H V_k lambda_k^{-1/2} (never formed), K = lambda_k^{1/2} V_k^T, keeping the k directions
-    // whose singular value sqrt(lambda) exceeds 1e-7 of the data's scale (below that the Gram
-    // matrix's rounding, ~1e-16 of the largest lambda, would make them noise; their energy is
-    // under 1e-14 of the total). Decision: a Gram eigenproblem rather than a pivoted QR of the
-    // tall H: one symmetric rank-k product (BLAS 3) instead of a column-by-column Householder
-    // sweep, about 10x faster at the face's size; the orthogonality lost by squaring is restored
-    // by the final re-orthonormalization below.
-    Eigen::MatrixXd gram(m + 1, m + 1);
-    gram.setZero();
-    gram.selfadjointView<Eigen::Lower>().rankUpdate(h.transpose());
-    // (the eigensolver reads the lower triangle only)
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(gram);
-    const Eigen::VectorXd& lambda = eig.eigenvalues();  // ascending
-    const double scale = std::max(std::sqrt(std::max(0.0, lambda[m])), s.sigma.size() > 0 ? s.sigma[0] : 0.0);
-    const double keepAbove = std::max(1e-7, options.dropRelative) * scale;
-    Index k = 0;
-    while (k < m + 1 && lambda[m - k] > 0 && std::sqrt(lambda[m - k]) > keepAbove) ++k;
-    const Eigen::MatrixXd vk = eig.eigenvectors().rightCols(k).rowwise().reverse();  // descending
-    Eigen::VectorXd rootLambda(k);
-    for (Index i = 0; i < k; ++i) rootLambda[i] = std::sqrt(lambda[m - i]);
-    const Eigen::MatrixXd kMat = rootLambda.asDiagonal() * vk.transpose();  // k x (m + 1)
+    const Eigen::MatrixXd l = projectOut(s.u, h);
+    const GramFactor jk = factorOutside(h, s.sigma.size() > 0 ? s.sigma[0] : 0.0, options);
+    const Index k = jk.k.rows();
 
     // The small core: [diag(sigma) L; 0 K].
     Eigen::MatrixXd core = Eigen::MatrixXd::Zero(r + k, r + m + 1);
     core.topLeftCorner(r, r) = s.sigma.asDiagonal();
     core.topRightCorner(r, m + 1) = l;
-    if (k > 0) core.bottomRightCorner(k, m + 1) = kMat;
-    Eigen::BDCSVD<Eigen::MatrixXd> svd(core, Eigen::ComputeThinU);
-    const Eigen::VectorXd& sv = svd.singularValues();
-    const double drop = options.dropRelative * (sv.size() > 0 ? sv[0] : 0.0);
-    Index keep = 0;
-    while (keep < sv.size() && sv[keep] > drop) ++keep;
-    if (options.maxRank > 0) keep = std::min(keep, options.maxRank);
-    double discarded = 0;
-    for (Index i = keep; i < sv.size(); ++i) discarded += sv[i] * sv[i];
-
-    // U' = [U J] U~ = U U~_top + H (V_k lambda_k^{-1/2} U~_bottom): J is applied, never stored.
-    const Eigen::MatrixXd coreU = svd.matrixU().leftCols(keep);
-    Eigen::MatrixXd u(rows, keep);
-    u.noalias() = s.u * coreU.topRows(r);
-    if (k > 0) {
-        const Eigen::MatrixXd toH = vk * rootLambda.cwiseInverse().asDiagonal() * coreU.bottomRows(k);
-        u.noalias() += h * toH;
-    }
-    Eigen::VectorXd sigma = sv.head(keep);
-    // Re-orthonormalize (Cholesky QR of U', then the SVD of R diag(sigma)): keeps U' orthonormal
-    // to rounding over many nightly updates whatever J lost to the Gram matrix.
-    if (keep > 0) {
-        Eigen::MatrixXd g = u.transpose() * u;
-        Eigen::LLT<Eigen::MatrixXd> llt(g);
-        if (llt.info() == Eigen::Success) {
-            const Eigen::MatrixXd rFactor = llt.matrixU();
-            const Eigen::MatrixXd q = llt.matrixU().solve<Eigen::OnTheRight>(u);
-            Eigen::JacobiSVD<Eigen::MatrixXd> small(rFactor * sigma.asDiagonal(), Eigen::ComputeFullU);
-            u.noalias() = q * small.matrixU();
-            sigma = small.singularValues();
-        }
-    }
+    if (k > 0) core.bottomRightCorner(k, m + 1) = jk.k;
+    CoreSvd c = truncatedCoreSvd(core, options);
+    Eigen::MatrixXd u = rotateInto(s.u, h, jk.toJ, c.u);
+    reorthonormalize(u, c.sigma);
 
     s.u = std::move(u);
-    s.sigma = std::move(sigma);
+    s.sigma = std::move(c.sigma);
     s.mean = (n * s.mean + md * meanNew) / (n + md);
     s.frames += m;
     s.totalEnergy += addedEnergy;
-    s.discardedEnergy += discarded;
+    s.discardedEnergy += c.discarded;
+}
+
+UpdateSpan spanOfUpdate(const IncrementalSubspace& state, const Eigen::Ref<const Eigen::MatrixXd>& newFrames,
+                        const IncrementalSvdOptions& options) {
+    checkUpdate(state, newFrames, options);
+    UpdateSpan span;
+    span.h = newFrames.colwise() - state.mean;
+    const Eigen::MatrixXd l = projectOut(state.u, span.h);
+    GramFactor jk = factorOutside(span.h, state.sigma.size() > 0 ? state.sigma[0] : 0.0, options);
+    span.toJ = std::move(jk.toJ);
+    span.coords.resize(l.rows() + jk.k.rows(), newFrames.cols());
+    span.coords.topRows(l.rows()) = l;
+    span.coords.bottomRows(jk.k.rows()) = jk.k;
+    return span;
+}
+
+IncrementalSubspace updateInSpan(const IncrementalSubspace& state, const UpdateSpan& span,
+                                 const Eigen::Ref<const Eigen::MatrixXd>& newFrames,
+                                 const std::vector<Index>& columns, const IncrementalSvdOptions& options) {
+    checkUpdate(state, newFrames, options);
+    const Index r = state.rank(), w = span.coords.rows();
+    const Index mo = static_cast<Index>(columns.size());
+    if (mo < 1) throw std::invalid_argument("incremental SVD: no frames chosen");
+    if (span.coords.cols() != newFrames.cols() || w != r + span.toJ.cols())
+        throw std::invalid_argument("incremental SVD: the span is not of these frames and this state");
+    Eigen::MatrixXd z(w, mo);
+    Eigen::VectorXd meanChosen = Eigen::VectorXd::Zero(state.mean.size());
+    for (Index j = 0; j < mo; ++j) {
+        const Index c = columns[static_cast<size_t>(j)];
+        if (c < 0 || c >= newFrames.cols())
+            throw std::invalid_argument("incremental SVD: column out of range");
+        z.col(j) = span.coords.col(c);
+        meanChosen += newFrames.col(c);
+    }
+    meanChosen /= static_cast<double>(mo);
+    const double n = static_cast<double>(state.frames), md = static_cast<double>(mo);
+    // B^ of updateSubspace in W's coordinates: the chosen frames about their mean, and the column
+    // sqrt(n m / (n + m)) (mu_B - mu_A), whose coordinates are the chosen coordinates' mean.
+    const Eigen::VectorXd zMean = z.rowwise().mean();
+    Eigen::MatrixXd core = Eigen::MatrixXd::Zero(w, r + mo + 1);
+    core.topLeftCorner(r, r) = state.sigma.asDiagonal();
+    core.middleCols(r, mo) = z.colwise() - zMean;
+    core.col(r + mo) = std::sqrt(n * md / (n + md)) * zMean;
+    CoreSvd small = truncatedCoreSvd(core, options);
+    IncrementalSubspace out;
+    out.u = rotateInto(state.u, span.h, span.toJ, small.u);
+    reorthonormalize(out.u, small.sigma);
+    out.sigma = std::move(small.sigma);
+    // The mean and energy exactly, from the frames (W holds them only to its dropped directions).
+    double added = n * md / (n + md) * (meanChosen - state.mean).squaredNorm();
+    for (Index col : columns) added += (newFrames.col(col) - meanChosen).squaredNorm();
+    out.mean = (n * state.mean + md * meanChosen) / (n + md);
+    out.frames = state.frames + mo;
+    out.totalEnergy = state.totalEnergy + added;
+    out.discardedEnergy = state.discardedEnergy + small.discarded;
+    return out;
 }
 
 double largestPrincipalAngle(const Eigen::Ref<const Eigen::MatrixXd>& a,

@@ -5,6 +5,8 @@
 
 #include <Eigen/Core>
 
+#include <vector>
+
 namespace pmsc {
 
 /// A mean-centred truncated SVD that can absorb new frames without the old ones (paper section 5:
@@ -72,6 +74,35 @@ struct IncrementalSvdOptions {
 /// @throws std::invalid_argument for a size mismatch or an empty update.
 void updateSubspace(IncrementalSubspace& state, const Eigen::Ref<const Eigen::MatrixXd>& newFrames,
                     const IncrementalSvdOptions& options = {});
+
+/// The span of an update: every new frame about the state's mean, b_i - mu, lies in
+/// span W = [U J], U the state's r vectors and J = h * toJ k orthonormal directions outside span(U)
+/// (directions whose singular value is under 1e-7 of the data's scale dropped, as updateSubspace
+/// does), and `coords` holds W^T (b_i - mu). An update of the state with any subset of the frames
+/// is then an (r + k)-dimensional problem (updateInSpan): cross-fitting folds need no pass over the
+/// (N*C) rows beyond forming their basis.
+struct UpdateSpan {
+    Eigen::MatrixXd h;       ///< (N*C) x m: the new frames about the old mean, with span(U) projected out
+    Eigen::MatrixXd toJ;     ///< m x k: J = h * toJ
+    Eigen::MatrixXd coords;  ///< (r + k) x m: W^T (b_i - mu)
+};
+
+/// W and the coordinates of `newFrames` ((N*C) x m raw frames) for updates of `state`.
+/// Cost: two (N*C) x r x m products (span(U) projected out twice) and one (N*C) x m x m Gram
+/// product. @throws std::invalid_argument as updateSubspace.
+UpdateSpan spanOfUpdate(const IncrementalSubspace& state, const Eigen::Ref<const Eigen::MatrixXd>& newFrames,
+                        const IncrementalSvdOptions& options = {});
+
+/// `state` updated with the columns `columns` of `newFrames` (the frames spanOfUpdate(state, ...)
+/// was given), computed in span W: equal to updateSubspace(state, those columns) to rounding (the
+/// same core SVD, rotated into W's coordinates; tested), at the cost of the small core SVD, one
+/// (N*C) x (r + m) x r' product for U' (r' the rank kept) and a pass over the chosen frames for the
+/// exact mean and energy.
+/// @throws std::invalid_argument for an empty or out-of-range column list.
+IncrementalSubspace updateInSpan(const IncrementalSubspace& state, const UpdateSpan& span,
+                                 const Eigen::Ref<const Eigen::MatrixXd>& newFrames,
+                                 const std::vector<Index>& columns,
+                                 const IncrementalSvdOptions& options = {});
 
 /// The largest principal angle (radians) between the column spaces of two matrices with
 /// orthonormal columns: theta_max with sin(theta_max) = ||(I - A A^T) B||_2 when A has at least as

@@ -66,7 +66,12 @@ void checkLearnInput(const Model& model, const FrameSet& newFrames, const LearnO
     checkFrames(model, newFrames);
     if (options.basis < 0 || options.maxRank < 0)
         throw std::invalid_argument("learn: basis and rank must be >= 0");
-    if (options.slices < 2) throw std::invalid_argument("learn: slices must be >= 2");
+    if (!(options.energy >= 0 && options.energy <= 1))
+        throw std::invalid_argument("learn: energy must be in (0, 1] (0 = the model's rule)");
+    if (options.basis > 0 && options.energy > 0)
+        throw std::invalid_argument("learn: a basis size and an energy rule both set M: give one");
+    if (options.slices < 0 || options.slices == 1)
+        throw std::invalid_argument("learn: slices must be >= 2 (0 = the training's slice size)");
 }
 
 /// The largest key RMS of the new frames under the old model (what made them misses).
@@ -81,11 +86,37 @@ double oldModelKeyRmsMax(const Model& model, const Eigen::Map<const Eigen::Matri
 /// The subspace before and after the update, and the basis taken from it.
 struct SubspaceUpdate {
     IncrementalSubspace before;  ///< the model's stored state
+    UpdateSpan span;             ///< the new frames in span [U J] of `before` and the update
     IncrementalSubspace state;   ///< `before` updated with the new frames
     IncrementalSvdOptions svdOptions;
+    double energy = 0;  ///< the energy rule M was chosen by (0: M fixed)
     Index basisSize = 0;
     Eigen::MatrixXd basis;
 };
+
+/// Every column index of m frames.
+std::vector<Index> allColumns(Index m) {
+    std::vector<Index> columns(static_cast<size_t>(m));
+    for (Index j = 0; j < m; ++j) columns[static_cast<size_t>(j)] = j;
+    return columns;
+}
+
+/// M after the update: --basis, else the energy rule (the options', else the model's stored
+/// one) on the updated state, else the model's M.
+Index chooseLearnedBasis(const Model& model, const LearnOptions& options, LearnReport& report,
+                         SubspaceUpdate& u) {
+    if (options.basis > 0) return options.basis;
+    u.energy = options.energy > 0 ? options.energy : (model.learning ? model.learning->basisEnergy : 0.0);
+    if (u.energy <= 0) return model.basisSize();
+    const Index m = basisSizeForEnergy(u.state.sigma, u.state.totalEnergy, u.energy);
+    const double got = u.state.sigma.head(m).squaredNorm() / u.state.totalEnergy;
+    if (got < u.energy * (1 - 1e-12)) {
+        report.warnings.push_back("energy " + std::to_string(u.energy) + " not reached within the state's " +
+                                  std::to_string(m) + " directions (captured " + std::to_string(got) +
+                                  "): M = " + std::to_string(m) + "; a larger --rank keeps more");
+    }
+    return m;
+}
 
 /// Step 1 (mean and basis): Brand's update of the stored state.
 void updateState(const Model& model, const Eigen::Map<const Eigen::MatrixXd>& fresh,
@@ -106,14 +137,16 @@ void updateState(const Model& model, const Eigen::Map<const Eigen::MatrixXd>& fr
     u.svdOptions.maxRank = options.maxRank > 0
                                ? options.maxRank
                                : (model.learning ? model.learning->maxRank : model.basisSize());
-    const Index wantedM = options.basis > 0 ? options.basis : model.basisSize();
-    if (u.svdOptions.maxRank < wantedM) {
+    const Index fixedM = options.basis > 0 ? options.basis : model.basisSize();
+    if (u.svdOptions.maxRank < fixedM) {
         throw std::invalid_argument("learn: rank " + std::to_string(u.svdOptions.maxRank) +
-                                    " is below the basis size " + std::to_string(wantedM));
+                                    " is below the basis size " + std::to_string(fixedM));
     }
-    u.state = u.before;
-    updateSubspace(u.state, fresh, u.svdOptions);
+    u.span = spanOfUpdate(u.before, fresh, u.svdOptions);
+    u.state = updateInSpan(u.before, u.span, fresh, allColumns(fresh.cols()), u.svdOptions);
     report.rankAfter = u.state.rank();
+    const Index wantedM = chooseLearnedBasis(model, options, report, u);
+    report.basisEnergy = u.energy;
     report.tailNorm = u.state.tailNorm();
     u.basisSize = std::min(wantedM, u.state.rank());
     if (u.basisSize < wantedM) {
@@ -179,21 +212,32 @@ Model learnedCore(const Model& model, const SubspaceUpdate& u, const std::vector
 }
 
 /// Step 3, cross-fitting: each slice of the new frames is scored by a model that never saw it
-/// (the old state updated with the other slices; the new keys).
+/// (the old state updated with the other slices, or the old state alone for one slice; the new
+/// keys).
 CalibrationStats crossFitNewFrames(const SubspaceUpdate& u, const Eigen::Map<const Eigen::MatrixXd>& fresh,
                                    Index channels, KeyErrorNorm norm, const std::vector<Index>& keys,
                                    Index slices, const auto& progress) {
     const Index m = fresh.cols();
     CalibrationStats scores;
+    // Decision: each fold is the old state updated with the other slices in the span of the full
+    // update (updateInSpan): the same subspace as an incremental update of the other slices (to
+    // rounding; IncrementalSvd.UpdateInSpanEqualsTheIncrementalUpdate), without projecting and
+    // factoring the (N*C) rows of the frames again per fold. docs/learning-and-calibration.md has
+    // the measured time.
     for (Index slice = 0; slice < slices; ++slice) {
         const Index first = slice * m / slices, last = (slice + 1) * m / slices;
-        IncrementalSubspace fold = u.before;
-        Eigen::MatrixXd others(fresh.rows(), m - (last - first));
-        others.leftCols(first) = fresh.leftCols(first);
-        others.rightCols(m - last) = fresh.rightCols(m - last);
+        std::vector<Index> others;
+        others.reserve(static_cast<size_t>(m - (last - first)));
+        for (Index j = 0; j < m; ++j)
+            if (j < first || j >= last) others.push_back(j);
         IncrementalSvdOptions foldOptions = u.svdOptions;
         foldOptions.maxRank = u.basisSize;  // a fold needs only its M-basis: a smaller product for U'
-        updateSubspace(fold, others, foldOptions);
+        IncrementalSubspace fold;
+        if (others.empty()) {  // one slice: the new frames are held out from the old state alone
+            fold = u.before;
+        } else {
+            fold = updateInSpan(u.before, u.span, fresh, others, foldOptions);
+        }
         const Index foldM = std::min(u.basisSize, fold.rank());
         const Eigen::MatrixXd foldBasis = fold.u.leftCols(foldM);
         const Eigen::MatrixXd foldProjector = makeProjector(foldBasis, channels, keys);
@@ -207,6 +251,23 @@ CalibrationStats crossFitNewFrames(const SubspaceUpdate& u, const Eigen::Map<con
     return scores;
 }
 
+/// How many slices the new frames are cross-fitted in. Decision: by default each slice holds as
+/// many frames as a slice of `pmsc train` on all n + m frames, (n + m) / S with S the training's
+/// folds (so m / ((n + m) / S) slices, at least 1): a held-out new frame is then scored by a model
+/// that lacks as large a share of the frames as training's folds lack, and its score is as
+/// pessimistic as retraining's. Fixed 5 slices of the new frames score them with models that saw
+/// 80% of them, which grows less cautious than retraining as n grows (soft-cached p99.5 1.10x
+/// scratch's at 1200 + 300 frames of the ICT take; docs/learning-and-calibration.md).
+Index newFrameSlices(const Model& model, const CalibrationRecord& record, Index m,
+                     const LearnOptions& options) {
+    if (options.slices > 0) return std::min(options.slices, m);
+    const Index trainingSlices = record.slices > 0 ? record.slices : 5;
+    const double sliceFrames =
+        static_cast<double>(model.trainFrames + m) / static_cast<double>(trainingSlices);
+    const Index slices = static_cast<Index>(std::llround(static_cast<double>(m) / sliceFrames));
+    return std::clamp<Index>(slices, 1, std::min(m, trainingSlices));
+}
+
 /// Step 3, calibrated: eps from the new frames' cross-fitted scores and the stored ones; the
 /// new scores are added to `record`.
 void calibrateLearned(const Model& model, const SubspaceUpdate& u,
@@ -214,15 +275,11 @@ void calibrateLearned(const Model& model, const SubspaceUpdate& u,
                       const LearnOptions& options, CalibrationRule rule, double coverage,
                       CalibrationRecord& record, Model& out, LearnReport& report, const auto& progress) {
     const Index m = fresh.cols();
-    CalibrationStats scores;
-    const Index slices = std::min(options.slices, m);
-    if (slices >= 2) {
-        scores = crossFitNewFrames(u, fresh, model.channels, model.keyErrorNorm, keys, slices, progress);
-        setThresholds(scores, model.tolerance, rule, coverage);
-        report.calibrationRatioNew = scores.ratio;
-    } else {
-        report.warnings.push_back("one new frame cannot be cross-fitted: eps from the stored scores only");
-    }
+    const Index slices = newFrameSlices(model, record, m, options);
+    CalibrationStats scores =
+        crossFitNewFrames(u, fresh, model.channels, model.keyErrorNorm, keys, slices, progress);
+    setThresholds(scores, model.tolerance, rule, coverage);
+    report.calibrationRatioNew = scores.ratio;
     double ratio = report.calibrationRatioNew;
     if (!record.keyRms.empty()) {
         CalibrationStats stored;
@@ -292,6 +349,7 @@ CalibrationRecord learnThresholds(const Model& model, const SubspaceUpdate& u,
 LearningState nextLearningState(const LearningState& settings, const SubspaceUpdate& u) {
     LearningState next = settings;
     next.maxRank = u.svdOptions.maxRank;
+    next.basisEnergy = u.energy;
     const Index extra = u.state.rank() - u.basisSize;
     next.extraBasis = u.state.u.rightCols(extra);
     next.extraSigma = u.state.sigma.tail(extra);

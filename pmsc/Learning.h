@@ -19,12 +19,18 @@ IncrementalSubspace subspaceOf(const Model& model);
 
 /// Options of learn(). Unset values keep what the model stored.
 struct LearnOptions {
-    Index basis = 0;    ///< M after the update; 0 = the model's M
+    Index basis = 0;  ///< M after the update; 0 = by the energy rule below, else the model's M
+    /// M after the update = the smallest capturing this fraction of all frames' energy (the
+    /// training's rule, applied to the updated singular values and the exact total energy);
+    /// 0 = the model's stored rule (LearningState::basisEnergy; none stored: M kept).
+    double energy = 0;
     Index maxRank = 0;  ///< rank r kept by the state; 0 = the model's (LearningState::maxRank, else M)
     std::optional<CalibrationRule> rule;  ///< default: the model's CalibrationRecord's, else MaxRatio
     std::optional<double> coverage;       ///< default: the model's, else 0.95
-    Index slices = 5;                     ///< cross-fitting folds over the new frames for the calibration
-    ProgressFn progress;                  ///< optional; returning false cancels (pmsc::Cancelled)
+    /// Cross-fitting folds over the new frames for the calibration; 0 = slices of the training's
+    /// size on all frames seen ((n + m) / S frames each, S the training's folds; at least one).
+    Index slices = 0;
+    ProgressFn progress;  ///< optional; returning false cancels (pmsc::Cancelled)
 };
 
 /// What learn() did.
@@ -32,6 +38,7 @@ struct LearnReport {
     Index newFrames = 0;
     Index rankBefore = 0, rankAfter = 0;
     Index basisBefore = 0, basisAfter = 0;
+    double basisEnergy = 0;                 ///< the energy rule M was chosen by; 0: M fixed
     Index keysKept = 0;                     ///< keys of the old model that are keys again
     double largestAngle = 0;                ///< largest principal angle between the old and the new M-basis
     double tailNorm = 0;                    ///< IncrementalSubspace::tailNorm() after the update
@@ -50,11 +57,14 @@ struct LearnReport {
 /// 2. keys selected again by the model's selector and settings on the rank-r surrogate of all
 ///    frames seen, U_r diag(sigma) (its Gram matrix is diag(sigma^2): every key-selection step
 ///    runs in the r-dimensional frame space), with the model's fiducials and grid points seeded;
+///    M is chosen again by the training's energy rule when the model stores it (the new frames
+///    add directions: keeping the old M loses them);
 /// 3. the projector for the new keys and basis;
 /// 4. eps: without a tolerance, the larger of the old eps_min and the new frames' largest key
 ///    RMS (eps_max = 1.5 eps_min, as training); with one, the new frames are scored by
 ///    cross-fitting (each of `slices` contiguous slices held out: the OLD state updated with the
-///    other slices, the new keys) and r = the larger of the rule's ratio on those scores and on
+///    other slices, computed in the span of the full update, updateInSpan; the new keys) and
+///    r = the larger of the rule's ratio on those scores and on
 ///    the stored training scores; eps_min = T / r, eps_max = 2 eps_min.
 /// What is exact and what is approximate compared with training from scratch on all frames is
 /// in docs/learning-and-calibration.md and IncrementalSvd.h.

@@ -4,7 +4,8 @@
 //   u64 maxRank, u64 updates, f64 discardedEnergy,
 //   u64 E extra vectors, f64 x E singular values, f64 x (N*C*E) vectors (column-major),
 //   u64 maxKeys, u64 block, f64 maxError,
-//   u64 count + u64 x count fiducials, u64 count + u64 x count grid points
+//   u64 count + u64 x count fiducials, u64 count + u64 x count grid points,
+//   f64 basisEnergy (optional: a section that ends before it reads as 0, M fixed)
 // "CALIBRAT" (Model::calibrationRecord, CalibrationRecord):
 //   u32 rule (0 max, 1 conformal), u32 reserved 0, f64 coverage, u64 slices,
 //   u64 n, f64 x n key RMS, f64 x n largest point errors
@@ -36,6 +37,7 @@ void encodeLearning(const Model& model, ByteWriter& out) {
     out.indices(s.fiducials);
     out.index(static_cast<Index>(s.gridPoints.size()));
     out.indices(s.gridPoints);
+    out.f64(s.basisEnergy);
 }
 
 void decodeLearning(ByteReader& in, Model& model) {
@@ -58,6 +60,9 @@ void decodeLearning(ByteReader& in, Model& model) {
     s.fiducials = in.indices(fiducials, static_cast<std::uint64_t>(model.points), "fiducial");
     const std::uint64_t grid = in.count("grid point count", 8);
     s.gridPoints = in.indices(grid, static_cast<std::uint64_t>(model.points), "grid point");
+    // Decision: the basis rule is the section's last field and optional, so model files written
+    // without it still load (as "M fixed", what an update of them does).
+    if (in.remaining() > 0) s.basisEnergy = in.finite("basis energy");
     try {
         s.validate(rows, model.basisSize(), model.points);
     } catch (const std::invalid_argument& e) {

@@ -39,6 +39,7 @@ void LearningState::validate(Index rows, Index basisSize, Index points) const {
     if (maxKeys < 1 || maxKeys > points) invalid("learning state: key budget outside [1, N]");
     if (block < 1) invalid("learning state: block must be >= 1");
     if (!(maxError >= 0) || !std::isfinite(maxError)) invalid("learning state: bad max error");
+    if (!(basisEnergy >= 0 && basisEnergy <= 1)) invalid("learning state: basis energy outside [0, 1]");
     for (const auto* list : {&fiducials, &gridPoints})
         for (Index p : *list)
             if (p < 0 || p >= points)

@@ -32,6 +32,12 @@ struct LearningState {
     std::vector<Index> fiducials;
     std::vector<Index> gridPoints;
 
+    // --- basis size rule (TrainingOptions) ---
+    /// The energy fraction the training chose M by (--energy, or the default energy rule), so that
+    /// an update chooses M again by the same rule on all frames seen; 0 = M was fixed (--basis,
+    /// --basis-max-error, or a file that does not store the rule): updates keep it.
+    double basisEnergy = 0;
+
     /// Checks sizes against the model's N*C and M; throws std::invalid_argument.
     void validate(Index rows, Index basisSize, Index points) const;
 };

@@ -570,6 +570,10 @@ void Trainer::learningState() {
     learning.maxError = options.maxError;
     learning.fiducials = options.fiducials;
     learning.gridPoints = options.gridPoints;
+    // The rule chooseBasisSize() took M by, when it is one an update can apply again: the energy
+    // of the singular values against the exact total (a point-error rule needs the frames).
+    if (options.basis <= 0 && (options.energy > 0 || options.basisMaxError <= 0))
+        learning.basisEnergy = options.energy > 0 ? options.energy : options.defaultEnergy;
     model.learning = std::move(learning);
     if (options.tolerance > 0) model.calibrationRecord = CalibrationRecord::from(report.calibration);
 }

@@ -175,6 +175,18 @@ TEST_F(LearnCli, BadInputsFailWithOneLineAndLeaveFilesAlone) {
     r = runPmsc(work, {"learn", "--model", dir_->file("m.pmsc"), "--frames", dir_->file("test.npy"), "--out",
                        work.file("m2.pmsc"), "--calibration", "median"});
     expectFailure(r, 2, {"--calibration", "median"});
+    for (const char* energy : {"0", "1.5", "x"}) {
+        r = runPmsc(work, {"learn", "--model", dir_->file("m.pmsc"), "--frames", dir_->file("test.npy"),
+                           "--out", work.file("m2.pmsc"), "--energy", energy});
+        expectFailure(r, 2, {"--energy"});
+    }
+    r = runPmsc(work, {"learn", "--model", dir_->file("m.pmsc"), "--frames", dir_->file("test.npy"), "--out",
+                       work.file("m2.pmsc"), "--energy", "0.99", "--basis", "4"});
+    expectFailure(r, 2, {"--basis", "--energy"});
+    r = runPmsc(work, {"learn", "--model", dir_->file("m.pmsc"), "--frames", dir_->file("test.npy"), "--out",
+                       work.file("m2.pmsc"), "--slices", "1"});
+    expectFailure(r, 2, {"--slices"});
+    EXPECT_FALSE(fs::exists(work.file("m2.pmsc")));
     r = runPmsc(work, {"train", "--frames", dir_->file("train.npy"), "--out", work.file("t.pmsc"),
                        "--tolerance", "0.02", "--calibration", "max", "--coverage", "0.9"});
     expectFailure(r, 2, {"--coverage", "conformal"});

@@ -23,6 +23,7 @@ pmsc::Model learnableModel() {
     s.maxError = 0.5;
     s.fiducials = {4};
     s.gridPoints = {6, 1};
+    s.basisEnergy = 0.9999;
     m.learning = s;
     pmsc::CalibrationRecord r;
     r.rule = pmsc::CalibrationRule::Conformal;
@@ -66,12 +67,30 @@ TEST(LearningSections, RoundTripBitExact) {
     EXPECT_EQ(back.learning->maxError, 0.5);
     EXPECT_EQ(back.learning->fiducials, m.learning->fiducials);
     EXPECT_EQ(back.learning->gridPoints, m.learning->gridPoints);
+    EXPECT_EQ(back.learning->basisEnergy, 0.9999);
     EXPECT_EQ(back.calibrationRecord->rule, pmsc::CalibrationRule::Conformal);
     EXPECT_EQ(back.calibrationRecord->coverage, 0.9);
     EXPECT_EQ(back.calibrationRecord->slices, 5);
     EXPECT_EQ(back.calibrationRecord->keyRms, m.calibrationRecord->keyRms);
     EXPECT_EQ(back.calibrationRecord->maxPointError, m.calibrationRecord->maxPointError);
     EXPECT_EQ(pmsc::encodeModel(back), bytes);
+}
+
+TEST(LearningSections, ASectionWithoutTheBasisRuleLoadsWithMFixed) {
+    // A LEARNSVD section that ends after the grid points (the basis rule is its optional last
+    // field) loads, with basisEnergy 0: updates keep M.
+    std::string bytes = pmsc::encodeModel(learnableModel());
+    const std::size_t learn = find(bytes, "LEARNSVD");
+    std::uint64_t length = 0;
+    std::memcpy(&length, bytes.data() + learn + 8, 8);
+    bytes.erase(learn + 16 + length - 8, 8);
+    length -= 8;
+    std::memcpy(bytes.data() + learn + 8, &length, 8);
+    refix(bytes);
+    const pmsc::Model back = pmsc::decodeModel(bytes, "m.pmsc");
+    ASSERT_TRUE(back.learning);
+    EXPECT_EQ(back.learning->basisEnergy, 0.0);
+    EXPECT_EQ(back.learning->gridPoints, learnableModel().learning->gridPoints);
 }
 
 TEST(LearningSections, APlainModelStaysVersion1) {
@@ -106,6 +125,12 @@ TEST(LearningSections, BadValuesNameTheSectionAndTheField) {
     const double negative = -1;  // first extra singular value
     std::memcpy(b.data() + learn + 16 + 32, &negative, 8);
     expectBad(b, "singular values");
+    b = good;
+    std::uint64_t learnLength = 0;
+    std::memcpy(&learnLength, good.data() + learn + 8, 8);
+    const double badEnergy = 1.5;  // the basis rule, the section's last field
+    std::memcpy(b.data() + learn + 16 + learnLength - 8, &badEnergy, 8);
+    expectBad(b, "basis energy");
     // CALIBRAT payload: u32 rule at +16.
     const std::size_t calib = find(good, "CALIBRAT");
     b = good;

@@ -145,3 +145,60 @@ TEST(IncrementalSvd, RejectsBadUpdates) {
     broken.sigma[0] = -1;
     EXPECT_THROW(broken.validate(), std::invalid_argument);
 }
+
+TEST(IncrementalSvd, UpdateInSpanEqualsTheIncrementalUpdate) {
+    // What learn's cross-fitting relies on: the old state updated with any subset of the new
+    // frames, computed in the span of the update of all of them, is the incremental update of that
+    // subset (low-rank old frames: both are also the SVD of the union; the new frames move in 3
+    // directions the old never did, about another mean).
+    const Eigen::MatrixXd old = frames(90, 40, 6, 71, 0.0);
+    Eigen::MatrixXd fresh = frames(90, 30, 6, 71, 0.0);
+    fresh += pmsc::test::lowRank(90, 30, 3, 73, 0.9) + Eigen::MatrixXd::Constant(90, 30, 0.5);
+    const pmsc::IncrementalSubspace before = stateFromScratch(old, 12);
+    const pmsc::UpdateSpan span = pmsc::spanOfUpdate(before, fresh);
+    // The 3 new directions and the offset of the means, nothing else.
+    EXPECT_GE(span.coords.rows(), before.rank() + 3);
+    EXPECT_LE(span.coords.rows(), before.rank() + 4);
+    for (const bool all : {true, false}) {
+        std::vector<Index> columns;
+        for (Index j = 0; j < 30; ++j)
+            if (all || j < 12 || j >= 18) columns.push_back(j);  // a fold: slice [12, 18) held out
+        Eigen::MatrixXd chosen(90, static_cast<Index>(columns.size()));
+        for (Index j = 0; j < chosen.cols(); ++j) chosen.col(j) = fresh.col(columns[static_cast<size_t>(j)]);
+        pmsc::IncrementalSubspace incremental = before;
+        pmsc::updateSubspace(incremental, chosen);
+        const pmsc::IncrementalSubspace projected = pmsc::updateInSpan(before, span, fresh, columns);
+        EXPECT_EQ(projected.frames, incremental.frames);
+        EXPECT_LT((projected.mean - incremental.mean).norm(), 1e-12 * incremental.mean.norm());
+        EXPECT_NEAR(projected.totalEnergy, incremental.totalEnergy, 1e-12 * incremental.totalEnergy);
+        ASSERT_EQ(projected.rank(), incremental.rank());
+        EXPECT_LT((projected.sigma - incremental.sigma).norm(), 1e-10 * incremental.sigma[0]);
+        EXPECT_LT(pmsc::largestPrincipalAngle(incremental.u, projected.u), 1e-9);
+        const Index r = projected.rank();
+        EXPECT_LT((projected.u.transpose() * projected.u - Eigen::MatrixXd::Identity(r, r)).norm(), 1e-12);
+        const pmsc::IncrementalSubspace exact = stateFromScratch(join(old, chosen), 20);
+        EXPECT_LT(pmsc::largestPrincipalAngle(exact.u, projected.u), 1e-9);
+    }
+    // Truncated to the fold's basis size, the leading directions are the same.
+    pmsc::IncrementalSvdOptions five;
+    five.maxRank = 5;
+    pmsc::IncrementalSubspace incremental = before;
+    pmsc::updateSubspace(incremental, fresh.leftCols(20), five);
+    std::vector<Index> first20(20);
+    for (Index j = 0; j < 20; ++j) first20[static_cast<size_t>(j)] = j;
+    const pmsc::IncrementalSubspace projected = pmsc::updateInSpan(before, span, fresh, first20, five);
+    ASSERT_EQ(projected.rank(), 5);
+    EXPECT_LT(pmsc::largestPrincipalAngle(incremental.u, projected.u), 1e-9);
+    EXPECT_NEAR(projected.discardedEnergy, incremental.discardedEnergy, 1e-10 * incremental.totalEnergy);
+}
+
+TEST(IncrementalSvd, UpdateInSpanRejectsBadColumns) {
+    const pmsc::IncrementalSubspace s = stateFromScratch(frames(30, 10, 3, 81, 0.0), 5);
+    const Eigen::MatrixXd fresh = frames(30, 6, 3, 82, 0.0);
+    const pmsc::UpdateSpan span = pmsc::spanOfUpdate(s, fresh);
+    EXPECT_THROW(pmsc::updateInSpan(s, span, fresh, {}), std::invalid_argument);
+    EXPECT_THROW(pmsc::updateInSpan(s, span, fresh, {0, 6}), std::invalid_argument);
+    EXPECT_THROW(pmsc::updateInSpan(s, span, fresh, {-1}), std::invalid_argument);
+    EXPECT_THROW(pmsc::updateInSpan(s, span, fresh.leftCols(5), {0}), std::invalid_argument);
+    EXPECT_THROW(pmsc::spanOfUpdate(s, Eigen::MatrixXd::Zero(29, 3)), std::invalid_argument);
+}

@@ -162,3 +162,57 @@ TEST(Learning, RejectsFramesThatDoNotFitTheModel) {
     tooSmall.maxRank = 3;
     EXPECT_THROW(pmsc::learn(old, patches(50, 5, 31, 0), tooSmall), std::invalid_argument);
 }
+
+TEST(Learning, TheEnergyRuleChoosesMAgainAsTrainingWould) {
+    // Trained by the energy rule on frames where two patches never move, the model has fewer basis
+    // vectors than training on the union would choose; learn chooses M by the same rule on all
+    // frames seen, and keeps M when asked for a basis size.
+    const pmsc::FrameSet day1 = patches(0, 80, 41, 2), misses = patches(80, 40, 41, 0);
+    pmsc::TrainingOptions o = options(20);
+    o.basis = 0;
+    o.energy = 0.99;
+    const pmsc::Model old = pmsc::train(day1, o);
+    ASSERT_TRUE(old.learning.has_value());
+    EXPECT_EQ(old.learning->basisEnergy, 0.99);
+    const pmsc::Model scratch = pmsc::train(join(day1, misses), o);
+    ASSERT_GT(scratch.basisSize(), old.basisSize());
+    const pmsc::Model learned = pmsc::learn(old, misses);
+    EXPECT_EQ(learned.basisSize(), scratch.basisSize());
+    EXPECT_EQ(learned.learning->basisEnergy, 0.99);
+    EXPECT_LT(pmsc::largestPrincipalAngle(scratch.basis, learned.basis), 0.02);
+
+    pmsc::LearnOptions fixed;
+    fixed.basis = old.basisSize();
+    const pmsc::Model kept = pmsc::learn(old, misses, fixed);
+    EXPECT_EQ(kept.basisSize(), old.basisSize());
+    EXPECT_EQ(kept.learning->basisEnergy, 0.0);  // M was given: later updates keep it
+    pmsc::LearnOptions lower;
+    lower.energy = 0.9;
+    EXPECT_LT(pmsc::learn(old, misses, lower).basisSize(), learned.basisSize());
+    lower.energy = 1.5;
+    EXPECT_THROW(pmsc::learn(old, misses, lower), std::invalid_argument);
+    lower.energy = 0.9;
+    lower.basis = 3;
+    EXPECT_THROW(pmsc::learn(old, misses, lower), std::invalid_argument);
+}
+
+TEST(Learning, NewFramesAreHeldOutInSlicesOfTheTrainingsSize) {
+    // 80 training frames in 5 slices: with 40 new frames a slice of all 120 is 24 frames, so the
+    // new frames are 2 slices; 10 new frames are one slice, scored by the old state alone.
+    const pmsc::Model old = pmsc::train(patches(0, 80, 51, 2), options(12));
+    ASSERT_EQ(old.calibrationRecord->slices, 5);
+    pmsc::LearnReport report;
+    pmsc::learn(old, patches(80, 40, 51, 0), {}, &report);
+    EXPECT_EQ(report.calibration.slices, 2);
+    EXPECT_EQ(report.calibration.keyRms.size(), 40u);
+    pmsc::learn(old, patches(80, 10, 51, 0), {}, &report);
+    EXPECT_EQ(report.calibration.slices, 1);
+    EXPECT_EQ(report.calibration.keyRms.size(), 10u);
+    EXPECT_GT(report.calibrationRatioNew, 0.0);
+    pmsc::LearnOptions four;
+    four.slices = 4;
+    pmsc::learn(old, patches(80, 40, 51, 0), four, &report);
+    EXPECT_EQ(report.calibration.slices, 4);
+    four.slices = 1;
+    EXPECT_THROW(pmsc::learn(old, patches(80, 40, 51, 0), four), std::invalid_argument);
+}
