@@ -34,14 +34,16 @@ std::optional<VolumeArgs> parseVolumeArgs(const std::vector<std::string>& args) 
         "Smoke made from a mesh with OpenVDB (meshToLevelSet, fog volume, noise), lit\n"
         "by a spherical light moving around and over it with a changing colour temperature.\n"
         "The light scattered at every active voxel (soft shadows through the heterogeneous\n"
-        "density, multiple scattering) is the expensive calculation; 96 training frames, a\n"
-        "basis and key voxels, validation between the training lights and on a path through\n"
+        "density, multiple scattering) is the expensive calculation; training frames on a\n"
+        "rig as fine as the medium needs (96 for the smoke), a basis and key voxels sized\n"
+        "from them, validation between the training lights and on a path through\n"
         "the soft-cache engine, renders from three moving cameras (one inside the smoke).\n"
         "Writes DIR/report.json, DIR/density.vdb, DIR/cache_*.vdb (grid 'inscatter'), DIR/*.png.");
     parser.option("--out", "DIR", "output folder (created if missing)", a.out, true);
     parser.option("--mesh", "FILE", "mesh to make smoke of (default " + defaults.mesh + ")", a.mesh);
     parser.option("--density", "FILE.vdb", "a density grid of your own instead of the mesh", a.density);
-    parser.option("--grid", "NAME", "its float grid (default 'density', else the first float grid)", a.grid);
+    parser.option("--grid", "NAME", "its float grid (default 'density', else the file's only float grid)",
+                  a.grid);
     parser.option("--voxels", "N",
                   "active voxels of the smoke made from the mesh (default 260000; --quick 12000)",
                   [&](const std::string& v) { a.voxels = parseIndex("--voxels", v, 1000, 8000000); });
@@ -62,10 +64,10 @@ std::optional<VolumeArgs> parseVolumeArgs(const std::vector<std::string>& args) 
                   [&](const std::string& v) { a.basis = parseIndex("--basis", v, 1, 512); });
     parser.option("--keys", "K", "key voxels (default: 6.25 x M, at most a tenth of the voxels)",
                   [&](const std::string& v) { a.keys = parseIndex("--keys", v, 1, 100000); });
-    parser.option(
-        "--azimuths", "A",
-        "training light azimuths per elevation (default " + std::to_string(defaults.rig.azimuths) + ")",
-        [&](const std::string& v) { a.azimuths = parseIndex("--azimuths", v, 2, 360); });
+    parser.option("--azimuths", "A",
+                  "training light azimuths per elevation (default " + std::to_string(defaults.rig.azimuths) +
+                      " x 6 elevations, refined for the medium; given: this rig as it is)",
+                  [&](const std::string& v) { a.azimuths = parseIndex("--azimuths", v, 2, 360); });
     parser.option("--elevations", "E1,E2,..", "training light elevations in degrees, each in [0, 89]",
                   [&](const std::string& v) {
                       a.elevations.clear();
