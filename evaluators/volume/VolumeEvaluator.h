@@ -114,8 +114,9 @@ struct VolumeRig {
     /// The rig for a medium: `base` (the default 16 x 6 grid) refined over the same band of
     /// elevations, azimuth and elevation steps shrinking together (20 x 7, 24 x 8, 28 x 9, 32 x 11),
     /// until its cellInterpolationError is at most kCellErrorGoal. A spiral base is returned as
-    /// it is. Deterministic for a medium; costs about 2 full frames per grid tried (5 x 24 lights
-    /// at 512 voxels).
+    /// it is. Deterministic for a medium; each grid tried costs 5 x 24 lights at 512 voxels, 61,440
+    /// voxel calculations (0.42 of a full frame of the 145,883-voxel spider; 2.3 to 2.6 s per grid
+    /// on a shared 2-core machine).
     static VolumeRig forMedium(const VolumeWorld& world, const VolumeRig& base);
     static VolumeRig forMedium(const VolumeWorld& world);  ///< from the default rig
     /// The goal of forMedium: the demo's smoke (Wuson, 253,972 voxels) gives 0.0163 at 16 x 6, where
