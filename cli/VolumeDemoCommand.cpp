@@ -22,6 +22,7 @@ struct VolumeArgs {
     long spiral = -1, colours = -1, gridKeys = -1;
     long voxels = -1, samples = -1, threads = -1, basis = -1, keys = -1, azimuths = -1;
     std::vector<double> elevations, kelvin;
+    double fogDensity = -1, fogFloor = -1, fogExponent = -1;
 };
 
 /// Declares the options, parses and checks them; std::nullopt when --help was asked for.
@@ -33,27 +34,40 @@ std::optional<VolumeArgs> parseVolumeArgs(const std::vector<std::string>& args) 
         "Smoke made from a mesh with OpenVDB (meshToLevelSet, fog volume, noise), lit\n"
         "by a spherical light moving around and over it with a changing colour temperature.\n"
         "The light scattered at every active voxel (soft shadows through the heterogeneous\n"
-        "density, multiple scattering) is the expensive calculation; 96 training frames, a\n"
-        "basis and key voxels, validation between the training lights and on a path through\n"
+        "density, multiple scattering) is the expensive calculation; training frames on a\n"
+        "rig as fine as the medium needs (96 for the smoke), a basis and key voxels sized\n"
+        "from them, validation between the training lights and on a path through\n"
         "the soft-cache engine, renders from three moving cameras (one inside the smoke).\n"
         "Writes DIR/report.json, DIR/density.vdb, DIR/cache_*.vdb (grid 'inscatter'), DIR/*.png.");
     parser.option("--out", "DIR", "output folder (created if missing)", a.out, true);
     parser.option("--mesh", "FILE", "mesh to make smoke of (default " + defaults.mesh + ")", a.mesh);
     parser.option("--density", "FILE.vdb", "a density grid of your own instead of the mesh", a.density);
-    parser.option("--grid", "NAME", "its float grid (default 'density', else the first float grid)", a.grid);
+    parser.option("--grid", "NAME", "its float grid (default 'density', else the file's only float grid)",
+                  a.grid);
     parser.option("--voxels", "N",
                   "active voxels of the smoke made from the mesh (default 260000; --quick 12000)",
                   [&](const std::string& v) { a.voxels = parseIndex("--voxels", v, 1000, 8000000); });
+    parser.option("--fog-density", "D", "the mesh's smoke: density scale (default 1)",
+                  [&](const std::string& v) { a.fogDensity = parseDouble("--fog-density", v, 1e-6, 1e6); });
+    parser.option("--fog-floor", "F",
+                  "the mesh's smoke: density where the noise is 0, in [0, 1] (default 0.15; 1 = uniform)",
+                  [&](const std::string& v) { a.fogFloor = parseDouble("--fog-floor", v, 0, 1); });
+    parser.option("--fog-exponent", "P",
+                  "the mesh's smoke: density ~ noise^P above the floor (default 2; higher = sparser wisps)",
+                  [&](const std::string& v) { a.fogExponent = parseDouble("--fog-exponent", v, 0.1, 64); });
     parser.option("--samples", "S", "shadow rays per voxel to the light (default 6; --quick 4)",
                   [&](const std::string& v) { a.samples = parseIndex("--samples", v, 1, 4096); });
-    parser.option("--basis", "M", "basis vectors (default " + std::to_string(defaults.basis) + ")",
+    parser.option("--basis", "M",
+                  "basis vectors (default: the fewest capturing 99.98% of the training frames' energy, at "
+                  "most " +
+                      std::to_string(defaults.maxBasis) + ")",
                   [&](const std::string& v) { a.basis = parseIndex("--basis", v, 1, 512); });
-    parser.option("--keys", "K", "key voxels (default " + std::to_string(defaults.keys) + ")",
+    parser.option("--keys", "K", "key voxels (default: 6.25 x M, at most a tenth of the voxels)",
                   [&](const std::string& v) { a.keys = parseIndex("--keys", v, 1, 100000); });
-    parser.option(
-        "--azimuths", "A",
-        "training light azimuths per elevation (default " + std::to_string(defaults.rig.azimuths) + ")",
-        [&](const std::string& v) { a.azimuths = parseIndex("--azimuths", v, 2, 360); });
+    parser.option("--azimuths", "A",
+                  "training light azimuths per elevation (default " + std::to_string(defaults.rig.azimuths) +
+                      " x 6 elevations, refined for the medium; given: this rig as it is)",
+                  [&](const std::string& v) { a.azimuths = parseIndex("--azimuths", v, 2, 360); });
     parser.option("--elevations", "E1,E2,..", "training light elevations in degrees, each in [0, 89]",
                   [&](const std::string& v) {
                       a.elevations.clear();
@@ -85,7 +99,7 @@ std::optional<VolumeArgs> parseVolumeArgs(const std::vector<std::string>& args) 
                       if (a.kelvin.size() != 2 || a.kelvin[0] > a.kelvin[1])
                           throw UsageError("--kelvin: give LOW,HIGH with LOW <= HIGH, not '" + v + "'");
                   });
-    parser.option("--grid-keys", "G", "key voxels seeded from a sparse spatial grid (at most K)",
+    parser.option("--grid-keys", "G", "key voxels seeded from a sparse spatial grid (at most K; default K/5)",
                   [&](const std::string& v) { a.gridKeys = parseIndex("--grid-keys", v, 0, 100000); });
     parser.option("--threads", "T", "worker threads (default: every core)",
                   [&](const std::string& v) { a.threads = parseIndex("--threads", v, 0, 1024); });
@@ -98,6 +112,8 @@ std::optional<VolumeArgs> parseVolumeArgs(const std::vector<std::string>& args) 
     if (!parser.parse(args)) return std::nullopt;
     if (!a.density.empty() && !a.mesh.empty()) parser.fail("--mesh and --density exclude each other");
     if (a.density.empty() && !a.grid.empty()) parser.fail("--grid needs --density");
+    if (!a.density.empty() && (a.fogDensity >= 0 || a.fogFloor >= 0 || a.fogExponent >= 0))
+        parser.fail("--fog-density, --fog-floor and --fog-exponent shape the mesh's smoke, not --density's");
     return a;
 }
 
@@ -110,9 +126,14 @@ volume::VolumeDemoOptions demoOptions(const VolumeArgs& a) {
     options.density = a.density;
     options.grid = a.grid;
     if (a.voxels > 0) options.fog.targetVoxels = static_cast<std::size_t>(a.voxels);
+    if (a.fogDensity >= 0) options.fog.densityScale = a.fogDensity;
+    if (a.fogFloor >= 0) options.fog.noiseFloor = a.fogFloor;
+    if (a.fogExponent >= 0) options.fog.noiseExponent = a.fogExponent;
     if (a.samples > 0) options.medium.lightSamples = static_cast<int>(a.samples);
     if (a.basis > 0) options.basis = static_cast<int>(a.basis);
     if (a.keys > 0) options.keys = static_cast<int>(a.keys);
+    // A rig asked for is used as it is; otherwise the demo refines the default for the medium.
+    if (a.azimuths > 0 || !a.elevations.empty() || a.spiral >= 0) options.rigFromMedium = false;
     if (a.azimuths > 0) options.rig.azimuths = static_cast<int>(a.azimuths);
     if (!a.elevations.empty()) options.rig.elevations = a.elevations;
     if (a.spiral >= 0) options.rig.spiral = static_cast<int>(a.spiral);
@@ -122,7 +143,7 @@ volume::VolumeDemoOptions demoOptions(const VolumeArgs& a) {
         options.rig.kelvinHigh = a.kelvin[1];
     }
     if (a.gridKeys >= 0) options.gridKeys = static_cast<int>(a.gridKeys);
-    if (options.gridKeys > options.keys) options.gridKeys = options.keys;
+    if (options.keys > 0 && options.gridKeys > options.keys) options.gridKeys = options.keys;
     if (a.threads >= 0) options.threads = static_cast<int>(a.threads);
     if (a.noVdbRender) options.vdbRender = false;
     if (a.separateChannels) options.sharedChannels = false;

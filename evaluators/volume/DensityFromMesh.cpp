@@ -112,6 +112,10 @@ openvdb::FloatGrid::Ptr fog(const Mesh& mesh, double voxelSize) {
 DensityVolume DensityVolume::fromMesh(const std::string& meshPath, const FogOptions& o) {
     initOpenVdb();
     if (o.targetVoxels < 1000) throw InputError("volume: at least 1000 voxels are needed");
+    if (!(o.densityScale > 0) || !(o.noiseFloor >= 0 && o.noiseFloor <= 1) || !(o.noiseExponent > 0))
+        throw InputError(
+            "volume: the fog's density scale must be > 0, its noise floor in [0, 1] and its "
+            "exponent > 0");
     const Mesh mesh = readMesh(meshPath, o.sizeMetres);
     // The voxel size for the target count: active voxels scale as voxelSize^-3; two corrections
     // from a coarse first guess land within a few percent.
@@ -125,15 +129,17 @@ DensityVolume DensityVolume::fromMesh(const std::string& meshPath, const FogOpti
         if (std::abs(ratio - 1) < 0.03) break;
         if (it < 2) voxel *= std::cbrt(ratio);
     }
-    // Noise: density = fog x (0.15 + 0.85 n), n in [0, 1] from fractal noise in world space, so the
-    // inside is lumpy like smoke; voxels whose density is zero (the fog's surface value) go inactive.
+    // Noise: density = scale x fog x (floor + (1 - floor) n^exponent), n in [0, 1] from fractal
+    // noise in world space, so the inside is lumpy like smoke; voxels whose density is zero (the
+    // fog's surface value, or the noise's troughs with floor 0) go inactive.
     const double f = o.noiseFrequency;
     for (auto leaf = grid->tree().beginLeaf(); leaf; ++leaf) {
         for (auto v = leaf->beginValueOn(); v; ++v) {
             const openvdb::Vec3d w = grid->indexToWorld(v.getCoord());
             const double n =
                 std::clamp(0.5 + 0.5 * fractalNoise(w.x() * f, w.y() * f, w.z() * f, o.noiseSeed), 0.0, 1.0);
-            const float d = static_cast<float>(*v * (0.15 + 0.85 * n * n));
+            const float d = static_cast<float>(
+                o.densityScale * *v * (o.noiseFloor + (1 - o.noiseFloor) * std::pow(n, o.noiseExponent)));
             if (d <= 1e-4f) {
                 v.setValue(0.0f);
                 v.setValueOff();

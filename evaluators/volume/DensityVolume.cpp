@@ -7,6 +7,7 @@
 
 #include <openvdb/tools/Interpolation.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <limits>
@@ -53,6 +54,31 @@ void DensityVolume::Impl::index(const std::string& where) {
     master = std::make_unique<Intersector>(*grid, /*dilationCount=*/1);
 }
 
+namespace {
+
+/// No grid named: the float grid named "density" if there is one, else the file's only float grid
+/// (mesh-to-volume tools name it after the mesh and the operations, e.g. vdb_tool's
+/// "ls2fog_mesh2ls_NAME"). Several float grids and none named "density": one error listing them,
+/// since picking the first would light whichever grid the writer happened to store first.
+openvdb::GridBase::Ptr readTheDensityGrid(openvdb::io::File& file, const std::string& where) {
+    std::vector<std::string> floats;
+    const openvdb::GridPtrVecPtr grids = file.readAllGridMetadata();  // held: the loop reads it
+    for (const auto& g : *grids)
+        if (g->isType<openvdb::FloatGrid>()) floats.push_back(g->getName());
+    if (floats.empty()) throw InputError(where + ": has no float grid (a density FloatGrid is needed)");
+    if (std::find(floats.begin(), floats.end(), "density") != floats.end()) return file.readGrid("density");
+    if (floats.size() > 1) {
+        std::string names;
+        for (const auto& n : floats) names += (names.empty() ? "'" : ", '") + n + "'";
+        throw InputError(
+            where + ": " + std::to_string(floats.size()) + " float grids (" + names +
+            ") and none named 'density': name one (--grid NAME, or grid=NAME in a volume: spec)");
+    }
+    return file.readGrid(floats.front());
+}
+
+}  // namespace
+
 DensityVolume DensityVolume::read(const std::string& path, const std::string& gridName) {
     initOpenVdb();
     const std::string where = "volume: " + path;
@@ -74,17 +100,7 @@ DensityVolume DensityVolume::read(const std::string& path, const std::string& gr
                 throw InputError(where + ": grid '" + gridName + "' is a " + base->valueType() +
                                  " grid, not a float grid");
         } else {
-            if (file.hasGrid("density")) base = file.readGrid("density");
-            if (!base || !openvdb::gridPtrCast<openvdb::FloatGrid>(base)) {
-                base.reset();
-                auto grids = file.readAllGridMetadata();
-                for (const auto& g : *grids)
-                    if (g->isType<openvdb::FloatGrid>()) {
-                        base = file.readGrid(g->getName());
-                        break;
-                    }
-            }
-            if (!base) throw InputError(where + ": has no float grid (a density FloatGrid is needed)");
+            base = readTheDensityGrid(file, where);
         }
         file.close();
         impl->grid = openvdb::gridPtrCast<openvdb::FloatGrid>(base);

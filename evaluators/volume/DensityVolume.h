@@ -21,6 +21,12 @@ struct FogOptions {
     double sizeMetres = 4.0;            ///< the mesh is scaled so its longest side is this long
     double noiseFrequency = 1.2;        ///< features per metre of the noise's first octave
     std::uint32_t noiseSeed = 11;
+    /// density = scale x fog x (floor + (1 - floor) n^exponent), n in [0, 1] the fractal noise.
+    /// The demo's smoke: 1, 0.15, 2 (lumpy, never empty inside). floor 1: uniform density (the
+    /// noise plays no part); floor 0 and a high exponent: sparse wisps where the noise peaks.
+    double densityScale = 1.0;
+    double noiseFloor = 0.15;
+    double noiseExponent = 2.0;
 };
 
 /// The medium: a heterogeneous density FloatGrid (OpenVDB) and the ordered list of its active
@@ -35,11 +41,13 @@ struct FogOptions {
 /// Thread safety: const methods may run concurrently; a Tracer belongs to one thread.
 class DensityVolume {
 public:
-    /// Reads a FloatGrid from a .vdb. gridName empty: the grid named "density" if there is one,
-    /// else the first FloatGrid of the file.
+    /// Reads a FloatGrid from a .vdb. gridName empty: the float grid named "density" if there is
+    /// one, else the file's only float grid, whatever its name (vdb_tool's fog volumes are named
+    /// after the mesh and the operations).
     /// @throws pmsc::InputError (one line, naming the file) for a missing or unreadable file, a
-    ///         file without a float grid, a grid name that is not in the file or not a float
-    ///         grid, a grid without active voxels, or non-uniform voxels.
+    ///         file without a float grid, several float grids none named "density" (listing
+    ///         them), a grid name that is not in the file or not a float grid, a grid without
+    ///         active voxels, or non-uniform voxels.
     static DensityVolume read(const std::string& path, const std::string& gridName = "");
 
     /// Builds smoke from a mesh (any format Assimp reads): OpenVDB's meshToLevelSet, then

@@ -179,6 +179,80 @@ std::vector<VolumeLight> VolumeRig::path(const VolumeWorld& world, int frames) c
     return out;
 }
 
+namespace {
+
+/// n elevations evenly over [lo, hi] degrees.
+std::vector<double> evenElevations(int n, double lo, double hi) {
+    std::vector<double> e(static_cast<std::size_t>(n));
+    for (int i = 0; i < n; ++i) e[static_cast<std::size_t>(i)] = lo + (hi - lo) * i / (n - 1);
+    return e;
+}
+
+/// Up to `count` voxels spread evenly over the point order (deterministic).
+std::vector<Index> voxelSample(Index n, Index count) {
+    std::vector<Index> out;
+    const Index k = std::min(n, count);
+    for (Index i = 0; i < k; ++i) out.push_back(i * n / k);
+    return out;
+}
+
+}  // namespace
+
+double VolumeRig::cellInterpolationError(const VolumeWorld& world) const {
+    if (spiral > 0 || elevations.size() < 2 || azimuths < 2) return 0;
+    // 24 cells spread over the grid: each the light at its centre, then its four corners.
+    const int bands = static_cast<int>(elevations.size()) - 1, cells = azimuths * bands;
+    const int wanted = std::min(cells, 24);
+    const double step = 360.0 / azimuths;
+    std::vector<VolumeLight> lights;
+    for (int i = 0; i < wanted; ++i) {
+        const int c = static_cast<int>(static_cast<long>(i) * cells / wanted);
+        const int a = c % azimuths;
+        const auto e = static_cast<std::size_t>(c / azimuths);
+        lights.push_back(light(world, (a + 0.5) * step, 0.5 * (elevations[e] + elevations[e + 1]), 5000));
+        for (int corner = 0; corner < 4; ++corner)
+            lights.push_back(light(world, (a + (corner & 1)) * step, elevations[e + (corner >> 1)], 5000));
+    }
+    const std::vector<Index> points = voxelSample(static_cast<Index>(world.density.voxelCount()), 512);
+    const std::size_t width = 3 * points.size();
+    std::vector<double> values(lights.size() * width);
+    // A non-owning pointer: the evaluator lives only inside this call.
+    const VolumeEvaluator ev(std::shared_ptr<const VolumeWorld>(std::shared_ptr<const VolumeWorld>(), &world),
+                             lights, "volume-rig-probe");
+    tbb::parallel_for(Index{0}, static_cast<Index>(lights.size()), [&](Index f) {
+        ev.evaluate(f, points, values.data() + static_cast<std::size_t>(f) * width);
+    });
+    double diff = 0, norm = 0;
+    for (int i = 0; i < wanted; ++i) {
+        const double* centre = values.data() + static_cast<std::size_t>(5 * i) * width;
+        for (std::size_t k = 0; k < width; ++k) {
+            double mean = 0;
+            for (int corner = 1; corner <= 4; ++corner)
+                mean += centre[static_cast<std::size_t>(corner) * width + k];
+            diff += (centre[k] - 0.25 * mean) * (centre[k] - 0.25 * mean);
+            norm += centre[k] * centre[k];
+        }
+    }
+    return norm > 0 ? std::sqrt(diff / norm) : 0.0;
+}
+
+VolumeRig VolumeRig::forMedium(const VolumeWorld& world) { return forMedium(world, VolumeRig{}); }
+
+VolumeRig VolumeRig::forMedium(const VolumeWorld& world, const VolumeRig& base) {
+    if (base.spiral > 0 || base.elevations.size() < 2) return base;
+    const double lo = base.elevations.front(), hi = base.elevations.back();
+    const int a0 = base.azimuths, e0 = static_cast<int>(base.elevations.size());
+    // Both steps are the base's x 4 / (4 + k) (16 x 6: 22.5 x 14 degrees, then 18 x 11.7,
+    // 15 x 10, 12.9 x 8.75, 11.25 x 7): the cells keep their shape.
+    for (int k = 0; k <= 4; ++k) {
+        VolumeRig rig = base;
+        rig.azimuths = a0 * (4 + k) / 4;
+        rig.elevations = k == 0 ? base.elevations : evenElevations(1 + (e0 - 1) * (4 + k) / 4, lo, hi);
+        if (k == 4 || rig.cellInterpolationError(world) <= kCellErrorGoal) return rig;
+    }
+    return base;
+}
+
 void recolour(const VolumeLight& from, const VolumeLight& to, double* values, Index points) {
     if (from.position.x != to.position.x || from.position.y != to.position.y ||
         from.position.z != to.position.z || from.radius != to.radius)
@@ -313,7 +387,7 @@ std::unique_ptr<VolumeEvaluator> makeVolumeEvaluator(const std::string& args) {
         }
     }
     auto world = VolumeWorld::create(DensityVolume::read(path, grid), medium, path);
-    const VolumeRig rig;
+    const VolumeRig rig = VolumeRig::forMedium(*world);  // the demo's rig for this medium
     std::vector<VolumeLight> set;
     auto add = [&](const std::vector<VolumeLight>& l) { set.insert(set.end(), l.begin(), l.end()); };
     if (lights == "all" || lights == "training") add(rig.training(*world));

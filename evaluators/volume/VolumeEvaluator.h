@@ -104,6 +104,25 @@ struct VolumeRig {
     /// An animation: one turn around the medium while rising and sinking between the lowest and
     /// highest training elevation, the colour temperature swinging between the training ones.
     std::vector<VolumeLight> path(const VolumeWorld& world, int frames) const;
+
+    /// How far the light at the centre of a training grid cell is from the mean of the cell's four
+    /// corner lights (relative RMS over a sample of voxels and cells, full calculation, one colour):
+    /// how fast this medium's lighting changes at this rig's spacing, which is what a basis of the
+    /// training frames has to interpolate. Grid rigs only (spiral: 0).
+    double cellInterpolationError(const VolumeWorld& world) const;
+
+    /// The rig for a medium: `base` (the default 16 x 6 grid) refined over the same band of
+    /// elevations, azimuth and elevation steps shrinking together (20 x 7, 24 x 8, 28 x 9, 32 x 11),
+    /// until its cellInterpolationError is at most kCellErrorGoal. A spiral base is returned as
+    /// it is. Deterministic for a medium; each grid tried costs 5 x 24 lights at 512 voxels, 61,440
+    /// voxel calculations (0.42 of a full frame of the 145,883-voxel spider; 2.3 to 2.6 s per grid
+    /// on a shared 2-core machine).
+    static VolumeRig forMedium(const VolumeWorld& world, const VolumeRig& base);
+    static VolumeRig forMedium(const VolumeWorld& world);  ///< from the default rig
+    /// The goal of forMedium: the demo's smoke (Wuson, 253,972 voxels) gives 0.0163 at 16 x 6, where
+    /// its reference ratio is 1.34 (goal 1.5); a uniform spider 0.0245 and a uniform dodecahedron
+    /// 0.0299 there, 0.014 and 0.015 at 24 x 8 (docs/volume.md, "Other media").
+    static constexpr double kCellErrorGoal = 0.017;
 };
 
 /// Values of a frame lit by `to` from those of a frame lit by `from`, when the two lights differ in
@@ -160,9 +179,11 @@ private:
 };
 
 /// The `volume` evaluator of the command line: ARGS = "FILE.vdb[:grid=NAME][:samples=S]
-/// [:lights=all|training|between|path]". lights=all (default): the 96 training lights, then 16
-/// lights between them, then a 48-frame path (the demo's frames, so export-frames and run share
-/// one spec). @throws pmsc::InputError for a bad option or file (one line).
+/// [:lights=all|training|between|path]". lights=all (default): the training lights of
+/// VolumeRig::forMedium (96 for the demo's smoke, more for a medium whose lighting changes faster
+/// with the light's direction), then 16 lights between them, then a 48-frame path (the demo's
+/// frames, so export-frames and run share one spec). @throws pmsc::InputError for a bad option or
+/// file (one line).
 std::unique_ptr<VolumeEvaluator> makeVolumeEvaluator(const std::string& args);
 
 }  // namespace pmsc::volume

@@ -17,6 +17,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
+#include <Eigen/Eigenvalues>
 
 #include <algorithm>
 #include <chrono>
@@ -115,8 +116,9 @@ VolumeDemoOptions VolumeDemoOptions::quickOptions() {
     o.medium.lightSamples = 4;
     o.rig.azimuths = 8;
     o.rig.elevations = {10, 40, 70};
-    o.basis = 16;
-    o.keys = 120;
+    o.rigFromMedium = false;
+    o.maxBasis = 16;  // the energy rule would take more; the smoke test stays seconds
+    o.keysPerBasis = 7.5;
     o.gridKeys = 32;
     o.betweenLights = 4;
     o.pathFrames = 16;
@@ -136,10 +138,11 @@ namespace {
 /// Throws InputError unless the options are usable.
 void checkOptions(const VolumeDemoOptions& o) {
     if (o.outDir.empty()) throw InputError("demo volume: --out DIR is required");
-    if (o.basis < 1 || o.keys < 1 || o.gridKeys < 0 || o.gridKeys > o.keys || o.betweenLights < 1 ||
-        o.pathFrames < 1 || o.pathFullEvery < 1 || o.referenceMultiplier < 1 || o.referencePoints < 1 ||
-        o.referenceFrames < 1 || o.imageSize < 8 || o.renderFrames < 0 || o.threads < 0 ||
-        !(o.toleranceFraction > 0) || o.rig.azimuths < 1 || o.rig.elevations.empty())
+    if (o.basis < 0 || o.keys < 0 || o.gridKeys < -1 || (o.keys > 0 && o.gridKeys > o.keys) ||
+        !(o.basisEnergy > 0 && o.basisEnergy <= 1) || o.maxBasis < 1 || !(o.keysPerBasis >= 1) ||
+        o.betweenLights < 1 || o.pathFrames < 1 || o.pathFullEvery < 1 || o.referenceMultiplier < 1 ||
+        o.referencePoints < 1 || o.referenceFrames < 1 || o.imageSize < 8 || o.renderFrames < 0 ||
+        o.threads < 0 || !(o.toleranceFraction > 0) || o.rig.azimuths < 1 || o.rig.elevations.empty())
         throw InputError("demo volume: an option is out of range");
 }
 
@@ -156,6 +159,17 @@ std::shared_ptr<const VolumeWorld> makeMedium(DemoSetup& run, const VolumeDemoOp
     world->density.write(o.outDir + "/density.vdb");
     run.lap("density", t);
     return world;
+}
+
+/// 1. (continued) The options with the rig this medium needs (VolumeRig::forMedium).
+VolumeDemoOptions withRigForMedium(DemoSetup& run, const VolumeDemoOptions& o, const VolumeWorld& world) {
+    VolumeDemoOptions out = o;
+    if (!o.rigFromMedium) return out;
+    const auto t = DemoClock::now();
+    run.progress("rig for the medium", 0, 1);
+    run.arena.execute([&] { out.rig = VolumeRig::forMedium(world, o.rig); });
+    run.lap("rig", t);
+    return out;
 }
 
 /// The training frames, and how many of them were full calculations (the others recoloured).
@@ -197,6 +211,7 @@ struct Trained {
     Model model;
     double peak = 0;      // the largest training radiance (Euclidean over RGB)
     RelError projection;  // the training frames' own distance from the basis
+    ModelSize size;       // M, K, grid keys chosen for the medium
 };
 
 /// 3. Train: basis, key voxels (seeded with a sparse spatial grid), calibrated eps; frees `q`.
@@ -209,18 +224,19 @@ Trained trainModel(DemoSetup& run, const VolumeDemoOptions& o, const VolumeWorld
         const double* v = q.values.data() + 3 * i;
         trained.peak = std::max(trained.peak, std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]));
     }
+    trained.size = chooseModelSize(o, q);
     TrainingOptions& topt = trained.options;
-    topt.basis = o.basis;
-    topt.maxKeys = o.keys;
+    topt.basis = trained.size.basis;
+    topt.maxKeys = trained.size.keys;
     topt.sharedChannels = o.sharedChannels;
     topt.tolerance = o.toleranceFraction * trained.peak;
-    if (o.gridKeys > 0) {
+    if (trained.size.gridKeys > 0) {
         Eigen::MatrixXd positions(n, 3);
         for (Index i = 0; i < n; ++i) {
             const Vec3 p = world.density.voxelPositions()[static_cast<std::size_t>(i)];
             positions.row(i) << p.x, p.y, p.z;
         }
-        topt.gridPoints = sparseGridPointsByCount(positions, o.gridKeys);
+        topt.gridPoints = sparseGridPointsByCount(positions, trained.size.gridKeys);
     }
     topt.progress = [&run](std::string_view stage, double done, double total) {
         run.progress(std::string("train: ") + std::string(stage), done, total);
@@ -538,6 +554,12 @@ void reportMediumAndModel(nlohmann::json& report, const VolumeDemoOptions& o, co
     report["tolerance"] = trained.options.tolerance;
     report["peak_training_radiance"] = trained.peak;
     report["energy_captured"] = model.energyCaptured();
+    report["rig_from_medium"] = o.rigFromMedium;
+    report["rig_azimuths"] = o.rig.spiral > 0 ? 0 : o.rig.azimuths;
+    report["rig_elevations"] = o.rig.elevations;
+    report["rig_cell_interpolation_error"] = o.rig.cellInterpolationError(world);
+    report["basis_rule"] = o.basis > 0 ? nlohmann::json("--basis") : nlohmann::json(o.basisEnergy);
+    report["keys_per_basis"] = o.keys > 0 ? nlohmann::json("--keys") : nlohmann::json(o.keysPerBasis);
     report["training_warnings"] = trained.report.warnings;
     report["threads"] = threads;
     report["density_tree_bytes"] = world.density.memoryBytes();
@@ -604,14 +626,74 @@ void reportLightSpacing(nlohmann::json& report, const VolumeDemoOptions& o, cons
 
 }  // namespace
 
-nlohmann::json runVolumeDemo(const VolumeDemoOptions& o) {
+namespace {
+
+/// The energy of the training matrix along its principal directions (eigenvalues of the Gram
+/// matrix of the mean-removed columns, largest first), as pmsc::train forms it: with shared
+/// channels the columns are (frame, channel) and the rows voxels, else the columns are frames.
+Eigen::VectorXd energySpectrum(const FrameSet& q, bool shared) {
+    const Index n = q.points, c = q.channels, f = q.frames;
+    const Index cols = shared ? f * c : f, rows = shared ? n : n * c;
+    auto at = [&](Index row, Index col) {
+        return shared ? q.values[static_cast<std::size_t>(((col / c) * n + row) * c + col % c)]
+                      : q.values[static_cast<std::size_t>(col * n * c + row)];
+    };
+    Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(cols, cols);
+    constexpr Index kBlock = 2048;
+    Eigen::MatrixXd b;
+    for (Index r0 = 0; r0 < rows; r0 += kBlock) {
+        const Index r1 = std::min(rows, r0 + kBlock);
+        b.resize(r1 - r0, cols);
+        for (Index r = r0; r < r1; ++r)
+            for (Index k = 0; k < cols; ++k) b(r - r0, k) = at(r, k);
+        if (shared) {
+            // each (voxel, channel) row's mean over the frames
+            for (Index ch = 0; ch < c; ++ch) {
+                Eigen::VectorXd mean = Eigen::VectorXd::Zero(r1 - r0);
+                for (Index k = ch; k < cols; k += c) mean += b.col(k);
+                mean /= static_cast<double>(f);
+                for (Index k = ch; k < cols; k += c) b.col(k) -= mean;
+            }
+        } else {
+            b.colwise() -= b.rowwise().mean();
+        }
+        gram.selfadjointView<Eigen::Lower>().rankUpdate(b.transpose());
+    }
+    gram = gram.selfadjointView<Eigen::Lower>();
+    Eigen::VectorXd e =
+        Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(gram, Eigen::EigenvaluesOnly).eigenvalues();
+    return e.reverse().cwiseMax(0.0);
+}
+
+}  // namespace
+
+ModelSize chooseModelSize(const VolumeDemoOptions& o, const FrameSet& q) {
+    ModelSize s;
+    const Eigen::VectorXd e = energySpectrum(q, o.sharedChannels);
+    const double total = e.sum();
+    const int available = static_cast<int>(std::min<Index>(e.size() - 1, o.maxBasis));
+    s.basis = o.basis;
+    if (s.basis == 0) {
+        double sum = 0;
+        while (s.basis < available && sum < o.basisEnergy * total) sum += e(s.basis++);
+        s.basis = std::max(s.basis, 1);
+    }
+    s.energy = total > 0 ? e.head(std::min<Index>(s.basis, e.size())).sum() / total : 1.0;
+    const int maxKeys = static_cast<int>(std::max<Index>(1, q.points / 10));
+    s.keys = o.keys > 0 ? o.keys : std::min(maxKeys, static_cast<int>(std::lround(o.keysPerBasis * s.basis)));
+    s.gridKeys = std::min(s.keys, o.gridKeys >= 0 ? o.gridKeys : s.keys / 5);
+    return s;
+}
+
+nlohmann::json runVolumeDemo(const VolumeDemoOptions& options) {
     const auto start = DemoClock::now();
-    checkOptions(o);
-    createOutputFolder(o.outDir, FolderErrorWording::CannotCreate);
-    DemoSetup run(o.threads > 0 ? o.threads : tbb::info::default_concurrency(), o.progress,
+    checkOptions(options);
+    createOutputFolder(options.outDir, FolderErrorWording::CannotCreate);
+    DemoSetup run(options.threads > 0 ? options.threads : tbb::info::default_concurrency(), options.progress,
                   "demo volume: interrupted", start);
 
-    const std::shared_ptr<const VolumeWorld> world = makeMedium(run, o);
+    const std::shared_ptr<const VolumeWorld> world = makeMedium(run, options);
+    const VolumeDemoOptions o = withRigForMedium(run, options, *world);
     const Index n = static_cast<Index>(world->density.voxelCount());
     const VolumeEvaluator trainEval(world, o.rig.training(*world), "volume-train");
     const Index trainFrames = trainEval.frameCount();

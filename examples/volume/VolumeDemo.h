@@ -2,6 +2,7 @@
 #pragma once
 
 #include "evaluators/volume/VolumeEvaluator.h"
+#include "pmsc/FrameSet.h"
 
 #include <nlohmann/json.hpp>
 
@@ -22,14 +23,25 @@ struct VolumeDemoOptions {
     std::string grid;
     FogOptions fog;  ///< targetVoxels: active voxels of the demo's smoke (260,000)
     MediumSettings medium;
-    VolumeRig rig;  ///< 16 azimuths x 6 elevations = 96 training frames
-    /// M and K: 40 and 250. With 96 training frames and the basis shared by R, G,
-    /// B the validation frames are 0.8% from the basis; M and K are what PMSC pays per frame
-    /// (reconstruction reads N M doubles of basis, each key voxel costs a full calculation): 142x,
-    /// reference ratio 1.34 (README, "The volumetric lighting cache").
-    int basis = 40;
-    int keys = 250;     ///< K, including the spatial grid's
-    int gridKeys = 48;  ///< about this many of the K from a sparse spatial grid (section 4)
+    VolumeRig rig;  ///< 16 azimuths x 6 elevations = 96 training frames, refined for the medium:
+    /// true: VolumeRig::forMedium(rig): more azimuths and elevations over the same band where the
+    /// medium's lighting changes faster between neighbouring lights than the smoke's (the `volume:`
+    /// evaluator's training lights are the same). false: `rig` as it is (the CLI's --azimuths,
+    /// --elevations, --spiral).
+    bool rigFromMedium = true;
+    /// M: 0 = the smallest basis whose vectors capture basisEnergy of the training frames' energy
+    /// (measured on the frames, so the medium decides: the demo's smoke needs 40 for 99.98%, a
+    /// uniform or dense medium with sharper shadows more), at most maxBasis. > 0: exactly that.
+    int basis = 0;
+    double basisEnergy = 0.9998;
+    int maxBasis = 160;
+    /// K: 0 = keysPerBasis x M (the smoke's 250 keys for 40 vectors), at most a tenth of the voxels.
+    /// Each key voxel costs a full calculation per frame; K = 6 M leaves the K x M system of the
+    /// key values well over-determined.
+    int keys = 0;
+    double keysPerBasis = 6.25;
+    /// About this many of the K from a sparse spatial grid (section 4); -1 = a fifth of K.
+    int gridKeys = -1;
     /// Red, green and blue share one basis over the voxels (Model::sharedChannels; false:
     /// `--separate-channels`, the basis over (voxel, channel) rows every other demo uses).
     bool sharedChannels = true;
@@ -53,6 +65,18 @@ struct VolumeDemoOptions {
     /// `--quick`: 12,000 voxels, 8 x 3 training lights, 4 light samples, 96 px, no vdb_render.
     static VolumeDemoOptions quickOptions();
 };
+
+/// The size of the model the demo trains for a medium.
+struct ModelSize {
+    int basis = 0, keys = 0, gridKeys = 0;
+    double energy = 0;  ///< fraction of the training frames' energy the basis captures
+};
+
+/// M, K and the grid keys for these training frames (the options' explicit basis, keys and
+/// gridKeys win): M the fewest basis vectors capturing options.basisEnergy of the frames'
+/// energy (eigenvalues of the Gram matrix of the mean-removed columns, as pmsc::train forms
+/// them), at most maxBasis; K = keysPerBasis x M, at most a tenth of the voxels; grid keys K/5.
+ModelSize chooseModelSize(const VolumeDemoOptions& options, const FrameSet& frames);
 
 /// Runs the experiment and writes into options.outDir: density.vdb (grid "density"),
 /// cache_{full,pmsc}_pathNNN.vdb (grid "inscatter", the density's topology), CAMERA_pathNNN.png

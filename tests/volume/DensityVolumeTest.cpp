@@ -52,6 +52,37 @@ TEST(DensityVolume, BadInputsAreOneLineInputErrorsNamingTheFile) {
     std::filesystem::remove_all(dir);
 }
 
+TEST(DensityVolume, WithoutAGridNameTheOnlyFloatGridIsReadAndSeveralAreOneErrorListingThem) {
+    const std::string dir = test::tempDir("grids");
+    // vdb_tool names its fog volume after the operations and the mesh.
+    const std::string one = dir + "/one.vdb";
+    test::writeFloatGrids(one, {"ls2fog_mesh2ls_Spider_binary"}, 0.2, 0.1);
+    EXPECT_EQ(DensityVolume::read(one).gridName(), "ls2fog_mesh2ls_Spider_binary");
+
+    const std::string two = dir + "/two.vdb";
+    test::writeFloatGrids(two, {"temperature", "smoke"}, 0.2, 0.1);
+    std::string e = errorOf([&] { DensityVolume::read(two); });
+    EXPECT_NE(e.find("2 float grids ("), std::string::npos) << e;  // in the file's order
+    EXPECT_NE(e.find("'temperature'"), std::string::npos) << e;
+    EXPECT_NE(e.find("'smoke'"), std::string::npos) << e;
+    EXPECT_NE(e.find("and none named 'density'"), std::string::npos) << e;
+    EXPECT_NE(e.find("--grid NAME"), std::string::npos) << e;
+    EXPECT_NE(e.find(two), std::string::npos) << e;
+    EXPECT_EQ(e.find('\n'), std::string::npos) << e;
+    EXPECT_EQ(DensityVolume::read(two, "smoke").gridName(), "smoke");
+
+    const std::string three = dir + "/three.vdb";
+    test::writeFloatGrids(three, {"temperature", "density", "smoke"}, 0.2, 0.1);
+    EXPECT_EQ(DensityVolume::read(three).gridName(), "density");
+
+    const std::string empty = dir + "/empty.vdb";
+    test::writeEmptyFloatGrid(empty, "density");
+    e = errorOf([&] { DensityVolume::read(empty); });
+    EXPECT_NE(e.find("the grid has no active voxels"), std::string::npos) << e;
+    EXPECT_NE(e.find(empty), std::string::npos) << e;
+    std::filesystem::remove_all(dir);
+}
+
 TEST(DensityVolume, MarchIntegratesAConstantBoxExactlyAndSkipsEmptySpace) {
     const std::string dir = test::tempDir("box");
     test::writeDensityBox(dir + "/box.vdb", "smoke", 1.0, 0.05, 2.0f);

@@ -21,6 +21,28 @@ void writeDensityBox(const std::string& path, const std::string& name, double ha
     openvdb::io::File(path).write({grid});
 }
 
+void writeFloatGrids(const std::string& path, const std::vector<std::string>& names, double half,
+                     double voxel) {
+    openvdb::initialize();
+    openvdb::GridPtrVec grids;
+    const int n = static_cast<int>(std::lround(half / voxel));
+    for (const std::string& name : names) {
+        auto grid = openvdb::FloatGrid::create(0.0f);
+        grid->setTransform(openvdb::math::Transform::createLinearTransform(voxel));
+        grid->denseFill(openvdb::CoordBBox(openvdb::Coord(-n), openvdb::Coord(n)), 1.0f, true);
+        grid->setName(name);
+        grids.push_back(grid);
+    }
+    openvdb::io::File(path).write(grids);
+}
+
+void writeEmptyFloatGrid(const std::string& path, const std::string& name) {
+    openvdb::initialize();
+    auto grid = openvdb::FloatGrid::create(0.0f);
+    grid->setName(name);
+    openvdb::io::File(path).write({grid});
+}
+
 void writeVectorOnly(const std::string& path) {
     openvdb::initialize();
     auto grid = openvdb::Vec3SGrid::create(openvdb::Vec3s(0));

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 namespace pmsc::volume::test {
 
@@ -9,6 +10,11 @@ namespace pmsc::volume::test {
 /// as a FloatGrid named `name` in a new file at `path`.
 void writeDensityBox(const std::string& path, const std::string& name, double half, double voxel,
                      float density);
+/// Several float grids, each a box of constant density 1 spanning [-half, half]^3, named `names`.
+void writeFloatGrids(const std::string& path, const std::vector<std::string>& names, double half,
+                     double voxel);
+/// A float grid `name` without active voxels.
+void writeEmptyFloatGrid(const std::string& path, const std::string& name);
 /// A file with only a Vec3SGrid "velocity" (no float grid).
 void writeVectorOnly(const std::string& path);
 /// The demo's mesh (assimp-testmodels' WusonOBJ.obj) or "" when the folder is missing.

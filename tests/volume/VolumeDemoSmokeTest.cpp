@@ -2,6 +2,7 @@
 // a cache file) and the volume evaluator's bad inputs through the command line: one line, exit 2.
 #include "VdbFixtures.h"
 #include "evaluators/volume/DensityVolume.h"
+#include "examples/volume/VolumeDemo.h"
 #include "tests/common/MissingData.h"
 
 #include <nlohmann/json.hpp>
@@ -17,9 +18,56 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <random>
 #include <string>
 
 namespace {
+
+/// F frames of N voxels x RGB whose mean-removed (voxel, frame-channel) matrix has rank r: r
+/// spatial patterns, each weighted per frame and channel, energies falling by 2 per pattern.
+pmsc::FrameSet rankFrames(pmsc::Index frames, pmsc::Index points, int rank) {
+    std::mt19937 rng(7);
+    std::normal_distribution<double> g(0, 1);
+    pmsc::FrameSet q(frames, points, 3);
+    std::vector<std::vector<double>> patterns(static_cast<std::size_t>(rank), std::vector<double>(points));
+    for (auto& p : patterns)
+        for (double& v : p) v = g(rng);
+    for (pmsc::Index f = 0; f < frames; ++f)
+        for (int k = 0; k < rank; ++k)
+            for (int c = 0; c < 3; ++c) {
+                const double w = g(rng) * std::pow(0.8, k);
+                for (pmsc::Index i = 0; i < points; ++i)
+                    q.frame(f)[3 * i + c] +=
+                        10 + w * patterns[static_cast<std::size_t>(k)][static_cast<std::size_t>(i)];
+            }
+    return q;
+}
+
+TEST(VolumeDemoModelSize, TheBasisFollowsTheFramesEnergyAndTheKeysTheBasis) {
+    pmsc::volume::VolumeDemoOptions o;  // the defaults: M by energy, K = 6.25 M, grid keys K / 5
+    auto s = pmsc::volume::chooseModelSize(o, rankFrames(40, 2000, 7));
+    EXPECT_EQ(s.basis, 7);  // all of a rank-7 set's energy, nothing beyond it
+    EXPECT_EQ(s.keys, 44);
+    EXPECT_EQ(s.gridKeys, 8);
+    EXPECT_GT(s.energy, 0.9998);
+    s = pmsc::volume::chooseModelSize(o, rankFrames(40, 2000, 12));
+    EXPECT_EQ(s.basis, 12);
+    EXPECT_EQ(s.keys, 75);
+    o.maxBasis = 5;  // the cap holds, and the keys follow the capped basis
+    s = pmsc::volume::chooseModelSize(o, rankFrames(40, 2000, 12));
+    EXPECT_EQ(s.basis, 5);
+    EXPECT_EQ(s.keys, 31);
+    EXPECT_LT(s.energy, 0.9998);
+    o.basis = 9;  // explicit sizes win
+    o.keys = 100;
+    o.gridKeys = 0;
+    s = pmsc::volume::chooseModelSize(o, rankFrames(40, 300, 12));
+    EXPECT_EQ(s.basis, 9);
+    EXPECT_EQ(s.keys, 100);
+    EXPECT_EQ(s.gridKeys, 0);
+    o.keys = 0;  // K at most a tenth of the voxels
+    EXPECT_EQ(pmsc::volume::chooseModelSize(o, rankFrames(40, 300, 12)).keys, 30);
+}
 
 #ifdef PMSC_BINARY
 std::string run(const std::string& command, int& status) {
@@ -154,7 +202,12 @@ TEST(VolumeEvaluatorCli, MissingFileNoFloatGridAndWrongGridNameAreOneLineAndExit
     const std::string dir = pmsc::volume::test::tempDir("cli");
     pmsc::volume::test::writeVectorOnly(dir + "/vectors.vdb");
     pmsc::volume::test::writeDensityBox(dir + "/box.vdb", "smoke", 0.2, 0.1, 1.0f);
+    pmsc::volume::test::writeFloatGrids(dir + "/two.vdb", {"heat", "smoke"}, 0.2, 0.1);
+    pmsc::volume::test::writeEmptyFloatGrid(dir + "/empty.vdb", "fog");
     const std::pair<std::string, std::string> cases[] = {
+        {"volume:" + dir + "/two.vdb", "2 float grids"},
+        {"volume:" + dir + "/two.vdb", "and none named 'density': name one (--grid NAME, or grid=NAME"},
+        {"volume:" + dir + "/empty.vdb", "the grid has no active voxels"},
         {"volume:" + dir + "/missing.vdb", "no such file"},
         {"volume:" + dir + "/vectors.vdb", "has no float grid"},
         {"volume:" + dir + "/box.vdb:grid=density", "no grid named 'density'"},
@@ -172,7 +225,8 @@ TEST(VolumeEvaluatorCli, MissingFileNoFloatGridAndWrongGridNameAreOneLineAndExit
     }
     for (const char* bad :
          {"--voxels ten", "--elevations 30,95", "--elevations 30,x", "--spiral -1", "--colours 0",
-          "--kelvin 6500,4000", "--kelvin 500,6500", "--kelvin 5000", "--kelvin 4000,5000,6000"}) {
+          "--kelvin 6500,4000", "--kelvin 500,6500", "--kelvin 5000", "--kelvin 4000,5000,6000",
+          "--fog-floor 1.5", "--fog-density 0", "--fog-exponent x", "--density d.vdb --fog-density 2"}) {
         int status = -1;
         const std::string out =
             run(std::string(PMSC_BINARY) + " demo volume --quick --out " + dir + "/d " + bad, status);

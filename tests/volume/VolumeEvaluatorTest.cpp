@@ -179,6 +179,42 @@ double angleDeg(const Vec3& a, const Vec3& b) {
            M_PI;
 }
 
+TEST(VolumeRig, ForMediumRefinesTheGridWhereTheLightingChangesFasterThanTheSmokes) {
+    const std::string mesh = test::testMesh();
+    if (mesh.empty()) {
+        PMSC_MISSING_DATA("assimp-testmodels not installed");
+    }
+    FogOptions fog;
+    fog.targetVoxels = 6000;
+    fog.densityScale = 0.05;  // thin: light reaches every voxel almost unshadowed
+    const auto thin = VolumeWorld::create(DensityVolume::fromMesh(mesh, fog), MediumSettings{}, mesh);
+    fog.densityScale = 3;  // dense and uniform: sharp, moving shadows
+    fog.noiseFloor = 1;
+    const auto dense = VolumeWorld::create(DensityVolume::fromMesh(mesh, fog), MediumSettings{}, mesh);
+
+    const VolumeRig base;
+    EXPECT_LT(base.cellInterpolationError(*thin), VolumeRig::kCellErrorGoal);
+    EXPECT_GT(base.cellInterpolationError(*dense), VolumeRig::kCellErrorGoal);
+    const VolumeRig forThin = VolumeRig::forMedium(*thin);
+    EXPECT_EQ(forThin.azimuths, base.azimuths);
+    EXPECT_EQ(forThin.elevations, base.elevations);
+    const VolumeRig forDense = VolumeRig::forMedium(*dense);
+    EXPECT_GT(forDense.azimuths, base.azimuths);
+    EXPECT_GT(forDense.elevations.size(), base.elevations.size());
+    EXPECT_EQ(forDense.elevations.front(), base.elevations.front());  // the same band, finer
+    EXPECT_EQ(forDense.elevations.back(), base.elevations.back());
+    EXPECT_TRUE(forDense.cellInterpolationError(*dense) <= VolumeRig::kCellErrorGoal ||
+                forDense.azimuths == 2 * base.azimuths);
+    EXPECT_LT(forDense.cellInterpolationError(*dense), base.cellInterpolationError(*dense));
+    // A spiral, or colours and distance asked for, pass through.
+    VolumeRig spiral;
+    spiral.spiral = 40;
+    EXPECT_EQ(VolumeRig::forMedium(*dense, spiral).spiral, 40);
+    VolumeRig warm;
+    warm.kelvinLow = warm.kelvinHigh = 3000;
+    EXPECT_EQ(VolumeRig::forMedium(*dense, warm).kelvinHigh, 3000);
+}
+
 TEST(VolumeRig, SpiralCoversTheBandEvenlyCyclesColoursAndBetweenFindsItsHoles) {
     const std::string dir = test::tempDir("spiral");
     const auto world = boxWorld(dir, 1.0f, {});
@@ -235,7 +271,7 @@ TEST(VolumeSpec, GridOptionAndBadOptionsAreOneLineInputErrors) {
     {
         const auto world = VolumeWorld::create(DensityVolume::read(dir + "/box.vdb"), {}, "box");
         EXPECT_EQ(makeVolumeEvaluator(dir + "/box.vdb")->frameCount(),
-                  static_cast<Index>(VolumeRig{}.training(*world).size()) + 16 + 48);
+                  static_cast<Index>(VolumeRig::forMedium(*world).training(*world).size()) + 16 + 48);
     }
     auto message = [&](const std::string& spec) {
         try {
