@@ -168,7 +168,7 @@ void printModelText(const Model& model, const ModelFileFacts& file) {
                   << model.learning->updates << " updates by pmsc learn\n";
     if (model.calibrationRecord)
         std::cout << "  calibration   " << toString(model.calibrationRecord->rule) << " rule"
-                  << (model.calibrationRecord->rule == CalibrationRule::Conformal
+                  << (model.calibrationRecord->rule != CalibrationRule::MaxRatio
                           ? " at coverage " + fmt("%.3g", model.calibrationRecord->coverage)
                           : std::string())
                   << ", " << model.calibrationRecord->keyRms.size() << " held-out frames stored\n";

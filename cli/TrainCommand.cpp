@@ -105,7 +105,7 @@ TrainingOptions defaultTrainingOptions() {
 /// What `pmsc train` was asked; the training settings themselves are in `options`.
 struct TrainArgs {
     std::vector<std::string> framePaths;
-    std::string outPath, selector = "teleconnection", rule = "conformal", targetsPath;
+    std::string outPath, selector = "teleconnection", rule = "threshold", targetsPath;
     std::string keyError;  // empty: TrainingOptions decides (largest, rms with shared channels)
     std::uint64_t memoryLimit = 0;
     Index blockPoints = 0;
@@ -183,17 +183,17 @@ void declareCalibrationOptions(ArgParser& parser, TrainArgs& a) {
                   [&](const std::string& v) { options.calibrationSlices = parseIndex("--slices", v, 2); });
     parser.option(
         "--calibration", "RULE",
-        "how --tolerance sets eps: conformal (tolerance / the held-out error ratios' quantile at "
-        "--coverage: P(hit over tolerance) <= 1 - coverage, default), max (tolerance / the largest "
-        "held-out ratio) or threshold (the largest held-out key error with no held-out frame over the "
-        "tolerance at or below it)",
+        "how --tolerance sets eps: threshold (the largest held-out key error with no held-out frame over "
+        "the tolerance at or below it, at most conformal's; max's where no held-out frame crossed the "
+        "tolerance; default), conformal (tolerance / the held-out error ratios' quantile at --coverage) "
+        "or max (tolerance / the largest held-out ratio)",
         a.rule);
     parser.option("--key-error", "NORM",
                   "the key error eps apply to: largest (the largest key's error, default) or rms (the "
                   "paper's RMS over the keys; the default with --shared-channels)",
                   a.keyError);
     parser.option("--coverage", "C",
-                  "coverage of --calibration conformal, in (0, 1) (default " +
+                  "coverage of --calibration threshold or conformal, in (0, 1) (default " +
                       std::to_string(options.calibrationCoverage).substr(0, 4) + ")",
                   [&](const std::string& v) {
                       options.calibrationCoverage = parseDouble("--coverage", v, 0.0, 1.0);
@@ -329,8 +329,8 @@ void checkTrainArgs(const ArgParser& parser, TrainArgs& a) {
         parser.fail("--key-error: '" + a.keyError + "' is not largest or rms");
     if (options.keyErrorNorm == KeyErrorNorm::Largest && a.sharedChannels)
         parser.fail("--key-error largest needs channels of their own (not --shared-channels)");
-    if (parser.given("--coverage") && options.calibrationRule != CalibrationRule::Conformal)
-        parser.fail("--coverage needs --calibration conformal");
+    if (parser.given("--coverage") && options.calibrationRule == CalibrationRule::MaxRatio)
+        parser.fail("--coverage needs --calibration threshold or conformal");
     if ((parser.given("--calibration") || parser.given("--coverage")) && !(options.tolerance > 0))
         parser.fail("--calibration and --coverage need --tolerance");
 }

@@ -89,7 +89,7 @@ void checkCalibrationArguments(Index f, Index group, double tolerance, Index sli
                                     "] (the frame count), got " + std::to_string(slices));
     }
     if (basisSize < 1) throw std::invalid_argument("calibration: basis size must be >= 1");
-    if (rule == CalibrationRule::Conformal && !(coverage > 0 && coverage < 1)) {
+    if (rule != CalibrationRule::MaxRatio && !(coverage > 0 && coverage < 1)) {
         throw std::invalid_argument("calibration coverage must be in (0, 1), got " +
                                     std::to_string(coverage));
     }
@@ -316,17 +316,18 @@ double conformalQuantile(std::vector<double> values, double coverage) {
 namespace {
 
 /// CalibrationRule::Threshold: the largest held-out key error with no frame over T at or below it,
-/// at least `floor` (the MaxRatio eps_min, which no frame over T is below).
-double heldOutThreshold(const CalibrationStats& s, double tolerance, double floor, double blind) {
+/// at most `cap` (the conformal quantile's eps_min) and at least `floor` (the MaxRatio eps_min,
+/// which no frame over T is below); `floor` itself when no held-out frame crossed T.
+double heldOutThreshold(const CalibrationStats& s, double tolerance, double floor, double cap, double blind) {
     double crossing = std::numeric_limits<double>::infinity();
     for (std::size_t i = 0; i < s.keyRms.size(); ++i)
         if (s.keyRms[i] > blind && !(s.maxPointError[i] <= tolerance))
             crossing = std::min(crossing, s.keyRms[i]);
+    if (!std::isfinite(crossing)) return floor;  // no held-out frame crossed T: the linear bound extrapolates
     double eps = floor;
-    if (!std::isfinite(crossing)) return eps;  // no held-out frame crossed T: the linear bound extrapolates
     for (double e : s.keyRms)
         if (e < crossing) eps = std::max(eps, e);
-    return eps;
+    return std::max(floor, std::min(eps, cap));
 }
 
 }  // namespace
@@ -351,7 +352,7 @@ void setThresholds(CalibrationStats& s, double tolerance, CalibrationRule rule, 
         throw std::invalid_argument("calibration tolerance must be a positive number, got " +
                                     std::to_string(tolerance));
     }
-    if (rule == CalibrationRule::Conformal && !(coverage > 0 && coverage < 1)) {
+    if (rule != CalibrationRule::MaxRatio && !(coverage > 0 && coverage < 1)) {
         throw std::invalid_argument("calibration coverage must be in (0, 1), got " +
                                     std::to_string(coverage));
     }
@@ -360,7 +361,7 @@ void setThresholds(CalibrationStats& s, double tolerance, CalibrationRule rule, 
     }
     s.tolerance = tolerance;
     s.rule = rule;
-    s.coverage = rule == CalibrationRule::Conformal ? coverage : 0.0;
+    s.coverage = rule != CalibrationRule::MaxRatio ? coverage : 0.0;
     s.blindFrames = 0;
     const double largestError =
         s.maxPointError.empty() ? 0.0 : *std::max_element(s.maxPointError.begin(), s.maxPointError.end());
@@ -374,7 +375,7 @@ void setThresholds(CalibrationStats& s, double tolerance, CalibrationRule rule, 
     s.usableFrames = static_cast<Index>(ratios.size());
     s.maxRatio = ratios.empty() ? 0.0 : *std::max_element(ratios.begin(), ratios.end());
     double ratio = s.maxRatio;
-    if (rule == CalibrationRule::Conformal && !ratios.empty()) {
+    if (rule != CalibrationRule::MaxRatio && !ratios.empty()) {
         ratio = conformalQuantile(ratios, coverage);
         const double n = static_cast<double>(ratios.size());
         if ((n + 1) * coverage > n * (1 + 1e-9)) {
@@ -384,7 +385,7 @@ void setThresholds(CalibrationStats& s, double tolerance, CalibrationRule rule, 
         }
     }
     if (rule == CalibrationRule::Threshold && !ratios.empty() && ratio > 0)
-        ratio = tolerance / heldOutThreshold(s, tolerance, tolerance / ratio, blind);
+        ratio = tolerance / heldOutThreshold(s, tolerance, tolerance / s.maxRatio, tolerance / ratio, blind);
     s.ratio = ratio;
     if (s.blindFrames > 0) {
         s.notes.push_back("calibration: " + std::to_string(s.blindFrames) +

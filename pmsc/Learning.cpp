@@ -332,7 +332,7 @@ CalibrationRecord learnThresholds(const Model& model, const SubspaceUpdate& u,
     CalibrationRecord record;
     if (model.calibrationRecord) record = *model.calibrationRecord;
     record.rule = rule;
-    record.coverage = rule == CalibrationRule::Conformal ? coverage : 0.0;
+    record.coverage = rule != CalibrationRule::MaxRatio ? coverage : 0.0;
     if (model.tolerance > 0) {
         calibrateLearned(model, u, fresh, keys, options, rule, coverage, record, out, report, progress);
     } else {

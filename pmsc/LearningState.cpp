@@ -60,7 +60,7 @@ void CalibrationRecord::validate() const {
     if (rule != CalibrationRule::MaxRatio && rule != CalibrationRule::Conformal &&
         rule != CalibrationRule::Threshold)
         invalid("calibration record: unknown rule " + std::to_string(static_cast<int>(rule)));
-    if (rule == CalibrationRule::Conformal && !(coverage > 0 && coverage < 1))
+    if (rule != CalibrationRule::MaxRatio && !(coverage > 0 && coverage < 1))
         invalid("calibration record: coverage must be in (0, 1)");
     if (slices < 0) invalid("calibration record: negative slice count");
     if (keyRms.size() != maxPointError.size()) invalid("calibration record: score arrays differ in length");

@@ -72,7 +72,7 @@ void validateOptions(const TrainingOptions& o, Index points, Index frames) {
         o.calibrationRule != CalibrationRule::Threshold) {
         badOption("unknown calibration rule " + std::to_string(static_cast<int>(o.calibrationRule)));
     }
-    if (o.calibrationRule == CalibrationRule::Conformal &&
+    if (o.calibrationRule != CalibrationRule::MaxRatio &&
         !(o.calibrationCoverage > 0 && o.calibrationCoverage < 1)) {
         badOption("calibration coverage must be in (0, 1), got " + num(o.calibrationCoverage));
     }

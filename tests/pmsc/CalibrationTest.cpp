@@ -120,29 +120,36 @@ pmsc::CalibrationStats scores(std::vector<double> e, std::vector<double> bigE) {
 }
 }  // namespace
 
-// The threshold rule is the held-out frames' own best threshold, never below the max rule's.
-TEST(Calibration, ThresholdRuleIsTheHeldOutBestThreshold) {
-    // T = 5: frames over T at e = 3 and e = 6; the largest e below 3 is 2. Ratios 1, 1, 3.33, ...
+// The threshold rule is the held-out frames' own best threshold, between the max rule's eps and the
+// conformal quantile's; the max rule's where no held-out frame crossed T.
+TEST(Calibration, ThresholdRuleIsTheHeldOutBestThresholdBetweenMaxAndConformal) {
+    // T = 5: frames over T at e = 3 and e = 6; the largest e below 3 is 2. Ratios, sorted:
+    // 0.75, 0.8, 1, 1, 3.33, 3.33. Coverage 0.5: the 4th, 1, so the conformal eps is 5.
     pmsc::CalibrationStats s = scores({1, 2, 3, 4, 5, 6}, {1, 2, 10, 3, 4, 20});
-    pmsc::setThresholds(s, 5.0, pmsc::CalibrationRule::Threshold, 0.9);
+    pmsc::setThresholds(s, 5.0, pmsc::CalibrationRule::Threshold, 0.5);
     EXPECT_DOUBLE_EQ(s.epsMin, 2.0);
     EXPECT_DOUBLE_EQ(s.ratio, 2.5);
     EXPECT_NEAR(s.maxRatio, 10.0 / 3.0, 1e-12);
     pmsc::CalibrationStats max = scores({1, 2, 3, 4, 5, 6}, {1, 2, 10, 3, 4, 20});
     pmsc::setThresholds(max, 5.0, pmsc::CalibrationRule::MaxRatio, 0.9);
     EXPECT_DOUBLE_EQ(max.epsMin, 1.5) << "T / the largest ratio";
+    // Coverage 0.9 of 6 frames has no quantile (the largest ratio, eps 1.5): the conformal cap binds.
+    s = scores({1, 2, 3, 4, 5, 6}, {1, 2, 10, 3, 4, 20});
+    pmsc::setThresholds(s, 5.0, pmsc::CalibrationRule::Threshold, 0.9);
+    EXPECT_DOUBLE_EQ(s.epsMin, 1.5);
     // No held-out frame over T: the linear bound extrapolates, as the max rule does.
     s = scores({1, 2}, {1, 3});
-    pmsc::setThresholds(s, 5.0, pmsc::CalibrationRule::Threshold, 0.9);
+    pmsc::setThresholds(s, 5.0, pmsc::CalibrationRule::Threshold, 0.5);
     EXPECT_DOUBLE_EQ(s.epsMin, 5.0 / 1.5);
     // The lowest crossing below every other frame: the max rule's eps, the floor.
     s = scores({1, 0.5}, {0.5, 10});
-    pmsc::setThresholds(s, 5.0, pmsc::CalibrationRule::Threshold, 0.9);
+    pmsc::setThresholds(s, 5.0, pmsc::CalibrationRule::Threshold, 0.5);
     EXPECT_DOUBLE_EQ(s.epsMin, 0.25);
     EXPECT_STREQ(pmsc::toString(pmsc::CalibrationRule::Threshold), "threshold");
     EXPECT_EQ(pmsc::calibrationRuleNamed("threshold"), pmsc::CalibrationRule::Threshold);
     EXPECT_EQ(pmsc::calibrationRuleNamed("max"), pmsc::CalibrationRule::MaxRatio);
     EXPECT_FALSE(pmsc::calibrationRuleNamed("median").has_value());
+    EXPECT_THROW(pmsc::setThresholds(s, 5.0, pmsc::CalibrationRule::Threshold, 1.0), std::invalid_argument);
 }
 
 TEST(Calibration, BlendBandSpansTheRuleRatioToTheMedianWithinOneAndAHalfAndTwo) {
