@@ -105,8 +105,8 @@ TrainingOptions defaultTrainingOptions() {
 /// What `pmsc train` was asked; the training settings themselves are in `options`.
 struct TrainArgs {
     std::vector<std::string> framePaths;
-    std::string outPath, selector = "teleconnection", rule = "threshold", targetsPath;
-    std::string keyError;  // empty: TrainingOptions decides (largest, rms with shared channels)
+    std::string outPath, selector = "teleconnection", rule = "max", targetsPath;
+    std::string keyError;  // empty: TrainingOptions decides (rms)
     std::uint64_t memoryLimit = 0;
     Index blockPoints = 0;
     bool outOfCore = false, sharedChannels = false, quiet = false;
@@ -183,14 +183,14 @@ void declareCalibrationOptions(ArgParser& parser, TrainArgs& a) {
                   [&](const std::string& v) { options.calibrationSlices = parseIndex("--slices", v, 2); });
     parser.option(
         "--calibration", "RULE",
-        "how --tolerance sets eps: threshold (the largest held-out key error with no held-out frame over "
-        "the tolerance at or below it, at most conformal's; max's where no held-out frame crossed the "
-        "tolerance; default), conformal (tolerance / the held-out error ratios' quantile at --coverage) "
-        "or max (tolerance / the largest held-out ratio)",
+        "how --tolerance sets eps: max (tolerance / the largest held-out error ratio, default), threshold "
+        "(the largest held-out key error with no held-out frame over the tolerance at or below it, at "
+        "most conformal's; max's where no held-out frame crossed the tolerance) or conformal (tolerance / "
+        "the held-out error ratios' quantile at --coverage)",
         a.rule);
     parser.option("--key-error", "NORM",
-                  "the key error eps apply to: largest (the largest key's error, default) or rms (the "
-                  "paper's RMS over the keys; the default with --shared-channels)",
+                  "the key error eps apply to: rms (the paper's RMS over the keys, default) or largest (the "
+                  "largest key's error; not with --shared-channels)",
                   a.keyError);
     parser.option("--coverage", "C",
                   "coverage of --calibration threshold or conformal, in (0, 1) (default " +

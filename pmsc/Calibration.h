@@ -33,14 +33,15 @@ enum class CalibrationRule : int {
     /// error at or below it had E <= T, kept between the MaxRatio answer (T / max E/e, which no
     /// held-out frame over T is below) and the Conformal one (T / the ratios' quantile at
     /// `coverage`, a margin for frames the held-out ones did not show); when no held-out frame
-    /// exceeded T, the MaxRatio answer. Decision, the default of `pmsc train`: within the errors
+    /// exceeded T, the MaxRatio answer. Why: within the errors
     /// the held-out frames reached, their own crossing says where hits stop being safe; beyond
     /// them only the worst ratio seen is a bound, since the ratio does not change with an error's
     /// size (a blind motion at small amplitude predicts it at large amplitude). Measured
-    /// (docs/calibration.md): on the face's novel controls the conformal rule alone hits frames at
-    /// 1.24% for a 1% tolerance, this rule hits none; on real motion capture replayed through a
+    /// (docs/calibration.md): with the largest key, on real motion capture replayed through a
     /// range-of-motion model it gets 78-100% of the best single threshold's hits from 2% of the
-    /// diagonal, where MaxRatio on the key RMS gets 0-65%.
+    /// diagonal, where MaxRatio on the key RMS gets 0-65%; on the face demo's full training it
+    /// keeps the novel controls out, on its quick training (fewer frames) it lets half of them hit,
+    /// which is why it is not the default.
     Threshold = 2,
 };
 

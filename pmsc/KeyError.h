@@ -6,10 +6,13 @@ namespace pmsc {
 /// How the key points' residual becomes the one number the soft cache compares with eps
 /// (section 5's "error at the key points"). Both are in data units, like a point error.
 enum class KeyErrorNorm : int {
-    /// RMS over the key points of each key's Euclidean residual over its channels.
+    /// RMS over the key points of each key's Euclidean residual over its channels: the paper's
+    /// measure and `pmsc train`'s default (docs/calibration.md: with it and the largest-ratio rule
+    /// the face's novel controls never hit; the largest key trades a little of that margin for
+    /// hits on motion capture).
     Rms = 0,
-    /// The largest key's Euclidean residual. Decision, the default of `pmsc train` for models whose
-    /// channels do not share the basis: the soft cache promises a bound on the largest POINT
+    /// The largest key's Euclidean residual (`--key-error largest`, for models whose channels do
+    /// not share the basis). Why it exists: the soft cache promises a bound on the largest POINT
     /// error, and an error confined to a few points (a limb or a lip the training never moved
     /// that way) shows at the few keys near it; the RMS divides it by sqrt(K / keys that see it),
     /// so the ratio point error / key error varies with how local the error is, and the

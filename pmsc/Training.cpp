@@ -317,7 +317,7 @@ void Trainer::meanAndGram() {
     model.channels = channels;
     model.trainFrames = f;
     model.selector = options.selector;
-    model.keyErrorNorm = options.keyErrorNorm.value_or(KeyErrorNorm::Largest);
+    model.keyErrorNorm = options.keyErrorNorm.value_or(KeyErrorNorm::Rms);
     progress("mean", 1, 1);
     progress("svd", 0, 1);
     gram = gramOf(q, comm);

@@ -55,10 +55,11 @@ struct TrainingOptions {
     double tolerance = 0;         ///< largest point error a hit may have (data units); 0 = no calibration
     Index calibrationSlices = 5;  ///< leave-one-slice-out folds
     /// How the held-out ratios E/e become eps (Calibration.h).
-    CalibrationRule calibrationRule = CalibrationRule::Threshold;
-    /// The key error eps apply to (Model::keyErrorNorm). Unset: the largest key, or the RMS when
-    /// the channels share the basis (a frame's C channel frames are calibrated as one, which the
-    /// largest key does not allow). Local fail-through regions measure their keys by the RMS.
+    CalibrationRule calibrationRule = CalibrationRule::MaxRatio;
+    /// The key error eps apply to (Model::keyErrorNorm). Unset: the RMS. The largest key is for
+    /// models whose channels do not share the basis (a shared-channel frame's C channel frames are
+    /// calibrated as one, which the largest key does not allow). Local fail-through regions measure
+    /// their keys by the RMS.
     std::optional<KeyErrorNorm> keyErrorNorm;
     double calibrationCoverage =
         0.9;  ///< 1 - alpha of CalibrationRule::Conformal (docs/learning-and-calibration.md: 0.9 measured)

@@ -132,7 +132,7 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     if (regions < 0) throw InputError("regions: must be >= 0 (0 = none), got " + std::to_string(regions));
     if (!(feather >= 0 && feather <= 0.5))
         throw InputError("feather: must be in [0, 0.5], got " + std::to_string(feather));
-    if (calibration != "threshold" && !(tolerance > 0))
+    if (calibration != "max" && !(tolerance > 0))
         throw InputError("calibration and coverage need a tolerance");
 
     TrainingFrames t = trainingFrames(frames);
@@ -199,7 +199,7 @@ void bindTraining(py::module_& m) {
         "train", &trainModel, "frames"_a, py::kw_only(), "basis"_a = 0, "energy"_a = 0.0,
         "basis_error"_a = 0.0, "max_basis"_a = 256, "max_error"_a = 0.0, "max_keys"_a = 200, "block"_a = 16,
         "fiducials"_a = std::vector<Index>{}, "grid_points"_a = std::vector<Index>{},
-        "selector"_a = "teleconnection", "tolerance"_a = 0.0, "slices"_a = 5, "calibration"_a = "threshold",
+        "selector"_a = "teleconnection", "tolerance"_a = 0.0, "slices"_a = 5, "calibration"_a = "max",
         "coverage"_a = 0.9, "key_error"_a = "", "learn_rank"_a = 0, "seed"_a = 20070101u,
         "power_iterations"_a = 2, "regions"_a = 0, "feather"_a = 0.03, "region_keys"_a = 4,
         "shared_channels"_a = false, "progress"_a = py::none(),
