@@ -141,6 +141,7 @@ double PointMultiplier::keyError(const double* keyValues, const double* coords) 
     // The largest key needs whole keys: a key's C residuals are summed (across blocks when a
     // block boundary splits them) before the max.
     const Index c = model_.channels;
+    const bool largestKey = model_.keyErrorNorm == KeyErrorNorm::Largest;
     double sum = 0, largest = 0, key = 0;
     for (Index x0 = 0; x0 < kc; x0 += kBlock) {
         const Index n = std::min(kBlock, kc - x0);
@@ -150,9 +151,15 @@ double PointMultiplier::keyError(const double* keyValues, const double* coords) 
             const double* column = basis + j * kc + x0;
             for (Index i = 0; i < n; ++i) predicted[i] += column[i] * bj;
         }
+        if (!largestKey) {  // the default measure: no per-key bookkeeping on the hot path
+            for (Index i = 0; i < n; ++i) {
+                const double r = keyValues[x0 + i] - predicted[i];
+                sum += r * r;
+            }
+            continue;
+        }
         for (Index i = 0; i < n; ++i) {
             const double r = keyValues[x0 + i] - predicted[i];
-            sum += r * r;
             key += r * r;
             if ((x0 + i + 1) % c == 0) {
                 largest = std::max(largest, key);
