@@ -25,6 +25,11 @@ SoftCachePolicy::SoftCachePolicy(double epsMin, double epsMax) : epsMin_(epsMin)
     }
 }
 
+SoftCachePolicy SoftCachePolicy::alwaysMiss() {
+    // Below every key error: "err <= epsMin" never holds and "err >= epsMax" always does.
+    return SoftCachePolicy(-1.0, -1.0, Unchecked{});
+}
+
 CacheDecision SoftCachePolicy::decide(double keyError) const {
     // A non-finite key error means the key values themselves are broken (or the projection
     // blew up): the PM result cannot be trusted, so fail through entirely.

@@ -28,12 +28,17 @@ class SoftCachePolicy {
 public:
     /// @throws std::invalid_argument unless 0 <= epsMin <= epsMax, both finite.
     SoftCachePolicy(double epsMin, double epsMax);
+    /// Every frame a miss, whatever its key error (0 included): the full calculation of every
+    /// frame through the same engine, for a viewer's "full" view or a reference run.
+    static SoftCachePolicy alwaysMiss();
 
     CacheDecision decide(double keyError) const;
     double epsMin() const { return epsMin_; }
     double epsMax() const { return epsMax_; }
 
 private:
+    struct Unchecked {};
+    SoftCachePolicy(double epsMin, double epsMax, Unchecked) : epsMin_(epsMin), epsMax_(epsMax) {}
     double epsMin_;
     double epsMax_;
 };

@@ -5,9 +5,6 @@
 #include "viewer/HalfCache.h"
 #include "viewer/SceneBytes.h"
 
-#include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
-
 #include <algorithm>
 #include <chrono>
 #include <condition_variable>
@@ -134,8 +131,11 @@ struct RelightSession::Impl : engine::FrameSink {
     const Index points, channels;
     LightFrames frames;
     std::atomic<bool> cancel{false};
-    tbb::task_arena arena;
-    std::unique_ptr<engine::Engine> engine;
+    std::unique_ptr<engine::Engine> engine;      ///< the soft cache
+    std::unique_ptr<engine::Engine> fullEngine;  ///< every frame a miss: the full view, the reference
+    HalfCache* target = nullptr;                 ///< what the running request updates
+    const char* targetName = "cache";
+    bool fullRun = false;  ///< the running request is a full calculation
 
     // What the page holds, updated in the order the updates are emitted (under emitMutex).
     std::mutex emitMutex;
@@ -165,7 +165,6 @@ struct RelightSession::Impl : engine::FrameSink {
           points(s.pointCount()),
           channels(m.channels),
           frames(s.evaluator(s.defaults())),
-          arena(threads > 0 ? threads : tbb::task_arena::automatic),
           cache(s.pointCount(), m.channels),
           reference(s.pointCount(), m.channels),
           lastControls(s.defaults()) {
@@ -184,7 +183,11 @@ struct RelightSession::Impl : engine::FrameSink {
         o.cancel = &cancel;
         o.onEstimate = [this](const engine::FrameEstimate& f) { sendEstimate(f); };
         o.onChunk = [this](const engine::ChunkFinished& c) { sendChunk(c); };
-        engine = std::make_unique<engine::Engine>(model, frames, std::move(o));  // checks N and C
+        engine = std::make_unique<engine::Engine>(model, frames, o);  // checks N and C
+        // The full calculation in the same branches, cancelled the same way: no estimate to show.
+        o.onEstimate = nullptr;
+        o.policy = SoftCachePolicy::alwaysMiss();
+        fullEngine = std::make_unique<engine::Engine>(model, frames, std::move(o));
         worker = std::thread([this] { loop(); });
     }
 
@@ -233,11 +236,11 @@ struct RelightSession::Impl : engine::FrameSink {
     void sendChunk(const engine::ChunkFinished& c) {
         std::lock_guard<std::mutex> lock(emitMutex);
         pointsDone += Index(c.values.size()) / channels;
-        nlohmann::json text = header("cache", "chunk", stateName(c.state));
+        nlohmann::json text = header(targetName, "chunk", fullRun ? "full" : stateName(c.state));
         text["weight"] = c.weight;
         // The whole array's checksum costs about a millisecond per 250,000 points: only the
         // estimate and the final carry one.
-        sendRange(cache, std::move(text), c.firstOutput, c.values, false);
+        sendRange(*target, std::move(text), c.firstOutput, c.values, false);
     }
 
     // engine::FrameSink: the frame the engine delivers (a hit's reconstruction lands here).
@@ -246,7 +249,7 @@ struct RelightSession::Impl : engine::FrameSink {
         deliveredState = r.state;
         deliveredWeight = r.weight;
         deliveredKeyError = r.keyError;
-        if (r.state == CacheState::Hit) {
+        if (r.state == CacheState::Hit && !fullRun) {
             const auto t = Clock::now();
             cache.write(0, r.values);
             encodeMs += msSince(t);
@@ -316,14 +319,12 @@ struct RelightSession::Impl : engine::FrameSink {
                 currentLight = scene.light(r.controls);
                 pointsDone = 0;
                 encodeMs = 0;
+                const bool toReference = r.kind == Request::Kind::Reference;
+                target = toReference ? &reference : &cache;
+                targetName = toReference ? "reference" : "cache";
+                fullRun = toReference || r.full;
             }
-            if (r.kind == Request::Kind::Reference) {
-                fullCalculation(r, reference, "reference");
-            } else if (r.full) {
-                fullCalculation(r, cache, "cache");
-            } else {
-                softCached(r);
-            }
+            run(r);
         } catch (const Cancelled&) {
             std::lock_guard<std::mutex> lock(queueMutex);
             ++counts.cancelled;
@@ -332,12 +333,14 @@ struct RelightSession::Impl : engine::FrameSink {
         }
     }
 
-    /// The soft cache through the engine: keys, projection, the error monitor's decision, then the
-    /// reconstruction or the fail-through branches (streamed by the callbacks).
-    void softCached(const Request& r) {
+    /// One request through the engine: the soft cache (keys, projection, the error monitor's
+    /// decision, then the reconstruction or the fail-through branches, streamed by the callbacks),
+    /// or for the full view and the reference the same graph with every frame a miss.
+    void run(const Request& r) {
         const Index frame = frames.append(scene.evaluator(r.controls));
-        engine->run(engine::FrameRange{frame, 1, 1}, *this);
-        const engine::RunStats& stats = engine->lastStats();
+        engine::Engine& e = fullRun ? *fullEngine : *engine;
+        e.run(engine::FrameRange{frame, 1, 1}, *this);
+        const engine::RunStats& stats = e.lastStats();
         nlohmann::json timing;
         for (const auto& n : stats.nodes) {
             std::string name = n.node;
@@ -345,45 +348,20 @@ struct RelightSession::Impl : engine::FrameSink {
             if (n.calls > 0) timing[name] = n.seconds * 1e3;
         }
         timing["engine_wall"] = stats.wallSeconds * 1e3;
+        std::string state = fullRun ? "full" : stateName(deliveredState);
         {
             std::lock_guard<std::mutex> lock(queueMutex);
-            if (deliveredState == CacheState::Hit) ++counts.hits;
-            if (deliveredState == CacheState::Blend) ++counts.blends;
-            if (deliveredState == CacheState::Miss) ++counts.misses;
+            if (fullRun)
+                ++counts.full;
+            else if (deliveredState == CacheState::Hit)
+                ++counts.hits;
+            else if (deliveredState == CacheState::Blend)
+                ++counts.blends;
+            else
+                ++counts.misses;
         }
-        sendFinal(cache, "cache", stateName(deliveredState), deliveredState == CacheState::Hit,
+        sendFinal(*target, targetName, state, !fullRun && deliveredState == CacheState::Hit,
                   std::move(timing));
-    }
-
-    /// The full calculation of every point, in the engine's branch sizes, each range sent as it
-    /// finishes; a newer request stops it between branches.
-    void fullCalculation(const Request& r, HalfCache& target, const char* targetName) {
-        const auto t0 = Clock::now();
-        const std::shared_ptr<const PointEvaluator> e = scene.evaluator(r.controls);
-        const Index chunk = std::max<Index>(256, (points + 63) / 64);
-        const Index chunks = (points + chunk - 1) / chunk;
-        arena.execute([&] {
-            tbb::parallel_for(Index(0), chunks, [&](Index i) {
-                if (cancel.load(std::memory_order_relaxed)) return;
-                const Index first = i * chunk, count = std::min(chunk, points - first);
-                std::vector<Index> list(static_cast<size_t>(count));
-                for (Index p = 0; p < count; ++p) list[size_t(p)] = first + p;
-                std::vector<double> out(static_cast<size_t>(count * channels));
-                e->evaluate(0, list, out.data());
-                std::lock_guard<std::mutex> lock(emitMutex);
-                if (cancel.load(std::memory_order_relaxed)) return;
-                pointsDone += count;
-                nlohmann::json text = header(targetName, "chunk", "full");
-                text["weight"] = 1.0;
-                sendRange(target, std::move(text), first, out, false);
-            });
-        });
-        if (cancel) throw Cancelled("viewer: full calculation cancelled");
-        {
-            std::lock_guard<std::mutex> lock(queueMutex);
-            ++counts.full;
-        }
-        sendFinal(target, targetName, "full", false, {{"fail_through_wall", msSince(t0)}});
     }
 
     void receive(const std::string& text) {

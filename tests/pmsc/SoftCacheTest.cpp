@@ -79,3 +79,12 @@ TEST(SoftCache, StateNames) {
     EXPECT_EQ(pmsc::toString(CacheState::Blend), "blend");
     EXPECT_EQ(pmsc::toString(CacheState::Miss), "miss");
 }
+
+TEST(SoftCache, AlwaysMissFailsThroughEveryErrorEvenZero) {
+    const SoftCachePolicy policy = SoftCachePolicy::alwaysMiss();
+    for (double e : {0.0, 1e-300, 0.5, 1e300}) {
+        const auto d = policy.decide(e);
+        EXPECT_EQ(d.state, pmsc::CacheState::Miss) << e;
+        EXPECT_EQ(d.weight, 1.0) << e;
+    }
+}
