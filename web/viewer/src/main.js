@@ -1,0 +1,407 @@
+// pmsc view: the page. Loads the scene, keeps the cache (N x 3 halfs) up to date from the server's
+// updates, draws it, and measures the time from a light move to the image drawn.
+
+import * as THREE from 'three';
+import {OrbitControls} from 'three/addons/controls/OrbitControls.js';
+import {Connection, loadScene} from './net.js';
+import {HALF_TO_FLOAT, floatToHalf, fnv1a64} from './half.js';
+import {Panel} from './panel.js';
+import {VolumeView} from './volume.js';
+import {CornellView} from './cornell.js';
+
+const params = new URLSearchParams(location.search);
+const [width, height] = (params.get('size') || '480x360').split('x').map(Number);
+const stepVoxels = Number(params.get('step') || 1);
+const interactiveScale = Number(params.get('interactive') || 0.4);
+
+const stats = {
+  moves: [],           // {seq, state, firstImageMs, convergedMs, inputMs}: one per answered `set`
+  costs: [],           // {copy, upload, draw} ms: one per image drawn
+  checksumsVerified: 0,
+  checksumErrors: 0,
+  errors: [],          // the server's `error` messages and the page's own
+};
+
+function toFloats(halfs) {
+  const out = new Float32Array(halfs.length);
+  for (let n = 0; n < halfs.length; ++n) out[n] = HALF_TO_FLOAT[halfs[n]];
+  return out;
+}
+
+async function start() {
+  const info = await loadScene();
+  const {scene} = info;
+  const n = scene.points;
+  const cache = new Uint16Array(n * 3);
+  const reference = new Uint16Array(n * 3);
+
+  const canvas = document.getElementById('view');
+  const renderer = new THREE.WebGLRenderer({canvas, antialias: false, powerPreference: 'high-performance'});
+  renderer.setPixelRatio(1);
+  renderer.setSize(width, height, true);
+  const gl = renderer.getContext();
+
+  const view = scene.kind === 'cornell' ? new CornellView(renderer, info) : new VolumeView(renderer, info);
+  view.setStep(stepVoxels);
+  const world = new THREE.Scene();
+  world.add(view.object);
+
+  const target = new THREE.Vector3(...scene.camera.target);
+  const up = new THREE.Vector3(...(scene.camera.up || [0, 1, 0]));
+  let toward = new THREE.Vector3(1, 0.35, 0.45);
+  if (scene.kind === 'cornell') {  // look in through the open side: the quads' normals add up to it
+    const sum = new THREE.Vector3();
+    for (const quad of scene.quads) sum.add(new THREE.Vector3(...quad.normal));
+    if (sum.lengthSq() > 1e-6) toward = sum;
+    else toward = new THREE.Vector3(0, 0, 1);
+  }
+  const camera = new THREE.PerspectiveCamera(40, width / height, scene.camera.distance / 100, scene.camera.distance * 20);
+  camera.up.copy(up);
+  camera.position.copy(target).addScaledVector(toward.normalize(), scene.camera.distance);
+  camera.lookAt(target);
+
+  // The light: a marker, and a line from the camera target to it.
+  const marker = new THREE.Mesh(new THREE.SphereGeometry(1, 16, 12), new THREE.MeshBasicMaterial({color: 0xffd040}));
+  const lineGeometry = new THREE.BufferGeometry().setFromPoints([target, target]);
+  const line = new THREE.Line(lineGeometry, new THREE.LineBasicMaterial({color: 0x806820}));
+  world.add(marker, line);
+  const placeLight = light => {
+    marker.position.set(...light.position);
+    marker.scale.setScalar(Math.max(light.radius, scene.camera.distance / 200));
+    lineGeometry.setFromPoints([target, marker.position]);
+    camera.far = Math.max(camera.far, 2 * camera.position.distanceTo(marker.position));
+    camera.updateProjectionMatrix();
+  };
+  placeLight(scene.light);
+
+  const orbit = new OrbitControls(camera, canvas);
+  orbit.target.copy(target);
+  orbit.update();
+
+  // Drawing. Updates only mark the image dirty; one draw serves every update that arrived before it.
+  let copyMs = 0;        // CPU copy of updates into the texture's data since the last draw
+  let drawScheduled = false;
+  let held = false;         // the test's screenshot of the estimate: no drawing until release()
+  let holdAfterEstimate = false;
+  const drawnEvents = [];   // {frame, kind: 'first'|'converged'} waiting for the next draw
+  const pixel = new Uint8Array(4);
+
+  // Light moves draw at the reduced `interactive` resolution (SwiftShader pays per pixel); the full
+  // resolution follows once nothing new has arrived for `refineMs`.
+  let scale = 1;
+  let refineTimer = null;
+  const refineMs = Number(params.get('refine') || 250);
+  function setScale(s) {
+    if (s === scale) return;
+    scale = s;
+    renderer.setPixelRatio(s);
+    renderer.setSize(width, height, true);
+  }
+
+  function drawNow(s = 1) {
+    setScale(s);
+    const t0 = performance.now();
+    renderer.initTexture(view.cache.texture);  // uploads the cache's changed rows
+    gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, pixel);  // waits for it
+    view.cache.drawn();
+    const t1 = performance.now();
+    renderer.render(world, camera);
+    gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, pixel);  // waits for the draw to finish
+    const t2 = performance.now();
+    return {t0, t1, t2};
+  }
+
+  function draw() {
+    drawScheduled = false;
+    if (held) return;
+    const moving = (drawnEvents.length > 0 || orbiting) && interactiveScale < 1;
+    const {t0, t1, t2} = drawNow(moving ? interactiveScale : 1);
+    stats.costs.push({copy: copyMs, upload: t1 - t0, draw: t2 - t1, scale});
+    clearTimeout(refineTimer);
+    if (moving) refineTimer = setTimeout(() => { if (!held) drawNow(1); }, refineMs);
+    copyMs = 0;
+    const events = drawnEvents.splice(0);
+    for (const event of events) drawn(event, t2);
+    panel.showStats(stats);
+    if (events.some(e => e.kind === 'first' && e.phase === 'estimate') && holdAfterEstimate) {
+      holdAfterEstimate = false;
+      held = true;
+      heldResolve?.();
+    }
+    verifyQueued();
+  }
+
+  function scheduleDraw() {
+    if (!drawScheduled) {
+      drawScheduled = true;
+      setTimeout(draw, 0);
+    }
+  }
+
+  let orbiting = false;
+  orbit.addEventListener('start', () => { orbiting = true; });
+  orbit.addEventListener('end', () => { orbiting = false; scheduleDraw(); });
+  orbit.addEventListener('change', scheduleDraw);
+
+  // Frames: one per `set` (target cache) or `reference` (target reference).
+  const frames = new Map();
+  let outstanding = null;   // the cache frame whose first image is not drawn yet
+  let unsent = null;        // {inputAt, waiters}: controls changed while a frame was outstanding
+  let mode = 'cache';
+  let difference = false;
+  let lastUpdate = null;
+
+  function sendControls(inputAt, waiters) {
+    const seq = connection.sendSet({...panel.values});
+    const frame = {seq, target: 'cache', sentAt: performance.now(), inputAt, waiters, state: null,
+      firstAt: null, convergedAt: null, checks: [], done: false};
+    frames.set(seq, frame);
+    outstanding = frame;
+    return frame;
+  }
+
+  function requestSet(waiter) {
+    const now = performance.now();
+    if (!outstanding) {
+      sendControls(now, waiter ? [waiter] : []);
+    } else {
+      unsent ??= {inputAt: now, waiters: []};
+      if (waiter) unsent.waiters.push(waiter);
+    }
+  }
+
+  function drawn(event, at) {
+    const frame = event.frame;
+    if (event.kind === 'first' && frame.firstAt === null) {
+      frame.firstAt = at;
+      if (frame.target === 'cache') {
+        frame.move = {seq: frame.seq, state: frame.state, firstImageMs: at - frame.sentAt, convergedMs: null,
+          inputMs: at - frame.inputAt};
+        stats.moves.push(frame.move);
+      }
+      if (frame.target === 'cache' && outstanding === frame) {
+        outstanding = null;
+        if (unsent) {
+          const {inputAt, waiters} = unsent;
+          unsent = null;
+          sendControls(inputAt, waiters);
+        }
+      }
+    }
+    if (event.kind === 'converged') {
+      frame.convergedAt = at;
+      if (frame.target === 'cache' && frame.move) {
+        const move = frame.move;
+        move.convergedMs = at - frame.sentAt;
+        panel.showConverged(frame.state === 'hit' ? `hit: ${move.convergedMs.toFixed(1)} ms`
+          : `converged in ${move.convergedMs.toFixed(1)} ms (first image ${move.firstImageMs.toFixed(1)} ms)`);
+      }
+    }
+  }
+
+  // Checksums: the array is copied when an estimate or final is applied and hashed after the draw,
+  // so the hash (~20 ms for 254k points) never delays an image.
+  const toVerify = [];
+  function verifyQueued() {
+    for (const {frame, snapshot, expected, phase} of toVerify.splice(0)) {
+      const actual = fnv1a64(snapshot);
+      const ok = actual === expected;
+      frame.checks.push({phase, ok});
+      if (ok) stats.checksumsVerified++;
+      else {
+        stats.checksumErrors++;
+        const text = `checksum mismatch: seq ${frame.seq} ${frame.target} ${phase}: page ${actual}, server ${expected}`;
+        stats.errors.push(text);
+        panel.showError(text);
+      }
+      if (phase === 'final') finish(frame);
+    }
+    panel.showStats(stats);
+  }
+
+  function finish(frame) {
+    frame.done = true;
+    const result = {seq: frame.seq, target: frame.target, state: frame.state,
+      firstImageMs: frame.firstAt === null ? null : frame.firstAt - frame.sentAt,
+      convergedMs: frame.convergedAt === null ? null : frame.convergedAt - frame.sentAt,
+      checksumOk: frame.checks.every(c => c.ok), checks: frame.checks.map(c => c.phase)};
+    if (frame.target === 'reference' && difference) showDifference();
+    for (const resolve of frame.waiters.splice(0)) resolve(result);
+  }
+
+  function onUpdate(update, {first, count, halfs}) {
+    const frame = frames.get(update.seq);
+    if (!frame) {
+      stats.errors.push(`update for unknown seq ${update.seq}`);
+      return;
+    }
+    const array = update.target === 'reference' ? reference : cache;
+    array.set(halfs, first * 3);
+    frame.state = update.state;
+    lastUpdate = update;
+    if (update.target === 'cache') {
+      // The server answers only the newest request: older frames are over; their callers get this one.
+      for (const [seq, old] of frames) {
+        if (seq < update.seq && old.target === 'cache' && !old.done) {
+          old.done = true;
+          frame.waiters.push(...old.waiters.splice(0));
+          if (outstanding === old) outstanding = null;
+        }
+      }
+      if (!difference) {
+        const t = performance.now();
+        view.cache.set(cache, first, count);
+        copyMs += performance.now() - t;
+      }
+      if (update.phase === 'estimate' || update.phase === 'final' || update.phase === 'chunk')
+        drawnEvents.push({frame, kind: 'first', phase: update.phase});
+      if (update.phase === 'final') drawnEvents.push({frame, kind: 'converged'});
+      placeLight(update.light);
+      panel.showUpdate(update);
+      scheduleDraw();
+    }
+    if (update.phase === 'estimate' || update.phase === 'final') {
+      toVerify.push({frame, snapshot: array.slice(), expected: update.checksum, phase: update.phase});
+      if (update.target === 'reference') verifyQueued();
+    }
+    if (update.target === 'reference' && update.phase === 'final') frame.convergedAt = performance.now();
+  }
+
+  function onMessage(message) {
+    if (message.type === 'error') {
+      stats.errors.push(message.message);
+      panel.showError(`server: ${message.message}`);
+    }
+  }
+
+  // The difference view: |cache - reference|, largest channel, scaled to its maximum.
+  let differenceMax = 0;
+  function showDifference() {
+    const a = cache;
+    const b = reference;
+    const diff = new Float32Array(n);
+    let max = 0;
+    for (let p = 0; p < n; ++p) {
+      let d = 0;
+      for (let c = 0; c < 3; ++c) d = Math.max(d, Math.abs(HALF_TO_FLOAT[a[3 * p + c]] - HALF_TO_FLOAT[b[3 * p + c]]));
+      diff[p] = d;
+      if (d > max) max = d;
+    }
+    const halfs = new Uint16Array(n * 3);
+    for (let p = 0; p < n; ++p) halfs[3 * p] = halfs[3 * p + 1] = halfs[3 * p + 2] = floatToHalf(diff[p]);
+    view.cache.set(halfs, 0, n);
+    view.showDifference(true, max);
+    differenceMax = max;
+    panel.showDifference(`max ${max.toPrecision(4)} (heat: black 0 → white max)`);
+    draw();
+  }
+
+  const referenceRequest = () => new Promise(resolve => {
+    const seq = connection.sendReference();
+    frames.set(seq, {seq, target: 'reference', sentAt: performance.now(), waiters: [resolve], state: null,
+      firstAt: null, convergedAt: null, checks: [], done: false});
+  });
+
+  const panel = new Panel(document.getElementById('panel'), scene.controls, {
+    onControl: () => requestSet(null),
+    onExposure: (exposure, gamma) => { view.setExposure(exposure, gamma); scheduleDraw(); },
+    onFull: on => setMode(on ? 'full' : 'cache'),
+    onDifference: on => toggleDifference(on),
+  });
+
+  async function toggleDifference(on) {
+    difference = on;
+    if (on) {
+      await referenceRequest();  // its final shows the difference
+    } else {
+      view.showDifference(false, 0);
+      view.cache.set(cache, 0, n);
+      panel.showDifference('–');
+      draw();
+    }
+  }
+
+  function setMode(view) {
+    mode = view;
+    panel.full.checked = view === 'full';
+    connection.sendMode(view);
+    return new Promise(resolve => requestSet(resolve));
+  }
+
+  window.addEventListener('keydown', event => {
+    const names = scene.controls.map(c => c.name);
+    const step = {ArrowLeft: [0, -1], ArrowRight: [0, 1], ArrowDown: [1, -1], ArrowUp: [1, 1]}[event.key];
+    if (!step || event.target instanceof HTMLInputElement || names[step[0]] === undefined) return;
+    const control = scene.controls[step[0]];
+    panel.setControl(control.name, panel.values[control.name] + step[1] * 4 * control.step);
+    requestSet(null);
+    event.preventDefault();
+  });
+
+  const connection = new Connection({onUpdate, onMessage, onClose: () => panel.showError('connection to the server closed')});
+  await connection.open();
+  document.body.classList.add('connected');
+
+  const api = {
+    stats,
+    scene,
+    /** Sets controls (only those given) and resolves when that light's converged image is drawn. */
+    set(controls, options = {}) {
+      for (const [name, value] of Object.entries(controls)) panel.setControl(name, value);
+      if (options.holdAfterEstimate) holdAfterEstimate = true;
+      return new Promise(resolve => requestSet(resolve));
+    },
+    /** Resolves once a held estimate image is on screen (after set(..., {holdAfterEstimate: true})). */
+    held: () => new Promise(resolve => { if (held) resolve(); else heldResolve = resolve; }),
+    release() { held = false; heldResolve = null; scheduleDraw(); },
+    cache: () => toFloats(cache),
+    reference: () => toFloats(reference),
+    mode: setMode,
+    requestReference: referenceRequest,
+    /** The difference view on (resolves with the largest difference once drawn) or off. */
+    async difference(on) {
+      panel.difference.checked = on;
+      await toggleDifference(on);
+      return on ? differenceMax : 0;
+    },
+    lastUpdate: () => lastUpdate,
+    currentMode: () => mode,
+    /** Times k draws of the current image at a resolution scale and step (voxels): the GPU's share. */
+    timeDraw(k = 5, s = 1, step = stepVoxels) {
+      view.setStep(step);
+      const times = [];
+      for (let i = 0; i < k; ++i) {
+        const {t1, t2} = drawNow(s);
+        times.push(t2 - t1);
+      }
+      view.setStep(stepVoxels);
+      drawNow(1);
+      return times;
+    },
+    /** FNV-1a 64 of the canvas's pixels, drawn afresh. */
+    canvasHash() {
+      drawNow();
+      const w = gl.drawingBufferWidth;
+      const h = gl.drawingBufferHeight;
+      const pixels = new Uint8Array(w * h * 4);
+      gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, pixels);
+      return fnv1a64(pixels);
+    },
+  };
+  let heldResolve = null;
+  window.pmscView.stats = stats;
+  Object.assign(window.pmscView, api);
+
+  // The first image: the scene's default controls.
+  return api.set({});
+}
+
+let readyResolve;
+let readyReject;
+window.pmscView = {ready: new Promise((resolve, reject) => { readyResolve = resolve; readyReject = reject; })};
+start().then(readyResolve, error => {
+  const message = document.getElementById('fatal');
+  message.textContent = `pmsc view: ${error.message}`;
+  message.classList.add('visible');
+  readyReject(error);
+});
