@@ -258,6 +258,7 @@ async function start() {
       if (update.phase === 'final') drawnEvents.push({frame, kind: 'converged'});
       placeLight(update.light);
       panel.showUpdate(update);
+      if (update.phase !== 'final') panel.showConverged(`converging: ${update.points_done} / ${update.points_total} points`);
       scheduleDraw();
     }
     if (update.phase === 'estimate' || update.phase === 'final') {
@@ -339,6 +340,7 @@ async function start() {
   });
 
   const connection = new Connection({onUpdate, onMessage, onClose: () => panel.showError('connection to the server closed')});
+  window.addEventListener('pagehide', () => connection.socket?.close());
   await connection.open();
   document.body.classList.add('connected');
 
@@ -365,6 +367,13 @@ async function start() {
       return on ? differenceMax : 0;
     },
     lastUpdate: () => lastUpdate,
+    /** Sends a text message as it is (the tests' malformed input). */
+    sendRaw: text => connection.socket.send(text),
+    /** Closes the WebSocket (the server then takes another viewer). */
+    disconnect() {
+      connection.onClose = null;
+      connection.socket.close();
+    },
     currentMode: () => mode,
     /** Times k draws of the current image at a resolution scale and step (voxels): the GPU's share. */
     timeDraw(k = 5, s = 1, step = stepVoxels) {
