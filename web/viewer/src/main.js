@@ -16,7 +16,7 @@ const interactiveScale = Number(params.get('interactive') || 0.4);
 
 const stats = {
   moves: [],           // {seq, state, firstImageMs, convergedMs, inputMs}: one per answered `set`
-  costs: [],           // {copy, upload, draw} ms: one per image drawn
+  costs: [],           // {apply, upload, draw} ms and the resolution scale: one per image drawn
   checksumsVerified: 0,
   checksumErrors: 0,
   errors: [],          // the server's `error` messages and the page's own
@@ -32,7 +32,6 @@ async function start() {
   const info = await loadScene();
   const {scene} = info;
   const n = scene.points;
-  const cache = new Uint16Array(n * 3);
   const reference = new Uint16Array(n * 3);
 
   const canvas = document.getElementById('view');
@@ -42,6 +41,7 @@ async function start() {
   const gl = renderer.getContext();
 
   const view = scene.kind === 'cornell' ? new CornellView(renderer, info) : new VolumeView(renderer, info);
+  const cache = view.cache.cache;  // N x 3 halfs: also the data of the texture the shaders read
   view.setStep(stepVoxels);
   const world = new THREE.Scene();
   world.add(view.object);
@@ -79,7 +79,6 @@ async function start() {
   orbit.update();
 
   // Drawing. Updates only mark the image dirty; one draw serves every update that arrived before it.
-  let copyMs = 0;        // CPU copy of updates into the texture's data since the last draw
   let drawScheduled = false;
   let held = false;         // the test's screenshot of the estimate: no drawing until release()
   let holdAfterEstimate = false;
@@ -116,10 +115,10 @@ async function start() {
     if (held) return;
     const moving = (drawnEvents.length > 0 || orbiting) && interactiveScale < 1;
     const {t0, t1, t2} = drawNow(moving ? interactiveScale : 1);
-    stats.costs.push({copy: copyMs, upload: t1 - t0, draw: t2 - t1, scale});
+    stats.costs.push({apply: applyMs, upload: t1 - t0, draw: t2 - t1, scale});
+    applyMs = 0;
     clearTimeout(refineTimer);
     if (moving) refineTimer = setTimeout(() => { if (!held) drawNow(1); }, refineMs);
-    copyMs = 0;
     const events = drawnEvents.splice(0);
     for (const event of events) drawn(event, t2);
     panel.showStats(stats);
@@ -229,7 +228,14 @@ async function start() {
     for (const resolve of frame.waiters.splice(0)) resolve(result);
   }
 
-  function onUpdate(update, {first, count, halfs}) {
+  let applyMs = 0;  // time spent applying updates since the last draw
+  function onUpdate(update, binary) {
+    const start = performance.now();
+    applyUpdate(update, binary);
+    applyMs += performance.now() - start;
+  }
+
+  function applyUpdate(update, {first, count, halfs}) {
     const frame = frames.get(update.seq);
     if (!frame) {
       stats.errors.push(`update for unknown seq ${update.seq}`);
@@ -248,11 +254,7 @@ async function start() {
           if (outstanding === old) outstanding = null;
         }
       }
-      if (!difference) {
-        const t = performance.now();
-        view.cache.set(cache, first, count);
-        copyMs += performance.now() - t;
-      }
+      if (!difference) view.cache.touched(first, count);
       if (update.phase === 'estimate' || update.phase === 'final' || update.phase === 'chunk')
         drawnEvents.push({frame, kind: 'first', phase: update.phase});
       if (update.phase === 'final') drawnEvents.push({frame, kind: 'converged'});
@@ -290,7 +292,7 @@ async function start() {
     }
     const halfs = new Uint16Array(n * 3);
     for (let p = 0; p < n; ++p) halfs[3 * p] = halfs[3 * p + 1] = halfs[3 * p + 2] = floatToHalf(diff[p]);
-    view.cache.set(halfs, 0, n);
+    view.cache.show(halfs);
     view.showDifference(true, max);
     differenceMax = max;
     panel.showDifference(`max ${max.toPrecision(4)} (heat: black 0 → white max)`);
@@ -316,7 +318,7 @@ async function start() {
       await referenceRequest();  // its final shows the difference
     } else {
       view.showDifference(false, 0);
-      view.cache.set(cache, 0, n);
+      view.cache.show(null);
       panel.showDifference('–');
       draw();
     }

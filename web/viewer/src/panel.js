@@ -83,7 +83,7 @@ export class Panel {
       element('h2', {}, 'Page'),
       field('latency', 'Latency'),
       field('byState', 'By state (p50/p95)'),
-      field('costs', 'Copy/upload/draw'),
+      field('costs', 'Apply/upload/draw'),
       field('checksum', 'Checksum'),
       field('difference', 'Difference'));
     this.message = element('div', {class: 'message', role: 'alert'});
@@ -129,7 +129,7 @@ export class Panel {
     f.byState.textContent = Object.entries(byState)
       .map(([state, v]) => `${state} ${percentile(v, 0.5).toFixed(0)}/${percentile(v, 0.95).toFixed(0)}`).join(', ') || '–';
     const c = stats.costs;
-    f.costs.textContent = c.length ? `p95 ${percentile(c.map(x => x.copy), 0.95).toFixed(1)} / ${percentile(c.map(x => x.upload), 0.95).toFixed(1)} / ${percentile(c.map(x => x.draw), 0.95).toFixed(1)} ms` : '–';
+    f.costs.textContent = c.length ? `p95 ${percentile(c.map(x => x.apply), 0.95).toFixed(1)} / ${percentile(c.map(x => x.upload), 0.95).toFixed(1)} / ${percentile(c.map(x => x.draw), 0.95).toFixed(1)} ms` : '–';
     f.checksum.textContent = stats.checksumErrors ? `${stats.checksumErrors} MISMATCHES` : `${stats.checksumsVerified} verified`;
     f.checksum.className = stats.checksumErrors ? 'bad' : '';
   }

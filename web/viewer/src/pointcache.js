@@ -1,7 +1,8 @@
-// The cache on the GPU, indexed by point: a 2D texture of RGBA halfs (alpha unused) holding point p
-// at texel (p mod W, p div W), and a 3D texture of the dense box holding each voxel's point index + 1
-// (0: no point). An update uploads only its rows of points: a chunk of fail-through branches is a
-// contiguous range, and nothing is scattered on the CPU per update.
+// The cache on the GPU, indexed by point: a 2D texture of RGB halfs holding point p at texel
+// (p mod W, p div W), and a 3D texture of the dense box holding each voxel's point index + 1 (0: no
+// point). The texture's data is the page's cache array itself (N x 3 halfs, padded to whole rows), so
+// an update is neither copied nor scattered: only the rows it touched are uploaded, and a chunk of
+// fail-through branches is a contiguous range of points.
 
 import * as THREE from 'three';
 
@@ -35,32 +36,42 @@ export class PointCache {
 
     this.points = n;
     const rows = Math.max(1, Math.ceil(n / CACHE_WIDTH));
-    this.data = new Uint16Array(CACHE_WIDTH * rows * 4);
-    this.texture = new THREE.DataTexture(this.data, CACHE_WIDTH, rows, THREE.RGBAFormat, THREE.HalfFloatType);
+    this.data = new Uint16Array(CACHE_WIDTH * rows * 3);
+    this.texture = new THREE.DataTexture(this.data, CACHE_WIDTH, rows, THREE.RGBFormat, THREE.HalfFloatType);
+    this.texture.internalFormat = 'RGB16F';
     this.texture.minFilter = this.texture.magFilter = THREE.NearestFilter;
     this.texture.generateMipmaps = false;
-    this.texture.unpackAlignment = 1;
+    this.texture.unpackAlignment = 2;
     this.texture.needsUpdate = true;
     this.uploaded = false;
   }
 
-  /** Copies points first..first+count-1 of an N x 3 half array to the texture's data (RGBA). */
-  set(halfs, first, count) {
-    const data = this.data;
-    for (let p = first, end = first + count; p < end; ++p) {
-      const d = p * 4;
-      const s = p * 3;
-      data[d] = halfs[s];
-      data[d + 1] = halfs[s + 1];
-      data[d + 2] = halfs[s + 2];
-    }
-    if (count > 0 && this.uploaded) {
-      // Whole rows, so three uploads one rectangle per range.
+  /** The page's cache: N x 3 halfs, the first part of the texture's data. */
+  get cache() {
+    return this.data.subarray(0, this.points * 3);
+  }
+
+  /** Points first..first+count-1 of the shown array changed: upload their rows at the next draw. */
+  touched(first, count) {
+    if (count <= 0) return;
+    if (this.uploaded && this.texture.image.data === this.data) {
       const row0 = Math.floor(first / CACHE_WIDTH);
       const row1 = Math.floor((first + count - 1) / CACHE_WIDTH);
-      this.texture.addUpdateRange(row0 * CACHE_WIDTH * 4, (row1 - row0 + 1) * CACHE_WIDTH * 4);
+      this.texture.addUpdateRange(row0 * CACHE_WIDTH * 3, (row1 - row0 + 1) * CACHE_WIDTH * 3);
     }
-    if (count > 0) this.texture.needsUpdate = true;
+    this.texture.needsUpdate = true;
+  }
+
+  /** Shows another N x 3 half array (the difference view), or the cache again (null): a full upload. */
+  show(halfs) {
+    let data = this.data;
+    if (halfs) {
+      data = new Uint16Array(this.data.length);
+      data.set(halfs);
+    }
+    this.texture.image.data = data;
+    this.texture.clearUpdateRanges();
+    this.texture.needsUpdate = true;
   }
 
   /** Called after a draw: from now on updates upload their ranges only. */

@@ -192,7 +192,7 @@ async function main() {
     const costs = await page.evaluate(() => window.pmscView.stats.costs);
     const moveCosts = costs.filter(c => c.scale < 1);
     result.pageCostsMs = {
-      copy: summary(moveCosts.map(c => c.copy)), upload: summary(moveCosts.map(c => c.upload)),
+      apply: summary(moveCosts.map(c => c.apply)), upload: summary(moveCosts.map(c => c.upload)),
       draw: summary(moveCosts.map(c => c.draw)), scale: moveCosts[0]?.scale ?? 1,
     };
 
