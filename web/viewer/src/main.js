@@ -13,6 +13,7 @@ const params = new URLSearchParams(location.search);
 const [width, height] = (params.get('size') || '480x360').split('x').map(Number);
 const stepVoxels = Number(params.get('step') || 1);
 const interactiveScale = Number(params.get('interactive') || 0.4);
+const interactiveStep = Number(params.get('istep') || 1.5);
 
 const stats = {
   moves: [],           // {seq, state, firstImageMs, convergedMs, inputMs}: one per answered `set`
@@ -93,6 +94,7 @@ async function start() {
   function setScale(s) {
     if (s === scale) return;
     scale = s;
+    view.setStep(s < 1 ? interactiveStep : stepVoxels);
     renderer.setPixelRatio(s);
     renderer.setSize(width, height, true);
   }
@@ -378,14 +380,15 @@ async function start() {
     },
     currentMode: () => mode,
     /** Times k draws of the current image at a resolution scale and step (voxels): the GPU's share. */
-    timeDraw(k = 5, s = 1, step = stepVoxels) {
-      view.setStep(step);
+    timeDraw(k = 5, s = 1, step = stepVoxels, upload = false) {
       const times = [];
       for (let i = 0; i < k; ++i) {
-        const {t1, t2} = drawNow(s);
-        times.push(t2 - t1);
+        if (upload) view.cache.touched(0, n);  // as a hit does: the whole cache again
+        setScale(s);
+        view.setStep(step);
+        const {t0, t1, t2} = drawNow(s);
+        times.push(upload ? {upload: t1 - t0, draw: t2 - t1} : t2 - t1);
       }
-      view.setStep(stepVoxels);
       drawNow(1);
       return times;
     },
