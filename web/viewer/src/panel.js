@@ -104,6 +104,7 @@ export class Panel {
     f.state.textContent = update.state;
     f.state.className = `state ${update.state}`;
     const err = update.key_error;
+    if (!Number.isFinite(err) || !Number.isFinite(update.eps_max)) return this.showProgress(update);
     f.keyError.textContent = `${(100 * err).toPrecision(3)}%  (eps ${(100 * update.eps_min).toPrecision(3)}–${(100 * update.eps_max).toPrecision(3)}%)`;
     // The bar spans 0 .. 1.5 eps_max; marks at eps_min and eps_max.
     const full = 1.5 * update.eps_max || 1;
@@ -111,6 +112,11 @@ export class Panel {
     this.errorBar.querySelector('.fill').className = `fill ${update.state}`;
     this.errorBar.querySelector('.min').style.left = `${(100 * update.eps_min) / full}%`;
     this.errorBar.querySelector('.max').style.left = `${(100 * update.eps_max) / full}%`;
+    this.showProgress(update);
+  }
+
+  showProgress(update) {
+    const f = this.fields;
     f.progress.textContent = `${update.points_done} / ${update.points_total}`;
     const t = update.timing_ms || {};
     f.server.textContent = Object.entries(t).map(([k, v]) => `${k} ${Number(v).toFixed(1)}`).join(', ');
