@@ -14,6 +14,7 @@ const [width, height] = (params.get('size') || '480x360').split('x').map(Number)
 const stepVoxels = Number(params.get('step') || 1);
 const interactiveScale = Number(params.get('interactive') || 0.4);
 const interactiveStep = Number(params.get('istep') || 1.5);
+const alwaysSmooth = params.get('smooth') === '1';  // trilinear density while moving too
 
 const stats = {
   moves: [],           // {seq, state, firstImageMs, convergedMs, inputMs}: one per answered `set`
@@ -94,7 +95,7 @@ async function start() {
   function setScale(s) {
     if (s === scale) return;
     scale = s;
-    view.setStep(s < 1 ? interactiveStep : stepVoxels);
+    view.setStep(s < 1 ? interactiveStep : stepVoxels, alwaysSmooth || s >= 1);
     renderer.setPixelRatio(s);
     renderer.setSize(width, height, true);
   }
@@ -385,7 +386,7 @@ async function start() {
       for (let i = 0; i < k; ++i) {
         if (upload) view.cache.touched(0, n);  // as a hit does: the whole cache again
         setScale(s);
-        view.setStep(step);
+        view.setStep(step, alwaysSmooth || s >= 1);
         const {t0, t1, t2} = drawNow(s);
         times.push(upload ? {upload: t1 - t0, draw: t2 - t1} : t2 - t1);
       }

@@ -8,24 +8,38 @@ import * as THREE from 'three';
 
 export const CACHE_WIDTH = 1024;
 
-/** GLSL for the shaders: the cache's radiance at a voxel (ivec3), or -1 where it has no point. */
+/**
+ * GLSL for the shaders. uIndex holds, per voxel, (density byte << 24) | (point index + 1), 0 where the
+ * voxel has no point: one fetch gives a ray-march step both its density (nearest voxel) and its
+ * point. cacheOf(v) is the radiance of that voxel's point.
+ */
 export const cacheLookupGlsl = /* glsl */ `
 precision highp usampler3D;
 uniform usampler3D uIndex;
 uniform sampler2D uCache;
-vec3 cacheAt(ivec3 voxel) {
-  uint id = texelFetch(uIndex, voxel, 0).r;
-  if (id == 0u) return vec3(-1.0);
-  id -= 1u;
+vec3 cacheOf(uint v) {
+  uint id = (v & 0xffffffu) - 1u;
   return texelFetch(uCache, ivec2(int(id % ${CACHE_WIDTH}u), int(id / ${CACHE_WIDTH}u)), 0).rgb;
+}
+vec3 cacheAt(ivec3 voxel) {
+  uint v = texelFetch(uIndex, voxel, 0).r;
+  return v == 0u ? vec3(-1.0) : cacheOf(v);
 }`;
 
+/** The most points the packed index holds (24 bits). */
+export const MAX_POINTS = 0xffffff;
+
 export class PointCache {
-  constructor(index, dims) {
+  /** @param densityBytes per voxel, 0..255 (or null: 0) */
+  constructor(index, dims, densityBytes = null) {
     const n = index.length;
+    if (n > MAX_POINTS) throw new Error(`${n} points: the page holds at most ${MAX_POINTS}`);
     const [nx, ny, nz] = dims;
     const ids = new Uint32Array(nx * ny * nz);
-    for (let p = 0; p < n; ++p) ids[index[p]] = p + 1;
+    for (let p = 0; p < n; ++p) {
+      const cell = index[p];
+      ids[cell] = ((densityBytes ? densityBytes[cell] : 0) * 0x1000000 + p + 1) >>> 0;
+    }
     this.index = new THREE.Data3DTexture(ids, nx, ny, nz);
     this.index.format = THREE.RedIntegerFormat;
     this.index.type = THREE.UnsignedIntType;

@@ -27,6 +27,7 @@ uniform float uSigmaT;        // volume.sigma_t x maxDensity
 uniform vec3 uAlbedo;
 uniform float uStep;          // world units
 uniform int uMaxSteps;
+uniform int uSmooth;          // 1: density trilinear (the refined image), 0: the voxel's own
 uniform float uExposure;
 uniform float uGamma;
 uniform int uDifference;
@@ -57,12 +58,14 @@ void main() {
   vec3 dp = dir * dt * toUvw;
   float T = 1.0;
   vec3 L = vec3(0.0);
+  ivec3 top = ivec3(uDims) - 1;
   for (int s = 0; s < steps; ++s, p += dp) {
-    float density = texture(uDensity, p).r;
-    if (density <= 0.0) continue;
+    // The voxel's point and density in one fetch; the refined image takes the density trilinear.
+    uint v = texelFetch(uIndex, clamp(ivec3(p * uDims), ivec3(0), top), 0).r;
+    if (v == 0u) continue;
+    float density = uSmooth == 1 ? texture(uDensity, p).r : float(v >> 24) / 255.0;
     float alpha = 1.0 - exp(-uSigmaT * density * dt);
-    vec3 lin = cacheAt(clamp(ivec3(p * uDims), ivec3(0), ivec3(uDims) - 1));  // the voxel's point
-    if (lin.r < 0.0) continue;
+    vec3 lin = cacheOf(v);
     vec3 source = uDifference == 1 ? heat(lin.r * uDifferenceScale) : uAlbedo * lin;
     L += T * alpha * source;
     T *= 1.0 - alpha;
@@ -97,7 +100,7 @@ export class VolumeView {
     densityTexture.needsUpdate = true;
 
     // The cache, by point; uploaded per update (the range it changed).
-    this.cache = new PointCache(index, this.dims);
+    this.cache = new PointCache(index, this.dims, densityBytes);
 
     this.material = new THREE.ShaderMaterial({
       glslVersion: THREE.GLSL3,
@@ -114,7 +117,8 @@ export class VolumeView {
         uSigmaT: {value: scene.volume.sigma_t * maxDensity},
         uAlbedo: {value: new THREE.Vector3(...scene.volume.albedo)},
         uStep: {value: h},
-        uMaxSteps: {value: 256},
+        uMaxSteps: {value: 512},
+        uSmooth: {value: 1},
         uExposure: {value: 1},
         uGamma: {value: 2.2},
         uDifference: {value: 0},
@@ -134,8 +138,9 @@ export class VolumeView {
     this.material.uniforms.uGamma.value = gamma;
   }
 
-  /** Step length in voxels (1 = one voxel); larger is cheaper and coarser. */
-  setStep(voxels) {
+  /** Step length in voxels (1 = one voxel); larger is cheaper and coarser. Smooth: trilinear density. */
+  setStep(voxels, smooth = true) {
+    this.material.uniforms.uSmooth.value = smooth ? 1 : 0;
     this.material.uniforms.uStep.value = voxels * this.voxel();
   }
 
