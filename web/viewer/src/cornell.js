@@ -1,7 +1,8 @@
 // The Cornell box: its quads, shaded by the cache's indirect irradiance (nearest voxel).
 //
 // A fragment at world position x on a quad with normal n reads voxel round((x - 0.5 h n - origin) / h)
-// (voxel (i,j,k)'s centre is origin + h (i,j,k)): half a voxel into the surface's shell of points.
+// (voxel (i,j,k)'s centre is origin + h (i,j,k)): half a voxel into the surface's shell of points;
+// where that voxel holds no point, the nearest along the normal that does.
 // Radiance shown = albedo / pi x cache irradiance: indirect light only, no direct term.
 
 import * as THREE from 'three';
@@ -37,9 +38,15 @@ vec3 heat(float x) {
 }
 
 void main() {
-  vec3 cell = (vWorld - 0.5 * uVoxel * uNormal - uOrigin) / uVoxel;
-  ivec3 ijk = clamp(ivec3(floor(cell + 0.5)), ivec3(0), uDims - 1);
-  vec3 irradiance = max(cacheAt(ijk), vec3(0.0));  // no point there: black
+  // Half a voxel behind the surface first; where that voxel holds no point (thin or slanted shells
+  // on a coarse grid), the voxel at the surface, then one a whole voxel behind, then in front.
+  const float depths[4] = float[4](0.5, 0.0, 1.0, -0.5);
+  vec3 irradiance = vec3(-1.0);
+  for (int k = 0; k < 4 && irradiance.r < 0.0; ++k) {
+    vec3 cell = (vWorld - depths[k] * uVoxel * uNormal - uOrigin) / uVoxel;
+    irradiance = cacheAt(clamp(ivec3(floor(cell + 0.5)), ivec3(0), uDims - 1));
+  }
+  irradiance = max(irradiance, vec3(0.0));  // no point near: black
   vec3 color;
   if (uDifference == 1) color = heat(irradiance.r * uDifferenceScale);
   else color = pow(clamp(uAlbedo / 3.14159265 * irradiance * uExposure, 0.0, 1.0), vec3(1.0 / uGamma));
@@ -51,7 +58,7 @@ export class CornellView {
     const {scene, index} = info;
     const [nx, ny, nz] = scene.grid.dims;
     this.dims = [nx, ny, nz];
-    this.cache = new PointCache(index, this.dims);
+    this.cache = new PointCache(renderer, index, this.dims);
 
     this.shared = {
       uCache: {value: this.cache.texture},

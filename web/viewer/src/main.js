@@ -30,6 +30,25 @@ function toFloats(halfs) {
   return out;
 }
 
+/**
+ * The direction out of the room through its open side: the face of the quads' bounding box on which
+ * no quad lies (within 2% of the box), -z where every face has one.
+ */
+function openSide(quads) {
+  const box = new THREE.Box3();
+  for (const quad of quads) for (const corner of quad.corners) box.expandByPoint(new THREE.Vector3(...corner));
+  const size = box.getSize(new THREE.Vector3());
+  const tolerance = 0.02 * Math.max(size.x, size.y, size.z);
+  for (const axis of ['z', 'x', 'y']) {
+    for (const [end, sign] of [['min', -1], ['max', 1]]) {
+      const plane = box[end][axis];
+      const covered = quads.some(q => q.corners.every(c => Math.abs(c['xyz'.indexOf(axis)] - plane) <= tolerance));
+      if (!covered) return new THREE.Vector3().setComponent('xyz'.indexOf(axis), sign);
+    }
+  }
+  return new THREE.Vector3(0, 0, -1);
+}
+
 async function start() {
   const info = await loadScene();
   const {scene} = info;
@@ -50,13 +69,7 @@ async function start() {
 
   const target = new THREE.Vector3(...scene.camera.target);
   const up = new THREE.Vector3(...(scene.camera.up || [0, 1, 0]));
-  let toward = new THREE.Vector3(1, 0.35, 0.45);
-  if (scene.kind === 'cornell') {  // look in through the open side: the quads' normals add up to it
-    const sum = new THREE.Vector3();
-    for (const quad of scene.quads) sum.add(new THREE.Vector3(...quad.normal));
-    if (sum.lengthSq() > 1e-6) toward = sum;
-    else toward = new THREE.Vector3(0, 0, 1);
-  }
+  const toward = scene.kind === 'cornell' ? openSide(scene.quads) : new THREE.Vector3(1, 0.35, 0.45);
   const camera = new THREE.PerspectiveCamera(40, width / height, scene.camera.distance / 100, scene.camera.distance * 20);
   camera.up.copy(up);
   camera.position.copy(target).addScaledVector(toward.normalize(), scene.camera.distance);
@@ -103,9 +116,8 @@ async function start() {
   function drawNow(s = 1) {
     setScale(s);
     const t0 = performance.now();
-    renderer.initTexture(view.cache.texture);  // uploads the cache's changed rows
+    view.cache.upload();  // the cache's changed rows
     gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, pixel);  // waits for it
-    view.cache.drawn();
     const t1 = performance.now();
     renderer.render(world, camera);
     gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, pixel);  // waits for the draw to finish
@@ -393,13 +405,16 @@ async function start() {
       drawNow(1);
       return times;
     },
-    /** FNV-1a 64 of the canvas's pixels, drawn afresh. */
+    /** FNV-1a 64 of the scene's pixels (drawn afresh at full size, without the light's marker). */
     canvasHash() {
+      marker.visible = line.visible = false;
       drawNow();
       const w = gl.drawingBufferWidth;
       const h = gl.drawingBufferHeight;
       const pixels = new Uint8Array(w * h * 4);
       gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, pixels);
+      marker.visible = line.visible = true;
+      drawNow();
       return fnv1a64(pixels);
     },
   };

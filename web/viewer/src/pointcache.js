@@ -31,9 +31,10 @@ export const MAX_POINTS = 0xffffff;
 
 export class PointCache {
   /** @param densityBytes per voxel, 0..255 (or null: 0) */
-  constructor(index, dims, densityBytes = null) {
+  constructor(renderer, index, dims, densityBytes = null) {
     const n = index.length;
     if (n > MAX_POINTS) throw new Error(`${n} points: the page holds at most ${MAX_POINTS}`);
+    this.renderer = renderer;
     const [nx, ny, nz] = dims;
     const ids = new Uint32Array(nx * ny * nz);
     for (let p = 0; p < n; ++p) {
@@ -49,15 +50,16 @@ export class PointCache {
     this.index.needsUpdate = true;
 
     this.points = n;
-    const rows = Math.max(1, Math.ceil(n / CACHE_WIDTH));
-    this.data = new Uint16Array(CACHE_WIDTH * rows * 3);
-    this.texture = new THREE.DataTexture(this.data, CACHE_WIDTH, rows, THREE.RGBFormat, THREE.HalfFloatType);
+    this.rows = Math.max(1, Math.ceil(n / CACHE_WIDTH));
+    this.data = new Uint16Array(CACHE_WIDTH * this.rows * 3);
+    this.texture = new THREE.DataTexture(this.data, CACHE_WIDTH, this.rows, THREE.RGBFormat, THREE.HalfFloatType);
     this.texture.internalFormat = 'RGB16F';
     this.texture.minFilter = this.texture.magFilter = THREE.NearestFilter;
     this.texture.generateMipmaps = false;
     this.texture.unpackAlignment = 2;
     this.texture.needsUpdate = true;
-    this.uploaded = false;
+    this.rowLow = Infinity;  // rows changed since the last upload
+    this.rowHigh = -1;
   }
 
   /** The page's cache: N x 3 halfs, the first part of the texture's data. */
@@ -65,18 +67,14 @@ export class PointCache {
     return this.data.subarray(0, this.points * 3);
   }
 
-  /** Points first..first+count-1 of the shown array changed: upload their rows at the next draw. */
+  /** Points first..first+count-1 of the shown array changed: upload their rows at the next upload(). */
   touched(first, count) {
-    if (count <= 0) return;
-    if (this.uploaded && this.texture.image.data === this.data) {
-      const row0 = Math.floor(first / CACHE_WIDTH);
-      const row1 = Math.floor((first + count - 1) / CACHE_WIDTH);
-      this.texture.addUpdateRange(row0 * CACHE_WIDTH * 3, (row1 - row0 + 1) * CACHE_WIDTH * 3);
-    }
-    this.texture.needsUpdate = true;
+    if (count <= 0 || this.texture.image.data !== this.data) return;
+    this.rowLow = Math.min(this.rowLow, Math.floor(first / CACHE_WIDTH));
+    this.rowHigh = Math.max(this.rowHigh, Math.floor((first + count - 1) / CACHE_WIDTH));
   }
 
-  /** Shows another N x 3 half array (the difference view), or the cache again (null): a full upload. */
+  /** Shows another N x 3 half array (the difference view), or the cache again (null). */
   show(halfs) {
     let data = this.data;
     if (halfs) {
@@ -84,12 +82,39 @@ export class PointCache {
       data.set(halfs);
     }
     this.texture.image.data = data;
-    this.texture.clearUpdateRanges();
-    this.texture.needsUpdate = true;
+    this.rowLow = 0;
+    this.rowHigh = this.rows - 1;
   }
 
-  /** Called after a draw: from now on updates upload their ranges only. */
-  drawn() {
-    this.uploaded = true;
+  /**
+   * Uploads the changed rows: texSubImage2D of whole rows on three's texture (three's own update
+   * ranges take RGBA rows only), then three's record of the GL state is reset. The first upload,
+   * before three has made the texture, is three's.
+   */
+  upload() {
+    const renderer = this.renderer;
+    const properties = renderer.properties.get(this.texture);
+    if (!properties.__webglTexture || properties.__version !== this.texture.version) {
+      this.texture.needsUpdate = true;
+      renderer.initTexture(this.texture);
+    } else if (this.rowHigh >= this.rowLow) {
+      const gl = renderer.getContext();
+      const low = this.rowLow;
+      const rows = this.rowHigh - low + 1;
+      gl.bindTexture(gl.TEXTURE_2D, properties.__webglTexture);
+      gl.pixelStorei(gl.UNPACK_ALIGNMENT, 2);
+      gl.pixelStorei(gl.UNPACK_ROW_LENGTH, 0);
+      gl.pixelStorei(gl.UNPACK_SKIP_PIXELS, 0);
+      gl.pixelStorei(gl.UNPACK_SKIP_ROWS, 0);
+      gl.pixelStorei(gl.UNPACK_FLIP_Y_WEBGL, false);
+      gl.pixelStorei(gl.UNPACK_PREMULTIPLY_ALPHA_WEBGL, false);
+      const data = this.texture.image.data;
+      gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, low, CACHE_WIDTH, rows, gl.RGB, gl.HALF_FLOAT,
+        data.subarray(low * CACHE_WIDTH * 3, (low + rows) * CACHE_WIDTH * 3));
+      gl.bindTexture(gl.TEXTURE_2D, null);
+      renderer.resetState();
+    }
+    this.rowLow = Infinity;
+    this.rowHigh = -1;
   }
 }

@@ -100,7 +100,7 @@ export class VolumeView {
     densityTexture.needsUpdate = true;
 
     // The cache, by point; uploaded per update (the range it changed).
-    this.cache = new PointCache(index, this.dims, densityBytes);
+    this.cache = new PointCache(renderer, index, this.dims, densityBytes);
 
     this.material = new THREE.ShaderMaterial({
       glslVersion: THREE.GLSL3,
