@@ -405,8 +405,12 @@ async function start() {
       drawNow(1);
       return times;
     },
-    /** FNV-1a 64 of the scene's pixels (drawn afresh at full size, without the light's marker). */
-    canvasHash() {
+    /**
+     * FNV-1a 64 of the scene's pixels (drawn afresh at full size, without the light's marker);
+     * reupload: after uploading the whole cache again.
+     */
+    canvasHash({reupload = false} = {}) {
+      if (reupload) view.cache.touched(0, n);  // the whole array again: partial uploads must match it
       marker.visible = line.visible = false;
       drawNow();
       const w = gl.drawingBufferWidth;

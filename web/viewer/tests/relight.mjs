@@ -224,6 +224,10 @@ async function main() {
         convergedMs: round(miss.convergedMs), checks: miss.checks};
       check(`${miss.state}: estimate first, then converged, checksums equal`, miss.checksumOk && miss.checks.includes('estimate') && miss.checks.includes('final'), miss.checks);
       const missCache = await page.evaluate(() => Array.from(window.pmscView.cache()));
+      // The image after the estimate's and the chunks' partial uploads equals one from the whole array.
+      const partial = await page.evaluate(() => window.pmscView.canvasHash());
+      const whole = await page.evaluate(() => window.pmscView.canvasHash({reupload: true}));
+      check('image from partial uploads equals the image from the whole cache', partial === whole, {partial, whole});
 
       // The same controls by the full calculation: the converged cache must equal it.
       const full = await page.evaluate(() => window.pmscView.mode('full'));
