@@ -235,6 +235,7 @@ async function start() {
 
   function finish(frame) {
     frame.done = true;
+    frames.delete(frame.seq);
     const result = {seq: frame.seq, target: frame.target, state: frame.state,
       firstImageMs: frame.firstAt === null ? null : frame.firstAt - frame.sentAt,
       convergedMs: frame.convergedAt === null ? null : frame.convergedAt - frame.sentAt,
@@ -265,6 +266,7 @@ async function start() {
       for (const [seq, old] of frames) {
         if (seq < update.seq && old.target === 'cache' && !old.done) {
           old.done = true;
+          frames.delete(seq);
           frame.waiters.push(...old.waiters.splice(0));
           if (outstanding === old) outstanding = null;
         }
