@@ -20,5 +20,8 @@ mkdir -p "$work"
   { tail -20 "$work/demo.log" >&2; echo "run-relight: pmsc demo volume --quick failed" >&2; exit 1; }
 [ -f "$work/model/model.pmsc" ] && [ -f "$work/model/density.vdb" ] ||
   { echo "run-relight: pmsc demo volume wrote no model.pmsc/density.vdb in $work/model" >&2; exit 1; }
+# The demo's scene.txt names the scene as it trained it (its sample count among others).
+scene="volume:$work/model/density.vdb"
+[ -s "$work/model/scene.txt" ] && scene=$(head -n 1 "$work/model/scene.txt")
 exec node "$web/tests/relight.mjs" --bin "$pmsc" --model "$work/model/model.pmsc" \
-  --scene "volume:$work/model/density.vdb" --short --out "$work/screenshots"
+  --scene "$scene" --short --out "$work/screenshots"
