@@ -82,7 +82,9 @@ async function start() {
   world.add(marker, line);
   const placeLight = light => {
     marker.position.set(...light.position);
-    marker.scale.setScalar(Math.max(light.radius, scene.camera.distance / 200));
+    // Its size: the light's radius, kept between 0.5% and 3% of the camera's distance.
+    const d = scene.camera.distance;
+    marker.scale.setScalar(Math.min(Math.max(light.radius, d / 200), d / 33));
     lineGeometry.setFromPoints([target, marker.position]);
     camera.far = Math.max(camera.far, 2 * camera.position.distanceTo(marker.position));
     camera.updateProjectionMatrix();
@@ -244,6 +246,12 @@ async function start() {
     for (const resolve of frame.waiters.splice(0)) resolve(result);
   }
 
+  let heldUpdate = null;
+  function showUpdate(update) {
+    panel.showUpdate(update);
+    if (update.phase !== 'final') panel.showConverged(`converging: ${update.points_done} / ${update.points_total} points`);
+  }
+
   let applyMs = 0;  // time spent applying updates since the last draw
   function onUpdate(update, binary) {
     const start = performance.now();
@@ -276,9 +284,11 @@ async function start() {
         drawnEvents.push({frame, kind: 'first', phase: update.phase});
       if (update.phase === 'final') drawnEvents.push({frame, kind: 'converged'});
       placeLight(update.light);
-      panel.showUpdate(update);
-      if (update.phase !== 'final') panel.showConverged(`converging: ${update.points_done} / ${update.points_total} points`);
-      scheduleDraw();
+      if (held) heldUpdate = update;  // the panel stays with the held image too
+      else showUpdate(update);
+      // The test's screenshot of an estimate: drawn now, before any chunk lands, then held.
+      if (holdAfterEstimate && update.phase === 'estimate') draw();
+      else scheduleDraw();
     }
     if (update.phase === 'estimate' || update.phase === 'final') {
       toVerify.push({frame, snapshot: array.slice(), expected: update.checksum, phase: update.phase});
@@ -295,7 +305,7 @@ async function start() {
   }
 
   // The difference view: |cache - reference|, largest channel, scaled to its maximum.
-  let differenceMax = 0;
+  let differenceMax = null;
   function showDifference() {
     const a = cache;
     const b = reference;
@@ -313,6 +323,7 @@ async function start() {
     view.showDifference(true, max);
     differenceMax = max;
     panel.showDifference(`max ${max.toPrecision(4)} (heat: black 0 → white max)`);
+    showCaption();
     draw();
   }
 
@@ -337,12 +348,24 @@ async function start() {
       view.showDifference(false, 0);
       view.cache.show(null);
       panel.showDifference('–');
+      differenceMax = null;
+      showCaption();
       draw();
     }
   }
 
+  const caption = document.getElementById('caption');
+  function showCaption() {
+    const what = scene.kind === 'cornell' ? 'indirect light' : 'in-scattered light';
+    caption.textContent = difference && differenceMax !== null
+      ? `difference |cache − reference|: black 0 → white ${differenceMax.toPrecision(3)}`
+      : `${what} (${mode === 'full' ? 'full calculation' : 'cache'})`;
+  }
+  showCaption();
+
   function setMode(view) {
     mode = view;
+    showCaption();
     panel.full.checked = view === 'full';
     connection.sendMode(view);
     return new Promise(resolve => requestSet(resolve));
@@ -374,7 +397,13 @@ async function start() {
     },
     /** Resolves once a held estimate image is on screen (after set(..., {holdAfterEstimate: true})). */
     held: () => new Promise(resolve => { if (held) resolve(); else heldResolve = resolve; }),
-    release() { held = false; heldResolve = null; scheduleDraw(); },
+    release() {
+      held = false;
+      heldResolve = null;
+      if (heldUpdate) showUpdate(heldUpdate);
+      heldUpdate = null;
+      scheduleDraw();
+    },
     cache: () => toFloats(cache),
     reference: () => toFloats(reference),
     mode: setMode,
@@ -383,7 +412,7 @@ async function start() {
     async difference(on) {
       panel.difference.checked = on;
       await toggleDifference(on);
-      return on ? differenceMax : 0;
+      return on ? differenceMax : null;
     },
     lastUpdate: () => lastUpdate,
     /** Sends a text message as it is (the tests' malformed input). */
