@@ -17,7 +17,7 @@ const interactiveStep = Number(params.get('istep') || 1.5);
 const alwaysSmooth = params.get('smooth') === '1';  // trilinear density while moving too
 
 const stats = {
-  moves: [],           // {seq, state, firstImageMs, convergedMs, inputMs}: one per answered `set`
+  moves: [],           // {seq, state, firstImageMs, convergedMs, inputMs, pageMs, serverMs}: one per answered `set`
   costs: [],           // {apply, upload, draw} ms and the resolution scale: one per image drawn
   checksumsVerified: 0,
   checksumErrors: 0,
@@ -96,7 +96,7 @@ async function start() {
   orbit.update();
 
   // Drawing. Updates only mark the image dirty; one draw serves every update that arrived before it.
-  let drawScheduled = false;
+  let drawTimer = null;      // a draw scheduled for the next task
   let held = false;         // the test's screenshot of the estimate: no drawing until release()
   let holdAfterEstimate = false;
   const drawnEvents = [];   // {frame, kind: 'first'|'converged'} waiting for the next draw
@@ -128,7 +128,8 @@ async function start() {
   }
 
   function draw() {
-    drawScheduled = false;
+    clearTimeout(drawTimer);
+    drawTimer = null;
     if (held) return;
     const moving = (drawnEvents.length > 0 || orbiting) && interactiveScale < 1;
     const {t0, t1, t2} = drawNow(moving ? interactiveScale : 1);
@@ -148,10 +149,7 @@ async function start() {
   }
 
   function scheduleDraw() {
-    if (!drawScheduled) {
-      drawScheduled = true;
-      setTimeout(draw, 0);
-    }
+    drawTimer ??= setTimeout(draw, 0);
   }
 
   let orbiting = false;
@@ -191,8 +189,10 @@ async function start() {
     if (event.kind === 'first' && frame.firstAt === null) {
       frame.firstAt = at;
       if (frame.target === 'cache') {
+        // pageMs: from the first image's update arriving to it drawn; serverMs: the server's own
+        // time for it (request received to update sent).
         frame.move = {seq: frame.seq, state: frame.state, firstImageMs: at - frame.sentAt, convergedMs: null,
-          inputMs: at - frame.inputAt};
+          inputMs: at - frame.inputAt, pageMs: at - event.arrivedAt, serverMs: event.serverMs ?? null};
         stats.moves.push(frame.move);
       }
       if (frame.target === 'cache' && outstanding === frame) {
@@ -219,7 +219,12 @@ async function start() {
   // so the hash (~20 ms for 254k points) never delays an image.
   const toVerify = [];
   function verifyQueued() {
-    for (const {frame, snapshot, expected, phase} of toVerify.splice(0)) {
+    // A cache frame's final waits for its image: finish() reports the time it was drawn.
+    const waiting = toVerify.filter(v => v.phase === 'final' && v.frame.target === 'cache' && v.frame.convergedAt === null);
+    const ready = toVerify.filter(v => !waiting.includes(v));
+    toVerify.length = 0;
+    toVerify.push(...waiting);
+    for (const {frame, snapshot, expected, phase} of ready) {
       const actual = fnv1a64(snapshot);
       const ok = actual === expected;
       frame.checks.push({phase, ok});
@@ -255,20 +260,28 @@ async function start() {
   let applyMs = 0;  // time spent applying updates since the last draw
   function onUpdate(update, binary) {
     const start = performance.now();
-    applyUpdate(update, binary);
+    const next = applyUpdate(update, binary, start);
     applyMs += performance.now() - start;
+    if (next === 'draw') draw();
+    else if (next === 'schedule') scheduleDraw();
   }
 
-  function applyUpdate(update, {first, count, halfs}) {
+  function applyUpdate(update, {first, count, halfs}, start) {
     const frame = frames.get(update.seq);
     if (!frame) {
       stats.errors.push(`update for unknown seq ${update.seq}`);
-      return;
+      return null;
     }
     const array = update.target === 'reference' ? reference : cache;
     array.set(halfs, first * 3);
     frame.state = update.state;
     lastUpdate = update;
+    if (update.phase === 'estimate' || update.phase === 'final')
+      toVerify.push({frame, snapshot: array.slice(), expected: update.checksum, phase: update.phase});
+    if (update.target === 'reference' && update.phase === 'final') {
+      frame.convergedAt = performance.now();
+      verifyQueued();
+    }
     if (update.target === 'cache') {
       // The server answers only the newest request: older frames are over; their callers get this one.
       for (const [seq, old] of frames) {
@@ -281,20 +294,17 @@ async function start() {
       }
       if (!difference) view.cache.touched(first, count);
       if (update.phase === 'estimate' || update.phase === 'final' || update.phase === 'chunk')
-        drawnEvents.push({frame, kind: 'first', phase: update.phase});
+        drawnEvents.push({frame, kind: 'first', phase: update.phase, arrivedAt: start,
+          serverMs: update.timing_ms?.since_request});
       if (update.phase === 'final') drawnEvents.push({frame, kind: 'converged'});
       placeLight(update.light);
       if (held) heldUpdate = update;  // the panel stays with the held image too
       else showUpdate(update);
-      // The test's screenshot of an estimate: drawn now, before any chunk lands, then held.
-      if (holdAfterEstimate && update.phase === 'estimate') draw();
-      else scheduleDraw();
+      // A light's first image is drawn at once; later chunks share a draw (the next task).
+      // (The test's screenshot of an estimate relies on it: drawn before any chunk lands, then held.)
+      return frame.firstAt === null && !held ? 'draw' : 'schedule';
     }
-    if (update.phase === 'estimate' || update.phase === 'final') {
-      toVerify.push({frame, snapshot: array.slice(), expected: update.checksum, phase: update.phase});
-      if (update.target === 'reference') verifyQueued();
-    }
-    if (update.target === 'reference' && update.phase === 'final') frame.convergedAt = performance.now();
+    return null;
   }
 
   function onMessage(message) {

@@ -192,6 +192,10 @@ async function main() {
       convergedMs: summary(moves.map(r => r.convergedMs)),
       firstImageByState: Object.fromEntries(Object.entries(byState).map(([s, v]) => [s, summary(v)])),
     };
+    // The first image's latency split: the server's own time, the page's (update arrived to drawn).
+    const recorded = await page.evaluate(k => window.pmscView.stats.moves.slice(-k), options.moves);
+    result.latency.serverMs = summary(recorded.map(m => m.serverMs).filter(Number.isFinite));
+    result.latency.pageMs = summary(recorded.map(m => m.pageMs));
     const costs = await page.evaluate(() => window.pmscView.stats.costs);
     const moveCosts = costs.filter(c => c.scale < 1);
     result.pageCostsMs = {
