@@ -27,6 +27,7 @@ PACKAGES=(
   libembree-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   nlohmann-json3-dev libpng-dev
+  libboost-dev  # Boost.Beast and Asio: the HTTP/WebSocket server of pmsc view
   libassimp-dev assimp-testmodels slurm-wlm munge
   libopenmpi-dev openmpi-bin  # mpirun -n P pmsc train, srun --mpi=pmix
   python3 python3-dev python3-numpy pybind11-dev  # the Python module (build/python) and its tests
@@ -96,12 +97,12 @@ check_format() {
   echo "pmsc.sh: ${#files[@]} files match .clang-format"
 }
 
-# clang-tidy on the product translation units that include no OpenVDB, Embree or Assimp (those
+# clang-tidy on the product translation units that include no OpenVDB, Embree, Assimp or Beast (those
 # cost ~25 s each to parse; the checks that matter for them run on the rest of their library).
 run_tidy() {
   local files
   mapfile -t files < <(git ls-files 'pmsc/*.cpp' 'nodes/*.cpp' 'engine/*.cpp' 'app/*.cpp' 'capi/*.cpp' 'cli/*.cpp' \
-    'evaluators/*.cpp' | xargs grep -LE '#include <(openvdb|embree3|assimp)/')
+    'evaluators/*.cpp' 'viewer/*.cpp' | xargs grep -LE '#include <(openvdb|embree3|assimp|boost/beast)/')
   run-clang-tidy-14 -quiet -p "$BUILD" -j "$JOBS" "${files[@]}" >"$BUILD/clang-tidy.log" 2>&1 \
     || { grep -E 'warning:|error:' "$BUILD/clang-tidy.log" | sort -u | head -50; die "clang-tidy found problems (full log: $BUILD/clang-tidy.log)"; }
   echo "pmsc.sh: clang-tidy clean on ${#files[@]} files"

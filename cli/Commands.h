@@ -26,6 +26,7 @@ int runRun(const std::vector<std::string>& args);            // cli/RunCommand.c
 int runExportFrames(const std::vector<std::string>& args);   // cli/ExportFramesCommand.cpp
 int runEvaluators(const std::vector<std::string>& args);     // cli/EvaluatorsCommand.cpp
 int runServe(const std::vector<std::string>& args);          // cli/ServeCommand.cpp
+int runView(const std::vector<std::string>& args);           // cli/ViewCommand.cpp (viewer/)
 int runDemoCornell(const std::vector<std::string>& args);    // cli/CornellDemoCommand.cpp (examples/cornell)
 int runDemoLearn(const std::vector<std::string>& args);      // cli/LearnDemoCommand.cpp (examples/face)
 int runDemoCross(const std::vector<std::string>& args);      // cli/CrossDemoCommand.cpp (examples/face)

@@ -47,6 +47,7 @@ const Command kCommands[] = {
     {"export-frames", "write an evaluator's frames (e.g. an animated asset's poses) as training .npy", runExportFrames},
     {"evaluators", "list the calculations --evaluator accepts, with their NAME[:ARGS] syntax", runEvaluators},
     {"serve", "serve an evaluator over the exec protocol on stdin/stdout (the child of exec:pmsc serve SPEC)", runServe},
+    {"view", "relight a scene interactively in a browser (volume or Cornell box; one viewer)", runView},
 };
 // clang-format on
 

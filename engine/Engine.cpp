@@ -144,6 +144,8 @@ struct Engine::Impl {
           threads(options.threads > 0 ? options.threads : tbb::info::default_concurrency()),
           maxInFlight(options.maxFramesInFlight > 0 ? options.maxFramesInFlight : 2 * Index(threads)),
           arena(threads) {
+        // A client of onEstimate wants the point multiplication of misses too.
+        if (options.onEstimate) options.keepPointMultiplication = true;
         if (m.regions && options.localFailThrough && plan.allPoints && shape.cheapSubsets) regions.emplace(m);
         // The first frame's buffers are made now, to measure what a frame in flight costs.
         takeSlots(1);
@@ -385,6 +387,7 @@ struct Engine::Impl::Graph {
     const Clock::time_point start;
     const bool stopOnFailure;
     const Index chunkCount;
+    const nodes::FramePlan& plan;
 
     flow::graph g;
     const char runDone = 0;  // sync object only (TSan): every body's end -> after wait_for_all
@@ -408,6 +411,10 @@ struct Engine::Impl::Graph {
 
     Graph(const Impl& impl, Bodies& bodies, FrameRange range, nodes::RunControl& control, Clocks& clocks,
           Clock::time_point start);
+    /// Hands a frame's point multiplication to EngineOptions::onEstimate.
+    void reportEstimate(const FrameSlot& slot) const;
+    /// Hands a finished fail-through branch to EngineOptions::onChunk.
+    void reportChunk(const ChunkMsg& m) const;
     /// Connects the nodes as drawn above.
     void wire();
     /// Puts the free slots in `tokens`, activates the source last, and waits for the graph.
@@ -452,6 +459,7 @@ Engine::Impl::Graph::Graph(const Impl& impl, Bodies& runBodies, FrameRange runRa
       start(runStart),
       stopOnFailure(impl.options.failurePolicy == FailurePolicy::StopRun),
       chunkCount(Index(impl.plan.chunks.size())),
+      plan(impl.plan),
       source(runRange, runControl),
       sourceNode(g, [this](tbb::flow_control& fc) -> Index { return sourceStep(fc); }),
       tokens(g),
@@ -542,6 +550,7 @@ void Engine::Impl::Graph::reconstructStep(Token slot, ReconstructNode::output_po
     if (done) {
         send(slot, std::get<0>(out), slot);
     } else {
+        if (options.onEstimate && slot->pmValid) reportEstimate(*slot);
         sendChunks(slot, std::get<1>(out));
     }
 }
@@ -558,7 +567,36 @@ ChunkMsg Engine::Impl::Graph::blendStep(ChunkMsg m) {
     if (m.slot->decision.state == CacheState::Blend && !control.cancelled()) {
         timed(clocks[kBlend], [&] { bodies.blend(*m.slot, m.chunk); });
     }
+    if (options.onChunk && !control.cancelled() && !m.slot->failed()) reportChunk(m);
     return m;
+}
+
+void Engine::Impl::Graph::reportEstimate(const FrameSlot& slot) const {
+    FrameEstimate e;
+    e.sequence = slot.sequence;
+    e.frame = slot.frame;
+    e.state = slot.decision.state;
+    e.weight = slot.decision.weight;
+    e.keyError = slot.keyError;
+    e.points = plan.outputPoints;
+    e.values =
+        std::span<const double>(slot.pmValues.data(), plan.outputPoints.size() * size_t(plan.channels));
+    options.onEstimate(e);
+}
+
+void Engine::Impl::Graph::reportChunk(const ChunkMsg& m) const {
+    const nodes::FramePlan::Chunk& chunk = plan.chunks[size_t(m.chunk)];
+    ChunkFinished c;
+    c.sequence = m.slot->sequence;
+    c.frame = m.slot->frame;
+    c.state = m.slot->decision.state;
+    c.weight = m.slot->decision.weight;
+    c.chunk = m.chunk;
+    c.chunks = chunkCount;
+    c.firstOutput = chunk.firstOutput;
+    c.values = std::span<const double>(m.slot->values.data() + chunk.firstOutput * plan.channels,
+                                       size_t(chunk.outputCount * plan.channels));
+    options.onChunk(c);
 }
 
 void Engine::Impl::Graph::gatherStep(ChunkMsg m, GatherNode::output_ports_type& out) {

@@ -13,6 +13,7 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <span>
 #include <vector>
 
 namespace pmsc::engine {
@@ -30,6 +31,31 @@ struct Progress {
     Index framesTotal = 0;
     Index hits = 0, blends = 0, misses = 0, failed = 0;
     double elapsedSeconds = 0;
+};
+
+/// A frame that does not hit, as soon as its point multiplication is known and before its
+/// fail-through starts: what an interactive client shows while the full calculation catches up.
+/// The spans are valid only during the call.
+struct FrameEstimate {
+    Index sequence = 0;
+    Index frame = 0;
+    CacheState state = CacheState::Miss;  ///< Blend or Miss
+    double weight = 0;                    ///< weight of the full result the frame will get
+    double keyError = 0;
+    std::span<const Index> points;   ///< the output's points
+    std::span<const double> values;  ///< their point-multiplied values, channel-minor
+};
+
+/// One fail-through branch of a frame that does not hit, finished: the final (soft-cached) values
+/// of its contiguous range of output points. The spans are valid only during the call.
+struct ChunkFinished {
+    Index sequence = 0;
+    Index frame = 0;
+    CacheState state = CacheState::Miss;
+    double weight = 0;
+    Index chunk = 0, chunks = 0;     ///< this branch, of the frame's `chunks`
+    Index firstOutput = 0;           ///< index of its first point in the output's points
+    std::span<const double> values;  ///< outputCount * C final values of the range
 };
 
 /// Everything a run can be told. Defaults give a full-speed run of all points.
@@ -72,6 +98,15 @@ struct EngineOptions {
     const std::atomic<bool>* cancel = nullptr;
     /// Called after each delivered frame, from the sink's thread (keep it cheap).
     std::function<void(const Progress&)> progress;
+    /// Called once for each frame that blends or misses, with its point multiplication, before its
+    /// fail-through branches run (setting it keeps the point multiplication of misses, as
+    /// keepPointMultiplication does). From a worker thread; frames of a range may call it
+    /// concurrently. Frames routed region by region (local fail-through) do not call it.
+    std::function<void(const FrameEstimate&)> onEstimate;
+    /// Called as each whole-frame fail-through branch finishes, with its range's final values.
+    /// From worker threads, concurrently for the branches of one frame (each has its own range).
+    /// Not called after the run was cancelled, nor for local frames, nor for a failed branch.
+    std::function<void(const ChunkFinished&)> onChunk;
 };
 
 /// The soft-caching evaluation engine (sections 5 and 6): a oneTBB

@@ -298,10 +298,8 @@ std::vector<std::shared_ptr<const FrameWriter>> CornellEvaluator::frameWriters()
                                                     activeVoxels)};
 }
 
-std::unique_ptr<CornellEvaluator> makeCornellEvaluator(const std::string& options) {
-    std::size_t points = 160000;
-    int samples = 160;
-    std::string lights = "all";
+CornellSpec parseCornellSpec(const std::string& options) {
+    CornellSpec spec;
     std::stringstream in(options);
     std::string item;
     while (std::getline(in, item, ',')) {
@@ -311,26 +309,32 @@ std::unique_ptr<CornellEvaluator> makeCornellEvaluator(const std::string& option
                           value = eq == std::string::npos ? "" : item.substr(eq + 1);
         auto number = [&](long lo, long hi) { return scene::integerOption("cornell", key, value, lo, hi); };
         if (key == "points") {
-            points = static_cast<std::size_t>(number(1000, 4000000));
+            spec.points = static_cast<std::size_t>(number(1000, 4000000));
         } else if (key == "samples") {
-            samples = static_cast<int>(number(2, 65536));
+            spec.samples = static_cast<int>(number(2, 65536));
         } else if (key == "lights") {
             if (value != "all" && value != "training" && value != "scattered" && value != "path")
                 throw InputError("evaluator 'cornell': lights='" + value +
                                  "' is not all, training, scattered or path");
-            lights = value;
+            spec.lights = value;
         } else {
             throw InputError("evaluator 'cornell': unknown option '" + key +
                              "' (points=N, samples=S, lights=SET)");
         }
     }
+    return spec;
+}
+
+std::unique_ptr<CornellEvaluator> makeCornellEvaluator(const std::string& options) {
+    const CornellSpec spec = parseCornellSpec(options);
+    const std::string& lights = spec.lights;
     const LightRig rig;
     std::vector<PointLight> set;
     auto add = [&](const std::vector<PointLight>& l) { set.insert(set.end(), l.begin(), l.end()); };
     if (lights == "all" || lights == "training") add(rig.trainingLights());
     if (lights == "all" || lights == "scattered") add(rig.scatteredLights(16));
     if (lights == "all" || lights == "path") add(rig.animationPath(60));
-    return std::make_unique<CornellEvaluator>(CornellWorld::create(points), std::move(set), samples,
+    return std::make_unique<CornellEvaluator>(CornellWorld::create(spec.points), std::move(set), spec.samples,
                                               "cornell");
 }
 

@@ -99,6 +99,14 @@ private:
     std::string name_;
 };
 
+/// The parts of a `cornell` spec's OPTIONS (below). @throws pmsc::InputError naming a bad option.
+struct CornellSpec {
+    std::size_t points = 160000;
+    int samples = 160;
+    std::string lights = "all";  ///< all, training, scattered or path
+};
+CornellSpec parseCornellSpec(const std::string& options);
+
 /// The `cornell` evaluator of the command line (spec "cornell[:OPTIONS]"), OPTIONS a comma-separated
 /// list of points=N (default 160000), samples=S (default 160) and lights=SET, SET one of
 ///   all (default): the 144 training lights, then 16 scattered validation lights, then the 60-frame

@@ -354,7 +354,7 @@ std::vector<std::shared_ptr<const FrameWriter>> VolumeEvaluator::frameWriters() 
     return {std::make_shared<scene::VdbFrameWriter>(static_cast<std::int64_t>(n), write, activeVoxels)};
 }
 
-std::unique_ptr<VolumeEvaluator> makeVolumeEvaluator(const std::string& args) {
+VolumeSpec parseVolumeSpec(const std::string& args) {
     // FILE.vdb[:key=value]...: options are the trailing ':'-separated items that contain '='.
     std::string path = args;
     std::vector<std::string> options;
@@ -365,28 +365,34 @@ std::unique_ptr<VolumeEvaluator> makeVolumeEvaluator(const std::string& args) {
         path.resize(colon);
     }
     if (path.empty()) throw InputError("evaluator 'volume' needs a file: 'volume:FILE.vdb[:grid=NAME]'");
-    std::string grid, lights = "all";
-    MediumSettings medium;
+    VolumeSpec spec;
     for (const std::string& item : options) {
         const auto eq = item.find('=');
         const std::string key = item.substr(0, eq), value = item.substr(eq + 1);
         if (key == "grid") {
             if (value.empty()) throw InputError("evaluator 'volume': grid= needs a grid name");
-            grid = value;
+            spec.grid = value;
         } else if (key == "samples") {
             const long v = scene::integerOption("volume", key, value, 1, 4096);
-            medium.lightSamples = static_cast<int>(v);
+            spec.medium.lightSamples = static_cast<int>(v);
         } else if (key == "lights") {
             if (value != "all" && value != "training" && value != "between" && value != "path")
                 throw InputError("evaluator 'volume': lights='" + value +
                                  "' is not all, training, between or path");
-            lights = value;
+            spec.lights = value;
         } else {
             throw InputError("evaluator 'volume': unknown option '" + key +
                              "' (grid=NAME, samples=S, lights=SET)");
         }
     }
-    auto world = VolumeWorld::create(DensityVolume::read(path, grid), medium, path);
+    spec.path = path;
+    return spec;
+}
+
+std::unique_ptr<VolumeEvaluator> makeVolumeEvaluator(const std::string& args) {
+    const VolumeSpec spec = parseVolumeSpec(args);
+    const std::string& lights = spec.lights;
+    auto world = VolumeWorld::create(DensityVolume::read(spec.path, spec.grid), spec.medium, spec.path);
     const VolumeRig rig = VolumeRig::forMedium(*world);  // the demo's rig for this medium
     std::vector<VolumeLight> set;
     auto add = [&](const std::vector<VolumeLight>& l) { set.insert(set.end(), l.begin(), l.end()); };

@@ -178,6 +178,16 @@ private:
     std::string name_;
 };
 
+/// The parts of a `volume:` spec "FILE.vdb[:grid=NAME][:samples=S][:lights=SET]" (options are the
+/// trailing ':'-separated items that contain '='). @throws pmsc::InputError for a bad option.
+struct VolumeSpec {
+    std::string path;
+    std::string grid;            ///< empty: the file's density grid (DensityVolume::read)
+    std::string lights = "all";  ///< all, training, between or path
+    MediumSettings medium;
+};
+VolumeSpec parseVolumeSpec(const std::string& args);
+
 /// The `volume` evaluator of the command line: ARGS = "FILE.vdb[:grid=NAME][:samples=S]
 /// [:lights=all|training|between|path]". lights=all (default): the training lights of
 /// VolumeRig::forMedium (96 for the demo's smoke, more for a medium whose lighting changes faster

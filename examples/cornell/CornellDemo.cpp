@@ -10,6 +10,7 @@
 #include "examples/cornell/Renderer.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
+#include "pmsc/ModelIO.h"
 #include "pmsc/SpatialGrid.h"
 #include "pmsc/Training.h"
 
@@ -497,6 +498,10 @@ nlohmann::json runCornellDemo(const CornellDemoOptions& o) {
     report["images"] = written.images;
     report["vdb_files"] = written.vdbs;
     report["seconds"] = run.finish();
+    // The model and the scene spec that rebuilds these points: what `pmsc view` and `pmsc run` take.
+    writeModel(o.outDir + "/model.pmsc", trained.model);
+    writeFileAtomically(o.outDir + "/scene.txt", "cornell:points=" + std::to_string(o.points) +
+                                                     ",samples=" + std::to_string(o.samples) + "\n");
     writeFileAtomically(o.outDir + "/report.json", report.dump(2) + "\n");
     run.progress("done", 1, 1);
     return report;

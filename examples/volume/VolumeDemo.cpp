@@ -7,6 +7,7 @@
 #include "examples/volume/VolumeRenderer.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
+#include "pmsc/ModelIO.h"
 #include "pmsc/SpatialGrid.h"
 #include "pmsc/Training.h"
 
@@ -731,6 +732,10 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& options) {
     getrusage(RUSAGE_SELF, &usage);
     report["peak_rss_mb"] = static_cast<double>(usage.ru_maxrss) / 1024.0;
     report["seconds"] = run.finish();
+    // The model and the scene spec that rebuilds this medium: what `pmsc view` and `pmsc run` take.
+    writeModel(o.outDir + "/model.pmsc", trained.model);
+    writeFileAtomically(o.outDir + "/scene.txt", "volume:" + o.outDir + "/density.vdb:samples=" +
+                                                     std::to_string(o.medium.lightSamples) + "\n");
     writeFileAtomically(o.outDir + "/report.json", report.dump(2) + "\n");
     run.progress("done", 1, 1);
     return report;

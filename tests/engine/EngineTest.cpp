@@ -7,10 +7,15 @@
 #include "tests/engine/Synthetic.h"
 
 #include <gtest/gtest.h>
+
+#include <map>
+#include <mutex>
 #include <nlohmann/json.hpp>
 
 #include <cmath>
 #include <cstring>
+#include <map>
+#include <mutex>
 #include <random>
 
 namespace pmsc::engine {
@@ -374,6 +379,58 @@ TEST_F(Fixture, KeepPointMultiplicationHandsThePmResultOfEveryFrame) {
         const auto expected = testing::referenceFrame(model, evaluator, policy, f);
         for (size_t x = 0; x < r.size(); ++x) ASSERT_NEAR(sink.values().frame(f)[x], expected[x], 1e-9);
     }
+}
+
+TEST_F(Fixture, EstimateAndChunkCallbacksShowEachFailThroughAsItFinishes) {
+    // What an interactive client sees: a frame that does not hit reports its point multiplication
+    // once, before any branch, then every branch's final values; together they are the frame.
+    std::mutex m;
+    std::map<Index, std::vector<double>> estimates;                // frame -> PM values
+    std::map<Index, std::vector<std::pair<Index, Index>>> ranges;  // frame -> (first, count)
+    std::map<Index, std::vector<double>> assembled;                // frame -> values from the chunks
+    EngineOptions o = options(2);
+    o.onEstimate = [&](const FrameEstimate& e) {
+        std::lock_guard<std::mutex> lock(m);
+        EXPECT_NE(e.state, CacheState::Hit);
+        EXPECT_TRUE(ranges[e.frame].empty()) << "a branch finished before the estimate of frame " << e.frame;
+        EXPECT_EQ(estimates.count(e.frame), 0u);
+        estimates[e.frame].assign(e.values.begin(), e.values.end());
+    };
+    o.onChunk = [&](const ChunkFinished& c) {
+        std::lock_guard<std::mutex> lock(m);
+        EXPECT_EQ(estimates.count(c.frame), 1u)
+            << "a branch of frame " << c.frame << " came before its estimate";
+        const Index count = Index(c.values.size()) / 3;
+        ranges[c.frame].push_back({c.firstOutput, count});
+        auto& a = assembled[c.frame];
+        a.resize(size_t(model.points * 3));
+        std::copy(c.values.begin(), c.values.end(), a.begin() + std::ptrdiff_t(c.firstOutput * 3));
+    };
+    Engine engine(model, evaluator, o);
+    FrameSetSink sink(12, model.points, 3, /*keepPm*/ true);
+    withWatchdog(60, "run", [&] { engine.run({0, 12, 1}, sink); });
+    Index failedThrough = 0;
+    for (Index f = 0; f < 12; ++f) {
+        if (sink.info()[size_t(f)].state == CacheState::Hit) {
+            EXPECT_EQ(estimates.count(f), 0u);
+            continue;
+        }
+        ++failedThrough;
+        ASSERT_EQ(estimates.count(f), 1u) << f;
+        for (size_t x = 0; x < estimates[f].size(); ++x)
+            ASSERT_EQ(estimates[f][x], sink.pmValues().frame(f)[x]);
+        auto r = ranges[f];
+        std::sort(r.begin(), r.end());
+        Index next = 0;
+        for (const auto& [first, count] : r) {
+            EXPECT_EQ(first, next);
+            next = first + count;
+        }
+        EXPECT_EQ(next, model.points) << "the branches of frame " << f << " do not cover its points once";
+        for (size_t x = 0; x < assembled[f].size(); ++x)
+            ASSERT_EQ(assembled[f][x], sink.values().frame(f)[x]);
+    }
+    EXPECT_GT(failedThrough, 0);
 }
 
 TEST(EngineMemory, HundredThousandFramesRunInBoundedMemory) {

@@ -1,0 +1,243 @@
+// The server over real connections: HTTP for the page and the API, the WebSocket protocol, one
+// viewer at a time, bad messages and a client that leaves mid-frame.
+#include "pmsc/Errors.h"
+#include "tests/common/MissingData.h"
+#include "tests/viewer/ViewerFixture.h"
+#include "viewer/ViewServer.h"
+
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/http.hpp>
+#include <boost/beast/websocket.hpp>
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+namespace pmsc::viewer {
+namespace {
+
+namespace net = boost::asio;
+namespace beast = boost::beast;
+namespace http = beast::http;
+namespace websocket = beast::websocket;
+using tcp = net::ip::tcp;
+using test::smallVolume;
+
+/// A server on a free port, served by its own thread for the test's duration.
+class Running {
+public:
+    explicit Running(const Model& model) {
+        web_ = smallVolume().dir + "/web";
+        std::filesystem::create_directories(web_ + "/src");
+        std::ofstream(web_ + "/index.html") << "<!doctype html><title>pmsc view</title>";
+        std::ofstream(web_ + "/src/main.js") << "export const x = 1;\n";
+        ViewServerOptions o;
+        o.port = 0;
+        o.webRoot = web_;
+        o.threads = 2;
+        server_ = std::make_unique<ViewServer>(model, *smallVolume().scene, o);
+        thread_ = std::thread([this] { server_->run(stop_); });
+    }
+    ~Running() {
+        stop_ = true;
+        thread_.join();
+    }
+    int port() const { return server_->port(); }
+
+private:
+    std::string web_;
+    std::unique_ptr<ViewServer> server_;
+    std::atomic<bool> stop_{false};
+    std::thread thread_;
+};
+
+http::response<http::string_body> request(int port, http::verb verb, const std::string& target) {
+    net::io_context ioc;
+    beast::tcp_stream stream(ioc);
+    stream.connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), static_cast<unsigned short>(port)));
+    http::request<http::string_body> req{verb, target, 11};
+    req.set(http::field::host, "127.0.0.1");
+    http::write(stream, req);
+    beast::flat_buffer buffer;
+    http::response<http::string_body> res;
+    http::read(stream, buffer, res);
+    beast::error_code ec;
+    stream.socket().shutdown(tcp::socket::shutdown_both, ec);
+    return res;
+}
+
+/// A WebSocket client of /api/ws.
+class Viewer {
+public:
+    explicit Viewer(int port) : ws_(ioc_) {
+        beast::get_lowest_layer(ws_).connect(
+            tcp::endpoint(net::ip::make_address("127.0.0.1"), static_cast<unsigned short>(port)));
+        ws_.handshake("127.0.0.1", "/api/ws");
+    }
+    void send(const std::string& text) {
+        ws_.text(true);
+        ws_.write(net::buffer(text));
+    }
+    /// The next message: its text (empty for a binary one) and its bytes.
+    std::pair<bool, std::string> next() {
+        beast::flat_buffer b;
+        ws_.read(b);
+        return {ws_.got_text(), beast::buffers_to_string(b.data())};
+    }
+    nlohmann::json nextText() {
+        auto [text, data] = next();
+        EXPECT_TRUE(text);
+        return nlohmann::json::parse(data);
+    }
+    /// Reads until the final update of `seq`, checking each update's binary part.
+    nlohmann::json untilFinal(std::uint32_t seq) {
+        for (;;) {
+            const nlohmann::json m = nextText();
+            if (m["type"] != "update") continue;
+            auto [text, bin] = next();
+            EXPECT_FALSE(text);
+            EXPECT_GE(bin.size(), 16u);
+            std::uint32_t header[4];
+            std::memcpy(header, bin.data(), 16);
+            EXPECT_EQ(header[0], 0x564d5350u);
+            EXPECT_EQ(header[1], m["seq"].get<std::uint32_t>());
+            EXPECT_EQ(bin.size(), 16 + size_t(header[3]) * 3 * 2);
+            if (m["phase"] == "final" && m["seq"] == seq) return m;
+        }
+    }
+    websocket::stream<beast::tcp_stream>& stream() { return ws_; }
+
+private:
+    net::io_context ioc_;
+    websocket::stream<beast::tcp_stream> ws_;
+};
+
+std::string setMessage(std::uint32_t seq, double azimuth, double elevation) {
+    return nlohmann::json{{"type", "set"}, {"seq", seq}, {"controls", {{"azimuth", azimuth}, {"elevation", elevation}}}}
+        .dump();
+}
+
+class ViewServerTest : public ::testing::Test {
+protected:
+    void SetUp() override {
+        if (!smallVolume().scene) PMSC_MISSING_DATA("assimp-testmodels not installed (WusonOBJ.obj)");
+    }
+};
+
+TEST_F(ViewServerTest, ServesThePageTheSceneAndItsGeometryAndNothingElse) {
+    Running server(smallVolume().model);
+    const Index n = smallVolume().scene->pointCount();
+    auto scene = request(server.port(), http::verb::get, "/api/scene");
+    EXPECT_EQ(scene.result(), http::status::ok);
+    const auto j = nlohmann::json::parse(scene.body());
+    EXPECT_EQ(j["kind"], "volume");
+    EXPECT_EQ(j["points"], n);
+    EXPECT_EQ(j["controls"].size(), 3u);
+    EXPECT_EQ(j["model"]["keys"], smallVolume().model.keyCount());
+    const auto dims = j["grid"]["dims"];
+    EXPECT_GE(dims[0].get<long long>() * dims[1].get<long long>() * dims[2].get<long long>(), n);
+    EXPECT_EQ(request(server.port(), http::verb::get, "/api/geometry").body().size(), size_t(n) * 8);
+    EXPECT_NE(request(server.port(), http::verb::get, "/").body().find("pmsc view"), std::string::npos);
+    auto js = request(server.port(), http::verb::get, "/app/main.js?v=1");
+    EXPECT_EQ(js.result(), http::status::ok);
+    EXPECT_EQ(js[http::field::content_type], "text/javascript; charset=utf-8");
+    EXPECT_EQ(request(server.port(), http::verb::get, "/app/../index.html").result(), http::status::not_found);
+    EXPECT_EQ(request(server.port(), http::verb::get, "/etc/passwd").result(), http::status::not_found);
+    EXPECT_EQ(request(server.port(), http::verb::get, "/app/missing.js").result(), http::status::not_found);
+    EXPECT_EQ(request(server.port(), http::verb::post, "/api/scene").result(), http::status::method_not_allowed);
+}
+
+TEST_F(ViewServerTest, ARelightArrivesAsTextThenItsHalfFloats) {
+    Running server(smallVolume().model);
+    Viewer v(server.port());
+    EXPECT_EQ(v.nextText()["type"], "hello");
+    v.send(setMessage(1, 90, 40));
+    const auto last = v.untilFinal(1);
+    EXPECT_TRUE(last["converged"].get<bool>());
+    EXPECT_EQ(last["checksum"].get<std::string>().size(), 16u);
+}
+
+TEST_F(ViewServerTest, AMalformedMessageGetsAnErrorAndTheConnectionStaysUsable) {
+    Running server(smallVolume().model);
+    Viewer v(server.port());
+    v.nextText();
+    v.send("{\"type\":\"set\",\"seq\":");
+    const auto err = v.nextText();
+    EXPECT_EQ(err["type"], "error");
+    EXPECT_NE(err["message"].get<std::string>().find("not JSON"), std::string::npos);
+    v.stream().binary(true);
+    v.stream().write(net::buffer(std::string("\x01\x02", 2)));
+    EXPECT_NE(v.nextText()["message"].get<std::string>().find("binary messages"), std::string::npos);
+    v.send(setMessage(2, 10, 10));
+    EXPECT_TRUE(v.untilFinal(2)["converged"].get<bool>());
+}
+
+TEST_F(ViewServerTest, ASecondViewerIsToldAndClosedWhileTheFirstGoesOn) {
+    Running server(smallVolume().model);
+    Viewer first(server.port());
+    first.nextText();
+    Viewer second(server.port());
+    const auto err = second.nextText();
+    EXPECT_EQ(err["type"], "error");
+    EXPECT_NE(err["message"].get<std::string>().find("one at a time"), std::string::npos);
+    beast::flat_buffer b;
+    beast::error_code ec;
+    second.stream().read(b, ec);
+    EXPECT_EQ(ec, websocket::error::closed);
+    first.send(setMessage(1, 45, 45));
+    EXPECT_TRUE(first.untilFinal(1)["converged"].get<bool>());
+}
+
+TEST_F(ViewServerTest, AViewerThatLeavesMidFrameFreesTheServerForTheNext) {
+    Model missing = smallVolume().model;
+    missing.epsMin = missing.epsMax = 0;  // every frame fails through: the client leaves mid-way
+    Running server(missing);
+    {
+        Viewer v(server.port());
+        v.nextText();
+        v.send(setMessage(1, 30, 20));
+        EXPECT_EQ(v.nextText()["phase"], "estimate");
+        beast::get_lowest_layer(v.stream()).socket().close();  // no close handshake
+    }
+    // The server lets the first viewer go when it notices; a new one is served.
+    for (int attempt = 0;; ++attempt) {
+        Viewer v(server.port());
+        const auto hello = v.nextText();
+        if (hello["type"] == "hello") {
+            v.send(setMessage(2, 60, 20));
+            EXPECT_EQ(v.untilFinal(2)["state"], "miss");
+            break;
+        }
+        ASSERT_LT(attempt, 50) << "the server still holds the viewer that left";
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+}
+
+TEST_F(ViewServerTest, AnAddressInUseOrAMissingPageIsOneLine) {
+    Running server(smallVolume().model);
+    ViewServerOptions o;
+    o.port = server.port();
+    o.webRoot = smallVolume().dir + "/web";
+    try {
+        ViewServer again(smallVolume().model, *smallVolume().scene, o);
+        FAIL() << "bound a port in use";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("cannot listen on 127.0.0.1:" + std::to_string(o.port)), std::string::npos)
+            << e.what();
+    }
+    o.port = 0;
+    o.webRoot = smallVolume().dir + "/nowhere";
+    try {
+        ViewServer none(smallVolume().model, *smallVolume().scene, o);
+        FAIL() << "served without a page";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("no index.html"), std::string::npos) << e.what();
+    }
+}
+
+}  // namespace
+}  // namespace pmsc::viewer

@@ -1,0 +1,356 @@
+// The only file that includes Boost.Beast and Boost.Asio (heavy headers), behind ViewServer.h.
+#include "viewer/ViewServer.h"
+
+#include "pmsc/Errors.h"
+#include "viewer/RelightSession.h"
+
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/post.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/http.hpp>
+#include <boost/beast/websocket.hpp>
+
+#include <chrono>
+#include <cstdlib>
+#include <deque>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+
+namespace pmsc::viewer {
+
+namespace net = boost::asio;
+namespace beast = boost::beast;
+namespace http = beast::http;
+namespace websocket = beast::websocket;
+using tcp = net::ip::tcp;
+
+namespace {
+
+std::string contentType(const std::string& path) {
+    const std::string ext = std::filesystem::path(path).extension().string();
+    if (ext == ".html") return "text/html; charset=utf-8";
+    if (ext == ".js" || ext == ".mjs") return "text/javascript; charset=utf-8";
+    if (ext == ".css") return "text/css; charset=utf-8";
+    if (ext == ".json" || ext == ".map") return "application/json";
+    if (ext == ".png") return "image/png";
+    if (ext == ".svg") return "image/svg+xml";
+    return "application/octet-stream";
+}
+
+/// The file a URL path names under the web root, or empty: only the page's own prefixes, no "..".
+std::string fileOf(const std::string& root, std::string target) {
+    target = target.substr(0, target.find_first_of("?#"));
+    if (target.find("..") != std::string::npos || target.find('\\') != std::string::npos) return {};
+    struct Prefix {
+        const char* url;
+        const char* dir;
+    };
+    static const Prefix prefixes[] = {{"/app/", "src/"},
+                                      {"/vendor/three/", "node_modules/three/build/"},
+                                      {"/vendor/three-addons/", "node_modules/three/examples/jsm/"}};
+    if (target == "/" || target == "/index.html") return root + "/index.html";
+    for (const Prefix& p : prefixes) {
+        const std::string url = p.url;
+        if (target.compare(0, url.size(), url) == 0 && target.size() > url.size())
+            return root + "/" + p.dir + target.substr(url.size());
+    }
+    return {};
+}
+
+bool readWhole(const std::string& path, std::string& out) {
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(path, ec)) return false;
+    std::ifstream in(path, std::ios::binary);
+    std::ostringstream s;
+    s << in.rdbuf();
+    if (!in.good() && !in.eof()) return false;
+    out = s.str();
+    return true;
+}
+
+}  // namespace
+
+std::string defaultWebRoot() {
+    if (const char* env = std::getenv("PMSC_VIEW_WEB"); env && *env) return env;
+    std::error_code ec;
+    const auto exe = std::filesystem::read_symlink("/proc/self/exe", ec);
+    if (!ec) {
+        const auto installed = exe.parent_path().parent_path() / "share" / "pmsc" / "web" / "viewer";
+        if (std::filesystem::is_regular_file(installed / "index.html", ec)) return installed.string();
+    }
+    return PMSC_WEB_DIR;
+}
+
+struct ViewServer::Impl {
+    const Model& model;
+    const RelightScene& scene;
+    ViewServerOptions options;
+    std::string sceneJson;
+    std::string geometry;
+    net::io_context ioc{1};
+    tcp::acceptor acceptor{ioc};
+
+    class WsConnection;
+    std::weak_ptr<WsConnection> viewer;  ///< the one connected viewer (I/O thread only)
+
+    Impl(const Model& m, const RelightScene& s, ViewServerOptions o) : model(m), scene(s), options(std::move(o)) {
+        std::error_code fe;
+        if (!std::filesystem::is_regular_file(options.webRoot + "/index.html", fe))
+            throw InputError("view: no index.html in the web root '" + options.webRoot + "' (--web DIR)");
+        nlohmann::json j = scene.describe();
+        j["controls"] = nlohmann::json::array();
+        for (const Control& c : scene.controls()) {
+            j["controls"].push_back({{"name", c.name},
+                                     {"label", c.label},
+                                     {"unit", c.unit},
+                                     {"min", c.min},
+                                     {"max", c.max},
+                                     {"step", c.step},
+                                     {"value", c.value}});
+        }
+        j["light"] = scene.light(scene.defaults());
+        j["model"] = {{"basis", model.basis.cols()},
+                      {"keys", model.keyCount()},
+                      {"eps_min", model.epsMin},
+                      {"eps_max", model.epsMax},
+                      {"key_error", toString(model.keyErrorNorm)}};
+        sceneJson = j.dump();
+        geometry = scene.geometry();
+        if (model.points != scene.pointCount())
+            throw InputError("view: the model has " + std::to_string(model.points) + " points, the " + scene.kind() +
+                             " scene " + std::to_string(scene.pointCount()) +
+                             ": train it on this scene's frames (pmsc demo " + scene.kind() +
+                             " --out DIR writes DIR/model.pmsc and DIR/scene.txt)");
+        boost::system::error_code ec;
+        const auto address = net::ip::make_address(options.bind, ec);
+        if (ec) throw InputError("view: --bind '" + options.bind + "' is not an IP address");
+        const tcp::endpoint endpoint(address, static_cast<unsigned short>(options.port));
+        acceptor.open(endpoint.protocol(), ec);
+        if (!ec) acceptor.set_option(net::socket_base::reuse_address(true), ec);
+        if (!ec) acceptor.bind(endpoint, ec);
+        if (!ec) acceptor.listen(net::socket_base::max_listen_connections, ec);
+        if (ec)
+            throw InputError("view: cannot listen on " + options.bind + ":" + std::to_string(options.port) + ": " +
+                             ec.message());
+    }
+
+    void accept();
+    http::response<http::string_body> respond(const http::request<http::string_body>& req) const;
+};
+
+/// One viewer's WebSocket: reads client messages into its RelightSession, writes the session's
+/// updates in order (text, then its binary part).
+class ViewServer::Impl::WsConnection : public std::enable_shared_from_this<WsConnection> {
+public:
+    WsConnection(Impl& server, tcp::socket socket) : server_(server), ws_(std::move(socket)) {}
+
+    void start(http::request<http::string_body> req) {
+        ws_.set_option(websocket::stream_base::timeout::suggested(beast::role_type::server));
+        ws_.read_message_max(1 << 20);
+        ws_.async_accept(req, [self = shared_from_this()](beast::error_code ec) { self->accepted(ec); });
+    }
+
+    /// Ends the relighting (cancels the frame in progress and joins its thread).
+    void stop() { session_.reset(); }
+
+private:
+    struct Out {
+        std::string data;
+        bool text;
+    };
+
+    void accepted(beast::error_code ec) {
+        if (ec) return;
+        if (server_.viewer.lock()) {
+            closing_ = true;
+            queue(nlohmann::json{{"type", "error"},
+                                 {"message", "another viewer is connected: pmsc view serves one at a time"}}
+                      .dump(),
+                  true);
+            return;
+        }
+        server_.viewer = weak_from_this();
+        queue(nlohmann::json{{"type", "hello"}, {"version", 1}}.dump(), true);
+        try {
+            std::weak_ptr<WsConnection> weak = weak_from_this();
+            net::io_context& ioc = server_.ioc;
+            const Index channels = server_.model.channels;
+            session_ = std::make_unique<RelightSession>(
+                server_.model, server_.scene, server_.options.threads, [weak, &ioc, channels](Update&& u) {
+                    std::string text = u.text.dump();
+                    std::string bin = u.binaryFollows ? u.binary(channels) : std::string();
+                    const bool withBinary = u.binaryFollows;
+                    net::post(ioc, [weak, text = std::move(text), bin = std::move(bin), withBinary]() mutable {
+                        if (auto self = weak.lock()) {
+                            self->queue(std::move(text), true);
+                            if (withBinary) self->queue(std::move(bin), false);
+                        }
+                    });
+                });
+        } catch (const std::exception& e) {
+            closing_ = true;
+            queue(nlohmann::json{{"type", "error"}, {"message", e.what()}}.dump(), true);
+            return;
+        }
+        read();
+    }
+
+    void read() {
+        ws_.async_read(buffer_, [self = shared_from_this()](beast::error_code ec, std::size_t) { self->onRead(ec); });
+    }
+
+    void onRead(beast::error_code ec) {
+        if (ec) {
+            // Closed or broken: stop the relighting (cancels the frame in progress) and let go.
+            session_.reset();
+            return;
+        }
+        const bool text = ws_.got_text();
+        const std::string message = beast::buffers_to_string(buffer_.data());
+        buffer_.consume(buffer_.size());
+        try {
+            if (!text) throw InputError("binary messages are not part of the viewer protocol (send JSON text)");
+            session_->receive(message);
+        } catch (const std::exception& e) {
+            queue(nlohmann::json{{"type", "error"}, {"message", e.what()}}.dump(), true);
+        }
+        read();
+    }
+
+    void queue(std::string data, bool text) {
+        out_.push_back({std::move(data), text});
+        if (!writing_) write();
+    }
+
+    void write() {
+        if (out_.empty()) {
+            writing_ = false;
+            if (closing_) {
+                ws_.async_close(websocket::close_code::try_again_later,
+                                [self = shared_from_this()](beast::error_code) {});
+            }
+            return;
+        }
+        writing_ = true;
+        ws_.text(out_.front().text);
+        ws_.async_write(net::buffer(out_.front().data),
+                        [self = shared_from_this()](beast::error_code ec, std::size_t) {
+                            self->out_.pop_front();
+                            if (ec) {
+                                self->out_.clear();
+                                self->writing_ = false;
+                                return;
+                            }
+                            self->write();
+                        });
+    }
+
+    Impl& server_;
+    websocket::stream<beast::tcp_stream> ws_;
+    beast::flat_buffer buffer_;
+    std::unique_ptr<RelightSession> session_;
+    std::deque<Out> out_;
+    bool writing_ = false;
+    bool closing_ = false;
+};
+
+namespace {
+
+/// One HTTP connection: requests answered in turn until the client closes, or handed to a
+/// WsConnection on an upgrade to /api/ws.
+template <class Server>
+class HttpConnection : public std::enable_shared_from_this<HttpConnection<Server>> {
+public:
+    HttpConnection(Server& server, tcp::socket socket) : server_(server), stream_(std::move(socket)) {}
+
+    void read() {
+        req_ = {};
+        stream_.expires_after(std::chrono::seconds(60));
+        http::async_read(stream_, buffer_, req_,
+                         [self = this->shared_from_this()](beast::error_code ec, std::size_t) { self->onRead(ec); });
+    }
+
+private:
+    void onRead(beast::error_code ec) {
+        if (ec) return;  // closed, timed out or malformed: Beast has nothing to answer
+        if (websocket::is_upgrade(req_)) {
+            if (req_.target() == "/api/ws") {
+                stream_.expires_never();
+                std::make_shared<typename Server::WsConnection>(server_, stream_.release_socket())
+                    ->start(std::move(req_));
+                return;
+            }
+        }
+        res_ = server_.respond(req_);
+        http::async_write(stream_, res_, [self = this->shared_from_this()](beast::error_code e, std::size_t) {
+            if (e) return;
+            if (self->res_.need_eof()) {
+                beast::error_code ignored;
+                self->stream_.socket().shutdown(tcp::socket::shutdown_send, ignored);
+                return;
+            }
+            self->read();
+        });
+    }
+
+    Server& server_;
+    beast::tcp_stream stream_;
+    beast::flat_buffer buffer_;
+    http::request<http::string_body> req_;
+    http::response<http::string_body> res_;
+};
+
+}  // namespace
+
+http::response<http::string_body> ViewServer::Impl::respond(const http::request<http::string_body>& req) const {
+    http::response<http::string_body> res;
+    res.version(req.version());
+    res.keep_alive(req.keep_alive());
+    res.set(http::field::server, "pmsc view");
+    res.set(http::field::cache_control, "no-store");
+    auto reply = [&](http::status status, std::string type, std::string body) {
+        res.result(status);
+        res.set(http::field::content_type, type);
+        res.body() = std::move(body);
+        res.prepare_payload();
+        return res;
+    };
+    if (req.method() != http::verb::get && req.method() != http::verb::head)
+        return reply(http::status::method_not_allowed, "text/plain", "pmsc view answers GET only\n");
+    const std::string target(req.target());
+    if (target == "/api/scene") return reply(http::status::ok, "application/json", sceneJson);
+    if (target == "/api/geometry") return reply(http::status::ok, "application/octet-stream", geometry);
+    const std::string path = fileOf(options.webRoot, target);
+    std::string body;
+    if (path.empty() || !readWhole(path, body))
+        return reply(http::status::not_found, "text/plain", "not found: " + target + "\n");
+    return reply(http::status::ok, contentType(path), std::move(body));
+}
+
+void ViewServer::Impl::accept() {
+    acceptor.async_accept([this](beast::error_code ec, tcp::socket socket) {
+        if (!ec) std::make_shared<HttpConnection<Impl>>(*this, std::move(socket))->read();
+        if (acceptor.is_open()) accept();
+    });
+}
+
+ViewServer::ViewServer(const Model& model, const RelightScene& scene, ViewServerOptions options)
+    : impl_(std::make_unique<Impl>(model, scene, std::move(options))) {}
+
+ViewServer::~ViewServer() = default;
+
+int ViewServer::port() const { return impl_->acceptor.local_endpoint().port(); }
+
+void ViewServer::run(const std::atomic<bool>& stop) {
+    impl_->accept();
+    while (!stop.load()) impl_->ioc.run_for(std::chrono::milliseconds(100));
+    // The session's thread posts to the I/O context: end it while the context still exists.
+    if (auto v = impl_->viewer.lock()) v->stop();
+    beast::error_code ec;
+    impl_->acceptor.close(ec);
+    impl_->ioc.stop();
+}
+
+}  // namespace pmsc::viewer

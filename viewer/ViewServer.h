@@ -1,0 +1,50 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include "pmsc/Model.h"
+#include "viewer/RelightScene.h"
+
+#include <atomic>
+#include <memory>
+#include <string>
+
+namespace pmsc::viewer {
+
+struct ViewServerOptions {
+    std::string bind = "127.0.0.1";  ///< address to listen on (loopback by default)
+    int port = 8080;                 ///< 0: any free port (ViewServer::port() tells which)
+    std::string webRoot;             ///< the page: index.html, src/, node_modules/three
+    int threads = 0;                 ///< the engine's worker threads (0: every core)
+};
+
+/// The page's folder: PMSC_VIEW_WEB if set, else the installed share/pmsc/web/viewer beside the
+/// program's prefix if it exists, else the source tree's web/viewer the build was made from.
+std::string defaultWebRoot();
+
+/// `pmsc view`'s server: the page and its files over HTTP, the scene's description and geometry
+/// (/api/scene, /api/geometry), and one viewer's relighting over a WebSocket (/api/ws, a
+/// RelightSession). Boost.Beast on one I/O thread (the caller of run()); the relighting runs on
+/// the session's thread and the engine's arena, and its updates are posted to the I/O thread.
+/// One viewer at a time: a second WebSocket gets an error message and is closed. Only GET
+/// requests for the page's files and the API are answered; everything else is 404 or 405.
+/// The protocol: docs/viewer.md.
+class ViewServer {
+public:
+    /// Binds and listens. @throws pmsc::InputError (one line) if the address cannot be bound,
+    ///         the web root has no index.html, or the model does not match the scene.
+    ViewServer(const Model& model, const RelightScene& scene, ViewServerOptions options);
+    ~ViewServer();
+    ViewServer(const ViewServer&) = delete;
+    ViewServer& operator=(const ViewServer&) = delete;
+
+    /// The port it listens on.
+    int port() const;
+    /// Serves until `stop` is set (checked every 100 ms), then closes every connection.
+    void run(const std::atomic<bool>& stop);
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace pmsc::viewer
