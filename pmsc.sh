@@ -115,22 +115,23 @@ run_sanitizers() {
   cmake --build build-asan -j "$JOBS" --target pmsc_unit_tests pmsc_io_tests pmsc_capi_test_model pmsc_capi_bad_inputs
   ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
     ctest --test-dir build-asan -L unit --output-on-failure -j "$JOBS"
-  # The engine's tests under ThreadSanitizer.
+  # The engine's tests and pmsc view's session and server (threads of their own around the
+  # engine) under ThreadSanitizer.
   if [ -d engine ] && grep -q pmsc_engine_tests tests/engine/CMakeLists.txt 2>/dev/null; then
     configure build-tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPMSC_SANITIZE=thread \
       -DPMSC_BUILD_EXAMPLES=OFF -DPMSC_BUILD_BENCH=OFF
-    cmake --build build-tsan -j "$JOBS" --target pmsc_engine_tests
+    cmake --build build-tsan -j "$JOBS" --target pmsc_engine_tests pmsc_viewer_tests
     # A oneTBB worker can end inside the uninstrumented libtbb after a test passed, which
     # ThreadSanitizer reports as "finished with ignores enabled" (no race, no test failure of
     # its own). Such a test runs once more; any other report fails the suite.
     local log=build-tsan/Testing/Temporary/LastTest.log
     if ! TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1 \
-      ctest --test-dir build-tsan -L engine --output-on-failure -j "$JOBS"; then
+      ctest --test-dir build-tsan -L '^(engine|viewer)$' --output-on-failure -j "$JOBS"; then
       grep -q "finished with ignores enabled" "$log" && ! grep -qE "WARNING: ThreadSanitizer|FAILED  \]" "$log" ||
-        die "ThreadSanitizer failed the engine tests (see $log)"
+        die "ThreadSanitizer failed the engine or viewer tests (see $log)"
       echo "pmsc.sh: a oneTBB worker ended with ThreadSanitizer's ignores enabled; running that test again"
       TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1 \
-        ctest --test-dir build-tsan -L engine --rerun-failed --output-on-failure -j "$JOBS"
+        ctest --test-dir build-tsan -L '^(engine|viewer)$' --rerun-failed --output-on-failure -j "$JOBS"
     fi
   fi
 }

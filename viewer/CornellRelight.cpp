@@ -93,7 +93,8 @@ private:
 std::unique_ptr<RelightScene> makeCornellScene(const std::string& args) {
     const cornell::CornellSpec spec = cornell::parseCornellSpec(args);
     if (args.find("lights=") != std::string::npos)
-        throw InputError("scene 'cornell': lights= is not an option of the viewer (its controls move the light)");
+        throw InputError(
+            "scene 'cornell': lights= is not an option of the viewer (its controls move the light)");
     return std::make_unique<CornellRelightScene>(CornellWorld::create(spec.points), spec.samples,
                                                  "cornell:" + args);
 }

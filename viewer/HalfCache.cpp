@@ -20,7 +20,8 @@ float fromHalf(std::uint16_t h) { return float(Eigen::half(Eigen::half_impl::raw
 
 std::span<const std::uint16_t> HalfCache::write(Index first, std::span<const double> values) {
     const size_t begin = size_t(first * channels_);
-    if (begin + values.size() > values_.size()) throw std::out_of_range("HalfCache::write: range past the end");
+    if (begin + values.size() > values_.size())
+        throw std::out_of_range("HalfCache::write: range past the end");
     std::transform(values.begin(), values.end(), values_.begin() + std::ptrdiff_t(begin), toHalf);
     return std::span<const std::uint16_t>(values_).subspan(begin, values.size());
 }

@@ -10,7 +10,7 @@
 
 namespace pmsc::viewer {
 
-std::unique_ptr<RelightScene> makeVolumeScene(const std::string& args);    // VolumeRelight.cpp
+std::unique_ptr<RelightScene> makeVolumeScene(const std::string& args);   // VolumeRelight.cpp
 std::unique_ptr<RelightScene> makeCornellScene(const std::string& args);  // CornellRelight.cpp
 
 namespace {
@@ -33,7 +33,8 @@ Controls RelightScene::resolve(const Controls& given) const {
     Controls c = defaults();
     for (const auto& [name, value] : given) {
         const auto& list = controls();
-        const auto it = std::find_if(list.begin(), list.end(), [&](const Control& k) { return k.name == name; });
+        const auto it =
+            std::find_if(list.begin(), list.end(), [&](const Control& k) { return k.name == name; });
         if (it == list.end()) {
             std::string names;
             for (const Control& k : list) names += (names.empty() ? "" : ", ") + k.name;
@@ -77,7 +78,8 @@ DenseLayout DenseLayout::of(const std::vector<std::array<double, 3>>& positions,
         d.origin[a] = lo[a];
         d.dims[a] = std::llround((hi[a] - lo[a]) / voxel) + 1;
     }
-    if (double(d.dims[0]) * double(d.dims[1]) * double(d.dims[2]) > double(std::numeric_limits<std::uint32_t>::max()))
+    if (double(d.dims[0]) * double(d.dims[1]) * double(d.dims[2]) >
+        double(std::numeric_limits<std::uint32_t>::max()))
         throw InputError("dense layout: the points' box has more than 2^32 voxels");
     d.index.reserve(positions.size());
     for (const auto& p : positions) {
@@ -91,7 +93,9 @@ DenseLayout DenseLayout::of(const std::vector<std::array<double, 3>>& positions,
 }
 
 nlohmann::json DenseLayout::toJson() const {
-    return {{"dims", {dims[0], dims[1], dims[2]}}, {"origin", {origin[0], origin[1], origin[2]}}, {"voxel", voxel}};
+    return {{"dims", {dims[0], dims[1], dims[2]}},
+            {"origin", {origin[0], origin[1], origin[2]}},
+            {"voxel", voxel}};
 }
 
 }  // namespace pmsc::viewer

@@ -22,14 +22,18 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double msSince(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
+double msSince(Clock::time_point t) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
 
 /// The frames of a viewer: frame f is the full calculation for the f-th request's controls. The
 /// engine sees one evaluator whose frames grow as the lighter moves the light; only the newest
 /// few are kept (a frame is evaluated only while its request runs).
 class LightFrames : public PointEvaluator {
 public:
-    explicit LightFrames(std::shared_ptr<const PointEvaluator> first) : first_(first) { frames_.push_back(first); }
+    explicit LightFrames(std::shared_ptr<const PointEvaluator> first) : first_(first) {
+        frames_.push_back(first);
+    }
 
     Index append(std::shared_ptr<const PointEvaluator> e) {
         std::lock_guard<std::mutex> lock(mutex_);
@@ -69,9 +73,12 @@ private:
 
 const char* stateName(CacheState s) {
     switch (s) {
-        case CacheState::Hit: return "hit";
-        case CacheState::Blend: return "blend";
-        case CacheState::Miss: return "miss";
+        case CacheState::Hit:
+            return "hit";
+        case CacheState::Blend:
+            return "blend";
+        case CacheState::Miss:
+            return "miss";
     }
     return "miss";
 }
@@ -90,13 +97,15 @@ std::uint32_t sequenceOf(const nlohmann::json& msg) {
     const auto it = msg.find("seq");
     if (it == msg.end() || !it->is_number_integer() || it->get<std::int64_t>() < 0 ||
         it->get<std::int64_t>() > std::int64_t(UINT32_MAX))
-        throw InputError("message '" + msg.value("type", std::string()) + "' needs \"seq\": an integer in [0, 2^32)");
+        throw InputError("message '" + msg.value("type", std::string()) +
+                         "' needs \"seq\": an integer in [0, 2^32)");
     return it->get<std::uint32_t>();
 }
 
 Controls controlsOf(const nlohmann::json& msg) {
     const auto it = msg.find("controls");
-    if (it == msg.end() || !it->is_object()) throw InputError("message 'set' needs \"controls\": an object of numbers");
+    if (it == msg.end() || !it->is_object())
+        throw InputError("message 'set' needs \"controls\": an object of numbers");
     Controls c;
     for (const auto& [name, value] : it->items()) {
         if (!value.is_number()) throw InputError("control '" + name + "' is not a number");
@@ -161,9 +170,9 @@ struct RelightSession::Impl : engine::FrameSink {
           reference(s.pointCount(), m.channels),
           lastControls(s.defaults()) {
         if (m.points != points || m.channels != frames.channelCount()) {
-            throw InputError("the model has " + std::to_string(m.points) + " points x " + std::to_string(m.channels) +
-                             " channels, the " + s.kind() + " scene " + std::to_string(points) + " x " +
-                             std::to_string(frames.channelCount()) +
+            throw InputError("the model has " + std::to_string(m.points) + " points x " +
+                             std::to_string(m.channels) + " channels, the " + s.kind() + " scene " +
+                             std::to_string(points) + " x " + std::to_string(frames.channelCount()) +
                              ": train it on this scene's frames (pmsc demo " + s.kind() +
                              " --out DIR writes DIR/model.pmsc and DIR/scene.txt)");
         }
@@ -190,15 +199,9 @@ struct RelightSession::Impl : engine::FrameSink {
     }
 
     nlohmann::json header(const char* target, const char* phase, const std::string& state) const {
-        return {{"type", "update"},
-                {"seq", current.seq},
-                {"target", target},
-                {"phase", phase},
-                {"state", state},
-                {"eps_min", model.epsMin},
-                {"eps_max", model.epsMax},
-                {"light", currentLight},
-                {"points_total", points}};
+        return {{"type", "update"},        {"seq", current.seq},    {"target", target},
+                {"phase", phase},          {"state", state},        {"eps_min", model.epsMin},
+                {"eps_max", model.epsMax}, {"light", currentLight}, {"points_total", points}};
     }
 
     /// Writes values into `target`, and emits them. Caller holds emitMutex.
@@ -348,7 +351,8 @@ struct RelightSession::Impl : engine::FrameSink {
             if (deliveredState == CacheState::Blend) ++counts.blends;
             if (deliveredState == CacheState::Miss) ++counts.misses;
         }
-        sendFinal(cache, "cache", stateName(deliveredState), deliveredState == CacheState::Hit, std::move(timing));
+        sendFinal(cache, "cache", stateName(deliveredState), deliveredState == CacheState::Hit,
+                  std::move(timing));
     }
 
     /// The full calculation of every point, in the engine's branch sizes, each range sent as it
@@ -402,7 +406,8 @@ struct RelightSession::Impl : engine::FrameSink {
             r.kind = Request::Kind::Reference;
         } else if (type == "mode") {
             const std::string view = msg.value("view", std::string());
-            if (view != "cache" && view != "full") throw InputError("message 'mode' needs \"view\": cache or full");
+            if (view != "cache" && view != "full")
+                throw InputError("message 'mode' needs \"view\": cache or full");
             std::lock_guard<std::mutex> lock(queueMutex);
             fullView = view == "full";
             return;

@@ -17,9 +17,9 @@ namespace pmsc::viewer {
 /// One message of the viewer protocol's `update` (docs/viewer.md): the text part as JSON and the
 /// binary part's range of half floats.
 struct Update {
-    nlohmann::json text;             ///< {"type": "update", "seq", "target", "phase", "state", ...}
+    nlohmann::json text;  ///< {"type": "update", "seq", "target", "phase", "state", ...}
     std::uint32_t seq = 0;
-    std::uint32_t first = 0;         ///< first point of the range
+    std::uint32_t first = 0;           ///< first point of the range
     std::vector<std::uint16_t> halfs;  ///< count x C half floats (count = halfs.size() / C)
     bool binaryFollows = true;         ///< false for an `error` message (text only)
 

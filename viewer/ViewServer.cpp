@@ -95,7 +95,8 @@ struct ViewServer::Impl {
     class WsConnection;
     std::weak_ptr<WsConnection> viewer;  ///< the one connected viewer (I/O thread only)
 
-    Impl(const Model& m, const RelightScene& s, ViewServerOptions o) : model(m), scene(s), options(std::move(o)) {
+    Impl(const Model& m, const RelightScene& s, ViewServerOptions o)
+        : model(m), scene(s), options(std::move(o)) {
         std::error_code fe;
         if (!std::filesystem::is_regular_file(options.webRoot + "/index.html", fe))
             throw InputError("view: no index.html in the web root '" + options.webRoot + "' (--web DIR)");
@@ -119,8 +120,8 @@ struct ViewServer::Impl {
         sceneJson = j.dump();
         geometry = scene.geometry();
         if (model.points != scene.pointCount())
-            throw InputError("view: the model has " + std::to_string(model.points) + " points, the " + scene.kind() +
-                             " scene " + std::to_string(scene.pointCount()) +
+            throw InputError("view: the model has " + std::to_string(model.points) + " points, the " +
+                             scene.kind() + " scene " + std::to_string(scene.pointCount()) +
                              ": train it on this scene's frames (pmsc demo " + scene.kind() +
                              " --out DIR writes DIR/model.pmsc and DIR/scene.txt)");
         boost::system::error_code ec;
@@ -132,8 +133,8 @@ struct ViewServer::Impl {
         if (!ec) acceptor.bind(endpoint, ec);
         if (!ec) acceptor.listen(net::socket_base::max_listen_connections, ec);
         if (ec)
-            throw InputError("view: cannot listen on " + options.bind + ":" + std::to_string(options.port) + ": " +
-                             ec.message());
+            throw InputError("view: cannot listen on " + options.bind + ":" + std::to_string(options.port) +
+                             ": " + ec.message());
     }
 
     void accept();
@@ -182,12 +183,13 @@ private:
                     std::string text = u.text.dump();
                     std::string bin = u.binaryFollows ? u.binary(channels) : std::string();
                     const bool withBinary = u.binaryFollows;
-                    net::post(ioc, [weak, text = std::move(text), bin = std::move(bin), withBinary]() mutable {
-                        if (auto self = weak.lock()) {
-                            self->queue(std::move(text), true);
-                            if (withBinary) self->queue(std::move(bin), false);
-                        }
-                    });
+                    net::post(ioc,
+                              [weak, text = std::move(text), bin = std::move(bin), withBinary]() mutable {
+                                  if (auto self = weak.lock()) {
+                                      self->queue(std::move(text), true);
+                                      if (withBinary) self->queue(std::move(bin), false);
+                                  }
+                              });
                 });
         } catch (const std::exception& e) {
             closing_ = true;
@@ -198,7 +200,8 @@ private:
     }
 
     void read() {
-        ws_.async_read(buffer_, [self = shared_from_this()](beast::error_code ec, std::size_t) { self->onRead(ec); });
+        ws_.async_read(buffer_,
+                       [self = shared_from_this()](beast::error_code ec, std::size_t) { self->onRead(ec); });
     }
 
     void onRead(beast::error_code ec) {
@@ -211,7 +214,8 @@ private:
         const std::string message = beast::buffers_to_string(buffer_.data());
         buffer_.consume(buffer_.size());
         try {
-            if (!text) throw InputError("binary messages are not part of the viewer protocol (send JSON text)");
+            if (!text)
+                throw InputError("binary messages are not part of the viewer protocol (send JSON text)");
             session_->receive(message);
         } catch (const std::exception& e) {
             queue(nlohmann::json{{"type", "error"}, {"message", e.what()}}.dump(), true);
@@ -268,8 +272,9 @@ public:
     void read() {
         req_ = {};
         stream_.expires_after(std::chrono::seconds(60));
-        http::async_read(stream_, buffer_, req_,
-                         [self = this->shared_from_this()](beast::error_code ec, std::size_t) { self->onRead(ec); });
+        http::async_read(
+            stream_, buffer_, req_,
+            [self = this->shared_from_this()](beast::error_code ec, std::size_t) { self->onRead(ec); });
     }
 
 private:
@@ -304,7 +309,8 @@ private:
 
 }  // namespace
 
-http::response<http::string_body> ViewServer::Impl::respond(const http::request<http::string_body>& req) const {
+http::response<http::string_body> ViewServer::Impl::respond(
+    const http::request<http::string_body>& req) const {
     http::response<http::string_body> res;
     res.version(req.version());
     res.keep_alive(req.keep_alive());

@@ -37,13 +37,14 @@ public:
     nlohmann::json describe() const override {
         const auto& m = world_->medium;
         const auto c = world_->centre;
-        return {{"kind", "volume"},
-                {"source", source_},
-                {"points", pointCount()},
-                {"channels", 3},
-                {"grid", layout_.toJson()},
-                {"camera", {{"target", {c.x, c.y, c.z}}, {"distance", 3.2 * world_->radius}, {"up", {0, 1, 0}}}},
-                {"volume", {{"sigma_t", m.sigmaT}, {"albedo", {m.albedo[0], m.albedo[1], m.albedo[2]}}}}};
+        return {
+            {"kind", "volume"},
+            {"source", source_},
+            {"points", pointCount()},
+            {"channels", 3},
+            {"grid", layout_.toJson()},
+            {"camera", {{"target", {c.x, c.y, c.z}}, {"distance", 3.2 * world_->radius}, {"up", {0, 1, 0}}}},
+            {"volume", {{"sigma_t", m.sigmaT}, {"albedo", {m.albedo[0], m.albedo[1], m.albedo[2]}}}}};
     }
 
     std::string geometry() const override {
@@ -83,8 +84,10 @@ private:
 std::unique_ptr<RelightScene> makeVolumeScene(const std::string& args) {
     const volume::VolumeSpec spec = volume::parseVolumeSpec(args);
     if (args.find(":lights=") != std::string::npos)
-        throw InputError("scene 'volume': lights= is not an option of the viewer (its controls move the light)");
-    auto world = VolumeWorld::create(volume::DensityVolume::read(spec.path, spec.grid), spec.medium, spec.path);
+        throw InputError(
+            "scene 'volume': lights= is not an option of the viewer (its controls move the light)");
+    auto world =
+        VolumeWorld::create(volume::DensityVolume::read(spec.path, spec.grid), spec.medium, spec.path);
     return std::make_unique<VolumeScene>(std::move(world), spec.path);
 }
 

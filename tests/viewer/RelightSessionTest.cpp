@@ -150,7 +150,8 @@ TEST_F(RelightSessionTest, AMissShowsTheEstimateThenConvergesToTheFullCalculatio
     std::vector<int> covered(size_t(n), 0);
     for (size_t i = 1; i + 1 < updates.size(); ++i) {
         EXPECT_EQ(updates[i].text["phase"], "chunk");
-        for (Index p = 0; p < Index(updates[i].halfs.size()) / 3; ++p) ++covered[size_t(updates[i].first + p)];
+        for (Index p = 0; p < Index(updates[i].halfs.size()) / 3; ++p)
+            ++covered[size_t(updates[i].first + p)];
     }
     EXPECT_TRUE(std::all_of(covered.begin(), covered.end(), [](int c) { return c == 1; }));
     const auto full = halfsOf(fullValues(*v.scene, {{"azimuth", 200}, {"elevation", -20}}));
@@ -227,7 +228,8 @@ TEST_F(RelightSessionTest, BadMessagesAreOneLineErrorsAndTheSessionGoesOn) {
               std::string::npos);
     EXPECT_NE(messageOf(R"({"type":"set","seq":1,"controls":{"elevation":"up"}})").find("not a number"),
               std::string::npos);
-    EXPECT_NE(messageOf(setMessage(1, 400, 10)).find("'azimuth' = 400 is outside [0, 360]"), std::string::npos);
+    EXPECT_NE(messageOf(setMessage(1, 400, 10)).find("'azimuth' = 400 is outside [0, 360]"),
+              std::string::npos);
     EXPECT_NE(messageOf(R"({"type":"mode","view":"x"})").find("cache or full"), std::string::npos);
     session.receive(setMessage(9, 45, 40));
     EXPECT_TRUE(page.waitFinal(9)["converged"].get<bool>());
@@ -242,7 +244,8 @@ TEST_F(RelightSessionTest, AModelOfOtherPointsIsRefusedWithTheWayToMakeOne) {
         RelightSession session(other, *v.scene, 1, page.emitter());
         FAIL() << "a model of other points was taken";
     } catch (const InputError& e) {
-        EXPECT_NE(std::string(e.what()).find("pmsc demo volume --out DIR writes DIR/model.pmsc"), std::string::npos)
+        EXPECT_NE(std::string(e.what()).find("pmsc demo volume --out DIR writes DIR/model.pmsc"),
+                  std::string::npos)
             << e.what();
     }
 }
@@ -261,7 +264,8 @@ TEST(RelightScene, BadSpecsAreOneLineErrors) {
     EXPECT_NE(messageOf("volume:x.vdb:lights=path").find("lights= is not an option of the viewer"),
               std::string::npos);
     EXPECT_NE(messageOf("cornell:points=5").find("points"), std::string::npos);
-    EXPECT_NE(messageOf("cornell:lights=all").find("lights= is not an option of the viewer"), std::string::npos);
+    EXPECT_NE(messageOf("cornell:lights=all").find("lights= is not an option of the viewer"),
+              std::string::npos);
 }
 
 TEST(HalfCache, HalfFloatsRoundToNearestAndNeverOverflow) {

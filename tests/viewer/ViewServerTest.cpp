@@ -5,11 +5,11 @@
 #include "tests/viewer/ViewerFixture.h"
 #include "viewer/ViewServer.h"
 
+#include <gtest/gtest.h>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket.hpp>
-#include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
 #include <cstring>
@@ -117,7 +117,8 @@ private:
 };
 
 std::string setMessage(std::uint32_t seq, double azimuth, double elevation) {
-    return nlohmann::json{{"type", "set"}, {"seq", seq}, {"controls", {{"azimuth", azimuth}, {"elevation", elevation}}}}
+    return nlohmann::json{
+        {"type", "set"}, {"seq", seq}, {"controls", {{"azimuth", azimuth}, {"elevation", elevation}}}}
         .dump();
 }
 
@@ -145,10 +146,12 @@ TEST_F(ViewServerTest, ServesThePageTheSceneAndItsGeometryAndNothingElse) {
     auto js = request(server.port(), http::verb::get, "/app/main.js?v=1");
     EXPECT_EQ(js.result(), http::status::ok);
     EXPECT_EQ(js[http::field::content_type], "text/javascript; charset=utf-8");
-    EXPECT_EQ(request(server.port(), http::verb::get, "/app/../index.html").result(), http::status::not_found);
+    EXPECT_EQ(request(server.port(), http::verb::get, "/app/../index.html").result(),
+              http::status::not_found);
     EXPECT_EQ(request(server.port(), http::verb::get, "/etc/passwd").result(), http::status::not_found);
     EXPECT_EQ(request(server.port(), http::verb::get, "/app/missing.js").result(), http::status::not_found);
-    EXPECT_EQ(request(server.port(), http::verb::post, "/api/scene").result(), http::status::method_not_allowed);
+    EXPECT_EQ(request(server.port(), http::verb::post, "/api/scene").result(),
+              http::status::method_not_allowed);
 }
 
 TEST_F(ViewServerTest, ARelightArrivesAsTextThenItsHalfFloats) {
@@ -226,7 +229,8 @@ TEST_F(ViewServerTest, AnAddressInUseOrAMissingPageIsOneLine) {
         ViewServer again(smallVolume().model, *smallVolume().scene, o);
         FAIL() << "bound a port in use";
     } catch (const InputError& e) {
-        EXPECT_NE(std::string(e.what()).find("cannot listen on 127.0.0.1:" + std::to_string(o.port)), std::string::npos)
+        EXPECT_NE(std::string(e.what()).find("cannot listen on 127.0.0.1:" + std::to_string(o.port)),
+                  std::string::npos)
             << e.what();
     }
     o.port = 0;

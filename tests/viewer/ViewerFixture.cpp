@@ -6,9 +6,9 @@
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
 #include <cstdlib>
 #include <filesystem>
-#include <unistd.h>
 
 namespace pmsc::viewer::test {
 
@@ -27,11 +27,13 @@ void build(SmallVolume& v) {
     std::vector<Controls> lights;
     for (int e : {10, 40, 70}) {
         for (int a = 0; a < 8; ++a) {
-            lights.push_back({{"azimuth", 45.0 * a}, {"elevation", double(e)}, {"kelvin", a % 2 ? 4000.0 : 6500.0}});
+            lights.push_back(
+                {{"azimuth", 45.0 * a}, {"elevation", double(e)}, {"kelvin", a % 2 ? 4000.0 : 6500.0}});
         }
     }
     FrameSet q(Index(lights.size()), n, 3);
-    for (size_t f = 0; f < lights.size(); ++f) v.scene->evaluator(lights[f])->evaluateAll(0, q.frame(Index(f)));
+    for (size_t f = 0; f < lights.size(); ++f)
+        v.scene->evaluator(lights[f])->evaluateAll(0, q.frame(Index(f)));
     TrainingOptions o;
     o.maxBasis = 12;
     o.maxKeys = 48;
