@@ -19,7 +19,7 @@ const fragmentShader = /* glsl */ `
 precision highp float;
 precision highp sampler3D;
 ${cacheLookupGlsl}
-uniform sampler3D uDensity;   // density / maxDensity
+uniform sampler3D uDensity;   // density / maxDensity (the difference view: |cache - reference| instead of Lin)
 uniform vec3 uBoxMin;
 uniform vec3 uDims;
 uniform vec3 uBoxMax;
@@ -58,6 +58,7 @@ void main() {
   vec3 dp = dir * dt * toUvw;
   float T = 1.0;
   vec3 L = vec3(0.0);
+  float largest = 0.0;
   ivec3 top = ivec3(uDims) - 1;
   for (int s = 0; s < steps; ++s, p += dp) {
     // The voxel's point and density in one fetch; the refined image takes the density trilinear.
@@ -66,12 +67,16 @@ void main() {
     float density = uSmooth == 1 ? texture(uDensity, p).r : float(v >> 24) / 255.0;
     float alpha = 1.0 - exp(-uSigmaT * density * dt);
     vec3 lin = cacheOf(v);
-    vec3 source = uDifference == 1 ? heat(lin.r * uDifferenceScale) : uAlbedo * lin;
-    L += T * alpha * source;
+    if (uDifference == 1) {  // the largest difference along the ray, wherever the medium is
+      if (density > 0.0) largest = max(largest, lin.r);
+      continue;
+    }
+    L += T * alpha * uAlbedo * lin;
     T *= 1.0 - alpha;
     if (T < 0.004) break;
   }
-  vec3 color = uDifference == 1 ? L : pow(clamp(L * uExposure, 0.0, 1.0), vec3(1.0 / uGamma));
+  vec3 color = uDifference == 1 ? heat(largest * uDifferenceScale)
+                                : pow(clamp(L * uExposure, 0.0, 1.0), vec3(1.0 / uGamma));
   fragColor = vec4(color, 1.0);
 }`;
 
