@@ -3,7 +3,8 @@
 #
 #   ./pmsc.sh demo       install missing Debian packages, build (Release), run the main demo
 #   ./pmsc.sh test       same set-up, then the whole suite through ctest: the fast tiers (unit, cli)
-#                        first, so a broken change fails in minutes, then everything else
+#                        first, so a broken change fails in minutes, then everything else (the
+#                        browser test of `pmsc view` among them: label browser)
 #   ./pmsc.sh format     check that every .h/.cpp matches .clang-format (--fix rewrites them)
 #   ./pmsc.sh tidy       clang-tidy (.clang-tidy) on the product code that has no heavy headers
 #   ./pmsc.sh sanitize   unit tests under AddressSanitizer+UBSan, engine tests under ThreadSanitizer
@@ -32,6 +33,11 @@ PACKAGES=(
   python3 python3-dev python3-numpy pybind11-dev  # the Python module (build/python) and its tests
 )
 
+# `pmsc view`'s page and its headless-browser test (ctest label browser): Node.js runs the test,
+# Debian's Chromium renders the page (WebGL through SwiftShader). npm comes with the machine's
+# Node.js; Debian's npm package is added only where there is none.
+WEB_PACKAGES=(nodejs chromium)
+
 # `./pmsc.sh fuzz` only: clang and its libFuzzer/sanitizer runtimes.
 FUZZ_PACKAGES=(clang-14 libclang-rt-14-dev)
 # `./pmsc.sh format` and `./pmsc.sh tidy`.
@@ -49,6 +55,20 @@ ensure_packages() {
   echo "pmsc.sh: installing ${missing[*]}"
   apt-get update -qq
   DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+}
+
+# The page's npm packages (three, puppeteer-core: pinned in web/viewer/package-lock.json) from the
+# npm registry, when node_modules is missing or older than the lock file. puppeteer-core downloads
+# no browser; the test drives /usr/bin/chromium.
+ensure_web() {
+  ensure_packages "${WEB_PACKAGES[@]}"
+  if ! command -v npm >/dev/null; then ensure_packages npm; fi
+  local web=web/viewer
+  if [ ! -f "$web/node_modules/.package-lock.json" ] || [ "$web/package-lock.json" -nt "$web/node_modules/.package-lock.json" ]; then
+    echo "pmsc.sh: npm ci in $web"
+    (cd "$web" && PUPPETEER_SKIP_DOWNLOAD=1 npm ci --no-audit --no-fund --loglevel=error)
+    touch "$web/node_modules/.package-lock.json"
+  fi
 }
 
 # configure DIR [cmake args...]: Ninja + ccache so rebuilds on two cores stay short. The build runs
@@ -119,10 +139,10 @@ run_sanitizers() {
 cmd=${1:-}
 case "$cmd" in
   demo)
-    ensure_packages; build_release
+    ensure_packages; ensure_web; build_release
     shift; exec "$BUILD/bin/pmsc" demo "$@" ;;
   test)
-    ensure_packages "${STYLE_PACKAGES[@]}"; check_format; build_release
+    ensure_packages "${STYLE_PACKAGES[@]}"; ensure_web; check_format; build_release
     ctest --test-dir "$BUILD" --output-on-failure -j "$JOBS" -L '^(unit|cli)$'
     ctest --test-dir "$BUILD" --output-on-failure -j "$JOBS" -LE '^(unit|cli)$' ;;
   format)
@@ -132,7 +152,7 @@ case "$cmd" in
   sanitize)
     ensure_packages; run_sanitizers ;;
   build)
-    ensure_packages; build_release ;;
+    ensure_packages; ensure_web; build_release ;;
   package)
     ensure_packages dpkg-dev
     cmake -S . -B build-package -G Ninja -DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache -DCMAKE_BUILD_TYPE=Release \

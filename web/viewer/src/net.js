@@ -1,0 +1,124 @@
+// The page's side of the protocol: /api/scene, /api/geometry and the /api/ws WebSocket.
+
+const MAGIC = 0x564d5350;  // 'P','S','M','V' as a little-endian uint32
+
+/** Fetches the scene description and the points' dense indices (and density or normals). */
+export async function loadScene() {
+  const sceneResponse = await fetch('/api/scene');
+  if (!sceneResponse.ok) throw new Error(`/api/scene: HTTP ${sceneResponse.status}`);
+  const scene = await sceneResponse.json();
+  const geometryResponse = await fetch('/api/geometry');
+  if (!geometryResponse.ok) throw new Error(`/api/geometry: HTTP ${geometryResponse.status}`);
+  const bytes = await geometryResponse.arrayBuffer();
+  const n = scene.points;
+  const perPoint = scene.kind === 'cornell' ? 3 : 1;
+  const expected = n * 4 * (1 + perPoint);
+  if (bytes.byteLength !== expected)
+    throw new Error(`/api/geometry: ${bytes.byteLength} bytes, expected ${expected} for ${n} points`);
+  const index = new Uint32Array(bytes, 0, n);
+  const values = new Float32Array(bytes, n * 4, n * perPoint);
+  const [nx, ny, nz] = scene.grid.dims;
+  const cells = nx * ny * nz;
+  for (let p = 0; p < n; ++p)
+    if (index[p] >= cells) throw new Error(`/api/geometry: point ${p} has dense index ${index[p]} outside the box`);
+  return {
+    scene,
+    index,
+    density: scene.kind === 'cornell' ? null : values,
+    normals: scene.kind === 'cornell' ? values : null,
+  };
+}
+
+/**
+ * The WebSocket: pairs every text `update` with the binary message that follows it and hands the
+ * pair to onUpdate(update, {first, count, halfs}); other messages go to onMessage.
+ */
+export class Connection {
+  constructor({onUpdate, onMessage, onClose}) {
+    this.onUpdate = onUpdate;
+    this.onMessage = onMessage;
+    this.onClose = onClose;
+    this.pending = null;  // the text update waiting for its binary message
+    this.seq = 0;
+  }
+
+  open() {
+    const url = new URL('/api/ws', location.href);
+    url.protocol = url.protocol === 'https:' ? 'wss:' : 'ws:';
+    this.socket = new WebSocket(url);
+    this.socket.binaryType = 'arraybuffer';
+    return new Promise((resolve, reject) => {
+      let hello = false;
+      this.socket.onopen = () => {};
+      this.socket.onerror = () => { if (!hello) reject(new Error('WebSocket /api/ws: could not connect')); };
+      this.socket.onclose = event => {
+        if (!hello) reject(new Error(`WebSocket /api/ws closed before hello (${event.code})`));
+        this.onClose?.(event);
+      };
+      this.socket.onmessage = event => {
+        if (typeof event.data === 'string') {
+          let message;
+          try {
+            message = JSON.parse(event.data);
+          } catch {
+            this.onMessage({type: 'error', message: `unparsable message from the server: ${event.data.slice(0, 80)}`});
+            return;
+          }
+          if (message.type === 'hello' && !hello) {
+            hello = true;
+            if (message.version !== 1) reject(new Error(`server speaks protocol version ${message.version}, page speaks 1`));
+            else resolve(message);
+          }
+          if (message.type === 'update') {
+            if (this.pending) this.onMessage({type: 'error', message: 'update without its binary message'});
+            this.pending = message;
+          } else {
+            this.onMessage(message);
+          }
+          return;
+        }
+        this.binary(event.data);
+      };
+    });
+  }
+
+  binary(buffer) {
+    const update = this.pending;
+    this.pending = null;
+    if (!update) {
+      this.onMessage({type: 'error', message: 'binary message without an update'});
+      return;
+    }
+    const header = new DataView(buffer, 0, 16);
+    const magic = header.getUint32(0, true);
+    const seq = header.getUint32(4, true);
+    const first = header.getUint32(8, true);
+    const count = header.getUint32(12, true);
+    if (magic !== MAGIC || seq !== update.seq || buffer.byteLength !== 16 + count * 6) {
+      this.onMessage({type: 'error', message: `bad binary message for seq ${update.seq} (magic ${magic.toString(16)}, seq ${seq}, ${buffer.byteLength} bytes for ${count} points)`});
+      return;
+    }
+    this.onUpdate(update, {first, count, halfs: new Uint16Array(buffer, 16, count * 3)});
+  }
+
+  send(message) {
+    this.socket.send(JSON.stringify(message));
+  }
+
+  /** Sends a `set` with the next sequence number and returns that number. */
+  sendSet(controls) {
+    const seq = ++this.seq;
+    this.send({type: 'set', seq, controls});
+    return seq;
+  }
+
+  sendReference() {
+    const seq = ++this.seq;
+    this.send({type: 'reference', seq});
+    return seq;
+  }
+
+  sendMode(view) {
+    this.send({type: 'mode', view});
+  }
+}
