@@ -337,7 +337,13 @@ http::response<http::string_body> ViewServer::Impl::respond(
 
 void ViewServer::Impl::accept() {
     acceptor.async_accept([this](beast::error_code ec, tcp::socket socket) {
-        if (!ec) std::make_shared<HttpConnection<Impl>>(*this, std::move(socket))->read();
+        if (!ec) {
+            // Each update is a small text message then its binary part: without TCP_NODELAY the
+            // second waits for the first's delayed ACK (Nagle), tens of milliseconds a move.
+            beast::error_code ignored;
+            socket.set_option(tcp::no_delay(true), ignored);
+            std::make_shared<HttpConnection<Impl>>(*this, std::move(socket))->read();
+        }
         if (acceptor.is_open()) accept();
     });
 }
