@@ -22,7 +22,7 @@ public:
         // 4000-6500 K, so a lighter can leave what the model was trained on and watch the
         // cache fail through to the full calculation.
         controls_ = {{"azimuth", "Light azimuth", "deg", 0, 360, 0.5, 30},
-                     {"elevation", "Light elevation", "deg", -30, 89, 0.5, 40},
+                     {"elevation", "Light elevation", "deg", -60, 89, 0.5, 40},
                      {"kelvin", "Colour temperature", "K", 2500, 10000, 50, 5000}};
         std::vector<std::array<double, 3>> p;
         p.reserve(world_->density.voxelCount());

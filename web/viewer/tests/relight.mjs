@@ -112,7 +112,7 @@ function missCandidates(scene) {
   const defaults = Object.fromEntries(scene.controls.map(c => [c.name, c.value]));
   const candidates = [];
   if (scene.kind === 'volume' && byName.elevation) {
-    candidates.push({...defaults, elevation: Math.max(byName.elevation.min, -25)});
+    candidates.push({...defaults, elevation: byName.elevation.min});
     candidates.push({...defaults, elevation: Math.min(byName.elevation.max, 89)});
   }
   // Each control alone at its ends, then every corner of the controls' box.
