@@ -21,6 +21,17 @@ std::string number(double v) {
     return s.str();
 }
 
+/// "unknown control 'hue' (the volume scene has azimuth, elevation, kelvin)".
+InputError unknownControl(const std::string& name, const std::string& kind,
+                          const std::vector<Control>& list) {
+    std::string names;
+    for (const Control& k : list) {
+        if (!names.empty()) names += ", ";
+        names += k.name;
+    }
+    return InputError("unknown control '" + name + "' (the " + kind + " scene has " + names + ")");
+}
+
 }  // namespace
 
 Controls RelightScene::defaults() const {
@@ -31,15 +42,13 @@ Controls RelightScene::defaults() const {
 
 Controls RelightScene::resolve(const Controls& given) const {
     Controls c = defaults();
-    for (const auto& [name, value] : given) {
+    for (const auto& entry : given) {
+        const std::string& name = entry.first;
+        const double value = entry.second;
         const auto& list = controls();
         const auto it =
             std::find_if(list.begin(), list.end(), [&](const Control& k) { return k.name == name; });
-        if (it == list.end()) {
-            std::string names;
-            for (const Control& k : list) names += (names.empty() ? "" : ", ") + k.name;
-            throw InputError("unknown control '" + name + "' (the " + kind() + " scene has " + names + ")");
-        }
+        if (it == list.end()) throw unknownControl(name, kind(), list);
         if (!std::isfinite(value) || value < it->min || value > it->max) {
             throw InputError("control '" + name + "' = " + number(value) + " is outside [" + number(it->min) +
                              ", " + number(it->max) + "] " + it->unit);

@@ -28,7 +28,7 @@ double msSince(Clock::time_point t) {
 /// few are kept (a frame is evaluated only while its request runs).
 class LightFrames : public PointEvaluator {
 public:
-    explicit LightFrames(std::shared_ptr<const PointEvaluator> first) : first_(first) {
+    explicit LightFrames(const std::shared_ptr<const PointEvaluator>& first) : first_(first) {
         frames_.push_back(first);
     }
 
