@@ -321,7 +321,7 @@ struct Engine::Impl::Bodies {
 };
 
 Engine::Impl::Bodies::Bodies(Impl& impl, FrameSink& frames, nodes::RunControl& control)
-    : keys(impl.model, impl.evaluator),
+    : keys(impl.model, impl.evaluator, impl.shape.cheapSubsets ? impl.options.keyPiecePoints : 0),
       project(impl.pm),
       monitor(impl.pm, impl.policy, impl.options.keepPointMultiplication,
               impl.regions ? &*impl.regions : nullptr, &impl.evaluator),

@@ -75,6 +75,12 @@ struct EngineOptions {
     /// least 256 points each. The automatic size depends on the point count only, never on the
     /// thread count, so the output is bit-identical at any `threads`.
     Index chunkPoints = 0;
+    /// > 0: a frame's key points are evaluated in parallel pieces of this many points instead of
+    /// one call. Latency over throughput: for one frame at a time (an interactive client, `pmsc
+    /// view`), where the keys are the calculation every move waits for; a batch run keeps every
+    /// core busy with frames already. Needs an evaluator whose subsets are cheap
+    /// (PointEvaluator::FailThroughShape::cheapSubsets; ignored otherwise). Same values either way.
+    Index keyPiecePoints = 0;
     /// Fail through with one PointEvaluator::evaluateAll() call per frame instead of
     /// chunks (for evaluators whose full evaluation shares work between points). Also on when
     /// the evaluator declares it (PointEvaluator::failThroughShape()).

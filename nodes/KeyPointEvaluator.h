@@ -16,14 +16,17 @@ class KeyPointEvaluator {
 public:
     static constexpr const char* kName = "keys";
 
-    KeyPointEvaluator(const Model& model, const PointEvaluator& evaluator)
-        : model_(model), evaluator_(evaluator) {}
+    /// @param piecePoints > 0: the keys are evaluated in parallel pieces of this many points
+    ///        (EngineOptions::keyPiecePoints); 0: in one call.
+    KeyPointEvaluator(const Model& model, const PointEvaluator& evaluator, Index piecePoints = 0)
+        : model_(model), evaluator_(evaluator), piecePoints_(piecePoints) {}
 
     void operator()(FrameSlot& slot) const;
 
 private:
     const Model& model_;
     const PointEvaluator& evaluator_;
+    Index piecePoints_;
 };
 
 }  // namespace pmsc::nodes

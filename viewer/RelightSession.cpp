@@ -180,6 +180,8 @@ struct RelightSession::Impl : engine::FrameSink {
         o.maxFramesInFlight = 1;
         // Every branch of a fail-through is a range the page can show as it arrives.
         o.localFailThrough = false;
+        // One frame at a time, every core on it: the keys in pieces (volume: 250 keys in 8).
+        o.keyPiecePoints = 32;
         o.cancel = &cancel;
         o.onEstimate = [this](const engine::FrameEstimate& f) { sendEstimate(f); };
         o.onChunk = [this](const engine::ChunkFinished& c) { sendChunk(c); };

@@ -433,6 +433,47 @@ TEST_F(Fixture, EstimateAndChunkCallbacksShowEachFailThroughAsItFinishes) {
     EXPECT_GT(failedThrough, 0);
 }
 
+TEST_F(Fixture, KeysInParallelPiecesGiveTheSameFrames) {
+    // Latency over throughput (one frame at a time): the keys in pieces of 2 points.
+    auto runWith = [&](Index piece, int threads) {
+        EngineOptions o = options(threads);
+        o.keyPiecePoints = piece;
+        Engine engine(model, evaluator, o);
+        FrameSetSink sink(12, model.points, 3);
+        withWatchdog(60, "run", [&] { engine.run({0, 12, 1}, sink); });
+        return std::vector<double>(sink.values().frame(0), sink.values().frame(0) + 12 * model.points * 3);
+    };
+    EXPECT_EQ(runWith(0, 2), runWith(2, 2));
+    EXPECT_EQ(runWith(0, 1), runWith(2, 2));
+}
+
+TEST(EngineLarge, AHitOfALargeFrameReconstructsInBlocksTheSameAtAnyThreadCount) {
+    // From 65,536 points a hit reconstructs in parallel blocks; the blocks depend on N only.
+    const Model model = testing::makeModel(70000, 3, 4, 12);
+    SyntheticEvaluator evaluator(model, 3);
+    const PointMultiplier pm(model);
+    auto runWith = [&](int threads) {
+        EngineOptions o;
+        o.threads = threads;
+        o.policy = SoftCachePolicy(1e300, 1e300);  // every frame a hit
+        Engine engine(model, evaluator, o);
+        FrameSetSink sink(3, model.points, 3);
+        withWatchdog(120, "run", [&] { engine.run({0, 3, 1}, sink); });
+        return std::vector<double>(sink.values().frame(0), sink.values().frame(0) + 3 * model.points * 3);
+    };
+    const auto one = runWith(1), two = runWith(2);
+    EXPECT_EQ(one, two);
+    // And it is the reconstruction of the frame's coordinates.
+    std::vector<double> k(size_t(model.keyCount() * 3)), b(size_t(model.basisSize())),
+        r(size_t(model.points * 3));
+    for (Index i = 0; i < model.keyCount(); ++i)
+        for (Index c = 0; c < 3; ++c)
+            k[size_t(i * 3 + c)] = evaluator.value(0, model.keyPoints[size_t(i)], c);
+    pm.project(k.data(), b.data());
+    pm.reconstruct(b.data(), r.data());
+    for (size_t x = 0; x < r.size(); ++x) ASSERT_NEAR(one[x], r[x], 1e-12 * (1 + std::abs(r[x]))) << x;
+}
+
 TEST(EngineMemory, HundredThousandFramesRunInBoundedMemory) {
     const Model model = testing::makeModel(12, 3, 3, 4);
     SyntheticEvaluator evaluator(model, 100000);
