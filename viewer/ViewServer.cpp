@@ -10,6 +10,7 @@
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket.hpp>
 
+#include <atomic>
 #include <chrono>
 #include <cstdlib>
 #include <deque>
@@ -95,6 +96,17 @@ struct ViewServer::Impl {
     class WsConnection;
     std::weak_ptr<WsConnection> viewer;  ///< the one connected viewer (I/O thread only)
 
+    /// The newest bodies by URL (I/O thread only); a body older than the last kBodiesKept is gone
+    /// (404): the page fetches each as its text arrives.
+    static constexpr std::size_t kBodiesKept = 8;
+    std::deque<std::pair<std::string, std::string>> bodies;
+    std::atomic<std::uint64_t> nextBody{0};
+
+    void keepBody(const std::string& url, std::string bytes) {
+        bodies.emplace_back(url, std::move(bytes));
+        while (bodies.size() > kBodiesKept) bodies.pop_front();
+    }
+
     Impl(const Model& m, const RelightScene& s, ViewServerOptions o)
         : model(m), scene(s), options(std::move(o)) {
         std::error_code fe;
@@ -178,18 +190,37 @@ private:
             std::weak_ptr<WsConnection> weak = weak_from_this();
             net::io_context& ioc = server_.ioc;
             const Index channels = server_.model.channels;
+            Impl* server = &server_;
             session_ = std::make_unique<RelightSession>(
-                server_.model, server_.scene, server_.options.threads, [weak, &ioc, channels](Update&& u) {
+                server_.model, server_.scene, server_.options.threads,
+                [weak, &ioc, channels, server](Update&& u) {
+                    // A large binary part (a whole cache) goes by HTTP (ViewServerOptions::
+                    // httpBodyBytes): the WebSocket carries the header alone (count 0) and the
+                    // text the body's address; the page fetches it before it applies later updates.
+                    std::string body;
+                    std::string bin;
+                    if (u.binaryFollows &&
+                        u.halfs.size() * sizeof(std::uint16_t) >= server->options.httpBodyBytes) {
+                        const std::uint64_t id = server->nextBody.fetch_add(1) + 1;
+                        u.text["body"] = "/api/body/" + std::to_string(id);
+                        body = u.binary(channels);
+                        Update header;
+                        header.seq = u.seq;
+                        bin = header.binary(channels);
+                    } else if (u.binaryFollows) {
+                        bin = u.binary(channels);
+                    }
                     std::string text = u.text.dump();
-                    std::string bin = u.binaryFollows ? u.binary(channels) : std::string();
                     const bool withBinary = u.binaryFollows;
-                    net::post(ioc,
-                              [weak, text = std::move(text), bin = std::move(bin), withBinary]() mutable {
-                                  if (auto self = weak.lock()) {
-                                      self->queue(std::move(text), true);
-                                      if (withBinary) self->queue(std::move(bin), false);
-                                  }
-                              });
+                    const std::string url = u.text.value("body", std::string());
+                    net::post(ioc, [weak, server, url, text = std::move(text), bin = std::move(bin),
+                                    body = std::move(body), withBinary]() mutable {
+                        if (!url.empty()) server->keepBody(url, std::move(body));
+                        if (auto self = weak.lock()) {
+                            self->queue(std::move(text), true);
+                            if (withBinary) self->queue(std::move(bin), false);
+                        }
+                    });
                 });
         } catch (const std::exception& e) {
             closing_ = true;
@@ -328,6 +359,11 @@ http::response<http::string_body> ViewServer::Impl::respond(
     const std::string target(req.target());
     if (target == "/api/scene") return reply(http::status::ok, "application/json", sceneJson);
     if (target == "/api/geometry") return reply(http::status::ok, "application/octet-stream", geometry);
+    if (target.rfind("/api/body/", 0) == 0) {
+        for (const auto& [url, bytes] : bodies)
+            if (url == target) return reply(http::status::ok, "application/octet-stream", bytes);
+        return reply(http::status::not_found, "text/plain", "no such body (superseded): " + target + "\n");
+    }
     const std::string path = fileOf(options.webRoot, target);
     std::string body;
     if (path.empty() || !readWhole(path, body))

@@ -5,6 +5,7 @@
 #include "viewer/RelightScene.h"
 
 #include <atomic>
+#include <cstddef>
 #include <memory>
 #include <string>
 
@@ -15,6 +16,10 @@ struct ViewServerOptions {
     int port = 8080;                 ///< 0: any free port (ViewServer::port() tells which)
     std::string webRoot;             ///< the page: index.html, src/, node_modules/three
     int threads = 0;                 ///< the engine's worker threads (0: every core)
+    /// An update whose values take at least this many bytes (a whole cache) sends them by HTTP
+    /// (/api/body/ID) and its header alone on the WebSocket: Chromium takes a 1.5 MB WebSocket
+    /// message in about 26 ms, the same bytes by fetch() in about 5 ms (docs/viewer-protocol.md).
+    std::size_t httpBodyBytes = 256 * 1024;
 };
 
 /// The page's folder: PMSC_VIEW_WEB if set, else the installed share/pmsc/web/viewer beside the

@@ -30,7 +30,7 @@ using test::smallVolume;
 /// A server on a free port, served by its own thread for the test's duration.
 class Running {
 public:
-    explicit Running(const Model& model) {
+    explicit Running(const Model& model, std::size_t httpBodyBytes = 256 * 1024) {
         web_ = smallVolume().dir + "/web";
         std::filesystem::create_directories(web_ + "/src");
         std::ofstream(web_ + "/index.html") << "<!doctype html><title>pmsc view</title>";
@@ -39,6 +39,7 @@ public:
         o.port = 0;
         o.webRoot = web_;
         o.threads = 2;
+        o.httpBodyBytes = httpBodyBytes;
         server_ = std::make_unique<ViewServer>(model, *smallVolume().scene, o);
         thread_ = std::thread([this] { server_->run(stop_); });
     }
@@ -73,7 +74,7 @@ http::response<http::string_body> request(int port, http::verb verb, const std::
 /// A WebSocket client of /api/ws.
 class Viewer {
 public:
-    explicit Viewer(int port) : ws_(ioc_) {
+    explicit Viewer(int port) : port_(port), ws_(ioc_) {
         beast::get_lowest_layer(ws_).connect(
             tcp::endpoint(net::ip::make_address("127.0.0.1"), static_cast<unsigned short>(port)));
         ws_.handshake("127.0.0.1", "/api/ws");
@@ -101,6 +102,14 @@ public:
             auto [text, bin] = next();
             EXPECT_FALSE(text);
             EXPECT_GE(bin.size(), 16u);
+            if (m.contains("body")) {
+                // A whole cache: the WebSocket carries the header alone, the values come by HTTP.
+                EXPECT_EQ(bin.size(), 16u);
+                const auto res = request(port_, http::verb::get, m["body"].get<std::string>());
+                EXPECT_EQ(res.result(), http::status::ok);
+                bin = res.body();
+                ++bodies;
+            }
             std::uint32_t header[4];
             std::memcpy(header, bin.data(), 16);
             EXPECT_EQ(header[0], 0x564d5350u);
@@ -110,8 +119,10 @@ public:
         }
     }
     websocket::stream<beast::tcp_stream>& stream() { return ws_; }
+    int bodies = 0;  ///< updates whose values came by HTTP
 
 private:
+    int port_;
     net::io_context ioc_;
     websocket::stream<beast::tcp_stream> ws_;
 };
@@ -162,6 +173,20 @@ TEST_F(ViewServerTest, ARelightArrivesAsTextThenItsHalfFloats) {
     const auto last = v.untilFinal(1);
     EXPECT_TRUE(last["converged"].get<bool>());
     EXPECT_EQ(last["checksum"].get<std::string>().size(), 16u);
+}
+
+TEST_F(ViewServerTest, AWholeCacheComesByHttpAndOnlyTheNewestAreKept) {
+    Model missing = smallVolume().model;
+    missing.epsMin = missing.epsMax = 0;  // an estimate (the whole cache), then branches
+    Running server(missing, 1024);        // every whole cache by HTTP, the branches too
+    Viewer v(server.port());
+    v.nextText();
+    v.send(setMessage(1, 30, 20));
+    EXPECT_EQ(v.untilFinal(1)["state"], "miss");
+    EXPECT_GE(v.bodies, 2) << "the estimate and the branches came by HTTP";
+    EXPECT_EQ(request(server.port(), http::verb::get, "/api/body/1").result(), http::status::not_found)
+        << "a body older than the newest 8 is gone";
+    EXPECT_EQ(request(server.port(), http::verb::get, "/api/body/x").result(), http::status::not_found);
 }
 
 TEST_F(ViewServerTest, AMalformedMessageGetsAnErrorAndTheConnectionStaysUsable) {
