@@ -1,6 +1,7 @@
 // `pmsc train`: frames (.npy) -> model (.pmsc). Sections 3-5 of the paper, plus calibration.
 #include "app/ExitCodes.h"
 #include "app/MemoryLimit.h"
+#include "app/TrainingDefaults.h"
 #include "cli/Args.h"
 #include "cli/Commands.h"
 #include "cli/CrossTrain.h"
@@ -89,19 +90,6 @@ FrameSet readShots(const std::vector<Shot>& shots) {
     return all;
 }
 
-/// The library's defaults, and regions chosen from the data unless told (RegionChoice.h).
-TrainingOptions defaultTrainingOptions() {
-    TrainingOptions options;
-    options.regions.automatic = true;
-    // Decision: regions learn from every 3rd frame. On the face's 941 training frames (159
-    // regions) that took 23.5 s of CPU against 120 s from every frame, and the novel frames
-    // evaluated 50.3% / 47.9% of the points against 52.0% / 51.2% (worst 0.48% of the diagonal
-    // against 0.46%); every 4th frame saved 2 s more for a worst of 0.47%
-    // (docs/local-fail-through.md, "Regions by default").
-    options.regions.frameStride = 3;
-    return options;
-}
-
 /// What `pmsc train` was asked; the training settings themselves are in `options`.
 struct TrainArgs {
     std::vector<std::string> framePaths;
@@ -110,7 +98,7 @@ struct TrainArgs {
     std::uint64_t memoryLimit = 0;
     Index blockPoints = 0;
     bool outOfCore = false, sharedChannels = false, quiet = false;
-    TrainingOptions options = defaultTrainingOptions();
+    TrainingOptions options = app::defaultTrainingOptions();
 };
 
 /// The parser with the command's description and its inputs and output (--frames, --out).

@@ -1,4 +1,5 @@
 // pmsc.train: `pmsc train` on NumPy arrays or .npy paths, with the same options and the same model bytes.
+#include "app/TrainingDefaults.h"
 #include "python/Arrays.h"
 #include "python/Errors.h"
 #include "python/PyModel.h"
@@ -97,9 +98,11 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
                                     const std::string& selector, double tolerance, Index slices,
                                     const std::string& calibration, double coverage,
                                     const std::string& keyError, Index learnRank, unsigned seed,
-                                    int powerIterations, Index regions, double feather, Index regionKeys,
-                                    bool sharedChannels, py::object progress) {
-    TrainingOptions o;
+                                    int powerIterations, const py::object& regions, const py::object& feather,
+                                    Index regionKeys, Index regionStride, bool sharedChannels,
+                                    py::object progress) {
+    // `pmsc train`'s defaults: regions chosen from the data ("auto"), learning from every 3rd frame.
+    TrainingOptions o = app::defaultTrainingOptions();
     o.basis = basis;
     o.energy = energy;
     o.basisMaxError = basisError;
@@ -123,15 +126,29 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     o.learnRank = learnRank;
     o.seed = seed;
     o.powerIterations = powerIterations;
-    o.regions.count = regions;
-    o.regions.featherFraction = feather;
+    if (py::isinstance<py::str>(regions)) {
+        if (regions.cast<std::string>() != "auto")
+            throw InputError("regions: '" + regions.cast<std::string>() +
+                             "' is not \"auto\" or a region count (0 = none)");
+    } else {
+        const Index count = regions.cast<Index>();
+        if (count < 0) throw InputError("regions: must be >= 0 (0 = none), got " + std::to_string(count));
+        o.regions.automatic = false;
+        o.regions.count = count;
+    }
+    if (!feather.is_none()) {
+        const double f = feather.cast<double>();
+        if (!(f >= 0 && f <= 0.5)) throw InputError("feather: must be in [0, 0.5], got " + std::to_string(f));
+        o.regions.featherFraction = f;
+        o.regions.automaticFeather = false;
+    }
+    if (regionStride < 1)
+        throw InputError("region_stride: must be >= 1, got " + std::to_string(regionStride));
+    o.regions.frameStride = regionStride;
     o.regions.ownKeys = regionKeys;
     o.sharedChannels = sharedChannels;
     if (regionKeys < 0)
         throw InputError("region_keys: must be >= 0 (0 = none), got " + std::to_string(regionKeys));
-    if (regions < 0) throw InputError("regions: must be >= 0 (0 = none), got " + std::to_string(regions));
-    if (!(feather >= 0 && feather <= 0.5))
-        throw InputError("feather: must be in [0, 0.5], got " + std::to_string(feather));
     if (calibration != "max" && !(tolerance > 0))
         throw InputError("calibration and coverage need a tolerance");
 
@@ -201,8 +218,8 @@ void bindTraining(py::module_& m) {
         "fiducials"_a = std::vector<Index>{}, "grid_points"_a = std::vector<Index>{},
         "selector"_a = "teleconnection", "tolerance"_a = 0.0, "slices"_a = 5, "calibration"_a = "max",
         "coverage"_a = 0.9, "key_error"_a = "", "learn_rank"_a = 0, "seed"_a = 20070101u,
-        "power_iterations"_a = 2, "regions"_a = 0, "feather"_a = 0.03, "region_keys"_a = 4,
-        "shared_channels"_a = false, "progress"_a = py::none(),
+        "power_iterations"_a = 2, "regions"_a = "auto", "feather"_a = py::none(), "region_keys"_a = 4,
+        "region_stride"_a = 3, "shared_channels"_a = false, "progress"_a = py::none(),
         "Trains a model as `pmsc train` does (same options, same model bytes). frames: an array (F, N, C), a "
         ".npy path, or a list of them (shots). progress(stage, done, total) may return False to cancel.");
 }

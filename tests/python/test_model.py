@@ -104,6 +104,31 @@ class ModelTest(TempDirTest):
         self.assertEqual(self.model.to_bytes(), cli)
         self.assertEqual(pmsc.train(npy, max_keys=30, tolerance=0.05, seed=3).to_bytes(), cli)
 
+    def test_regions_by_default_as_the_command_line(self):
+        # Local motion on a surface (each of 24 bumps moves a few percent of 2,025 points): `pmsc
+        # train --tolerance` learns regions without being told; pmsc.train does the same, byte for byte.
+        self.require_cli()
+        rng = np.random.default_rng(5)
+        g = np.linspace(0.0, 10.0, 45)
+        xs, ys = np.meshgrid(g, g)
+        rest = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], axis=1)
+        centres = rng.uniform(1.0, 9.0, size=(24, 2))
+        bumps = np.exp(-((rest[None, :, 0] - centres[:, None, 0]) ** 2 + (rest[None, :, 1] - centres[:, None, 1]) ** 2) / 0.3)
+        weights = rng.uniform(-1.0, 1.0, size=(240, 24)) * (rng.uniform(size=(240, 24)) < 0.25)
+        frames = np.repeat(rest[None], 240, axis=0)
+        frames[:, :, 2] = weights @ bumps
+        npy = self.path("local.npy")
+        np.save(npy, frames)
+        run_cli("train", "--frames", npy, "--out", self.path("local.pmsc"), "--tolerance", 0.05, "--seed", 3, "--quiet")
+        with open(self.path("local.pmsc"), "rb") as f:
+            cli = f.read()
+        model = pmsc.train(npy, tolerance=0.05, seed=3)
+        self.assertGreater(model.info["regions"], 0)
+        self.assertEqual(model.to_bytes(), cli)
+        self.assertEqual(pmsc.train(npy, tolerance=0.05, seed=3, regions=0).info["regions"], 0)
+        with self.assertRaises(pmsc.InputError):
+            pmsc.train(npy, tolerance=0.05, regions="some")
+
     def test_progress_can_cancel(self):
         stages = []
         m = pmsc.train(self.frames, max_keys=10, progress=lambda s, d, t: stages.append(s))
