@@ -309,10 +309,8 @@ void checkTrainArgs(const ArgParser& parser, TrainArgs& a) {
         options.calibrationRule = *r;
     else
         parser.fail("--calibration: '" + rule + "' is not threshold, max or conformal");
-    if (a.keyError == "largest")
-        options.keyErrorNorm = KeyErrorNorm::Largest;
-    else if (a.keyError == "rms")
-        options.keyErrorNorm = KeyErrorNorm::Rms;
+    if (const auto norm = keyErrorNormNamed(a.keyError))
+        options.keyErrorNorm = *norm;
     else if (!a.keyError.empty())
         parser.fail("--key-error: '" + a.keyError + "' is not largest or rms");
     if (options.keyErrorNorm == KeyErrorNorm::Largest && a.sharedChannels)

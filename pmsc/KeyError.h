@@ -1,6 +1,9 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include <optional>
+#include <string_view>
+
 namespace pmsc {
 
 /// How the key points' residual becomes the one number the soft cache compares with eps
@@ -25,5 +28,8 @@ enum class KeyErrorNorm : int {
 
 /// "rms" / "largest"
 const char* toString(KeyErrorNorm norm);
+/// The measure of a name ("rms" or "largest"); std::nullopt for any other. The command line and
+/// Python parse the same names with it.
+std::optional<KeyErrorNorm> keyErrorNormNamed(std::string_view name);
 
 }  // namespace pmsc

@@ -18,6 +18,12 @@ bool allFinite(const Eigen::Ref<const Eigen::MatrixXd>& m) { return m.allFinite(
 
 const char* toString(KeyErrorNorm norm) { return norm == KeyErrorNorm::Largest ? "largest" : "rms"; }
 
+std::optional<KeyErrorNorm> keyErrorNormNamed(std::string_view name) {
+    if (name == "rms") return KeyErrorNorm::Rms;
+    if (name == "largest") return KeyErrorNorm::Largest;
+    return std::nullopt;
+}
+
 double Model::energyCaptured() const {
     // An all-zero training set has nothing to capture; reporting 1 keeps "fraction captured"
     // meaningful (nothing was lost) instead of dividing by zero.

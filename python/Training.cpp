@@ -117,10 +117,8 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     o.calibrationSlices = slices;
     o.calibrationRule = ruleOf(calibration);
     o.calibrationCoverage = coverage;
-    if (keyError == "largest")
-        o.keyErrorNorm = KeyErrorNorm::Largest;
-    else if (keyError == "rms")
-        o.keyErrorNorm = KeyErrorNorm::Rms;
+    if (const auto norm = keyErrorNormNamed(keyError))
+        o.keyErrorNorm = *norm;
     else if (!keyError.empty())
         throw InputError("key_error: '" + keyError + "' is not largest or rms");
     o.learnRank = learnRank;

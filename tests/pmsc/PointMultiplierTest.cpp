@@ -183,3 +183,10 @@ TEST(Model, EnergyCaptured) {
     model.totalEnergy = 28;
     EXPECT_NEAR(model.energyCaptured(), 14.0 / 28.0, 1e-15);
 }
+
+TEST(KeyError, NamesRoundTripAndOthersAreRefused) {
+    for (const auto norm : {pmsc::KeyErrorNorm::Rms, pmsc::KeyErrorNorm::Largest})
+        EXPECT_EQ(pmsc::keyErrorNormNamed(pmsc::toString(norm)), norm);
+    EXPECT_EQ(pmsc::keyErrorNormNamed("RMS"), std::nullopt);
+    EXPECT_EQ(pmsc::keyErrorNormNamed(""), std::nullopt);
+}
