@@ -33,10 +33,12 @@ PACKAGES=(
   python3 python3-dev python3-numpy pybind11-dev  # the Python module (build/python) and its tests
 )
 
-# `pmsc view`'s page and its headless-browser test (ctest label browser): Node.js runs the test,
-# Debian's Chromium renders the page (WebGL through SwiftShader). npm comes with the machine's
+# `pmsc view`'s page: Node.js's npm fetches its packages (three.js). npm comes with the machine's
 # Node.js; Debian's npm package is added only where there is none.
-WEB_PACKAGES=(nodejs chromium)
+WEB_PACKAGES=(nodejs)
+# The page's headless-browser test (ctest label browser, `./pmsc.sh test` only): Debian's Chromium
+# renders the page (WebGL through SwiftShader).
+BROWSER_PACKAGES=(chromium)
 
 # `./pmsc.sh fuzz` only: clang and its libFuzzer/sanitizer runtimes.
 FUZZ_PACKAGES=(clang-14 libclang-rt-14-dev)
@@ -142,7 +144,7 @@ case "$cmd" in
     ensure_packages; ensure_web; build_release
     shift; exec "$BUILD/bin/pmsc" demo "$@" ;;
   test)
-    ensure_packages "${STYLE_PACKAGES[@]}"; ensure_web; check_format; build_release
+    ensure_packages "${STYLE_PACKAGES[@]}" "${BROWSER_PACKAGES[@]}"; ensure_web; check_format; build_release
     ctest --test-dir "$BUILD" --output-on-failure -j "$JOBS" -L '^(unit|cli)$'
     ctest --test-dir "$BUILD" --output-on-failure -j "$JOBS" -LE '^(unit|cli)$' ;;
   format)
