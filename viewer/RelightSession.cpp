@@ -68,17 +68,7 @@ private:
     std::vector<std::shared_ptr<const PointEvaluator>> frames_;
 };
 
-const char* stateName(CacheState s) {
-    switch (s) {
-        case CacheState::Hit:
-            return "hit";
-        case CacheState::Blend:
-            return "blend";
-        case CacheState::Miss:
-            return "miss";
-    }
-    return "miss";
-}
+std::string stateName(CacheState s) { return std::string(toString(s)); }
 
 /// A client's request: new control values (for the cache or the full calculation) or the
 /// reference (the full calculation for the difference view).

@@ -6,7 +6,7 @@
 // Radiance shown = albedo / pi x cache irradiance: indirect light only, no direct term.
 
 import * as THREE from 'three';
-import {PointCache, cacheLookupGlsl} from './pointcache.js';
+import {PointCache, cacheLookupGlsl, displayGlsl} from './pointcache.js';
 
 const vertexShader = /* glsl */ `
 out vec3 vWorld;
@@ -25,17 +25,9 @@ uniform float uVoxel;
 uniform ivec3 uDims;
 uniform vec3 uNormal;
 uniform vec3 uAlbedo;
-uniform float uExposure;
-uniform float uGamma;
-uniform int uDifference;
-uniform float uDifferenceScale;
+${displayGlsl}
 in vec3 vWorld;
 out vec4 fragColor;
-
-vec3 heat(float x) {
-  x = clamp(x, 0.0, 1.0);
-  return clamp(vec3(3.0 * x, 3.0 * x - 1.0, 3.0 * x - 2.0), 0.0, 1.0);
-}
 
 void main() {
   // Half a voxel behind the surface first; where that voxel holds no point (thin or slanted shells
@@ -47,10 +39,7 @@ void main() {
     irradiance = cacheAt(clamp(ivec3(floor(cell + 0.5)), ivec3(0), uDims - 1));
   }
   irradiance = max(irradiance, vec3(0.0));  // no point near: black
-  vec3 color;
-  if (uDifference == 1) color = heat(irradiance.r * uDifferenceScale);
-  else color = pow(clamp(uAlbedo / 3.14159265 * irradiance * uExposure, 0.0, 1.0), vec3(1.0 / uGamma));
-  fragColor = vec4(color, 1.0);
+  fragColor = vec4(display(uAlbedo / 3.14159265 * irradiance, irradiance.r), 1.0);
 }`;
 
 export class CornellView {

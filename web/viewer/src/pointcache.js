@@ -26,6 +26,24 @@ vec3 cacheAt(ivec3 voxel) {
   return v == 0u ? vec3(-1.0) : cacheOf(v);
 }`;
 
+/**
+ * GLSL both scenes display with: tone mapping of a linear value (exposure, gamma) or, in the
+ * difference view, a heat map of a difference scaled to its largest.
+ */
+export const displayGlsl = /* glsl */ `
+uniform float uExposure;
+uniform float uGamma;
+uniform int uDifference;
+uniform float uDifferenceScale;
+vec3 heat(float x) {
+  x = clamp(x, 0.0, 1.0);
+  return clamp(vec3(3.0 * x, 3.0 * x - 1.0, 3.0 * x - 2.0), 0.0, 1.0);
+}
+vec3 display(vec3 linear, float difference) {
+  return uDifference == 1 ? heat(difference * uDifferenceScale)
+                          : pow(clamp(linear * uExposure, 0.0, 1.0), vec3(1.0 / uGamma));
+}`;
+
 /** The most points the packed index holds (24 bits). */
 export const MAX_POINTS = 0xffffff;
 

@@ -5,7 +5,7 @@
 // at the voxel's point (nearest voxel: the cache is kept by point, see pointcache.js).
 
 import * as THREE from 'three';
-import {PointCache, cacheLookupGlsl} from './pointcache.js';
+import {PointCache, cacheLookupGlsl, displayGlsl} from './pointcache.js';
 
 const vertexShader = /* glsl */ `
 out vec3 vWorld;
@@ -28,17 +28,9 @@ uniform vec3 uAlbedo;
 uniform float uStep;          // world units
 uniform int uMaxSteps;
 uniform int uSmooth;          // 1: density trilinear (the refined image), 0: the voxel's own
-uniform float uExposure;
-uniform float uGamma;
-uniform int uDifference;
-uniform float uDifferenceScale;
+${displayGlsl}
 in vec3 vWorld;
 out vec4 fragColor;
-
-vec3 heat(float x) {
-  x = clamp(x, 0.0, 1.0);
-  return clamp(vec3(3.0 * x, 3.0 * x - 1.0, 3.0 * x - 2.0), 0.0, 1.0);
-}
 
 void main() {
   vec3 origin = cameraPosition;
@@ -75,9 +67,7 @@ void main() {
     T *= 1.0 - alpha;
     if (T < 0.004) break;
   }
-  vec3 color = uDifference == 1 ? heat(largest * uDifferenceScale)
-                                : pow(clamp(L * uExposure, 0.0, 1.0), vec3(1.0 / uGamma));
-  fragColor = vec4(color, 1.0);
+  fragColor = vec4(display(L, largest), 1.0);
 }`;
 
 export class VolumeView {
