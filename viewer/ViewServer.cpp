@@ -96,9 +96,10 @@ struct ViewServer::Impl {
     class WsConnection;
     std::weak_ptr<WsConnection> viewer;  ///< the one connected viewer (I/O thread only)
 
-    /// The newest bodies by URL (I/O thread only); a body older than the last kBodiesKept is gone
-    /// (404): the page fetches each as its text arrives.
-    static constexpr std::size_t kBodiesKept = 8;
+    /// Bodies not yet fetched, by URL (I/O thread only). Each is served once and then let go (moved
+    /// into its response, no copy); at most kBodiesKept wait, the oldest beyond that are gone (404),
+    /// so a page that never fetches costs bounded memory (the page fetches each as its text arrives).
+    static constexpr std::size_t kBodiesKept = 32;
     std::deque<std::pair<std::string, std::string>> bodies;
     std::atomic<std::uint64_t> nextBody{0};
 
@@ -150,7 +151,8 @@ struct ViewServer::Impl {
     }
 
     void accept();
-    http::response<http::string_body> respond(const http::request<http::string_body>& req) const;
+    /// Answers a GET; a body (/api/body/ID) leaves the store with its answer.
+    http::response<http::string_body> respond(const http::request<http::string_body>& req);
 };
 
 /// One viewer's WebSocket: reads client messages into its RelightSession, writes the session's
@@ -340,8 +342,7 @@ private:
 
 }  // namespace
 
-http::response<http::string_body> ViewServer::Impl::respond(
-    const http::request<http::string_body>& req) const {
+http::response<http::string_body> ViewServer::Impl::respond(const http::request<http::string_body>& req) {
     http::response<http::string_body> res;
     res.version(req.version());
     res.keep_alive(req.keep_alive());
@@ -360,9 +361,14 @@ http::response<http::string_body> ViewServer::Impl::respond(
     if (target == "/api/scene") return reply(http::status::ok, "application/json", sceneJson);
     if (target == "/api/geometry") return reply(http::status::ok, "application/octet-stream", geometry);
     if (target.rfind("/api/body/", 0) == 0) {
-        for (const auto& [url, bytes] : bodies)
-            if (url == target) return reply(http::status::ok, "application/octet-stream", bytes);
-        return reply(http::status::not_found, "text/plain", "no such body (superseded): " + target + "\n");
+        for (auto it = bodies.begin(); it != bodies.end(); ++it) {
+            if (it->first != target) continue;
+            std::string bytes = std::move(it->second);
+            bodies.erase(it);
+            return reply(http::status::ok, "application/octet-stream", std::move(bytes));
+        }
+        return reply(http::status::not_found, "text/plain",
+                     "no such body (fetched or superseded): " + target + "\n");
     }
     const std::string path = fileOf(options.webRoot, target);
     std::string body;

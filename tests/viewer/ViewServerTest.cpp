@@ -175,7 +175,7 @@ TEST_F(ViewServerTest, ARelightArrivesAsTextThenItsHalfFloats) {
     EXPECT_EQ(last["checksum"].get<std::string>().size(), 16u);
 }
 
-TEST_F(ViewServerTest, AWholeCacheComesByHttpAndOnlyTheNewestAreKept) {
+TEST_F(ViewServerTest, AWholeCacheComesByHttpAndIsServedOnce) {
     Model missing = smallVolume().model;
     missing.epsMin = missing.epsMax = 0;  // an estimate (the whole cache), then branches
     Running server(missing, 1024);        // every whole cache by HTTP, the branches too
@@ -185,7 +185,7 @@ TEST_F(ViewServerTest, AWholeCacheComesByHttpAndOnlyTheNewestAreKept) {
     EXPECT_EQ(v.untilFinal(1)["state"], "miss");
     EXPECT_GE(v.bodies, 2) << "the estimate and the branches came by HTTP";
     EXPECT_EQ(request(server.port(), http::verb::get, "/api/body/1").result(), http::status::not_found)
-        << "a body older than the newest 8 is gone";
+        << "a body is served once";
     EXPECT_EQ(request(server.port(), http::verb::get, "/api/body/x").result(), http::status::not_found);
 }
 
