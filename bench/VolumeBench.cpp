@@ -145,6 +145,34 @@ void BM_ReconstructSharedVsSeparate(benchmark::State& state) {
 }
 BENCHMARK(BM_ReconstructSharedVsSeparate)->Arg(40)->Arg(64)->Unit(benchmark::kMillisecond)->Iterations(30);
 
+// BM_ReconstructSingleVsDouble/M: the same reconstruction (shared channels, 254,000 voxels) from
+// the basis in float (BasisPrecision::Single, what `pmsc view` uses) and in double, alternately;
+// single_over_double = the ratio of their times (the float basis is half the bytes).
+void BM_ReconstructSingleVsDouble(benchmark::State& state) {
+    const Index n = 254000, m = state.range(0);
+    const Model model = reconstructionModel(n, m, true);
+    const PointMultiplier single(model, BasisPrecision::Single), dbl(model, BasisPrecision::Double);
+    std::vector<double> coords(static_cast<std::size_t>(model.coordCount()), 0.1),
+        out(static_cast<std::size_t>(3 * n));
+    double singleSeconds = 0, doubleSeconds = 0;
+    using Clock = std::chrono::steady_clock;
+    for (auto _ : state) {
+        auto t0 = Clock::now();
+        single.reconstruct(coords.data(), out.data());
+        auto t1 = Clock::now();
+        dbl.reconstruct(coords.data(), out.data());
+        auto t2 = Clock::now();
+        benchmark::DoNotOptimize(out.data());
+        singleSeconds += std::chrono::duration<double>(t1 - t0).count();
+        doubleSeconds += std::chrono::duration<double>(t2 - t1).count();
+    }
+    const double iterations = static_cast<double>(state.iterations());
+    state.counters["single_ms"] = 1e3 * singleSeconds / iterations;
+    state.counters["double_ms"] = 1e3 * doubleSeconds / iterations;
+    state.counters["single_over_double"] = singleSeconds / doubleSeconds;
+}
+BENCHMARK(BM_ReconstructSingleVsDouble)->Arg(40)->Arg(64)->Unit(benchmark::kMillisecond)->Iterations(30);
+
 }  // namespace
 
 BENCHMARK_MAIN();

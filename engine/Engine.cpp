@@ -131,7 +131,7 @@ struct Engine::Impl {
           evaluator(e),
           options(std::move(o)),
           shape(e.failThroughShape()),
-          pm(checked(m, e, options)),
+          pm(checked(m, e, options), options.basisPrecision),
           policy(options.policy ? *options.policy : SoftCachePolicy(m.epsMin, m.epsMax)),
           chunkPoints(options.chunkPoints > 0 ? options.chunkPoints
                       : shape.chunkPoints > 0

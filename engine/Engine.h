@@ -7,6 +7,7 @@
 #include "pmsc/Errors.h"  // pmsc::Cancelled
 #include "pmsc/Model.h"
 #include "pmsc/PointEvaluator.h"
+#include "pmsc/PointMultiplier.h"  // BasisPrecision
 
 #include <atomic>
 #include <cstdint>
@@ -81,6 +82,11 @@ struct EngineOptions {
     /// core busy with frames already. Needs an evaluator whose subsets are cheap
     /// (PointEvaluator::FailThroughShape::cheapSubsets; ignored otherwise). Same values either way.
     Index keyPiecePoints = 0;
+    /// What a hit's and a blend's point multiplication read the basis in (models whose channels
+    /// share it). Single halves the memory a hit of a large cache reads, and its time; for clients
+    /// that display the values (`pmsc view`). Double, the default, is what every batch run and
+    /// comparison uses.
+    BasisPrecision basisPrecision = BasisPrecision::Double;
     /// Fail through with one PointEvaluator::evaluateAll() call per frame instead of
     /// chunks (for evaluators whose full evaluation shares work between points). Also on when
     /// the evaluator declares it (PointEvaluator::failThroughShape()).

@@ -14,61 +14,124 @@ using ConstRowMajorMap = Eigen::Map<const RowMajor>;
 
 /// The basis of a model whose channels share it, copied in panels of kPanel rows: panel p holds
 /// rows [p*kPanel, (p+1)*kPanel) column-major (kPanel x M, the last one padded with zeros), one
-/// contiguous block. Decision, measured at N = 254,000, M = 40..64, C = 3: Eigen's GEMM packs the
-/// (N x M) operand before multiplying it by the M x C coordinates and ran slower than the (N*C) x M
-/// GEMV it replaces; a blocked loop over the column-major basis reads M streams 8*N bytes apart
-/// and reached 6-15 GB/s. One panel is one stream: the SoA loop below vectorizes over its rows.
-constexpr Index kPanel = 256;
+/// contiguous block, read front to back. Decisions, measured at N = 254,000, M = 40, C = 3
+/// (`pmsc_volume_bench --benchmark_filter=Reconstruct`):
+/// - Eigen's GEMM packs the (N x M) operand before multiplying it by the M x C coordinates and
+///   ran slower than the (N*C) x M GEMV it replaces; a loop over the column-major basis reads M
+///   streams 8*N bytes apart.
+/// - Panels of 256 rows with per-channel accumulator rows stored every sum M times: 5.0-5.5 ms
+///   a frame on one core, in double or float alike.
+/// - Panels of 16 rows whose C x 16 sums stay in registers over all M columns (tileRows):
+///   4.3-4.8 ms in double, 2.2-3.2 ms in float, 4.5 ms either way built without -march=native;
+///   16 rows beat 8 and 32.
+constexpr Index kPanel = 16;
 
-Eigen::VectorXd panelsOf(const Eigen::MatrixXd& basis) {
+template <typename Scalar>
+Eigen::Matrix<Scalar, Eigen::Dynamic, 1> panelsOf(const Eigen::MatrixXd& basis) {
     const Index n = basis.rows(), m = basis.cols();
     const Index panels = (n + kPanel - 1) / kPanel;
-    Eigen::VectorXd out = Eigen::VectorXd::Zero(panels * kPanel * m);
+    Eigen::Matrix<Scalar, Eigen::Dynamic, 1> out =
+        Eigen::Matrix<Scalar, Eigen::Dynamic, 1>::Zero(panels * kPanel * m);
     for (Index p = 0; p < panels; ++p) {
         const Index rows = std::min(kPanel, n - p * kPanel);
         for (Index j = 0; j < m; ++j)
-            for (Index i = 0; i < rows; ++i) out[(p * m + j) * kPanel + i] = basis(p * kPanel + i, j);
+            for (Index i = 0; i < rows; ++i)
+                out[(p * m + j) * kPanel + i] = static_cast<Scalar>(basis(p * kPanel + i, j));
     }
     return out;
 }
 
+/// Rows of a panel (a partial panel, or any C): acc (C rows of kPanel) = mean, plus every basis
+/// column times its coordinate, in the order tileRows adds them.
+template <typename Scalar>
+void panelRows(const Scalar* block, Index m, Index c, const double* coords, Index rows, const double* mu,
+               double* acc) {
+    for (Index ch = 0; ch < c; ++ch)
+        for (Index i = 0; i < rows; ++i) acc[ch * kPanel + i] = mu[i * c + ch];
+    for (Index j = 0; j < m; ++j) {
+        const Scalar* column = block + j * kPanel;
+        for (Index ch = 0; ch < c; ++ch) {
+            const double bc = coords[j * c + ch];
+            double* a = acc + ch * kPanel;
+            for (Index i = 0; i < rows; ++i) a[i] += static_cast<double>(column[i]) * bc;
+        }
+    }
+}
+
+/// A whole panel with C fixed: its kC x kPanel sums stay in registers for the whole pass over
+/// the M columns, so the loop reads the panel once and stores only the results.
+template <int kC, typename Scalar>
+void tileRows(const Scalar* block, Index m, const double* coords, const double* mu, double* o) {
+    using Column = Eigen::Matrix<double, kPanel, 1>;
+    // The sums of a tile, channel by channel, in Eigen's fixed-size vectors (registers).
+    Column acc[kC];
+    const Eigen::Map<const Eigen::Matrix<double, kC, kPanel>> mean(mu);
+    for (int ch = 0; ch < kC; ++ch) acc[ch] = mean.row(ch).transpose();
+    for (Index j = 0; j < m; ++j) {
+        const Column column =
+            Eigen::Map<const Eigen::Matrix<Scalar, kPanel, 1>>(block + j * kPanel).template cast<double>();
+        for (int ch = 0; ch < kC; ++ch) acc[ch] += column * coords[j * kC + ch];
+    }
+    Eigen::Map<Eigen::Matrix<double, kC, kPanel>> result(o);
+    for (int ch = 0; ch < kC; ++ch) result.row(ch) = acc[ch].transpose();
+}
+
 /// Points [first, first+count) of a model whose channels share the basis, from its panels.
-/// kC > 0 fixes C at compile time.
-template <int kC>
-void sharedReconstruct(const Model& model, const double* panels, const double* coords, Index first,
+/// kC > 0 fixes C at compile time (and takes whole tiles in registers); Scalar is the panels'
+/// (BasisPrecision), the sums are double.
+template <int kC, typename Scalar>
+void sharedReconstruct(const Model& model, const Scalar* panels, const double* coords, Index first,
                        Index count, double* out) {
     const Index c = kC > 0 ? kC : model.channels;
     const Index m = model.basisSize();
-    // One accumulator row per channel (structure of arrays), so the inner loop over points is a
-    // plain vectorizable a*x+y per channel.
-    std::vector<double> dynamicAcc(kC > 0 ? 0 : static_cast<std::size_t>(c * kPanel));
-    double fixedAcc[kC > 0 ? kC * kPanel : 1];
-    double* acc = kC > 0 ? fixedAcc : dynamicAcc.data();
+    // Partial panels: one accumulator row per channel (structure of arrays).
+    std::vector<double> acc(static_cast<std::size_t>(c * kPanel));
     const double* mean = model.mean.data();
     for (Index at = first; at < first + count;) {
         const Index panel = at / kPanel, lo = at - panel * kPanel;
         const Index rows = std::min(kPanel - lo, first + count - at);
         const double* mu = mean + at * c;
-        for (Index ch = 0; ch < c; ++ch)
-            for (Index i = 0; i < rows; ++i) acc[ch * kPanel + i] = mu[i * c + ch];
-        const double* block = panels + panel * m * kPanel + lo;
-        for (Index j = 0; j < m; ++j) {
-            const double* column = block + j * kPanel;
-            for (Index ch = 0; ch < c; ++ch) {
-                const double bc = coords[j * c + ch];
-                double* a = acc + ch * kPanel;
-                for (Index i = 0; i < rows; ++i) a[i] += column[i] * bc;
+        const Scalar* block = panels + panel * m * kPanel + lo;
+        double* o = out + (at - first) * c;
+        if constexpr (kC > 0) {
+            if (rows == kPanel) {
+                tileRows<kC>(block, m, coords, mu, o);
+                at += rows;
+                continue;
             }
         }
-        double* o = out + (at - first) * c;
-        for (Index ch = 0; ch < c; ++ch)
-            for (Index i = 0; i < rows; ++i) o[i * c + ch] = acc[ch * kPanel + i];
+        {
+            panelRows(block, m, c, coords, rows, mu, acc.data());
+            for (Index ch = 0; ch < c; ++ch)
+                for (Index i = 0; i < rows; ++i) o[i * c + ch] = acc[ch * kPanel + i];
+        }
         at += rows;
+    }
+}
+template <typename Scalar>
+void sharedReconstructC(const Model& model, const Scalar* panels, const double* coords, Index first,
+                        Index count, double* out) {
+    switch (model.channels) {
+        case 1:
+            sharedReconstruct<1>(model, panels, coords, first, count, out);
+            break;
+        case 2:
+            sharedReconstruct<2>(model, panels, coords, first, count, out);
+            break;
+        case 3:
+            sharedReconstruct<3>(model, panels, coords, first, count, out);
+            break;
+        case 4:
+            sharedReconstruct<4>(model, panels, coords, first, count, out);
+            break;
+        default:
+            sharedReconstruct<0>(model, panels, coords, first, count, out);
+            break;
     }
 }
 }  // namespace
 
-PointMultiplier::PointMultiplier(const Model& model) : model_(model) {
+PointMultiplier::PointMultiplier(const Model& model, BasisPrecision precision) : model_(model) {
     model_.validate();
     const Eigen::Map<const Eigen::MatrixXd> meanColumn(model_.mean.data(), model_.mean.size(), 1);
     keyMean_ = gatherKeyRows(meanColumn, model_.channels, model_.keyPoints).col(0);
@@ -76,7 +139,10 @@ PointMultiplier::PointMultiplier(const Model& model) : model_(model) {
     // b = P (k - mean_K) = P k - P mean_K: precomputing P mean_K lets project() write straight
     // into the caller's buffer with one GEMV and no temporary.
     if (model_.sharedChannels) {
-        panels_ = panelsOf(model_.basis);
+        if (precision == BasisPrecision::Single)
+            singlePanels_ = panelsOf<float>(model_.basis);
+        else
+            panels_ = panelsOf<double>(model_.basis);
         projectedKeyMean_.resize(model_.coordCount());
         RowMajorMap(projectedKeyMean_.data(), model_.basisSize(), model_.channels).noalias() =
             model_.projector * ConstRowMajorMap(keyMean_.data(), model_.keyCount(), model_.channels);
@@ -189,23 +255,10 @@ void PointMultiplier::reconstructRange(const double* coords, Index first, Index 
     if (model_.sharedChannels) {
         // out (count x C) = mean + basis rows (count x M) * coords (M x C): one pass over the
         // N x M basis for all channels, a third of the (N*C) x M one's memory traffic at C = 3.
-        switch (c) {
-            case 1:
-                sharedReconstruct<1>(model_, panels_.data(), coords, first, count, out);
-                break;
-            case 2:
-                sharedReconstruct<2>(model_, panels_.data(), coords, first, count, out);
-                break;
-            case 3:
-                sharedReconstruct<3>(model_, panels_.data(), coords, first, count, out);
-                break;
-            case 4:
-                sharedReconstruct<4>(model_, panels_.data(), coords, first, count, out);
-                break;
-            default:
-                sharedReconstruct<0>(model_, panels_.data(), coords, first, count, out);
-                break;
-        }
+        if (singlePanels_.size() > 0)
+            sharedReconstructC(model_, singlePanels_.data(), coords, first, count, out);
+        else
+            sharedReconstructC(model_, panels_.data(), coords, first, count, out);
         return;
     }
     Eigen::Map<const Eigen::VectorXd> b(coords, model_.basisSize());
