@@ -15,6 +15,12 @@ namespace pmsc::viewer {
 std::uint16_t toHalf(double v);
 /// The value of a half float.
 float fromHalf(std::uint16_t h);
+/// toHalf of every value into out (values.size() halves), vectorized where the CPU has F16C.
+void toHalves(std::span<const double> values, std::uint16_t* out);
+/// The checksum the server and the page compare: FNV-1a 64 (offset 0xcbf29ce484222325, prime
+/// 0x100000001b3) stepped once per 32-bit little-endian word of the halves, the last word
+/// zero-padded when the count is odd.
+std::uint64_t wordChecksum(std::span<const std::uint16_t> halfs);
 
 /// What a viewer holds of a cache: N x C half floats, the form the page uploads. Updated range by
 /// range as the server sends them, so the server and the page hold the same bytes and can compare
@@ -25,7 +31,7 @@ public:
 
     /// Stores `values` (count x C doubles) at points [first, first + count); returns their halfs.
     std::span<const std::uint16_t> write(Index first, std::span<const double> values);
-    /// FNV-1a 64 of the whole array's little-endian bytes, as 16 lowercase hex digits.
+    /// wordChecksum of the whole array, as 16 lowercase hex digits.
     std::string checksum() const;
     std::span<const std::uint16_t> values() const { return values_; }
     Index points() const { return Index(values_.size()) / channels_; }

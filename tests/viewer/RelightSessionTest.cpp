@@ -10,8 +10,11 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
+#include <limits>
 #include <mutex>
+#include <random>
 
 namespace pmsc::viewer {
 namespace {
@@ -274,11 +277,51 @@ TEST(HalfCache, HalfFloatsRoundToNearestAndNeverOverflow) {
     EXPECT_EQ(toHalf(1e9), 0x7bff);  // 65504, not infinity
     EXPECT_EQ(fromHalf(toHalf(0.1)), fromHalf(0x2e66));
     HalfCache c(2, 3);
-    EXPECT_EQ(c.checksum(), "5467b0da1d106495") << "FNV-1a 64 of 12 zero bytes";
+    EXPECT_EQ(c.checksum(), "d94d12186c0f2fb7") << "FNV-1a 64 stepped over three zero words";
     const std::vector<double> v{1, 2, 3};
     c.write(1, v);
     EXPECT_EQ(fromHalf(c.values()[3]), 1.0f);
     EXPECT_THROW(c.write(2, v), std::out_of_range);
+}
+
+TEST(HalfCache, BatchConversionIsTheScalarOneBitForBit) {
+    // Every edge: ties at several exponents, the largest half and beyond, subnormals, zeros of
+    // both signs, then random values over the halves' range; lengths not a multiple of eight.
+    std::vector<double> v{0.0,
+                          -0.0,
+                          1.0 + std::ldexp(1.0, -11),
+                          1.0 + 3 * std::ldexp(1.0, -11),
+                          65504.0,
+                          65519.0,
+                          65520.0,
+                          1e300,
+                          -1e300,
+                          std::ldexp(1.0, -24),
+                          std::ldexp(1.0, -25),
+                          std::ldexp(3.0, -26),
+                          6.1e-5,
+                          -0.1,
+                          1e-300};
+    std::mt19937 random(7);
+    std::uniform_real_distribution<double> exponent(-30, 17), unit(-1, 1);
+    for (int i = 0; i < 10001; ++i) v.push_back(unit(random) * std::exp2(exponent(random)));
+    std::vector<std::uint16_t> batch(v.size());
+    toHalves(v, batch.data());
+    for (size_t i = 0; i < v.size(); ++i) ASSERT_EQ(batch[i], toHalf(v[i])) << "value " << v[i];
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    std::vector<double> nans(9, nan);
+    std::vector<std::uint16_t> h(nans.size());
+    toHalves(nans, h.data());
+    for (const std::uint16_t x : h) EXPECT_TRUE(std::isnan(fromHalf(x)));
+}
+
+TEST(HalfCache, ChecksumStepsPerWordAndPadsAnOddCount) {
+    // Expected values from Python integers; web/viewer/tests/half.test.mjs checks the page's
+    // JavaScript against the same ones.
+    const std::vector<std::uint16_t> odd{1, 2, 3}, edges{0x3c00, 0xc000, 0x7bff, 0xffff, 0x8000};
+    EXPECT_EQ(wordChecksum(odd), 0x3c2f2501ee9691ddull);
+    EXPECT_EQ(wordChecksum(edges), 0x5bda643e5916f520ull);
+    EXPECT_EQ(wordChecksum({}), 0xcbf29ce484222325ull);
 }
 
 }  // namespace

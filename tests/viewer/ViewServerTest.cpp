@@ -15,6 +15,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <thread>
 
 namespace pmsc::viewer {
@@ -187,6 +188,36 @@ TEST_F(ViewServerTest, AWholeCacheComesByHttpAndIsServedOnce) {
     EXPECT_EQ(request(server.port(), http::verb::get, "/api/body/1").result(), http::status::not_found)
         << "a body is served once";
     EXPECT_EQ(request(server.port(), http::verb::get, "/api/body/x").result(), http::status::not_found);
+}
+
+TEST_F(ViewServerTest, AWaitingBodyRequestGetsTheNextWholeCacheWithItsAddress) {
+    Running server(smallVolume().model, 1024);  // every whole cache by HTTP
+    Viewer v(server.port());
+    v.nextText();
+    // Asked for before the frame exists: answered when the server makes the body (or at once, had
+    // the body been made first: the same answer).
+    auto waiting = std::async(std::launch::async, [port = server.port()] {
+        return request(port, http::verb::get, "/api/body/next");
+    });
+    v.send(setMessage(1, 30, 20));
+    nlohmann::json m;
+    do m = v.nextText();
+    while (m["type"] != "update" || !m.contains("body"));
+    auto [text, header] = v.next();
+    EXPECT_FALSE(text);
+    EXPECT_EQ(header.size(), 16u) << "the WebSocket carries the header alone";
+    const auto res = waiting.get();
+    ASSERT_EQ(res.result(), http::status::ok);
+    EXPECT_EQ(res["X-Pmsc-Body"], m["body"].get<std::string>());
+    std::uint32_t h[4];
+    ASSERT_GE(res.body().size(), 16u);
+    std::memcpy(h, res.body().data(), 16);
+    EXPECT_EQ(h[0], 0x564d5350u);
+    EXPECT_EQ(h[1], 1u);
+    EXPECT_EQ(res.body().size(), 16 + size_t(h[3]) * 3 * 2);
+    EXPECT_EQ(request(server.port(), http::verb::get, m["body"].get<std::string>()).result(),
+              http::status::not_found)
+        << "served once: to the waiting request";
 }
 
 TEST_F(ViewServerTest, AMalformedMessageGetsAnErrorAndTheConnectionStaysUsable) {

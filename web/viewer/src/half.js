@@ -1,4 +1,5 @@
-// IEEE half floats and the FNV-1a 64 checksum the server sends with every update.
+// IEEE half floats, and the checksums: the cache's (wordChecksum, sent by the server with every
+// update) and the canvas's (fnv1a64, for the test's image comparisons).
 
 // Every half bit pattern decoded once: 65,536 floats (256 KiB).
 export const HALF_TO_FLOAT = (() => {
@@ -45,23 +46,45 @@ export function floatToHalf(value) {
   return sign | half;
 }
 
-/**
- * FNV-1a 64 (offset 0xcbf29ce484222325, prime 0x100000001b3) over the bytes of a typed array, as
- * 16 lowercase hex digits. The 64-bit state is kept as two 32-bit halves: the prime is 2^40 + 0x1b3,
- * so h * prime = h * 0x1b3 + (h << 40), every partial product exact in a double.
- */
+// FNV-1a 64 (offset 0xcbf29ce484222325, prime 0x100000001b3) with the 64-bit state kept as two
+// 32-bit halves: the prime is 2^40 + 0x1b3, so h * prime = h * 0x1b3 + (h << 40), every partial
+// product exact in a double.
+const FNV_OFFSET_HI = 0xcbf29ce4;
+const FNV_OFFSET_LO = 0x84222325;
+
+/** One FNV-1a 64 step: state [hi, lo] xor a value of up to 32 bits, times the prime. */
+function fnvStep(state, value) {
+  const lo = (state[1] ^ value) >>> 0;
+  const a = (lo & 0xffff) * 0x1b3;
+  const b = (lo >>> 16) * 0x1b3;
+  const t = a + (b & 0xffff) * 65536;
+  const carry = Math.floor(t / 4294967296) + Math.floor(b / 65536);
+  state[0] = (Math.imul(state[0], 0x1b3) + carry + (lo << 8)) >>> 0;
+  state[1] = t >>> 0;
+}
+
+function hex(state) {
+  return state[0].toString(16).padStart(8, '0') + state[1].toString(16).padStart(8, '0');
+}
+
+/** FNV-1a 64 over the bytes of a typed array, as 16 lowercase hex digits. */
 export function fnv1a64(typedArray) {
   const bytes = new Uint8Array(typedArray.buffer, typedArray.byteOffset, typedArray.byteLength);
-  let hi = 0xcbf29ce4;
-  let lo = 0x84222325;
-  for (let n = 0; n < bytes.length; ++n) {
-    lo = (lo ^ bytes[n]) >>> 0;
-    const a = (lo & 0xffff) * 0x1b3;
-    const b = (lo >>> 16) * 0x1b3;
-    const t = a + (b & 0xffff) * 65536;
-    const carry = Math.floor(t / 4294967296) + Math.floor(b / 65536);
-    hi = (Math.imul(hi, 0x1b3) + carry + (lo << 8)) >>> 0;
-    lo = t >>> 0;
-  }
-  return hi.toString(16).padStart(8, '0') + lo.toString(16).padStart(8, '0');
+  const state = [FNV_OFFSET_HI, FNV_OFFSET_LO];
+  for (let n = 0; n < bytes.length; ++n) fnvStep(state, bytes[n]);
+  return hex(state);
+}
+
+/**
+ * The checksum the server sends with a cache: FNV-1a 64 stepped once per 32-bit little-endian word
+ * of a Uint16Array (two halves), the last word zero-padded when the count is odd. A quarter of the
+ * byte-wise steps: the page verifies every update.
+ */
+export function wordChecksum(halfs) {
+  const state = [FNV_OFFSET_HI, FNV_OFFSET_LO];
+  const n = halfs.length;
+  let i = 0;
+  for (; i + 2 <= n; i += 2) fnvStep(state, (halfs[i] | (halfs[i + 1] << 16)) >>> 0);
+  if (i < n) fnvStep(state, halfs[i]);
+  return hex(state);
 }

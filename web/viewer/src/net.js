@@ -30,6 +30,75 @@ export async function loadScene() {
 }
 
 /**
+ * Whole caches by HTTP: one GET /api/body/next always waits at the server, which answers it the
+ * moment a body is made (its address in X-Pmsc-Body), so the bytes are on their way before the
+ * WebSocket's header for them arrives. get(url) resolves with a body's bytes whichever comes first.
+ */
+class BodyPoller {
+  constructor(onError) {
+    this.onError = onError;
+    this.arrived = new Map();  // url -> ArrayBuffer, not asked for yet
+    this.wanted = new Map();   // url -> {resolve, reject}, not arrived yet
+    this.running = false;
+    this.failing = false;
+  }
+
+  start() {
+    if (this.running) return;
+    this.running = true;
+    this.loop();
+  }
+
+  async loop() {
+    while (this.running) {
+      try {
+        const response = await fetch('/api/body/next', {cache: 'no-store'});
+        if (!response.ok) throw new Error(`/api/body/next: HTTP ${response.status}`);
+        const url = response.headers.get('X-Pmsc-Body');
+        if (!url) throw new Error('/api/body/next: an answer without X-Pmsc-Body');
+        const bytes = await response.arrayBuffer();
+        this.failing = false;
+        const waiter = this.wanted.get(url);
+        if (waiter) {
+          this.wanted.delete(url);
+          waiter.resolve(bytes);
+        } else {
+          this.arrived.set(url, bytes);
+        }
+      } catch (error) {
+        // The server went away or restarted: say so once, and ask again a little later.
+        if (!this.failing) this.onError(error.message);
+        this.failing = true;
+        await new Promise(resolve => setTimeout(resolve, 500));
+      }
+    }
+  }
+
+  /** A body's bytes; one the waiting request has not brought in 5 s is asked for by its address. */
+  get(url) {
+    const bytes = this.arrived.get(url);
+    if (bytes) {
+      this.arrived.delete(url);
+      return Promise.resolve(bytes);
+    }
+    return new Promise((resolve, reject) => {
+      const timer = setTimeout(() => {
+        if (!this.wanted.has(url)) return;
+        this.wanted.delete(url);
+        fetch(url, {cache: 'no-store'}).then(r => {
+          if (!r.ok) throw new Error(`${url}: HTTP ${r.status}`);
+          return r.arrayBuffer();
+        }).then(resolve, reject);
+      }, 5000);
+      this.wanted.set(url, {
+        resolve: b => { clearTimeout(timer); resolve(b); },
+        reject: e => { clearTimeout(timer); reject(e); },
+      });
+    });
+  }
+}
+
+/**
  * The WebSocket: pairs every text `update` with the binary message that follows it and hands the
  * pair to onUpdate(update, {first, count, halfs}); other messages go to onMessage.
  */
@@ -42,9 +111,11 @@ export class Connection {
     this.seq = 0;
     // Updates are applied in the order they came, also when one's values come by HTTP.
     this.applied = Promise.resolve();
+    this.bodies = new BodyPoller(message => this.onMessage({type: 'error', message}));
   }
 
   open() {
+    this.bodies.start();
     const url = new URL('/api/ws', location.href);
     url.protocol = url.protocol === 'https:' ? 'wss:' : 'ws:';
     this.socket = new WebSocket(url);
@@ -93,10 +164,7 @@ export class Connection {
     }
     // A whole cache comes by HTTP (update.body; the WebSocket carried its header alone): fetch()
     // takes it several times faster than a WebSocket message in Chromium. Later updates wait for it.
-    const values = update.body ? fetch(update.body).then(r => {
-      if (!r.ok) throw new Error(`${update.body}: HTTP ${r.status}`);
-      return r.arrayBuffer();
-    }) : Promise.resolve(buffer);
+    const values = update.body ? this.bodies.get(update.body) : Promise.resolve(buffer);
     this.applied = this.applied.then(() => values).then(data => this.apply(update, data)).catch(error => {
       this.onMessage({type: 'error', message: `update ${update.seq}: ${error.message}`});
     });

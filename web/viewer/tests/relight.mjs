@@ -3,6 +3,7 @@
 //
 //   node tests/relight.mjs --model D/model.pmsc --scene volume:D/density.vdb [--bin build/bin/pmsc]
 //        [--moves 100 | --short] [--out DIR] [--size 480x360] [--tolerance 0] [--url URL]
+//        [--gpu-compositing]
 //
 // Starts the server itself (--port 0, the address it prints), drives the page through
 // window.pmscView, prints a JSON summary and exits 1 if any check failed (2: could not run).
@@ -30,6 +31,7 @@ function parseArgs(argv) {
     url: null,
     chromium: process.env.CHROMIUM || '/usr/bin/chromium',
     timeout: 60000,
+    gpuCompositing: false,
   };
   for (let i = 2; i < argv.length; ++i) {
     const arg = argv[i];
@@ -47,8 +49,9 @@ function parseArgs(argv) {
     else if (arg === '--tolerance') options.tolerance = Number(value());
     else if (arg === '--url') options.url = value();
     else if (arg === '--chromium') options.chromium = value();
+    else if (arg === '--gpu-compositing') options.gpuCompositing = true;
     else if (arg === '--help' || arg === '-h') {
-      console.log(fs.readFileSync(fileURLToPath(import.meta.url), 'utf8').split('\n').slice(1, 10).join('\n'));
+      console.log(fs.readFileSync(fileURLToPath(import.meta.url), 'utf8').split('\n').slice(1, 11).join('\n'));
       process.exit(0);
     } else throw new Error(`unknown argument ${arg}`);
   }
@@ -141,7 +144,8 @@ async function main() {
     checks.push({name, ok: Boolean(ok), ...(detail === undefined ? {} : {detail})});
     if (!ok) console.error(`relight: FAILED ${name}${detail === undefined ? '' : `: ${JSON.stringify(detail)}`}`);
   };
-  const result = {url: null, moves: options.moves, checks, screenshots: {}};
+  const result = {url: null, moves: options.moves, compositing: options.gpuCompositing ? 'gpu (SwiftShader)' : 'software',
+    checks, screenshots: {}};
 
   if (!fs.existsSync(options.chromium)) throw new Error(`no browser at ${options.chromium} (apt-get install chromium)`);
   const server = options.url ? null : await startServer(options);
@@ -153,8 +157,13 @@ async function main() {
   const browser = await puppeteer.launch({
     executablePath: options.chromium,
     headless: true,
-    args: ['--no-sandbox', '--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--ignore-gpu-blocklist',
-      '--disable-background-timer-throttling', '--disable-renderer-backgrounding'],
+    // Chromium's own set-up on a machine without a GPU (SystemInfo.getInfo: gpu_compositing
+    // "disabled_software"): WebGL 2 in SwiftShader, the page composited in software.
+    // --gpu-compositing forces compositing through SwiftShader as well (--use-angle=swiftshader
+    // --ignore-gpu-blocklist), which costs the 2-core machine about 15 ms of CPU per frame.
+    args: ['--no-sandbox', '--enable-unsafe-swiftshader', '--disable-background-timer-throttling',
+      '--disable-renderer-backgrounding',
+      ...(options.gpuCompositing ? ['--use-angle=swiftshader', '--ignore-gpu-blocklist'] : [])],
   });
   try {
     const page = await browser.newPage();
