@@ -41,8 +41,8 @@ Eigen::Matrix<Scalar, Eigen::Dynamic, 1> panelsOf(const Eigen::MatrixXd& basis) 
     return out;
 }
 
-/// Rows of a panel (a partial panel, or any C): acc (C rows of kPanel) = mean, plus every basis
-/// column times its coordinate, in the order tileRows adds them.
+/// A panel for any C: acc (C rows of kPanel) = mean, plus every basis column times its
+/// coordinate, in the order tileRows adds them.
 template <typename Scalar>
 void panelRows(const Scalar* block, Index m, Index c, const double* coords, Index rows, const double* mu,
                double* acc) {
@@ -78,36 +78,44 @@ void tileRows(const Scalar* block, Index m, const double* coords, const double* 
 
 /// Points [first, first+count) of a model whose channels share the basis, from its panels.
 /// kC > 0 fixes C at compile time (and takes whole tiles in registers); Scalar is the panels'
-/// (BasisPrecision), the sums are double.
+/// (BasisPrecision), the sums are double. Every panel is computed whole, the same instructions
+/// for the same row whatever the range: a range that starts or ends inside a panel computes it
+/// into a scratch panel (the mean's rows past N zero) and keeps its rows. So a point's value is
+/// the same bits in any chunking, in any build (FMA contraction may differ between a vectorized
+/// loop and a scalar remainder, never between two runs of one loop).
 template <int kC, typename Scalar>
 void sharedReconstruct(const Model& model, const Scalar* panels, const double* coords, Index first,
                        Index count, double* out) {
     const Index c = kC > 0 ? kC : model.channels;
     const Index m = model.basisSize();
-    // Partial panels: one accumulator row per channel (structure of arrays).
-    std::vector<double> acc(static_cast<std::size_t>(c * kPanel));
+    const auto panelValues = static_cast<std::size_t>(c * kPanel);
+    std::vector<double> acc(kC > 0 ? 0 : panelValues), scratchMean(panelValues), scratchOut(panelValues);
     const double* mean = model.mean.data();
     for (Index at = first; at < first + count;) {
-        const Index panel = at / kPanel, lo = at - panel * kPanel;
+        const Index panel = at / kPanel, start = panel * kPanel, lo = at - start;
         const Index rows = std::min(kPanel - lo, first + count - at);
-        const double* mu = mean + at * c;
-        const Scalar* block = panels + panel * m * kPanel + lo;
-        double* o = out + (at - first) * c;
+        const bool whole = rows == kPanel;
+        const double* mu = mean + start * c;
+        if (!whole) {
+            const Index valid = std::min(kPanel, model.points - start);
+            std::fill(scratchMean.begin(), scratchMean.end(), 0.0);
+            std::copy(mu, mu + valid * c, scratchMean.begin());
+            mu = scratchMean.data();
+        }
+        double* o = whole ? out + (at - first) * c : scratchOut.data();
+        const Scalar* block = panels + panel * m * kPanel;
         if constexpr (kC > 0) {
-            if (rows == kPanel) {
-                tileRows<kC>(block, m, coords, mu, o);
-                at += rows;
-                continue;
-            }
-        }
-        {
-            panelRows(block, m, c, coords, rows, mu, acc.data());
+            tileRows<kC>(block, m, coords, mu, o);
+        } else {
+            panelRows(block, m, c, coords, kPanel, mu, acc.data());
             for (Index ch = 0; ch < c; ++ch)
-                for (Index i = 0; i < rows; ++i) o[i * c + ch] = acc[ch * kPanel + i];
+                for (Index i = 0; i < kPanel; ++i) o[i * c + ch] = acc[ch * kPanel + i];
         }
+        if (!whole) std::copy(o + lo * c, o + (lo + rows) * c, out + (at - first) * c);
         at += rows;
     }
 }
+
 template <typename Scalar>
 void sharedReconstructC(const Model& model, const Scalar* panels, const double* coords, Index first,
                         Index count, double* out) {
