@@ -8,6 +8,8 @@
 #include "cli/Commands.h"
 #include "cli/Progress.h"
 #include "examples/face/FaceDemo.h"
+#include "pmsc/Calibration.h"
+#include "pmsc/KeyError.h"
 
 #include <cstdio>
 #include <optional>
@@ -46,11 +48,12 @@ int runDemoFace(const std::vector<std::string>& args) {
     std::string data, out;
     std::optional<Index> threads, basis, regions, seed;
     std::optional<double> tolerance;
+    std::string keyError, calibration;
     bool quick = false, quiet = false;
     ArgParser parser(
         "demo face",
         "--data DIR --out DIR2 [--quick] [--threads T] [--tolerance PCT] [--basis M] [--regions R] [--seed "
-        "S] [--quiet]",
+        "S] [--key-error NORM] [--calibration RULE] [--quiet]",
         "Section 7 of the paper on the ICT face (26,719 points): a rig with a jaw rotating about its\n"
         "hinge, eyelids rotating over the eyeballs, eyes that aim, correctives, relax, muscle flesh\n"
         "and lip and eyelid contact poses 36 animated sequences (speech, emotions, blinks, gaze);\n"
@@ -75,6 +78,10 @@ int runDemoFace(const std::vector<std::string>& args) {
                   "seed of the animation (default 7): another seed is another take, training and test sets\n"
                   "(novel and mixed sequences included), to check that settings chosen on one take hold",
                   [&](const std::string& v) { seed = parseIndex("--seed", v, 0, 4294967295LL); });
+    parser.option("--key-error", "NORM",
+                  "the key error eps apply to, as pmsc train's: rms (default), largest or loo", keyError);
+    parser.option("--calibration", "RULE", "as pmsc train's: max (default), threshold or conformal",
+                  calibration);
     parser.flag("--quick", "9 + 2 short sequences: a smoke test of the whole pipeline (about 20 s)", quick);
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
@@ -87,6 +94,15 @@ int runDemoFace(const std::vector<std::string>& args) {
     if (basis) options.basis = static_cast<long>(*basis);
     if (regions) options.regions = static_cast<long>(*regions);
     if (seed) options.seed = static_cast<unsigned>(*seed);
+    if (!keyError.empty()) {
+        options.keyErrorNorm = keyErrorNormNamed(keyError);
+        if (!options.keyErrorNorm) parser.fail("--key-error: '" + keyError + "' is not rms, largest or loo");
+    }
+    if (!calibration.empty()) {
+        options.calibrationRule = calibrationRuleNamed(calibration);
+        if (!options.calibrationRule)
+            parser.fail("--calibration: '" + calibration + "' is not threshold, max or conformal");
+    }
 
     Progress progress("demo face", !quiet);
     options.progress = [&](std::string_view stage, double done, double total) {

@@ -139,8 +139,7 @@ void printModelText(const Model& model, const ModelFileFacts& file) {
         std::cout << " " << model.keyPoints[i];
     }
     std::cout << "\n  eps           [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax)
-              << "] " << (model.keyErrorNorm == KeyErrorNorm::Largest ? "largest key error" : "key RMS error")
-              << " (data units)\n";
+              << "] " << describe(model.keyErrorNorm) << " (data units)\n";
     std::cout << "  tolerance     "
               << (model.tolerance > 0 ? fmt("%.6g", model.tolerance) + " (eps calibrated for it)"
                                       : std::string("none (eps from the training frames)"))

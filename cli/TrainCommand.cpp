@@ -177,8 +177,9 @@ void declareCalibrationOptions(ArgParser& parser, TrainArgs& a) {
         "the held-out error ratios' quantile at --coverage)",
         a.rule);
     parser.option("--key-error", "NORM",
-                  "the key error eps apply to: rms (the paper's RMS over the keys, default) or largest (the "
-                  "largest key's error; not with --shared-channels)",
+                  "the key error eps apply to: rms (the paper's RMS over the keys, default), largest (the "
+                  "largest key's error) or loo (the largest key's leave-one-out error: each key's residual "
+                  "over 1 - its leverage); largest and loo not with --shared-channels",
                   a.keyError);
     parser.option("--coverage", "C",
                   "coverage of --calibration threshold or conformal, in (0, 1) (default " +
@@ -312,9 +313,10 @@ void checkTrainArgs(const ArgParser& parser, TrainArgs& a) {
     if (const auto norm = keyErrorNormNamed(a.keyError))
         options.keyErrorNorm = *norm;
     else if (!a.keyError.empty())
-        parser.fail("--key-error: '" + a.keyError + "' is not largest or rms");
-    if (options.keyErrorNorm == KeyErrorNorm::Largest && a.sharedChannels)
-        parser.fail("--key-error largest needs channels of their own (not --shared-channels)");
+        parser.fail("--key-error: '" + a.keyError + "' is not rms, largest or loo");
+    if (options.keyErrorNorm && *options.keyErrorNorm != KeyErrorNorm::Rms && a.sharedChannels)
+        parser.fail(std::string("--key-error ") + toString(*options.keyErrorNorm) +
+                    " needs channels of their own (not --shared-channels)");
     if (parser.given("--coverage") && options.calibrationRule == CalibrationRule::MaxRatio)
         parser.fail("--coverage needs --calibration threshold or conformal");
     if ((parser.given("--calibration") || parser.given("--coverage")) && !(options.tolerance > 0))

@@ -20,7 +20,7 @@ void printTrainSummary(std::ostream& out, const std::string& modelPath, const Fr
         << report.iterations << " rounds)\n";
     out << "  residual    largest point error of PM on the training frames: "
         << fmt("%.6g", model.trainMaxPointResidual) << "\n";
-    const std::string measure = model.keyErrorNorm == KeyErrorNorm::Largest ? "largest key error" : "key RMS";
+    const std::string measure = describe(model.keyErrorNorm);
     if (model.tolerance > 0) {
         out << "  eps         [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax) << "] "
             << measure << ", calibrated for tolerance " << fmt("%.6g", model.tolerance) << " ("

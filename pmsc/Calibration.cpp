@@ -11,13 +11,34 @@
 
 namespace pmsc {
 
+Eigen::VectorXd leaveOneOutScale(const Eigen::MatrixXd& bk, const Eigen::MatrixXd& projector) {
+    if (projector.rows() != bk.cols() || projector.cols() != bk.rows())
+        throw std::invalid_argument("leaveOneOutScale: the projector is not pinv of these key rows");
+    Eigen::VectorXd scale(bk.rows());
+    for (Index j = 0; j < bk.rows(); ++j) {
+        const double h = bk.row(j).dot(projector.col(j));
+        scale[j] = 1.0 / std::max(1.0 - h, kMinOneMinusLeverage);
+    }
+    return scale;
+}
+
 double keyErrorOfResidual(const Eigen::Ref<const Eigen::VectorXd>& residual, Index channels,
-                          KeyErrorNorm norm) {
+                          KeyErrorNorm norm, const Eigen::VectorXd* looScale) {
     const Index keys = residual.size() / channels;  // rows are key x channel: exact
     if (norm == KeyErrorNorm::Rms) return std::sqrt(residual.squaredNorm() / static_cast<double>(keys));
+    const bool loo = norm == KeyErrorNorm::LeaveOneOut;
+    if (loo && (looScale == nullptr || looScale->size() != residual.size()))
+        throw std::invalid_argument("keyErrorOfResidual: the leave-one-out error needs each key row's scale");
     double largest = 0;
-    for (Index k = 0; k < keys; ++k)
-        largest = std::max(largest, residual.segment(k * channels, channels).squaredNorm());
+    for (Index k = 0; k < keys; ++k) {
+        double key = 0;
+        for (Index ch = 0; ch < channels; ++ch) {
+            const Index row = k * channels + ch;
+            const double r = loo ? residual[row] * (*looScale)[row] : residual[row];
+            key += r * r;
+        }
+        largest = std::max(largest, key);
+    }
     return std::sqrt(largest);
 }
 
@@ -33,8 +54,10 @@ Eigen::VectorXd keyRmsFromKeyRows(const Eigen::MatrixXd& qk, const Eigen::Matrix
     Eigen::MatrixXd coords = projector * qk;
     Eigen::MatrixXd r = qk;
     r.noalias() -= bk * coords;
+    const Eigen::VectorXd scale =
+        norm == KeyErrorNorm::LeaveOneOut ? leaveOneOutScale(bk, projector) : Eigen::VectorXd();
     Eigen::VectorXd e(r.cols());
-    for (Index j = 0; j < r.cols(); ++j) e[j] = keyErrorOfResidual(r.col(j), channels, norm);
+    for (Index j = 0; j < r.cols(); ++j) e[j] = keyErrorOfResidual(r.col(j), channels, norm, &scale);
     return e;
 }
 
@@ -179,6 +202,8 @@ void Folds::score(Index first, Index last, CalibrationStats& s) {
     Eigen::MatrixXd uk;
     heldInTimes(keyRows, uk);
     const Eigen::MatrixXd projector = projectorFromKeyRows(uk, channels);
+    const Eigen::VectorXd looScale =
+        norm == KeyErrorNorm::LeaveOneOut ? leaveOneOutScale(uk, projector) : Eigen::VectorXd();
     Eigen::MatrixXd heldOutK = keyRows.middleCols(first, out).colwise() - heldInMean(keyRows);
     const Eigen::MatrixXd coords = projector * heldOutK;
     heldOutK.noalias() -= uk * coords;  // the PM residual at the keys
@@ -196,7 +221,7 @@ void Folds::score(Index first, Index last, CalibrationStats& s) {
     maxOverRanks(comm, pointErr.data(), static_cast<std::size_t>(out));
     for (Index j = 0; j < out; ++j) {
         s.frames.push_back(first + j);
-        s.keyRms.push_back(keyErrorOfResidual(heldOutK.col(j), channels, norm));
+        s.keyRms.push_back(keyErrorOfResidual(heldOutK.col(j), channels, norm, &looScale));
         s.maxPointError.push_back(pointErr[j]);
     }
 }
@@ -238,9 +263,9 @@ CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::Matrix
     const Index f = q.frames();
     checkCalibrationArguments(f, group, tolerance, slices, basisSize, gram, rule, coverage);
     // A frame's largest key over its C channel frames is not a function of their own largest keys.
-    if (group > 1 && norm == KeyErrorNorm::Largest)
+    if (group > 1 && norm != KeyErrorNorm::Rms)
         throw std::invalid_argument(
-            "calibrate: the largest-key error is for models whose channels do not share the basis");
+            "calibrate: the largest-key errors are for models whose channels do not share the basis");
     const Index groups = f / group;
     CalibrationStats s;
     s.tolerance = tolerance;

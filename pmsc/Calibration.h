@@ -106,10 +106,17 @@ CalibrationStats calibrate(const Eigen::Ref<const Eigen::MatrixXd>& q, Index cha
 /// r / (their median), within [1.5, 2] (the reasons are next to the code); 2 without ratios.
 double blendBand(std::vector<double> ratios, double ratio);
 
+/// KeyErrorNorm::LeaveOneOut's factor per key row: 1 / (1 - h), h = the row's leverage, the diagonal
+/// of bk * projector (bk: the key rows of the basis, projector: pinv(bk)). 1 - h is kept at least
+/// kMinOneMinusLeverage: a row the fit passes through exactly (h = 1) would divide by zero.
+Eigen::VectorXd leaveOneOutScale(const Eigen::MatrixXd& bk, const Eigen::MatrixXd& projector);
+constexpr double kMinOneMinusLeverage = 1e-3;
+
 /// The key error of one frame's key residual (K*C rows, key-major, channel-minor) by `norm`, as
-/// PointMultiplier::keyError computes it at run time.
+/// PointMultiplier::keyError computes it at run time. `looScale` (leaveOneOutScale of the same
+/// fit) is needed by KeyErrorNorm::LeaveOneOut alone.
 double keyErrorOfResidual(const Eigen::Ref<const Eigen::VectorXd>& residual, Index channels,
-                          KeyErrorNorm norm);
+                          KeyErrorNorm norm, const Eigen::VectorXd* looScale = nullptr);
 
 /// Sets s.ratio, s.epsMin, s.epsMax (and s.rule, s.coverage, s.tolerance, s.maxRatio,
 /// s.usableFrames, s.blindFrames, notes) from the held-out scores s.keyRms / s.maxPointError:

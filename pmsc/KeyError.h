@@ -24,12 +24,26 @@ enum class KeyErrorNorm : int {
     /// 1.1..1.9 for the largest key, and the largest key calibrated on held-out range-of-motion
     /// slices still bounds the real takes' errors.
     Largest = 1,
+    /// The largest key's leave-one-out residual (`--key-error loo`, for models whose channels do
+    /// not share the basis): each key row's residual divided by 1 - h, h its leverage (the
+    /// diagonal of the key rows' hat matrix B_K pinv(B_K)), then the largest Euclidean norm over
+    /// a key's channels. r / (1 - h) is exactly what that row would miss were it left out of the
+    /// fit (PRESS). Why: the least-squares fit bends most towards high-leverage keys, so motion the
+    /// basis never saw hides in their small residuals; undoing that makes the key error read like
+    /// a point error the fit did not see. Measured (docs/calibration.md): with the `threshold`
+    /// rule the quick face's novel frames stay under the tolerance where the largest key lets 11
+    /// of them over it, and the motion-capture takes keep 96-100% of the best single threshold's
+    /// hits at 3% of the diagonal.
+    LeaveOneOut = 2,
 };
 
-/// "rms" / "largest"
+/// "rms" / "largest" / "loo"
 const char* toString(KeyErrorNorm norm);
-/// The measure of a name ("rms" or "largest"); std::nullopt for any other. The command line and
-/// Python parse the same names with it.
+/// What the command line prints for it: "key RMS error", "largest key error", "largest
+/// leave-one-out key error".
+const char* describe(KeyErrorNorm norm);
+/// The measure of a name ("rms", "largest" or "loo"); std::nullopt for any other. The command
+/// line and Python parse the same names with it.
 std::optional<KeyErrorNorm> keyErrorNormNamed(std::string_view name);
 
 }  // namespace pmsc

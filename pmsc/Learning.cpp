@@ -50,8 +50,11 @@ void scoreFrames(const Eigen::Ref<const Eigen::MatrixXd>& centered, const Eigen:
     residual.noalias() -= basis * coords;
     const Eigen::VectorXd pointErr = maxPointNormPerColumn(residual, channels);
     const Eigen::MatrixXd keyResidual = gatherKeyRows(residual, channels, keys);
+    const Eigen::VectorXd looScale = norm == KeyErrorNorm::LeaveOneOut
+                                         ? leaveOneOutScale(gatherKeyRows(basis, channels, keys), projector)
+                                         : Eigen::VectorXd();
     for (Index j = 0; j < centered.cols(); ++j) {
-        keyRms.push_back(keyErrorOfResidual(keyResidual.col(j), channels, norm));
+        keyRms.push_back(keyErrorOfResidual(keyResidual.col(j), channels, norm, &looScale));
         maxPointError.push_back(pointErr[j]);
     }
 }

@@ -16,11 +16,34 @@ bool allFinite(const Eigen::Ref<const Eigen::MatrixXd>& m) { return m.allFinite(
 
 }  // namespace
 
-const char* toString(KeyErrorNorm norm) { return norm == KeyErrorNorm::Largest ? "largest" : "rms"; }
+const char* toString(KeyErrorNorm norm) {
+    switch (norm) {
+        case KeyErrorNorm::Largest:
+            return "largest";
+        case KeyErrorNorm::LeaveOneOut:
+            return "loo";
+        case KeyErrorNorm::Rms:
+            break;
+    }
+    return "rms";
+}
+
+const char* describe(KeyErrorNorm norm) {
+    switch (norm) {
+        case KeyErrorNorm::Largest:
+            return "largest key error";
+        case KeyErrorNorm::LeaveOneOut:
+            return "largest leave-one-out key error";
+        case KeyErrorNorm::Rms:
+            break;
+    }
+    return "key RMS error";
+}
 
 std::optional<KeyErrorNorm> keyErrorNormNamed(std::string_view name) {
     if (name == "rms") return KeyErrorNorm::Rms;
     if (name == "largest") return KeyErrorNorm::Largest;
+    if (name == "loo") return KeyErrorNorm::LeaveOneOut;
     return std::nullopt;
 }
 

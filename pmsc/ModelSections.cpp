@@ -14,14 +14,16 @@ namespace {
 // KEYERROR: the key error norm eps applies to (Model::keyErrorNorm), one u32. Absent = Rms, the
 // measure of every model written without it.
 ModelSectionCodec keyErrorSectionCodec() {
-    return {{'K', 'E', 'Y', 'E', 'R', 'R', 'O', 'R'},
-            [](const Model& m) { return m.keyErrorNorm != KeyErrorNorm::Rms; },
-            [](const Model& m, ByteWriter& out) { out.u32(static_cast<std::uint32_t>(m.keyErrorNorm)); },
-            [](ByteReader& in, Model& m) {
-                const std::uint32_t v = in.u32("key error norm");
-                if (v > 1) in.fail("key error norm " + std::to_string(v) + " is not 0 (rms) or 1 (largest)");
-                m.keyErrorNorm = static_cast<KeyErrorNorm>(v);
-            }};
+    return {
+        {'K', 'E', 'Y', 'E', 'R', 'R', 'O', 'R'},
+        [](const Model& m) { return m.keyErrorNorm != KeyErrorNorm::Rms; },
+        [](const Model& m, ByteWriter& out) { out.u32(static_cast<std::uint32_t>(m.keyErrorNorm)); },
+        [](ByteReader& in, Model& m) {
+            const std::uint32_t v = in.u32("key error norm");
+            if (v > 2)
+                in.fail("key error norm " + std::to_string(v) + " is not 0 (rms), 1 (largest) or 2 (loo)");
+            m.keyErrorNorm = static_cast<KeyErrorNorm>(v);
+        }};
 }
 
 }  // namespace

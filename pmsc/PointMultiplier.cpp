@@ -1,5 +1,7 @@
 #include "pmsc/PointMultiplier.h"
 
+#include "pmsc/Calibration.h"  // leaveOneOutScale
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -144,6 +146,8 @@ PointMultiplier::PointMultiplier(const Model& model, BasisPrecision precision) :
     const Eigen::Map<const Eigen::MatrixXd> meanColumn(model_.mean.data(), model_.mean.size(), 1);
     keyMean_ = gatherKeyRows(meanColumn, model_.channels, model_.keyPoints).col(0);
     keyBasis_ = gatherKeyRows(model_.basis, model_.basisChannels(), model_.keyPoints);
+    if (model_.keyErrorNorm == KeyErrorNorm::LeaveOneOut)
+        looScale_ = leaveOneOutScale(keyBasis_, model_.projector);
     // b = P (k - mean_K) = P k - P mean_K: precomputing P mean_K lets project() write straight
     // into the caller's buffer with one GEMV and no temporary.
     if (model_.sharedChannels) {
@@ -190,17 +194,18 @@ double PointMultiplier::keyError(const double* keyValues, const double* coords) 
         double sum = 0, largest = 0;
         for (Index i = 0; i < keys; ++i) {
             double key = 0;
+            const double scale = looScale_.size() > 0 ? looScale_[i] : 1.0;  // one leverage per key
             for (Index ch = 0; ch < c; ++ch) {
                 double predicted = keyMean_[i * c + ch];
                 for (Index j = 0; j < m; ++j) predicted += keyBasis_(i, j) * coords[j * c + ch];
-                const double r = keyValues[i * c + ch] - predicted;
+                const double r = (keyValues[i * c + ch] - predicted) * scale;
                 key += r * r;
             }
             sum += key;
             largest = std::max(largest, key);
         }
-        return model_.keyErrorNorm == KeyErrorNorm::Largest ? std::sqrt(largest)
-                                                            : std::sqrt(sum / static_cast<double>(keys));
+        return model_.keyErrorNorm == KeyErrorNorm::Rms ? std::sqrt(sum / static_cast<double>(keys))
+                                                        : std::sqrt(largest);
     }
     // Decision (Model.h): RMS over key points of each point's Euclidean error over its channels,
     // so the number reads like a point error in data units and eps can be compared with the
@@ -215,7 +220,8 @@ double PointMultiplier::keyError(const double* keyValues, const double* coords) 
     // The largest key needs whole keys: a key's C residuals are summed (across blocks when a
     // block boundary splits them) before the max.
     const Index c = model_.channels;
-    const bool largestKey = model_.keyErrorNorm == KeyErrorNorm::Largest;
+    const bool largestKey = model_.keyErrorNorm != KeyErrorNorm::Rms;
+    const double* scale = looScale_.size() > 0 ? looScale_.data() : nullptr;
     double sum = 0, largest = 0, key = 0;
     for (Index x0 = 0; x0 < kc; x0 += kBlock) {
         const Index n = std::min(kBlock, kc - x0);
@@ -233,7 +239,8 @@ double PointMultiplier::keyError(const double* keyValues, const double* coords) 
             continue;
         }
         for (Index i = 0; i < n; ++i) {
-            const double r = keyValues[x0 + i] - predicted[i];
+            double r = keyValues[x0 + i] - predicted[i];
+            if (scale) r *= scale[x0 + i];
             key += r * r;
             if ((x0 + i + 1) % c == 0) {
                 largest = std::max(largest, key);
@@ -241,8 +248,8 @@ double PointMultiplier::keyError(const double* keyValues, const double* coords) 
             }
         }
     }
-    return model_.keyErrorNorm == KeyErrorNorm::Largest ? std::sqrt(largest)
-                                                        : std::sqrt(sum / static_cast<double>(keys));
+    return model_.keyErrorNorm == KeyErrorNorm::Rms ? std::sqrt(sum / static_cast<double>(keys))
+                                                    : std::sqrt(largest);
 }
 
 void PointMultiplier::reconstruct(const double* coords, double* out) const {

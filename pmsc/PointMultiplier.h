@@ -37,7 +37,8 @@ public:
     void project(const double* keyValues, double* coords) const;
 
     /// The model's key error (Model::keyErrorNorm): the RMS over key points, or the largest, of
-    /// the Euclidean norm (over channels) of each key's residual k - (mean_K + B_K b). Data units.
+    /// the Euclidean norm (over channels) of each key's residual k - (mean_K + B_K b), each key row
+    /// first divided by 1 - its leverage for KeyErrorNorm::LeaveOneOut. Data units.
     /// Returns NaN if any key value is not finite.
     double keyError(const double* keyValues, const double* coords) const;
 
@@ -57,6 +58,7 @@ private:
     Eigen::VectorXd projectedKeyMean_;  // M (or M x C): P mean_K, so project() needs no temporary
     Eigen::VectorXd panels_;            // shared channels: the basis in panels of rows (PointMultiplier.cpp)
     Eigen::VectorXf singlePanels_;      // the same in float, instead, for BasisPrecision::Single
+    Eigen::VectorXd looScale_;          // KeyErrorNorm::LeaveOneOut: 1 / (1 - leverage) per key row
 };
 
 }  // namespace pmsc

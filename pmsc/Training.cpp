@@ -161,8 +161,9 @@ Model trainSharedChannels(const FrameSet& frames, const TrainingOptions& options
     }
     TrainingOptions one = options;
     one.sharedChannels = false;
-    if (options.keyErrorNorm == KeyErrorNorm::Largest)
-        throw InputError("train: the largest-key error needs channels of their own (not --shared-channels)");
+    if (options.keyErrorNorm == KeyErrorNorm::Largest || options.keyErrorNorm == KeyErrorNorm::LeaveOneOut)
+        throw InputError(std::string("train: the ") + toString(*options.keyErrorNorm) +
+                         " key error needs channels of their own (not --shared-channels)");
     one.keyErrorNorm = KeyErrorNorm::Rms;
     // A frame's channels are held out together: held in, its other channels would tell the fold
     // most of what it is asked to predict. (The C=1 training then checks --slices against the F

@@ -120,7 +120,7 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     if (const auto norm = keyErrorNormNamed(keyError))
         o.keyErrorNorm = *norm;
     else if (!keyError.empty())
-        throw InputError("key_error: '" + keyError + "' is not largest or rms");
+        throw InputError("key_error: '" + keyError + "' is not rms, largest or loo");
     o.learnRank = learnRank;
     o.seed = seed;
     o.powerIterations = powerIterations;

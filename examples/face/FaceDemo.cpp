@@ -169,6 +169,8 @@ TrainedModel trainModel(const DemoRun& run, const FrameSet& training, double per
     to.maxKeys = options.maxKeys;
     to.fiducials.assign(IctFace::multiPie68().begin(), IctFace::multiPie68().end());
     to.tolerance = options.tolerancePercent * percent;
+    if (options.keyErrorNorm) to.keyErrorNorm = *options.keyErrorNorm;
+    if (options.calibrationRule) to.calibrationRule = *options.calibrationRule;
     to.regions.count = options.regions;
     to.regions.featherFraction = options.featherPercent / 100.0;
     to.regions.maxLocalFraction = options.maxLocalFraction;

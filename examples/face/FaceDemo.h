@@ -1,9 +1,13 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include "pmsc/Calibration.h"  // CalibrationRule
+#include "pmsc/KeyError.h"
+
 #include <nlohmann/json.hpp>
 
 #include <functional>
+#include <optional>
 #include <string>
 #include <string_view>
 
@@ -53,6 +57,10 @@ struct FaceDemoOptions {
     /// as good as the paper calls good, and calibration (leave-one-slice-out, E <= r e) sets
     /// eps_min = T / r, eps_max = 2 eps_min, which keeps blends under T as well.
     double tolerancePercent = 1.0;
+    /// The key error and the calibration rule (`pmsc train --key-error`, `--calibration`); unset:
+    /// pmsc train's defaults (the key RMS, the largest held-out ratio).
+    std::optional<KeyErrorNorm> keyErrorNorm;
+    std::optional<CalibrationRule> calibrationRule;
 
     // --- measurement ---
     long timingFrames = 40;  ///< validation frames timed one by one, full pose vs PMSC, same run

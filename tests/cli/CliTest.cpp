@@ -435,9 +435,32 @@ TEST_F(Cli, UsageMistakes) {
     expectFailure(runPmsc(dir, {"train", "--frames", shot_->train, "--out", out, "--regions", "2",
                                 "--region-keys", "2.5"}),
                   2, {"--region-keys", "'2.5' is not an integer"});
+    expectFailure(runPmsc(dir, {"train", "--frames", shot_->train, "--out", out, "--key-error", "median"}), 2,
+                  {"--key-error", "'median' is not rms, largest or loo"});
+    expectFailure(runPmsc(dir, {"train", "--frames", shot_->train, "--out", out, "--key-error", "loo",
+                                "--shared-channels"}),
+                  2, {"--key-error loo needs channels of their own"});
     expectFailure(runPmsc(dir, {"frobnicate"}), 2, {"unknown command 'frobnicate'"});
     expectFailure(runPmsc(dir, {"inspect"}), 2, {"missing MODEL.pmsc"});
     EXPECT_TRUE(outputs(dir).empty());
+}
+
+// --key-error loo: the model keeps the measure, calibrated in it, and says so.
+TEST_F(Cli, TrainWithTheLeaveOneOutKeyError) {
+    TempDir dir;
+    const auto model = dir.file("m.pmsc");
+    const RunResult r = runPmsc(
+        dir, {"train", "--frames", shot_->train, "--out", model, "--basis", "8", "--max-keys", "16",
+              "--tolerance", "0.05", "--calibration", "threshold", "--key-error", "loo", "--regions", "0"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.out.find("largest leave-one-out key error, calibrated for tolerance 0.05"), std::string::npos)
+        << r.out;
+    const pmsc::Model m = pmsc::readModel(model);
+    EXPECT_EQ(m.keyErrorNorm, pmsc::KeyErrorNorm::LeaveOneOut);
+    EXPECT_GT(m.epsMin, 0);
+    const RunResult inspect = runPmsc(dir, {"inspect", model});
+    EXPECT_NE(inspect.out.find("largest leave-one-out key error (data units)"), std::string::npos)
+        << inspect.out;
 }
 
 // The demo commands parse numbers with Args' converters, as every other command does: face's
@@ -460,6 +483,10 @@ TEST_F(Cli, DemoNumbersGoThroughArgs) {
     expectFailure(runPmsc(dir, with(face, {"--tolerance", "0"})), 2, {"--tolerance", "out of range"});
     expectFailure(runPmsc(dir, with(face, {"--tolerance", "1%"})), 2,
                   {"--tolerance", "'1%' is not a number"});
+    expectFailure(runPmsc(dir, with(face, {"--key-error", "median"})), 2,
+                  {"--key-error", "'median' is not rms, largest or loo"});
+    expectFailure(runPmsc(dir, with(face, {"--calibration", "best"})), 2,
+                  {"--calibration", "'best' is not threshold, max or conformal"});
     const std::vector<std::string> cornell{"demo", "cornell", "--quick", "--out", dir.file("cornell")};
     expectFailure(runPmsc(dir, with(cornell, {"--threads", " 2"})), 2, {"--threads", "is not an integer"});
     expectFailure(runPmsc(dir, with(cornell, {"--points", "10"})), 2, {"--points", "out of range"});

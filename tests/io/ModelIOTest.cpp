@@ -45,6 +45,23 @@ void expectRejected(const std::string& path, std::initializer_list<std::string> 
     for (const auto& f : fragments) EXPECT_NE(what.find(f), std::string::npos) << what;
 }
 
+TEST(ModelFile, AKeyErrorNormThisVersionDoesNotKnowIsRefused) {
+    Model m = smallModel();
+    m.keyErrorNorm = pmsc::KeyErrorNorm::LeaveOneOut;
+    std::string bytes = pmsc::encodeModel(m);
+    const std::size_t tag = bytes.find("KEYERROR");
+    ASSERT_NE(tag, std::string::npos);
+    std::uint32_t norm = 0;
+    std::memcpy(&norm, bytes.data() + tag + 16, sizeof norm);  // after the tag and its length
+    ASSERT_EQ(norm, 2u);
+    poke<std::uint32_t>(bytes, tag + 16, 3);
+    reseal(bytes);
+    TempDir dir;
+    const auto path = dir.file("norm.pmsc");
+    writeBytes(path, bytes);
+    expectRejected(path, {"key error norm 3", "2 (loo)"});
+}
+
 TEST(ModelFile, Fnv1a64MatchesPublishedVectors) {
     // Test vectors of the FNV reference (www.isthe.com/chongo/tech/comp/fnv).
     EXPECT_EQ(pmsc::fnv1a64("", 0), 0xcbf29ce484222325ull);

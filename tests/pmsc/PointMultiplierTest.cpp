@@ -106,6 +106,84 @@ TEST(PointMultiplier, LargestKeyErrorIsTheLargestKeysEuclideanError) {
     EXPECT_EQ(pmsc::decodeModel(pmsc::encodeModel(model), "test").keyErrorNorm, pmsc::KeyErrorNorm::Rms);
 }
 
+// What key row j would miss were it left out of the fit: solve the least squares without that
+// row, predict it. Brute force, for the PRESS identity r_j / (1 - h_jj) the model computes.
+Eigen::VectorXd leaveOneOutResiduals(const Eigen::MatrixXd& bk, const Eigen::VectorXd& k) {
+    Eigen::VectorXd r(bk.rows());
+    for (pmsc::Index j = 0; j < bk.rows(); ++j) {
+        Eigen::MatrixXd a(bk.rows() - 1, bk.cols());
+        Eigen::VectorXd y(bk.rows() - 1);
+        for (pmsc::Index i = 0, o = 0; i < bk.rows(); ++i) {
+            if (i == j) continue;
+            a.row(o) = bk.row(i);
+            y[o++] = k[i];
+        }
+        const Eigen::VectorXd b = a.colPivHouseholderQr().solve(y);
+        r[j] = k[j] - bk.row(j).dot(b);
+    }
+    return r;
+}
+
+TEST(PointMultiplier, LeaveOneOutKeyErrorIsWhatEachKeyRowMissesWhenLeftOut) {
+    // 12 keys x 3 channels = 36 rows for a 6-vector basis: every row has leverage below 1.
+    const std::vector<pmsc::Index> keys{2, 5, 9, 13, 17, 22, 26, 31, 35, 38, 44, 47};
+    pmsc::Model model = makeModel(50, 3, 6, keys);
+    model.keyErrorNorm = pmsc::KeyErrorNorm::LeaveOneOut;
+    const pmsc::PointMultiplier pm(model);
+    Eigen::VectorXd frame = model.mean + model.basis * pmsc::test::gaussian(6, 1, 21).col(0);
+    frame += 0.05 * pmsc::test::gaussian(150, 1, 22).col(0);
+    const std::vector<double> k = keyValuesOf(model, frame);
+    Eigen::VectorXd coords(6);
+    pm.project(k.data(), coords.data());
+    const Eigen::MatrixXd bk = pmsc::gatherKeyRows(model.basis, 3, keys);
+    const Eigen::VectorXd centred =
+        Eigen::Map<const Eigen::VectorXd>(k.data(), 36) - pmsc::gatherKeyRows(model.mean, 3, keys).col(0);
+    const Eigen::VectorXd loo = leaveOneOutResiduals(bk, centred);
+    double largest = 0, plain = 0;
+    for (pmsc::Index key = 0; key < 12; ++key) {
+        largest = std::max(largest, loo.segment(key * 3, 3).norm());
+        plain = std::max(plain, (centred - bk * coords).segment(key * 3, 3).norm());
+    }
+    EXPECT_GT(largest, plain) << "leaving a row out can only raise what it misses";
+    EXPECT_NEAR(pm.keyError(k.data(), coords.data()), largest, 1e-10 * largest);
+    // The calibration's measure is the same number.
+    const Eigen::VectorXd scale = pmsc::leaveOneOutScale(bk, model.projector);
+    EXPECT_NEAR(pmsc::keyErrorOfResidual(centred - bk * coords, 3, pmsc::KeyErrorNorm::LeaveOneOut, &scale),
+                largest, 1e-10 * largest);
+    EXPECT_THROW(pmsc::keyErrorOfResidual(centred - bk * coords, 3, pmsc::KeyErrorNorm::LeaveOneOut),
+                 std::invalid_argument)
+        << "the leave-one-out error needs the rows' scale";
+    // The KEYERROR section keeps it; a norm this version does not know is refused.
+    EXPECT_EQ(pmsc::decodeModel(pmsc::encodeModel(model), "test").keyErrorNorm,
+              pmsc::KeyErrorNorm::LeaveOneOut);
+}
+
+TEST(PointMultiplier, LeaveOneOutKeyErrorOfSharedChannelsLeavesAKeyOutOfEachChannelsFit) {
+    // The channels share the K x M key basis: one leverage per key, each channel its own fit.
+    const std::vector<pmsc::Index> keys{1, 4, 8, 11, 15, 19, 23, 27, 30, 34};
+    pmsc::Model model = makeModel(40, 1, 4, keys);  // an N x M basis
+    model.channels = 3;
+    model.sharedChannels = true;
+    model.mean = pmsc::test::gaussian(120, 1, 30).col(0);
+    model.projector = pmsc::makeProjector(model.basis, 1, keys);
+    model.keyErrorNorm = pmsc::KeyErrorNorm::LeaveOneOut;
+    const pmsc::PointMultiplier pm(model);
+    Eigen::VectorXd frame = model.mean + 0.1 * pmsc::test::gaussian(120, 1, 31).col(0);
+    const std::vector<double> k = keyValuesOf(model, frame);
+    std::vector<double> coords(static_cast<size_t>(model.coordCount()));
+    pm.project(k.data(), coords.data());
+    const Eigen::MatrixXd bk = pmsc::gatherKeyRows(model.basis, 1, keys);
+    Eigen::MatrixXd loo(10, 3);
+    for (pmsc::Index ch = 0; ch < 3; ++ch) {
+        Eigen::VectorXd y(10);
+        for (pmsc::Index i = 0; i < 10; ++i)
+            y[i] = k[size_t(i * 3 + ch)] - model.mean[keys[size_t(i)] * 3 + ch];
+        loo.col(ch) = leaveOneOutResiduals(bk, y);
+    }
+    const double largest = loo.rowwise().norm().maxCoeff();
+    EXPECT_NEAR(pm.keyError(k.data(), coords.data()), largest, 1e-10 * largest);
+}
+
 TEST(PointMultiplier, KeyRmsIsNaNForNonFiniteKeyValue) {
     const pmsc::Model model = makeModel(20, 3, 3, {0, 4, 8});
     const pmsc::PointMultiplier pm(model);
@@ -185,8 +263,10 @@ TEST(Model, EnergyCaptured) {
 }
 
 TEST(KeyError, NamesRoundTripAndOthersAreRefused) {
-    for (const auto norm : {pmsc::KeyErrorNorm::Rms, pmsc::KeyErrorNorm::Largest})
+    for (const auto norm :
+         {pmsc::KeyErrorNorm::Rms, pmsc::KeyErrorNorm::Largest, pmsc::KeyErrorNorm::LeaveOneOut})
         EXPECT_EQ(pmsc::keyErrorNormNamed(pmsc::toString(norm)), norm);
+    EXPECT_EQ(std::string(pmsc::toString(pmsc::KeyErrorNorm::LeaveOneOut)), "loo");
     EXPECT_EQ(pmsc::keyErrorNormNamed("RMS"), std::nullopt);
     EXPECT_EQ(pmsc::keyErrorNormNamed(""), std::nullopt);
 }
