@@ -73,6 +73,15 @@ class ModelTest(TempDirTest):
         largest = np.linalg.norm(res, axis=2).max(axis=1)
         np.testing.assert_allclose(r.key_error(rk), largest, rtol=1e-9)
         self.assertEqual(r.info["key_error"], "largest")
+        # key_error="loo": each key row's residual over 1 - its leverage (the hat matrix's diagonal).
+        o = pmsc.train(f, max_keys=30, seed=3, key_error="loo")
+        ok = f[:, o.key_points]
+        bk = o.basis[o.key_points].reshape(-1, o.basis_size)            # (K*C, M)
+        h = np.einsum("jm,mj->j", bk, o.projector)
+        res = (ok - o.reconstruct(o.project(ok))[:, o.key_points]).reshape(len(f), -1) / (1 - h)
+        loo = np.linalg.norm(res.reshape(len(f), -1, 3), axis=2).max(axis=1)
+        np.testing.assert_allclose(o.key_error(ok), loo, rtol=1e-9)
+        self.assertEqual(o.info["key_error"], "loo")
         with self.assertRaises(pmsc.InputError):
             pmsc.train(f, max_keys=30, key_error="median")
 
