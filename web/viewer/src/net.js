@@ -40,17 +40,24 @@ class BodyPoller {
     this.arrived = new Map();  // url -> ArrayBuffer, not asked for yet
     this.wanted = new Map();   // url -> {resolve, reject}, not arrived yet
     this.running = false;
+    this.generation = 0;  // a loop runs while its generation is the current one
     this.failing = false;
   }
 
   start() {
     if (this.running) return;
     this.running = true;
-    this.loop();
+    this.loop(++this.generation);
   }
 
-  async loop() {
-    while (this.running) {
+  /** No new request after the one in flight (the server lets that one go when another page asks). */
+  stop() {
+    this.running = false;
+    ++this.generation;
+  }
+
+  async loop(generation) {
+    while (generation === this.generation) {
       try {
         const response = await fetch('/api/body/next', {cache: 'no-store'});
         if (!response.ok) throw new Error(`/api/body/next: HTTP ${response.status}`);
@@ -66,6 +73,8 @@ class BodyPoller {
           this.arrived.set(url, bytes);
         }
       } catch (error) {
+        // A stopped loop's request ends when the server lets it go: nothing to say.
+        if (generation !== this.generation) return;
         // The server went away or restarted: say so once, and ask again a little later.
         if (!this.failing) this.onError(error.message);
         this.failing = true;
@@ -115,7 +124,6 @@ export class Connection {
   }
 
   open() {
-    this.bodies.start();
     const url = new URL('/api/ws', location.href);
     url.protocol = url.protocol === 'https:' ? 'wss:' : 'ws:';
     this.socket = new WebSocket(url);
@@ -125,6 +133,7 @@ export class Connection {
       this.socket.onopen = () => {};
       this.socket.onerror = () => { if (!hello) reject(new Error('WebSocket /api/ws: could not connect')); };
       this.socket.onclose = event => {
+        this.bodies.stop();
         if (!hello) reject(new Error(`WebSocket /api/ws closed before hello (${event.code})`));
         this.onClose?.(event);
       };
@@ -139,6 +148,9 @@ export class Connection {
           }
           if (message.type === 'hello' && !hello) {
             hello = true;
+            // Only the page the server took as its viewer waits for bodies: a second page, which
+            // the server turns away, must not take the waiting request from the first.
+            this.bodies.start();
             if (message.version !== 1) reject(new Error(`server speaks protocol version ${message.version}, page speaks 1`));
             else resolve(message);
           }
