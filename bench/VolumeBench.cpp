@@ -119,6 +119,28 @@ Model reconstructionModel(Index n, Index m, bool shared) {
     return model;
 }
 
+/// Runs `a` then `b` in every iteration and sets the counters NAME_A_ms, NAME_B_ms and
+/// NAME_A_over_NAME_B: two ways of the same work timed side by side in one run.
+template <class A, class B>
+void timeAlternately(benchmark::State& state, const std::string& nameA, A&& a, const std::string& nameB,
+                     B&& b) {
+    double secondsA = 0, secondsB = 0;
+    using Clock = std::chrono::steady_clock;
+    for (auto _ : state) {
+        const auto t0 = Clock::now();
+        a();
+        const auto t1 = Clock::now();
+        b();
+        const auto t2 = Clock::now();
+        secondsA += std::chrono::duration<double>(t1 - t0).count();
+        secondsB += std::chrono::duration<double>(t2 - t1).count();
+    }
+    const double iterations = static_cast<double>(state.iterations());
+    state.counters[nameA + "_ms"] = 1e3 * secondsA / iterations;
+    state.counters[nameB + "_ms"] = 1e3 * secondsB / iterations;
+    state.counters[nameA + "_over_" + nameB] = secondsA / secondsB;
+}
+
 void BM_ReconstructSharedVsSeparate(benchmark::State& state) {
     const Index n = 254000, m = state.range(0);
     const Model shared = reconstructionModel(n, m, true), separate = reconstructionModel(n, m, false);
@@ -126,22 +148,17 @@ void BM_ReconstructSharedVsSeparate(benchmark::State& state) {
     std::vector<double> coordsShared(static_cast<std::size_t>(shared.coordCount()), 0.1),
         coordsSeparate(static_cast<std::size_t>(separate.coordCount()), 0.1),
         out(static_cast<std::size_t>(3 * n));
-    double sharedSeconds = 0, separateSeconds = 0;
-    using Clock = std::chrono::steady_clock;
-    for (auto _ : state) {
-        auto t0 = Clock::now();
-        pmShared.reconstruct(coordsShared.data(), out.data());
-        auto t1 = Clock::now();
-        pmSeparate.reconstruct(coordsSeparate.data(), out.data());
-        auto t2 = Clock::now();
-        benchmark::DoNotOptimize(out.data());
-        sharedSeconds += std::chrono::duration<double>(t1 - t0).count();
-        separateSeconds += std::chrono::duration<double>(t2 - t1).count();
-    }
-    const double iterations = static_cast<double>(state.iterations());
-    state.counters["shared_ms"] = 1e3 * sharedSeconds / iterations;
-    state.counters["separate_ms"] = 1e3 * separateSeconds / iterations;
-    state.counters["shared_over_separate"] = sharedSeconds / separateSeconds;
+    timeAlternately(
+        state, "shared",
+        [&] {
+            pmShared.reconstruct(coordsShared.data(), out.data());
+            benchmark::DoNotOptimize(out.data());
+        },
+        "separate",
+        [&] {
+            pmSeparate.reconstruct(coordsSeparate.data(), out.data());
+            benchmark::DoNotOptimize(out.data());
+        });
 }
 BENCHMARK(BM_ReconstructSharedVsSeparate)->Arg(40)->Arg(64)->Unit(benchmark::kMillisecond)->Iterations(30);
 
@@ -154,22 +171,17 @@ void BM_ReconstructSingleVsDouble(benchmark::State& state) {
     const PointMultiplier single(model, BasisPrecision::Single), dbl(model, BasisPrecision::Double);
     std::vector<double> coords(static_cast<std::size_t>(model.coordCount()), 0.1),
         out(static_cast<std::size_t>(3 * n));
-    double singleSeconds = 0, doubleSeconds = 0;
-    using Clock = std::chrono::steady_clock;
-    for (auto _ : state) {
-        auto t0 = Clock::now();
-        single.reconstruct(coords.data(), out.data());
-        auto t1 = Clock::now();
-        dbl.reconstruct(coords.data(), out.data());
-        auto t2 = Clock::now();
-        benchmark::DoNotOptimize(out.data());
-        singleSeconds += std::chrono::duration<double>(t1 - t0).count();
-        doubleSeconds += std::chrono::duration<double>(t2 - t1).count();
-    }
-    const double iterations = static_cast<double>(state.iterations());
-    state.counters["single_ms"] = 1e3 * singleSeconds / iterations;
-    state.counters["double_ms"] = 1e3 * doubleSeconds / iterations;
-    state.counters["single_over_double"] = singleSeconds / doubleSeconds;
+    timeAlternately(
+        state, "single",
+        [&] {
+            single.reconstruct(coords.data(), out.data());
+            benchmark::DoNotOptimize(out.data());
+        },
+        "double",
+        [&] {
+            dbl.reconstruct(coords.data(), out.data());
+            benchmark::DoNotOptimize(out.data());
+        });
 }
 BENCHMARK(BM_ReconstructSingleVsDouble)->Arg(40)->Arg(64)->Unit(benchmark::kMillisecond)->Iterations(30);
 

@@ -96,12 +96,13 @@ int runDemoFace(const std::vector<std::string>& args) {
     if (seed) options.seed = static_cast<unsigned>(*seed);
     if (!keyError.empty()) {
         options.keyErrorNorm = keyErrorNormNamed(keyError);
-        if (!options.keyErrorNorm) parser.fail("--key-error: '" + keyError + "' is not rms, largest or loo");
+        if (!options.keyErrorNorm)
+            parser.fail("--key-error: '" + keyError + "' is not " + kKeyErrorNormChoices);
     }
     if (!calibration.empty()) {
         options.calibrationRule = calibrationRuleNamed(calibration);
         if (!options.calibrationRule)
-            parser.fail("--calibration: '" + calibration + "' is not threshold, max or conformal");
+            parser.fail("--calibration: '" + calibration + "' is not " + kCalibrationRuleChoices);
     }
 
     Progress progress("demo face", !quiet);

@@ -109,7 +109,7 @@ int runLearn(const std::vector<std::string>& args) {
         if (const auto r = calibrationRuleNamed(rule))
             options.rule = *r;
         else
-            parser.fail("--calibration: '" + rule + "' is not threshold, max or conformal");
+            parser.fail("--calibration: '" + rule + "' is not " + kCalibrationRuleChoices);
     }
     std::vector<std::string> paths;
     try {

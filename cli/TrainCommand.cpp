@@ -309,11 +309,11 @@ void checkTrainArgs(const ArgParser& parser, TrainArgs& a) {
     if (const auto r = calibrationRuleNamed(rule))
         options.calibrationRule = *r;
     else
-        parser.fail("--calibration: '" + rule + "' is not threshold, max or conformal");
+        parser.fail("--calibration: '" + rule + "' is not " + kCalibrationRuleChoices);
     if (const auto norm = keyErrorNormNamed(a.keyError))
         options.keyErrorNorm = *norm;
     else if (!a.keyError.empty())
-        parser.fail("--key-error: '" + a.keyError + "' is not rms, largest or loo");
+        parser.fail("--key-error: '" + a.keyError + "' is not " + kKeyErrorNormChoices);
     if (options.keyErrorNorm && *options.keyErrorNorm != KeyErrorNorm::Rms && a.sharedChannels)
         parser.fail(std::string("--key-error ") + toString(*options.keyErrorNorm) +
                     " needs channels of their own (not --shared-channels)");

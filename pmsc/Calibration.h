@@ -50,6 +50,8 @@ const char* toString(CalibrationRule rule);
 
 /// The rule a name gives ("max", "conformal", "threshold"), or nothing.
 std::optional<CalibrationRule> calibrationRuleNamed(const std::string& name);
+/// The names calibrationRuleNamed takes, as the command line and Python list them in messages.
+constexpr const char* kCalibrationRuleChoices = "threshold, max or conformal";
 
 /// What calibration measured, so a user (and `pmsc train`) can see why eps came out as it did.
 struct CalibrationStats {

@@ -43,7 +43,9 @@ const char* toString(KeyErrorNorm norm);
 /// leave-one-out key error".
 const char* describe(KeyErrorNorm norm);
 /// The measure of a name ("rms", "largest" or "loo"); std::nullopt for any other. The command
-/// line and Python parse the same names with it.
+/// line and Python parse the same names with it, and list them in their messages as
+/// kKeyErrorNormChoices.
 std::optional<KeyErrorNorm> keyErrorNormNamed(std::string_view name);
+constexpr const char* kKeyErrorNormChoices = "rms, largest or loo";
 
 }  // namespace pmsc

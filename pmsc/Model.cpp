@@ -41,9 +41,8 @@ const char* describe(KeyErrorNorm norm) {
 }
 
 std::optional<KeyErrorNorm> keyErrorNormNamed(std::string_view name) {
-    if (name == "rms") return KeyErrorNorm::Rms;
-    if (name == "largest") return KeyErrorNorm::Largest;
-    if (name == "loo") return KeyErrorNorm::LeaveOneOut;
+    for (KeyErrorNorm n : {KeyErrorNorm::Rms, KeyErrorNorm::Largest, KeyErrorNorm::LeaveOneOut})
+        if (name == toString(n)) return n;
     return std::nullopt;
 }
 

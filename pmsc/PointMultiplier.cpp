@@ -46,16 +46,15 @@ Eigen::Matrix<Scalar, Eigen::Dynamic, 1> panelsOf(const Eigen::MatrixXd& basis) 
 /// A panel for any C: acc (C rows of kPanel) = mean, plus every basis column times its
 /// coordinate, in the order tileRows adds them.
 template <typename Scalar>
-void panelRows(const Scalar* block, Index m, Index c, const double* coords, Index rows, const double* mu,
-               double* acc) {
+void panelRows(const Scalar* block, Index m, Index c, const double* coords, const double* mu, double* acc) {
     for (Index ch = 0; ch < c; ++ch)
-        for (Index i = 0; i < rows; ++i) acc[ch * kPanel + i] = mu[i * c + ch];
+        for (Index i = 0; i < kPanel; ++i) acc[ch * kPanel + i] = mu[i * c + ch];
     for (Index j = 0; j < m; ++j) {
         const Scalar* column = block + j * kPanel;
         for (Index ch = 0; ch < c; ++ch) {
             const double bc = coords[j * c + ch];
             double* a = acc + ch * kPanel;
-            for (Index i = 0; i < rows; ++i) a[i] += static_cast<double>(column[i]) * bc;
+            for (Index i = 0; i < kPanel; ++i) a[i] += static_cast<double>(column[i]) * bc;
         }
     }
 }
@@ -90,8 +89,15 @@ void sharedReconstruct(const Model& model, const Scalar* panels, const double* c
                        Index count, double* out) {
     const Index c = kC > 0 ? kC : model.channels;
     const Index m = model.basisSize();
+    // Scratch for any C (acc) and for a panel a range cuts (its mean and its values); a range of
+    // whole panels, the engine's blocks, needs none.
+    std::vector<double> acc, scratchMean, scratchOut;
     const auto panelValues = static_cast<std::size_t>(c * kPanel);
-    std::vector<double> acc(kC > 0 ? 0 : panelValues), scratchMean(panelValues), scratchOut(panelValues);
+    if (kC == 0) acc.resize(panelValues);
+    if (first % kPanel != 0 || (first + count) % kPanel != 0) {
+        scratchMean.resize(panelValues);
+        scratchOut.resize(panelValues);
+    }
     const double* mean = model.mean.data();
     for (Index at = first; at < first + count;) {
         const Index panel = at / kPanel, start = panel * kPanel, lo = at - start;
@@ -109,7 +115,7 @@ void sharedReconstruct(const Model& model, const Scalar* panels, const double* c
         if constexpr (kC > 0) {
             tileRows<kC>(block, m, coords, mu, o);
         } else {
-            panelRows(block, m, c, coords, kPanel, mu, acc.data());
+            panelRows(block, m, c, coords, mu, acc.data());
             for (Index ch = 0; ch < c; ++ch)
                 for (Index i = 0; i < kPanel; ++i) o[i * c + ch] = acc[ch * kPanel + i];
         }

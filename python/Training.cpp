@@ -89,7 +89,7 @@ Selector selectorOf(const std::string& s) {
 
 CalibrationRule ruleOf(const std::string& s) {
     if (const auto r = calibrationRuleNamed(s)) return *r;
-    throw InputError("calibration: '" + s + "' is not threshold, max or conformal");
+    throw InputError("calibration: '" + s + "' is not " + kCalibrationRuleChoices);
 }
 
 std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energy, double basisError,
@@ -120,7 +120,7 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     if (const auto norm = keyErrorNormNamed(keyError))
         o.keyErrorNorm = *norm;
     else if (!keyError.empty())
-        throw InputError("key_error: '" + keyError + "' is not rms, largest or loo");
+        throw InputError("key_error: '" + keyError + "' is not " + kKeyErrorNormChoices);
     o.learnRank = learnRank;
     o.seed = seed;
     o.powerIterations = powerIterations;

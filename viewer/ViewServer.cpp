@@ -229,12 +229,11 @@ private:
                     // A large binary part (a whole cache) goes by HTTP (ViewServerOptions::
                     // httpBodyBytes): the WebSocket carries the header alone (count 0) and the
                     // text the body's address; the page fetches it before it applies later updates.
-                    std::string body;
-                    std::string bin;
+                    std::string body, bin, url;
                     if (u.binaryFollows &&
                         u.halfs.size() * sizeof(std::uint16_t) >= server->options.httpBodyBytes) {
-                        const std::uint64_t id = server->nextBody.fetch_add(1) + 1;
-                        u.text["body"] = "/api/body/" + std::to_string(id);
+                        url = "/api/body/" + std::to_string(server->nextBody.fetch_add(1) + 1);
+                        u.text["body"] = url;
                         body = u.binary(channels);
                         Update header;
                         header.seq = u.seq;
@@ -244,9 +243,8 @@ private:
                     }
                     std::string text = u.text.dump();
                     const bool withBinary = u.binaryFollows;
-                    const std::string url = u.text.value("body", std::string());
-                    net::post(ioc, [weak, server, url, text = std::move(text), bin = std::move(bin),
-                                    body = std::move(body), withBinary]() mutable {
+                    net::post(ioc, [weak, server, url = std::move(url), text = std::move(text),
+                                    bin = std::move(bin), body = std::move(body), withBinary]() mutable {
                         if (!url.empty()) server->keepBody(url, std::move(body));
                         if (auto self = weak.lock()) {
                             self->queue(std::move(text), true);
