@@ -5,12 +5,16 @@
 //   BM_FacePmsc      the rig posing the model's key points, the projection, the key error and the
 //                    reconstruction of all points (what a hit costs)
 //   BM_FaceKeyPose, BM_FaceReconstruct: the two big parts of BM_FacePmsc
+//   BM_FaceKeyErrorPredictedVsRms: the key error of a frame in `pmsc train --tolerance`'s default
+//                    measure (the predicted point error: the key RMS and the leave-one-out error)
+//                    against the key RMS alone, timed alternately (counter predicted_over_rms)
 //
 // After the runs it prints one JSON line {"speedup": full / pmsc, "key_cost_fraction": ...} from
 // the CPU times. The model: DIR/face.pmsc of `pmsc demo face --out DIR` when PMSC_FACE_MODEL
 // names it (the demo's own keys and basis), otherwise one trained here from 10 sequences of the
 // demo's animation (M = 48, 170 keys, Multi-PIE fiducials). ICT data: PMSC_ICT_FACEKIT_DIR, or
 // the folder CMake was configured with.
+#include "TimeAlternately.h"
 #include "evaluators/face/FaceEvaluator.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/PointMultiplier.h"
@@ -114,10 +118,29 @@ void BM_FacePmsc(benchmark::State& state) {
     }
 }
 
+void BM_FaceKeyErrorPredictedVsRms(benchmark::State& state) {
+    const Setup& s = setup();
+    Model rms = s.model, predicted = s.model;
+    rms.keyErrorNorm = KeyErrorNorm::Rms;
+    predicted.keyErrorNorm = KeyErrorNorm::Predicted;
+    predicted.tolerance = 1;
+    predicted.partEps = {1, 1};
+    const PointMultiplier pmRms(rms), pmPredicted(predicted);
+    std::vector<double> keys(static_cast<size_t>(3 * s.model.keyCount())),
+        coords(static_cast<size_t>(s.model.coordCount()));
+    s.evaluator->evaluate(s.frames[0], s.model.keyPoints, keys.data());
+    pmRms.project(keys.data(), coords.data());
+    pmsc::bench::timeAlternately(
+        state, "predicted",
+        [&] { benchmark::DoNotOptimize(pmPredicted.keyError(keys.data(), coords.data())); }, "rms",
+        [&] { benchmark::DoNotOptimize(pmRms.keyError(keys.data(), coords.data())); });
+}
+
 BENCHMARK(BM_FaceFullPose)->Unit(benchmark::kMillisecond)->MinTime(2.0);
 BENCHMARK(BM_FacePmsc)->Unit(benchmark::kMillisecond)->MinTime(2.0);
 BENCHMARK(BM_FaceKeyPose)->Unit(benchmark::kMillisecond)->MinTime(1.0);
 BENCHMARK(BM_FaceReconstruct)->Unit(benchmark::kMillisecond)->MinTime(1.0);
+BENCHMARK(BM_FaceKeyErrorPredictedVsRms)->Unit(benchmark::kMicrosecond)->MinTime(1.0);
 
 // Keeps each benchmark's CPU time per iteration for the ratio printed at the end.
 class RatioReporter : public benchmark::ConsoleReporter {

@@ -8,6 +8,7 @@
 // BM_ReconstructSharedVsSeparate: see below.
 // BM_KeysVersusAll: 200 random voxels and all voxels in the same iteration; linearity =
 // (keys time / K) / (all time / N), which should be 1 within 20% (keys cost K/N of all voxels).
+#include "TimeAlternately.h"
 #include "evaluators/volume/VolumeEvaluator.h"
 #include "pmsc/PointMultiplier.h"
 
@@ -20,6 +21,8 @@
 #include <random>
 
 namespace {
+
+using pmsc::bench::timeAlternately;
 
 using namespace pmsc;
 using namespace pmsc::volume;
@@ -117,28 +120,6 @@ Model reconstructionModel(Index n, Index m, bool shared) {
     for (Index k = 0; k < 2 * m; ++k) model.keyPoints.push_back(k * (n / (2 * m)));
     model.projector = makeProjector(model.basis, model.basisChannels(), model.keyPoints);
     return model;
-}
-
-/// Runs `a` then `b` in every iteration and sets the counters NAME_A_ms, NAME_B_ms and
-/// NAME_A_over_NAME_B: two ways of the same work timed side by side in one run.
-template <class A, class B>
-void timeAlternately(benchmark::State& state, const std::string& nameA, A&& a, const std::string& nameB,
-                     B&& b) {
-    double secondsA = 0, secondsB = 0;
-    using Clock = std::chrono::steady_clock;
-    for (auto _ : state) {
-        const auto t0 = Clock::now();
-        a();
-        const auto t1 = Clock::now();
-        b();
-        const auto t2 = Clock::now();
-        secondsA += std::chrono::duration<double>(t1 - t0).count();
-        secondsB += std::chrono::duration<double>(t2 - t1).count();
-    }
-    const double iterations = static_cast<double>(state.iterations());
-    state.counters[nameA + "_ms"] = 1e3 * secondsA / iterations;
-    state.counters[nameB + "_ms"] = 1e3 * secondsB / iterations;
-    state.counters[nameA + "_over_" + nameB] = secondsA / secondsB;
 }
 
 void BM_ReconstructSharedVsSeparate(benchmark::State& state) {

@@ -79,8 +79,11 @@ int runDemoFace(const std::vector<std::string>& args) {
                   "(novel and mixed sequences included), to check that settings chosen on one take hold",
                   [&](const std::string& v) { seed = parseIndex("--seed", v, 0, 4294967295LL); });
     parser.option("--key-error", "NORM",
-                  "the key error eps apply to, as pmsc train's: rms (default), largest or loo", keyError);
-    parser.option("--calibration", "RULE", "as pmsc train's: max (default), threshold or conformal",
+                  "the key error eps apply to, as pmsc train's: predicted (default), rms, largest or loo",
+                  keyError);
+    parser.option("--calibration", "RULE",
+                  "as pmsc train's: threshold (default for the predicted key error), max (default for the "
+                  "others) or conformal",
                   calibration);
     parser.flag("--quick", "9 + 2 short sequences: a smoke test of the whole pipeline (about 20 s)", quick);
     parser.flag("--quiet", "no progress display", quiet);

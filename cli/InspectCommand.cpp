@@ -73,6 +73,8 @@ void printModelJson(const Model& model, const ModelFileFacts& file) {
     j["eps_min"] = model.epsMin;
     j["eps_max"] = model.epsMax;
     j["key_error"] = toString(model.keyErrorNorm);
+    if (model.keyErrorNorm == KeyErrorNorm::Predicted)
+        j["key_error_parts_eps"] = {{"rms", model.partEps.rms}, {"loo", model.partEps.loo}};
     j["tolerance"] = model.tolerance;
     j["train_max_point_residual"] = model.trainMaxPointResidual;
     j["key_indices"] = std::vector<long long>(model.keyPoints.begin(), model.keyPoints.end());
@@ -140,6 +142,10 @@ void printModelText(const Model& model, const ModelFileFacts& file) {
     }
     std::cout << "\n  eps           [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax)
               << "] " << describe(model.keyErrorNorm) << " (data units)\n";
+    if (model.keyErrorNorm == KeyErrorNorm::Predicted)
+        std::cout << "  parts         key RMS error at or under " << fmt("%.6g", model.partEps.rms)
+                  << " or largest leave-one-out key error at or under " << fmt("%.6g", model.partEps.loo)
+                  << ": a hit\n";
     std::cout << "  tolerance     "
               << (model.tolerance > 0 ? fmt("%.6g", model.tolerance) + " (eps calibrated for it)"
                                       : std::string("none (eps from the training frames)"))

@@ -57,6 +57,50 @@ FrameSet readAll(const std::vector<std::string>& paths) {
 
 }  // namespace
 
+namespace {
+
+/// What `pmsc learn` did, for the person who ran it: sizes, times, thresholds before and after.
+void printLearnSummary(const std::string& modelPath, const std::string& outPath, const Model& model,
+                       const Model& learned, const LearnReport& report, double seconds) {
+    std::cout << "learned " << outPath << " from " << modelPath << " + " << report.newFrames
+              << " new frames in " << fmt("%.2f", seconds) << " s (update " << fmt("%.2f", report.seconds)
+              << " s: subspace " << fmt("%.2f", report.secondsSubspace) << ", keys "
+              << fmt("%.2f", report.secondsKeys) << ", calibration " << fmt("%.2f", report.secondsCalibration)
+              << ")\n";
+    std::cout << "  frames      " << model.trainFrames << " -> " << learned.trainFrames << " (update "
+              << learned.learning->updates << ")\n";
+    std::cout << "  basis       M = " << report.basisBefore << " -> " << report.basisAfter
+              << (report.basisEnergy > 0 ? " (energy rule " + fmt("%.6g", report.basisEnergy) + ")"
+                                         : std::string(" (fixed)"))
+              << ", state rank " << report.rankBefore << " -> " << report.rankAfter << ", captures "
+              << fmt("%.4f", 100.0 * learned.energyCaptured()) << "% of all frames' energy; largest angle to "
+              << "the old basis " << fmt("%.3g", report.largestAngle * 180.0 / 3.141592653589793) << " deg\n";
+    std::cout << "  key points  K = " << learned.keyCount() << ", " << report.keysKept
+              << " of them keys before\n";
+    std::cout << "  new frames  largest " << describe(model.keyErrorNorm) << " under the old model "
+              << fmt("%.6g", report.oldModelNewFramesKeyRmsMax) << ", largest point error of the new model "
+              << fmt("%.6g", report.newFramesMaxPointError) << "\n";
+    std::cout << "  eps         [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax)
+              << "] -> [" << fmt("%.6g", learned.epsMin) << ", " << fmt("%.6g", learned.epsMax) << "]";
+    if (learned.tolerance > 0) {
+        std::cout << " for tolerance " << fmt("%.6g", learned.tolerance) << " ("
+                  << toString(learned.calibrationRecord ? learned.calibrationRecord->rule
+                                                        : CalibrationRule::MaxRatio)
+                  << (learned.keyErrorNorm == KeyErrorNorm::Predicted ? " rule for the leave-one-out part"
+                                                                      : " rule")
+                  << "; ratio " << fmt("%.4g", report.calibrationRatioNew) << " on the new frames, "
+                  << fmt("%.4g", report.calibrationRatioOld) << " on the stored scores)";
+    }
+    std::cout << "\n";
+    if (learned.keyErrorNorm == KeyErrorNorm::Predicted)
+        std::cout << "  parts       key RMS eps " << fmt("%.6g", model.partEps.rms) << " -> "
+                  << fmt("%.6g", learned.partEps.rms) << ", leave-one-out eps "
+                  << fmt("%.6g", model.partEps.loo) << " -> " << fmt("%.6g", learned.partEps.loo) << "\n";
+    for (const auto& w : report.warnings) std::cout << "  warning: " << w << "\n";
+}
+
+}  // namespace
+
 int runLearn(const std::vector<std::string>& args) {
     std::string modelPath, framesText, outPath, rule;
     LearnOptions options;
@@ -144,35 +188,7 @@ int runLearn(const std::vector<std::string>& args) {
     progress.finish();
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
-    std::cout << "learned " << outPath << " from " << modelPath << " + " << report.newFrames
-              << " new frames in " << fmt("%.2f", seconds) << " s (update " << fmt("%.2f", report.seconds)
-              << " s: subspace " << fmt("%.2f", report.secondsSubspace) << ", keys "
-              << fmt("%.2f", report.secondsKeys) << ", calibration " << fmt("%.2f", report.secondsCalibration)
-              << ")\n";
-    std::cout << "  frames      " << model.trainFrames << " -> " << learned.trainFrames << " (update "
-              << learned.learning->updates << ")\n";
-    std::cout << "  basis       M = " << report.basisBefore << " -> " << report.basisAfter
-              << (report.basisEnergy > 0 ? " (energy rule " + fmt("%.6g", report.basisEnergy) + ")"
-                                         : std::string(" (fixed)"))
-              << ", state rank " << report.rankBefore << " -> " << report.rankAfter << ", captures "
-              << fmt("%.4f", 100.0 * learned.energyCaptured()) << "% of all frames' energy; largest angle to "
-              << "the old basis " << fmt("%.3g", report.largestAngle * 180.0 / 3.141592653589793) << " deg\n";
-    std::cout << "  key points  K = " << learned.keyCount() << ", " << report.keysKept
-              << " of them keys before\n";
-    std::cout << "  new frames  largest key RMS under the old model "
-              << fmt("%.6g", report.oldModelNewFramesKeyRmsMax) << ", largest point error of the new model "
-              << fmt("%.6g", report.newFramesMaxPointError) << "\n";
-    std::cout << "  eps         [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax)
-              << "] -> [" << fmt("%.6g", learned.epsMin) << ", " << fmt("%.6g", learned.epsMax) << "]";
-    if (learned.tolerance > 0) {
-        std::cout << " for tolerance " << fmt("%.6g", learned.tolerance) << " ("
-                  << toString(learned.calibrationRecord ? learned.calibrationRecord->rule
-                                                        : CalibrationRule::MaxRatio)
-                  << " rule; ratio " << fmt("%.4g", report.calibrationRatioNew) << " on the new frames, "
-                  << fmt("%.4g", report.calibrationRatioOld) << " on the stored scores)";
-    }
-    std::cout << "\n";
-    for (const auto& w : report.warnings) std::cout << "  warning: " << w << "\n";
+    printLearnSummary(modelPath, outPath, model, learned, report, seconds);
     return kExitOk;
 }
 

@@ -93,8 +93,9 @@ FrameSet readShots(const std::vector<Shot>& shots) {
 /// What `pmsc train` was asked; the training settings themselves are in `options`.
 struct TrainArgs {
     std::vector<std::string> framePaths;
-    std::string outPath, selector = "teleconnection", rule = "max", targetsPath;
-    std::string keyError;  // empty: TrainingOptions decides (rms)
+    std::string outPath, selector = "teleconnection", rule,
+                         targetsPath;  // rule empty: TrainingOptions decides
+    std::string keyError;              // empty: TrainingOptions decides (resolvedKeyErrorNorm)
     std::uint64_t memoryLimit = 0;
     Index blockPoints = 0;
     bool outOfCore = false, sharedChannels = false, quiet = false;
@@ -171,15 +172,19 @@ void declareCalibrationOptions(ArgParser& parser, TrainArgs& a) {
                   [&](const std::string& v) { options.calibrationSlices = parseIndex("--slices", v, 2); });
     parser.option(
         "--calibration", "RULE",
-        "how --tolerance sets eps: max (tolerance / the largest held-out error ratio, default), threshold "
-        "(the largest held-out key error with no held-out frame over the tolerance at or below it, at "
-        "most conformal's; max's where no held-out frame crossed the tolerance) or conformal (tolerance / "
-        "the held-out error ratios' quantile at --coverage)",
+        "how --tolerance sets eps: threshold (the largest held-out key error with no held-out frame over "
+        "the tolerance at or below it, at most conformal's; max's where no held-out frame crossed the "
+        "tolerance; default for the predicted key error, whose RMS part is always max), max (tolerance / the "
+        "largest held-out error ratio, default for the other key errors) or conformal (tolerance / the "
+        "held-out error ratios' quantile at --coverage)",
         a.rule);
     parser.option("--key-error", "NORM",
-                  "the key error eps apply to: rms (the paper's RMS over the keys, default), largest (the "
-                  "largest key's error) or loo (the largest key's leave-one-out error: each key's residual "
-                  "over 1 - its leverage); largest and loo not with --shared-channels",
+                  "the key error eps apply to: predicted (the point error the key RMS and the leave-one-out "
+                  "error predict, the smaller: a hit when either is under its calibrated threshold; default "
+                  "with --tolerance), rms (the paper's RMS over the keys; default without --tolerance and "
+                  "with --shared-channels), largest (the largest key's error) or loo (the largest key's "
+                  "leave-one-out error: each key's residual over 1 - its leverage); predicted, largest and "
+                  "loo not with --shared-channels, predicted only with --tolerance",
                   a.keyError);
     parser.option("--coverage", "C",
                   "coverage of --calibration threshold or conformal, in (0, 1) (default " +
@@ -308,7 +313,7 @@ void checkTrainArgs(const ArgParser& parser, TrainArgs& a) {
 
     if (const auto r = calibrationRuleNamed(rule))
         options.calibrationRule = *r;
-    else
+    else if (!rule.empty())
         parser.fail("--calibration: '" + rule + "' is not " + kCalibrationRuleChoices);
     if (const auto norm = keyErrorNormNamed(a.keyError))
         options.keyErrorNorm = *norm;
@@ -317,10 +322,12 @@ void checkTrainArgs(const ArgParser& parser, TrainArgs& a) {
     if (options.keyErrorNorm && *options.keyErrorNorm != KeyErrorNorm::Rms && a.sharedChannels)
         parser.fail(std::string("--key-error ") + toString(*options.keyErrorNorm) +
                     " needs channels of their own (not --shared-channels)");
-    if (parser.given("--coverage") && options.calibrationRule == CalibrationRule::MaxRatio)
-        parser.fail("--coverage needs --calibration threshold or conformal");
+    if (options.keyErrorNorm == KeyErrorNorm::Predicted && !(options.tolerance > 0))
+        parser.fail("--key-error predicted needs --tolerance (each of its parts is calibrated for it)");
     if ((parser.given("--calibration") || parser.given("--coverage")) && !(options.tolerance > 0))
         parser.fail("--calibration and --coverage need --tolerance");
+    if (parser.given("--coverage") && resolvedCalibrationRule(options) == CalibrationRule::MaxRatio)
+        parser.fail("--coverage needs --calibration threshold or conformal");
 }
 
 /// Declares the options, parses and checks them; std::nullopt when --help was asked for.

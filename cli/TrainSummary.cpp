@@ -5,6 +5,31 @@
 
 namespace pmsc::cli {
 
+namespace {
+
+/// How the rule set eps from the held-out frames of `c`, one line.
+std::string ruleLine(const CalibrationStats& c, double tolerance) {
+    const auto underMax = [&] {
+        return "largest ratio " + fmt("%.4g", c.maxRatio) + ", eps_min would be " +
+               fmt("%.6g", c.maxRatio > 0 ? tolerance / c.maxRatio : 0.0) + " under --calibration max)\n";
+    };
+    if (c.rule == CalibrationRule::Conformal)
+        return "conformal: ratio quantile at coverage " + fmt("%.4g", c.coverage) + " of " +
+               std::to_string(c.usableFrames) + " held-out frames (" + underMax();
+    if (c.rule == CalibrationRule::Threshold)
+        return "threshold: no frame over the tolerance at or below eps_min among " +
+               std::to_string(c.usableFrames) + " held-out frames (" + underMax();
+    std::string line = "max: the largest ratio of " + std::to_string(c.usableFrames) + " held-out frames";
+    if (c.usableFrames > 0) {
+        const double q = conformalQuantile(heldOutRatios(c), 0.95);
+        line += " (conformal 95% quantile " + fmt("%.4g", q) + ", eps_min would be " +
+                fmt("%.6g", q > 0 ? tolerance / q : 0.0) + ")";
+    }
+    return line + "\n";
+}
+
+}  // namespace
+
 void printTrainSummary(std::ostream& out, const std::string& modelPath, const FrameSet& frames,
                        const Model& model, const TrainingReport& report, double seconds) {
     out << "trained " << modelPath << " from " << frames.frames << " frames x " << frames.points
@@ -21,32 +46,24 @@ void printTrainSummary(std::ostream& out, const std::string& modelPath, const Fr
     out << "  residual    largest point error of PM on the training frames: "
         << fmt("%.6g", model.trainMaxPointResidual) << "\n";
     const std::string measure = describe(model.keyErrorNorm);
-    if (model.tolerance > 0) {
+    const CalibrationStats& c = report.calibration;
+    if (model.tolerance > 0 && model.keyErrorNorm == KeyErrorNorm::Predicted && c.parts.size() == 2) {
         out << "  eps         [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax) << "] "
-            << measure << ", calibrated for tolerance " << fmt("%.6g", model.tolerance) << " ("
-            << report.calibration.slices
-            << " held-out slices, point error <= " << fmt("%.4g", report.calibration.ratio) << " x "
-            << measure << "; blend band " << fmt("%.3g", model.epsMax / model.epsMin) << "x)\n";
-        const CalibrationStats& c = report.calibration;
-        if (c.rule == CalibrationRule::Conformal) {
-            out << "  rule        conformal: ratio quantile at coverage " << fmt("%.4g", c.coverage) << " of "
-                << c.usableFrames << " held-out frames (largest ratio " << fmt("%.4g", c.maxRatio)
-                << ", eps_min would be " << fmt("%.6g", c.maxRatio > 0 ? model.tolerance / c.maxRatio : 0.0)
-                << " under --calibration max)\n";
-        } else if (c.rule == CalibrationRule::Threshold) {
-            out << "  rule        threshold: no frame over the tolerance at or below eps_min among "
-                << c.usableFrames << " held-out frames (largest ratio " << fmt("%.4g", c.maxRatio)
-                << ", eps_min would be " << fmt("%.6g", c.maxRatio > 0 ? model.tolerance / c.maxRatio : 0.0)
-                << " under --calibration max)\n";
-        } else {
-            out << "  rule        max: the largest ratio of " << c.usableFrames << " held-out frames";
-            if (c.usableFrames > 0) {
-                const double q = conformalQuantile(heldOutRatios(c), 0.95);
-                out << " (conformal 95% quantile " << fmt("%.4g", q) << ", eps_min would be "
-                    << fmt("%.6g", q > 0 ? model.tolerance / q : 0.0) << ")";
-            }
-            out << "\n";
-        }
+            << measure << ", calibrated for tolerance " << fmt("%.6g", model.tolerance) << " (" << c.slices
+            << " held-out slices; a hit when either part is at or under its threshold; blend band "
+            << fmt("%.3g", model.epsMax / model.epsMin) << "x)\n";
+        out << "  key RMS     eps " << fmt("%.6g", model.partEps.rms)
+            << ", point error <= " << fmt("%.4g", c.parts[0].ratio) << " x key RMS error; "
+            << ruleLine(c.parts[0], model.tolerance);
+        out << "  leave-out   eps " << fmt("%.6g", model.partEps.loo)
+            << ", point error <= " << fmt("%.4g", c.parts[1].ratio) << " x largest leave-one-out key error; "
+            << ruleLine(c.parts[1], model.tolerance);
+    } else if (model.tolerance > 0) {
+        out << "  eps         [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax) << "] "
+            << measure << ", calibrated for tolerance " << fmt("%.6g", model.tolerance) << " (" << c.slices
+            << " held-out slices, point error <= " << fmt("%.4g", c.ratio) << " x " << measure
+            << "; blend band " << fmt("%.3g", model.epsMax / model.epsMin) << "x)\n";
+        out << "  rule        " << ruleLine(c, model.tolerance);
     } else {
         out << "  eps         [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax) << "] "
             << measure << ", from the training frames (no --tolerance: not calibrated)\n";

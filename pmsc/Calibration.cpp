@@ -22,8 +22,16 @@ Eigen::VectorXd leaveOneOutScale(const Eigen::MatrixXd& bk, const Eigen::MatrixX
     return scale;
 }
 
+PredictedParts keyErrorParts(const Eigen::Ref<const Eigen::VectorXd>& residual, Index channels,
+                             const Eigen::VectorXd& looScale) {
+    return {keyErrorOfResidual(residual, channels, KeyErrorNorm::Rms),
+            keyErrorOfResidual(residual, channels, KeyErrorNorm::LeaveOneOut, &looScale)};
+}
+
 double keyErrorOfResidual(const Eigen::Ref<const Eigen::VectorXd>& residual, Index channels,
                           KeyErrorNorm norm, const Eigen::VectorXd* looScale) {
+    if (norm == KeyErrorNorm::Predicted)
+        throw std::invalid_argument("keyErrorOfResidual: the predicted error needs its parts' thresholds");
     const Index keys = residual.size() / channels;  // rows are key x channel: exact
     if (norm == KeyErrorNorm::Rms) return std::sqrt(residual.squaredNorm() / static_cast<double>(keys));
     const bool loo = norm == KeyErrorNorm::LeaveOneOut;
@@ -202,8 +210,9 @@ void Folds::score(Index first, Index last, CalibrationStats& s) {
     Eigen::MatrixXd uk;
     heldInTimes(keyRows, uk);
     const Eigen::MatrixXd projector = projectorFromKeyRows(uk, channels);
-    const Eigen::VectorXd looScale =
-        norm == KeyErrorNorm::LeaveOneOut ? leaveOneOutScale(uk, projector) : Eigen::VectorXd();
+    const Eigen::VectorXd looScale = norm == KeyErrorNorm::LeaveOneOut || norm == KeyErrorNorm::Predicted
+                                         ? leaveOneOutScale(uk, projector)
+                                         : Eigen::VectorXd();
     Eigen::MatrixXd heldOutK = keyRows.middleCols(first, out).colwise() - heldInMean(keyRows);
     const Eigen::MatrixXd coords = projector * heldOutK;
     heldOutK.noalias() -= uk * coords;  // the PM residual at the keys
@@ -221,7 +230,13 @@ void Folds::score(Index first, Index last, CalibrationStats& s) {
     maxOverRanks(comm, pointErr.data(), static_cast<std::size_t>(out));
     for (Index j = 0; j < out; ++j) {
         s.frames.push_back(first + j);
-        s.keyRms.push_back(keyErrorOfResidual(heldOutK.col(j), channels, norm, &looScale));
+        if (norm == KeyErrorNorm::Predicted) {
+            const PredictedParts e = keyErrorParts(heldOutK.col(j), channels, looScale);
+            s.keyRms.push_back(e.rms);
+            s.keyLoo.push_back(e.loo);
+        } else {
+            s.keyRms.push_back(keyErrorOfResidual(heldOutK.col(j), channels, norm, &looScale));
+        }
         s.maxPointError.push_back(pointErr[j]);
     }
 }
@@ -283,7 +298,10 @@ CalibrationStats calibrate(RowBlocks& q, Communicator& comm, const Eigen::Matrix
                           " usable basis vectors (down to " + std::to_string(folds.smallestM) + ")");
     }
     if (group > 1) foldGroups(s, group);
-    setThresholds(s, tolerance, rule, coverage);
+    if (norm == KeyErrorNorm::Predicted)
+        setPredictedThresholds(s, tolerance, rule, coverage);
+    else
+        setThresholds(s, tolerance, rule, coverage);
     return s;
 }
 
@@ -439,6 +457,41 @@ void setThresholds(CalibrationStats& s, double tolerance, CalibrationRule rule, 
     s.epsMin = tolerance / ratio;
     s.band = blendBand(ratios, ratio);
     s.epsMax = s.band * s.epsMin;
+}
+
+void setPredictedThresholds(CalibrationStats& s, double tolerance, CalibrationRule looRule, double coverage) {
+    if (s.keyLoo.size() != s.keyRms.size())
+        throw std::invalid_argument("calibration: the predicted error's two parts differ in count");
+    CalibrationStats rms, loo;
+    rms.keyRms = s.keyRms;
+    loo.keyRms = s.keyLoo;
+    rms.maxPointError = loo.maxPointError = s.maxPointError;
+    setThresholds(rms, tolerance, CalibrationRule::MaxRatio, coverage);
+    setThresholds(loo, tolerance, looRule, coverage);
+    s.partEps = {rms.epsMin, loo.epsMin};
+    for (std::size_t f = 0; f < s.keyRms.size(); ++f)
+        s.keyRms[f] = predictedPointError({rms.keyRms[f], loo.keyRms[f]}, s.partEps, tolerance);
+    s.tolerance = tolerance;
+    s.rule = looRule;
+    s.coverage = loo.coverage;
+    s.usableFrames = std::max(rms.usableFrames, loo.usableFrames);
+    s.blindFrames = std::min(rms.blindFrames, loo.blindFrames);
+    const std::vector<double> ratios = heldOutRatios(s);
+    s.maxRatio = ratios.empty() ? 0.0 : *std::max_element(ratios.begin(), ratios.end());
+    s.ratio = 1;
+    s.epsMin = tolerance;
+    // Decision: the narrower band of the two parts. Either keeps a blend under T under its own
+    // linear bound (blendBand), and the narrower one leaves the cache sooner.
+    s.band = std::min(rms.band, loo.band);
+    s.epsMax = s.band * s.epsMin;
+    const std::string prefix = "calibration: ";
+    for (const CalibrationStats* part : {&rms, &loo})
+        for (const std::string& note : part->notes) {
+            const std::string name =
+                part == &rms ? "calibration (key RMS part): " : "calibration (leave-one-out part): ";
+            s.notes.push_back(name + (note.starts_with(prefix) ? note.substr(prefix.size()) : note));
+        }
+    s.parts = {std::move(rms), std::move(loo)};
 }
 
 }  // namespace pmsc

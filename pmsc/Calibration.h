@@ -69,6 +69,14 @@ struct CalibrationStats {
     std::vector<Index> frames;          ///< held-out frame indices, ascending
     std::vector<double> keyRms;         ///< e_f: key RMS error of each held-out frame
     std::vector<double> maxPointError;  ///< E_f: largest point error of PM on it
+    /// KeyErrorNorm::Predicted: each held-out frame's largest leave-one-out key error (keyRms holds
+    /// its key RMS until setPredictedThresholds combines the two into the predicted error).
+    std::vector<double> keyLoo;
+    /// KeyErrorNorm::Predicted, after setPredictedThresholds: the thresholds of the two parts and
+    /// each part's own calibration (parts[0] the key RMS by MaxRatio, parts[1] the leave-one-out
+    /// error by the rule), whose keyRms are the raw part errors.
+    PredictedParts partEps;
+    std::vector<CalibrationStats> parts;
     /// Held-out frames whose key error is rounding noise (e_f <= 1e-9 max E) while E_f is not:
     /// errors the key monitor cannot see (typically K*C == M).
     Index blindFrames = 0;
@@ -116,7 +124,8 @@ constexpr double kMinOneMinusLeverage = 1e-3;
 
 /// The key error of one frame's key residual (K*C rows, key-major, channel-minor) by `norm`, as
 /// PointMultiplier::keyError computes it at run time. `looScale` (leaveOneOutScale of the same
-/// fit) is needed by KeyErrorNorm::LeaveOneOut alone.
+/// fit) is needed by KeyErrorNorm::LeaveOneOut alone. KeyErrorNorm::Predicted needs its parts'
+/// thresholds: keyErrorParts, then predictedPointError (this throws std::invalid_argument for it).
 double keyErrorOfResidual(const Eigen::Ref<const Eigen::VectorXd>& residual, Index channels,
                           KeyErrorNorm norm, const Eigen::VectorXd* looScale = nullptr);
 
@@ -127,6 +136,20 @@ double keyErrorOfResidual(const Eigen::Ref<const Eigen::VectorXd>& residual, Ind
 /// 0). Used by calibrate() and by `pmsc learn`, which scores frames of its own.
 /// @throws std::invalid_argument unless tolerance > 0 and 0 < coverage < 1 (Conformal).
 void setThresholds(CalibrationStats& s, double tolerance, CalibrationRule rule, double coverage);
+
+/// KeyErrorNorm::Predicted: calibrates its parts from the held-out scores s.keyRms (key RMS) and
+/// s.keyLoo (leave-one-out), the key RMS by MaxRatio whatever `looRule` (the paper's linear bound,
+/// the measure every case was measured safe with) and the leave-one-out error by `looRule`, then
+/// sets s.partEps, s.parts, s.keyRms = each frame's predicted point error (predictedPointError),
+/// eps_min = T (a frame is a hit when either part is at or under its threshold, so every held-out
+/// frame at or under it was at or under T in the part that certified it), eps_max = the narrower of
+/// the parts' bands times T, s.ratio = 1 and s.maxRatio = the largest E_f / predicted error.
+/// @throws std::invalid_argument as setThresholds, or when keyLoo and keyRms differ in count
+void setPredictedThresholds(CalibrationStats& s, double tolerance, CalibrationRule looRule, double coverage);
+
+/// The two parts of KeyErrorNorm::Predicted for one frame's key residual (as keyErrorOfResidual).
+PredictedParts keyErrorParts(const Eigen::Ref<const Eigen::VectorXd>& residual, Index channels,
+                             const Eigen::VectorXd& looScale);
 
 /// The held-out ratios E_f / e_f that setThresholds() uses (frames with a usable key error).
 std::vector<double> heldOutRatios(const CalibrationStats& s);

@@ -25,8 +25,10 @@ struct LearnOptions {
     /// 0 = the model's stored rule (LearningState::basisEnergy; none stored: M kept).
     double energy = 0;
     Index maxRank = 0;  ///< rank r kept by the state; 0 = the model's (LearningState::maxRank, else M)
-    std::optional<CalibrationRule> rule;  ///< default: the model's CalibrationRecord's, else MaxRatio
-    std::optional<double> coverage;       ///< default: the model's, else 0.95
+    /// Default: the model's CalibrationRecord's, else Threshold for a predicted key error (the rule of
+    /// its leave-one-out part) and MaxRatio for the others.
+    std::optional<CalibrationRule> rule;
+    std::optional<double> coverage;  ///< default: the model's, else 0.95
     /// Cross-fitting folds over the new frames for the calibration; 0 = slices of the training's
     /// size on all frames seen ((n + m) / S frames each, S the training's folds; at least one).
     Index slices = 0;

@@ -7,8 +7,9 @@
 //   u64 count + u64 x count fiducials, u64 count + u64 x count grid points,
 //   f64 basisEnergy (optional: a section that ends before it reads as 0, M fixed)
 // "CALIBRAT" (Model::calibrationRecord, CalibrationRecord):
-//   u32 rule (0 max, 1 conformal), u32 reserved 0, f64 coverage, u64 slices,
-//   u64 n, f64 x n key RMS, f64 x n largest point errors
+//   u32 rule (0 max, 1 conformal, 2 threshold), u32 parts (0, or 1 when leave-one-out scores
+//   follow), f64 coverage, u64 slices, u64 n, f64 x n key RMS, f64 x n largest point errors,
+//   [f64 x n leave-one-out key errors (KeyErrorNorm::Predicted)]
 #include "pmsc/LearningSections.h"
 
 #include "pmsc/Model.h"
@@ -76,20 +77,22 @@ bool calibrationPresent(const Model& model) { return model.calibrationRecord.has
 void encodeCalibration(const Model& model, ByteWriter& out) {
     const CalibrationRecord& r = *model.calibrationRecord;
     out.u32(static_cast<std::uint32_t>(r.rule));
-    out.u32(0);
+    out.u32(r.keyLoo.empty() ? 0 : 1);
     out.f64(r.coverage);
     out.index(r.slices);
     out.index(static_cast<Index>(r.keyRms.size()));
     out.doubles(r.keyRms.data(), r.keyRms.size());
     out.doubles(r.maxPointError.data(), r.maxPointError.size());
+    out.doubles(r.keyLoo.data(), r.keyLoo.size());
 }
 
 void decodeCalibration(ByteReader& in, Model& model) {
     CalibrationRecord r;
     const std::uint32_t rule = in.u32("rule");
-    if (rule > 1) in.fail("rule " + std::to_string(rule) + " is not 0 (max) or 1 (conformal)");
+    if (rule > 2) in.fail("rule " + std::to_string(rule) + " is not 0 (max), 1 (conformal) or 2 (threshold)");
     r.rule = static_cast<CalibrationRule>(rule);
-    if (in.u32("reserved") != 0) in.fail("reserved field is not 0");
+    const std::uint32_t looScores = in.u32("leave-one-out scores");
+    if (looScores > 1) in.fail("leave-one-out score flag " + std::to_string(looScores) + " is not 0 or 1");
     r.coverage = in.finite("coverage");
     r.slices = in.index("slices", static_cast<std::uint64_t>(1) << 40);
     const std::uint64_t n = in.count("score count", 16);
@@ -97,6 +100,10 @@ void decodeCalibration(ByteReader& in, Model& model) {
     in.doubles(r.keyRms.data(), n, "key RMS scores");
     r.maxPointError.resize(n);
     in.doubles(r.maxPointError.data(), n, "point error scores");
+    if (looScores == 1) {
+        r.keyLoo.resize(n);
+        in.doubles(r.keyLoo.data(), n, "leave-one-out scores");
+    }
     try {
         r.validate();
     } catch (const std::invalid_argument& e) {

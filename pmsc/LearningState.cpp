@@ -51,7 +51,9 @@ CalibrationRecord CalibrationRecord::from(const CalibrationStats& s) {
     r.rule = s.rule;
     r.coverage = s.coverage;
     r.slices = s.slices;
-    r.keyRms = s.keyRms;
+    // A predicted error's scores are kept as its raw parts, which `pmsc learn` calibrates anew.
+    r.keyRms = s.parts.empty() ? s.keyRms : s.parts[0].keyRms;
+    if (s.parts.size() > 1) r.keyLoo = s.parts[1].keyRms;
     r.maxPointError = s.maxPointError;
     return r;
 }
@@ -63,7 +65,12 @@ void CalibrationRecord::validate() const {
     if (rule != CalibrationRule::MaxRatio && !(coverage > 0 && coverage < 1))
         invalid("calibration record: coverage must be in (0, 1)");
     if (slices < 0) invalid("calibration record: negative slice count");
-    if (keyRms.size() != maxPointError.size()) invalid("calibration record: score arrays differ in length");
+    if (keyRms.size() != maxPointError.size() || (!keyLoo.empty() && keyLoo.size() != keyRms.size()))
+        invalid("calibration record: score arrays differ in length");
+    for (size_t i = 0; i < keyLoo.size(); ++i)
+        if (!(keyLoo[i] >= 0) || !std::isfinite(keyLoo[i]))
+            invalid("calibration record: leave-one-out score " + std::to_string(i) +
+                    " is not a finite number >= 0");
     for (size_t i = 0; i < keyRms.size(); ++i)
         if (!(keyRms[i] >= 0) || !(maxPointError[i] >= 0) || !std::isfinite(keyRms[i]) ||
             !std::isfinite(maxPointError[i]))

@@ -47,9 +47,11 @@ struct LearningState {
 /// `pmsc inspect` can show them.
 struct CalibrationRecord {
     CalibrationRule rule = CalibrationRule::MaxRatio;
-    double coverage = 0;                ///< Conformal only
-    Index slices = 0;                   ///< leave-one-slice-out folds of the training (0 = none)
-    std::vector<double> keyRms;         ///< e_f of each held-out frame
+    double coverage = 0;         ///< Conformal only
+    Index slices = 0;            ///< leave-one-slice-out folds of the training (0 = none)
+    std::vector<double> keyRms;  ///< e_f of each held-out frame (the key RMS part for Predicted)
+    /// KeyErrorNorm::Predicted: each held-out frame's leave-one-out part (empty otherwise).
+    std::vector<double> keyLoo;
     std::vector<double> maxPointError;  ///< E_f of each held-out frame
 
     static CalibrationRecord from(const CalibrationStats& s);

@@ -2,7 +2,9 @@
 
 #include <Eigen/QR>
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -22,6 +24,8 @@ const char* toString(KeyErrorNorm norm) {
             return "largest";
         case KeyErrorNorm::LeaveOneOut:
             return "loo";
+        case KeyErrorNorm::Predicted:
+            return "predicted";
         case KeyErrorNorm::Rms:
             break;
     }
@@ -34,6 +38,8 @@ const char* describe(KeyErrorNorm norm) {
             return "largest key error";
         case KeyErrorNorm::LeaveOneOut:
             return "largest leave-one-out key error";
+        case KeyErrorNorm::Predicted:
+            return "predicted point error";
         case KeyErrorNorm::Rms:
             break;
     }
@@ -41,9 +47,19 @@ const char* describe(KeyErrorNorm norm) {
 }
 
 std::optional<KeyErrorNorm> keyErrorNormNamed(std::string_view name) {
-    for (KeyErrorNorm n : {KeyErrorNorm::Rms, KeyErrorNorm::Largest, KeyErrorNorm::LeaveOneOut})
+    for (KeyErrorNorm n :
+         {KeyErrorNorm::Predicted, KeyErrorNorm::Rms, KeyErrorNorm::Largest, KeyErrorNorm::LeaveOneOut})
         if (name == toString(n)) return n;
     return std::nullopt;
+}
+
+double predictedPointError(PredictedParts error, PredictedParts eps, double tolerance) {
+    if (std::isnan(error.rms) || std::isnan(error.loo)) return std::numeric_limits<double>::quiet_NaN();
+    const auto over = [](double e, double threshold) {
+        if (threshold > 0) return e / threshold;
+        return e > 0 ? std::numeric_limits<double>::infinity() : 0.0;
+    };
+    return tolerance * std::min(over(error.rms, eps.rms), over(error.loo, eps.loo));
 }
 
 double Model::energyCaptured() const {
@@ -110,6 +126,13 @@ void Model::validate() const {
     }
     if (!std::isfinite(tolerance) || tolerance < 0) {
         invalid("tolerance must be finite and >= 0, got " + std::to_string(tolerance));
+    }
+    if (keyErrorNorm == KeyErrorNorm::Predicted) {
+        if (!(tolerance > 0)) invalid("the predicted key error needs a calibration tolerance");
+        if (sharedChannels) invalid("the predicted key error needs channels of their own");
+        if (!std::isfinite(partEps.rms) || !std::isfinite(partEps.loo) || partEps.rms < 0 || partEps.loo < 0)
+            invalid("the predicted key error's part thresholds must be finite and >= 0, got [" +
+                    std::to_string(partEps.rms) + ", " + std::to_string(partEps.loo) + "]");
     }
     if (!allFinite(mean)) invalid("mean contains NaN or Inf");
     if (!allFinite(basis)) invalid("basis contains NaN or Inf");

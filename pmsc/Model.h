@@ -56,6 +56,9 @@ struct Model {
     double epsMin = 0;     ///< soft cache: at or below, a hit (section 5)
     double epsMax = 0;     ///< soft cache: at or above, a miss
     double tolerance = 0;  ///< calibration target (largest point error of a hit); 0 = not calibrated
+    /// KeyErrorNorm::Predicted: the thresholds of its two parts, each calibrated for `tolerance`
+    /// (section KEYERROR); the key error is tolerance * min(e_rms / rms, e_loo / loo).
+    PredictedParts partEps;
     double trainMaxPointResidual = 0;  ///< largest point error of PM on the training set
 
     // --- optional parts: each one is a tagged section of a version-2 model file (ModelSections.h)

@@ -11,19 +11,30 @@ namespace pmsc {
 
 namespace {
 
-// KEYERROR: the key error norm eps applies to (Model::keyErrorNorm), one u32. Absent = Rms, the
-// measure of every model written without it.
+// KEYERROR: the key error norm eps applies to (Model::keyErrorNorm), one u32; for 3 (predicted)
+// then f64 eps_rms, f64 eps_loo (Model::partEps). Absent = Rms, the measure of every model written
+// without it.
 ModelSectionCodec keyErrorSectionCodec() {
-    return {
-        {'K', 'E', 'Y', 'E', 'R', 'R', 'O', 'R'},
-        [](const Model& m) { return m.keyErrorNorm != KeyErrorNorm::Rms; },
-        [](const Model& m, ByteWriter& out) { out.u32(static_cast<std::uint32_t>(m.keyErrorNorm)); },
-        [](ByteReader& in, Model& m) {
-            const std::uint32_t v = in.u32("key error norm");
-            if (v > 2)
-                in.fail("key error norm " + std::to_string(v) + " is not 0 (rms), 1 (largest) or 2 (loo)");
-            m.keyErrorNorm = static_cast<KeyErrorNorm>(v);
-        }};
+    return {{'K', 'E', 'Y', 'E', 'R', 'R', 'O', 'R'},
+            [](const Model& m) { return m.keyErrorNorm != KeyErrorNorm::Rms; },
+            [](const Model& m, ByteWriter& out) {
+                out.u32(static_cast<std::uint32_t>(m.keyErrorNorm));
+                if (m.keyErrorNorm == KeyErrorNorm::Predicted) {
+                    out.f64(m.partEps.rms);
+                    out.f64(m.partEps.loo);
+                }
+            },
+            [](ByteReader& in, Model& m) {
+                const std::uint32_t v = in.u32("key error norm");
+                if (v > 3)
+                    in.fail("key error norm " + std::to_string(v) +
+                            " is not 0 (rms), 1 (largest), 2 (loo) or 3 (predicted)");
+                m.keyErrorNorm = static_cast<KeyErrorNorm>(v);
+                if (m.keyErrorNorm == KeyErrorNorm::Predicted) {
+                    m.partEps.rms = in.finite("key RMS part threshold");
+                    m.partEps.loo = in.finite("leave-one-out part threshold");
+                }
+            }};
 }
 
 }  // namespace

@@ -152,7 +152,7 @@ PointMultiplier::PointMultiplier(const Model& model, BasisPrecision precision) :
     const Eigen::Map<const Eigen::MatrixXd> meanColumn(model_.mean.data(), model_.mean.size(), 1);
     keyMean_ = gatherKeyRows(meanColumn, model_.channels, model_.keyPoints).col(0);
     keyBasis_ = gatherKeyRows(model_.basis, model_.basisChannels(), model_.keyPoints);
-    if (model_.keyErrorNorm == KeyErrorNorm::LeaveOneOut)
+    if (model_.keyErrorNorm == KeyErrorNorm::LeaveOneOut || model_.keyErrorNorm == KeyErrorNorm::Predicted)
         looScale_ = leaveOneOutScale(keyBasis_, model_.projector);
     // b = P (k - mean_K) = P k - P mean_K: precomputing P mean_K lets project() write straight
     // into the caller's buffer with one GEMV and no temporary.
@@ -245,8 +245,9 @@ double PointMultiplier::keyError(const double* keyValues, const double* coords) 
             continue;
         }
         for (Index i = 0; i < n; ++i) {
-            double r = keyValues[x0 + i] - predicted[i];
-            if (scale) r *= scale[x0 + i];
+            const double raw = keyValues[x0 + i] - predicted[i];
+            sum += raw * raw;  // the predicted error's RMS part
+            const double r = scale ? raw * scale[x0 + i] : raw;
             key += r * r;
             if ((x0 + i + 1) % c == 0) {
                 largest = std::max(largest, key);
@@ -254,8 +255,17 @@ double PointMultiplier::keyError(const double* keyValues, const double* coords) 
             }
         }
     }
-    return model_.keyErrorNorm == KeyErrorNorm::Rms ? std::sqrt(sum / static_cast<double>(keys))
-                                                    : std::sqrt(largest);
+    const double rms = std::sqrt(sum / static_cast<double>(keys));
+    switch (model_.keyErrorNorm) {
+        case KeyErrorNorm::Rms:
+            return rms;
+        case KeyErrorNorm::Predicted:
+            return predictedPointError({rms, std::sqrt(largest)}, model_.partEps, model_.tolerance);
+        case KeyErrorNorm::Largest:
+        case KeyErrorNorm::LeaveOneOut:
+            break;
+    }
+    return std::sqrt(largest);
 }
 
 void PointMultiplier::reconstruct(const double* coords, double* out) const {

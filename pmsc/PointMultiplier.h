@@ -38,7 +38,8 @@ public:
 
     /// The model's key error (Model::keyErrorNorm): the RMS over key points, or the largest, of
     /// the Euclidean norm (over channels) of each key's residual k - (mean_K + B_K b), each key row
-    /// first divided by 1 - its leverage for KeyErrorNorm::LeaveOneOut. Data units.
+    /// first divided by 1 - its leverage for KeyErrorNorm::LeaveOneOut; for KeyErrorNorm::Predicted
+    /// both the RMS and the leave-one-out error, combined by predictedPointError. Data units.
     /// Returns NaN if any key value is not finite.
     double keyError(const double* keyValues, const double* coords) const;
 

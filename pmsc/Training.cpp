@@ -68,11 +68,14 @@ void validateOptions(const TrainingOptions& o, Index points, Index frames) {
         badOption("calibration slices must be in [2, " + std::to_string(groups) + "], got " +
                   std::to_string(o.calibrationSlices));
     }
-    if (o.calibrationRule != CalibrationRule::MaxRatio && o.calibrationRule != CalibrationRule::Conformal &&
-        o.calibrationRule != CalibrationRule::Threshold) {
-        badOption("unknown calibration rule " + std::to_string(static_cast<int>(o.calibrationRule)));
+    if (o.calibrationRule && *o.calibrationRule != CalibrationRule::MaxRatio &&
+        *o.calibrationRule != CalibrationRule::Conformal &&
+        *o.calibrationRule != CalibrationRule::Threshold) {
+        badOption("unknown calibration rule " + std::to_string(static_cast<int>(*o.calibrationRule)));
     }
-    if (o.calibrationRule != CalibrationRule::MaxRatio &&
+    if (o.keyErrorNorm == KeyErrorNorm::Predicted && !(o.tolerance > 0))
+        badOption("the predicted key error is calibrated for a tolerance: give one (or another key error)");
+    if (resolvedCalibrationRule(o) != CalibrationRule::MaxRatio &&
         !(o.calibrationCoverage > 0 && o.calibrationCoverage < 1)) {
         badOption("calibration coverage must be in (0, 1), got " + num(o.calibrationCoverage));
     }
@@ -161,7 +164,7 @@ Model trainSharedChannels(const FrameSet& frames, const TrainingOptions& options
     }
     TrainingOptions one = options;
     one.sharedChannels = false;
-    if (options.keyErrorNorm == KeyErrorNorm::Largest || options.keyErrorNorm == KeyErrorNorm::LeaveOneOut)
+    if (options.keyErrorNorm && *options.keyErrorNorm != KeyErrorNorm::Rms)
         throw InputError(std::string("train: the ") + toString(*options.keyErrorNorm) +
                          " key error needs channels of their own (not --shared-channels)");
     one.keyErrorNorm = KeyErrorNorm::Rms;
@@ -318,7 +321,7 @@ void Trainer::meanAndGram() {
     model.channels = channels;
     model.trainFrames = f;
     model.selector = options.selector;
-    model.keyErrorNorm = options.keyErrorNorm.value_or(KeyErrorNorm::Rms);
+    model.keyErrorNorm = resolvedKeyErrorNorm(options);
     progress("mean", 1, 1);
     progress("svd", 0, 1);
     gram = gramOf(q, comm);
@@ -541,9 +544,10 @@ void Trainer::thresholds() {
     if (options.tolerance > 0) {
         report.calibration =
             calibrate(q, comm, keyRows, keys, m, options.tolerance, options.calibrationSlices, gram,
-                      options.calibrationRule, options.calibrationCoverage, options.calibrationGroup,
+                      resolvedCalibrationRule(options), options.calibrationCoverage, options.calibrationGroup,
                       model.keyErrorNorm);
         model.tolerance = options.tolerance;
+        model.partEps = report.calibration.partEps;
     } else {
         report.calibration =
             thresholdsFromKeyRows(keyRows, basisKeyRows, channels, model.projector, model.keyErrorNorm);
@@ -610,6 +614,17 @@ void Trainer::regions() {
 }
 
 }  // namespace
+
+KeyErrorNorm resolvedKeyErrorNorm(const TrainingOptions& options) {
+    if (options.keyErrorNorm) return *options.keyErrorNorm;
+    return options.tolerance > 0 && !options.sharedChannels ? KeyErrorNorm::Predicted : KeyErrorNorm::Rms;
+}
+
+CalibrationRule resolvedCalibrationRule(const TrainingOptions& options) {
+    if (options.calibrationRule) return *options.calibrationRule;
+    return resolvedKeyErrorNorm(options) == KeyErrorNorm::Predicted ? CalibrationRule::Threshold
+                                                                    : CalibrationRule::MaxRatio;
+}
 
 Model train(const FrameSet& frames, const TrainingOptions& options, TrainingReport* reportOut) {
     validateFrames(frames);

@@ -123,6 +123,12 @@ py::dict modelInfo(const Model& m) {
     d["eps_min"] = m.epsMin;
     d["eps_max"] = m.epsMax;
     d["key_error"] = toString(m.keyErrorNorm);
+    if (m.keyErrorNorm == KeyErrorNorm::Predicted) {
+        py::dict parts;
+        parts["rms"] = m.partEps.rms;
+        parts["loo"] = m.partEps.loo;
+        d["key_error_parts_eps"] = parts;  // as `pmsc inspect --json`
+    }
     d["tolerance"] = m.tolerance;
     d["energy_captured"] = m.energyCaptured();
     d["train_max_point_residual"] = m.trainMaxPointResidual;

@@ -87,7 +87,9 @@ Selector selectorOf(const std::string& s) {
     throw InputError("selector: '" + s + "' is not teleconnection or qdeim");
 }
 
-CalibrationRule ruleOf(const std::string& s) {
+// "" = TrainingOptions decides (resolvedCalibrationRule), as `pmsc train` without --calibration.
+std::optional<CalibrationRule> ruleOf(const std::string& s) {
+    if (s.empty()) return std::nullopt;
     if (const auto r = calibrationRuleNamed(s)) return *r;
     throw InputError("calibration: '" + s + "' is not " + kCalibrationRuleChoices);
 }
@@ -147,7 +149,7 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     o.sharedChannels = sharedChannels;
     if (regionKeys < 0)
         throw InputError("region_keys: must be >= 0 (0 = none), got " + std::to_string(regionKeys));
-    if (calibration != "max" && !(tolerance > 0))
+    if (!calibration.empty() && !(tolerance > 0))
         throw InputError("calibration and coverage need a tolerance");
 
     TrainingFrames t = trainingFrames(frames);
@@ -214,7 +216,7 @@ void bindTraining(py::module_& m) {
         "train", &trainModel, "frames"_a, py::kw_only(), "basis"_a = 0, "energy"_a = 0.0,
         "basis_error"_a = 0.0, "max_basis"_a = 256, "max_error"_a = 0.0, "max_keys"_a = 200, "block"_a = 16,
         "fiducials"_a = std::vector<Index>{}, "grid_points"_a = std::vector<Index>{},
-        "selector"_a = "teleconnection", "tolerance"_a = 0.0, "slices"_a = 5, "calibration"_a = "max",
+        "selector"_a = "teleconnection", "tolerance"_a = 0.0, "slices"_a = 5, "calibration"_a = "",
         "coverage"_a = 0.9, "key_error"_a = "", "learn_rank"_a = 0, "seed"_a = 20070101u,
         "power_iterations"_a = 2, "regions"_a = "auto", "feather"_a = py::none(), "region_keys"_a = 4,
         "region_stride"_a = 3, "shared_channels"_a = false, "progress"_a = py::none(),

@@ -8,7 +8,7 @@
  *   make its runtime (thresholds eps)                 pmsc_multiplier_create
  *   per frame: compute the key points' values yourself, then
  *     key values -> pose-space coordinates            pmsc_multiplier_project      (section 6)
- *     the key points' own RMS error                   pmsc_multiplier_key_error
+ *     the key points' own error (the model's measure) pmsc_multiplier_key_error
  *     hit, blend or miss, and the weight of the full  pmsc_multiplier_decide       (section 5)
  *     all points, or chosen points                    pmsc_multiplier_reconstruct[_points]
  *     a blend of the PM result and the full result    pmsc_blend
@@ -136,7 +136,7 @@ PMSC_C_API pmsc_status pmsc_model_key_points(const pmsc_model* model, int64_t* k
                                              size_t key_point_count) PMSC_C_NOEXCEPT;
 
 /** The soft-cache thresholds stored in the model (`pmsc train`, `--tolerance`): at or below
- *  eps_min a frame hits, at or above eps_max it misses. Key RMS error, data units. */
+ *  eps_min a frame hits, at or above eps_max it misses. In the model's key error, data units. */
 PMSC_C_API pmsc_status pmsc_model_eps(const pmsc_model* model, double* eps_min,
                                       double* eps_max) PMSC_C_NOEXCEPT;
 
@@ -192,8 +192,12 @@ PMSC_C_API pmsc_status pmsc_multiplier_project(const pmsc_multiplier* multiplier
                                                size_t key_value_count, double* coords,
                                                size_t coord_count) PMSC_C_NOEXCEPT;
 
-/** The key RMS error: RMS over the K key points of the Euclidean norm (over channels) of the
- *  difference between a key point's computed value and its value reconstructed from coords.
+/** The model's key error, from each key point's residual: the Euclidean norm (over channels) of
+ *  the difference between its computed value and its value reconstructed from coords. The
+ *  measure is the one `pmsc train` calibrated the thresholds for (`pmsc inspect` names it): by
+ *  default with a tolerance the predicted point error (the tolerance times the smaller of the key
+ *  RMS and the largest leave-one-out key error, each over its own threshold), else the RMS of the
+ *  residuals over the K keys, or the largest (leave-one-out) key's (docs/calibration.md).
  *  Data units; what the thresholds are compared with. NaN when a key value is NaN or infinite
  *  (pmsc_multiplier_decide makes that a miss).
  *  @param[in] coords  the coordinates pmsc_multiplier_project gave for these key values */

@@ -436,10 +436,12 @@ TEST_F(Cli, UsageMistakes) {
                                 "--region-keys", "2.5"}),
                   2, {"--region-keys", "'2.5' is not an integer"});
     expectFailure(runPmsc(dir, {"train", "--frames", shot_->train, "--out", out, "--key-error", "median"}), 2,
-                  {"--key-error", "'median' is not rms, largest or loo"});
+                  {"--key-error", "'median' is not predicted, rms, largest or loo"});
     expectFailure(runPmsc(dir, {"train", "--frames", shot_->train, "--out", out, "--key-error", "loo",
                                 "--shared-channels"}),
                   2, {"--key-error loo needs channels of their own"});
+    expectFailure(runPmsc(dir, {"train", "--frames", shot_->train, "--out", out, "--key-error", "predicted"}),
+                  2, {"--key-error predicted needs --tolerance"});
     expectFailure(runPmsc(dir, {"frobnicate"}), 2, {"unknown command 'frobnicate'"});
     expectFailure(runPmsc(dir, {"inspect"}), 2, {"missing MODEL.pmsc"});
     EXPECT_TRUE(outputs(dir).empty());
@@ -484,7 +486,7 @@ TEST_F(Cli, DemoNumbersGoThroughArgs) {
     expectFailure(runPmsc(dir, with(face, {"--tolerance", "1%"})), 2,
                   {"--tolerance", "'1%' is not a number"});
     expectFailure(runPmsc(dir, with(face, {"--key-error", "median"})), 2,
-                  {"--key-error", "'median' is not rms, largest or loo"});
+                  {"--key-error", "'median' is not predicted, rms, largest or loo"});
     expectFailure(runPmsc(dir, with(face, {"--calibration", "best"})), 2,
                   {"--calibration", "'best' is not threshold, max or conformal"});
     const std::vector<std::string> cornell{"demo", "cornell", "--quick", "--out", dir.file("cornell")};

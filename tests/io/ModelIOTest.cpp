@@ -8,6 +8,7 @@
 #include <Eigen/QR>
 
 #include <cstring>
+#include <limits>
 #include <string>
 
 namespace {
@@ -54,12 +55,43 @@ TEST(ModelFile, AKeyErrorNormThisVersionDoesNotKnowIsRefused) {
     std::uint32_t norm = 0;
     std::memcpy(&norm, bytes.data() + tag + 16, sizeof norm);  // after the tag and its length
     ASSERT_EQ(norm, 2u);
-    poke<std::uint32_t>(bytes, tag + 16, 3);
+    poke<std::uint32_t>(bytes, tag + 16, 4);
     reseal(bytes);
     TempDir dir;
     const auto path = dir.file("norm.pmsc");
     writeBytes(path, bytes);
-    expectRejected(path, {"key error norm 3", "2 (loo)"});
+    expectRejected(path, {"key error norm 4", "3 (predicted)"});
+}
+
+TEST(ModelFile, APredictedKeyErrorKeepsItsPartsThresholds) {
+    Model m = smallModel();
+    m.keyErrorNorm = pmsc::KeyErrorNorm::Predicted;
+    m.tolerance = 0.5;
+    m.epsMin = 0.5;
+    m.epsMax = 0.75;
+    m.partEps = {0.125, 0.375};
+    TempDir dir;
+    const auto path = dir.file("m.pmsc");
+    pmsc::writeModel(path, m);
+    const Model back = pmsc::readModel(path);
+    EXPECT_EQ(back.keyErrorNorm, pmsc::KeyErrorNorm::Predicted);
+    EXPECT_EQ(back.partEps.rms, 0.125);
+    EXPECT_EQ(back.partEps.loo, 0.375);
+    // Without its parts (a section cut after the norm) the file is refused, not read as zeros.
+    std::string bytes = pmsc::encodeModel(m);
+    const std::size_t tag = bytes.find("KEYERROR");
+    ASSERT_NE(tag, std::string::npos);
+    poke<double>(bytes, tag + 20, std::numeric_limits<double>::infinity());
+    reseal(bytes);
+    writeBytes(path, bytes);
+    expectRejected(path, {"KEYERROR", "key RMS part threshold"});
+}
+
+TEST(ModelFile, APredictedKeyErrorWithoutAToleranceIsRefused) {
+    Model m = smallModel();
+    m.keyErrorNorm = pmsc::KeyErrorNorm::Predicted;
+    m.tolerance = 0;
+    EXPECT_THROW(m.validate(), std::invalid_argument);
 }
 
 TEST(ModelFile, Fnv1a64MatchesPublishedVectors) {

@@ -152,6 +152,67 @@ TEST(Calibration, ThresholdRuleIsTheHeldOutBestThresholdBetweenMaxAndConformal) 
     EXPECT_THROW(pmsc::setThresholds(s, 5.0, pmsc::CalibrationRule::Threshold, 1.0), std::invalid_argument);
 }
 
+TEST(Calibration, PredictedErrorHitsWhereEitherPartDoesAndNoHeldOutHitIsOverTheTolerance) {
+    // 300 held-out frames whose point error each part sees differently: E = a * rms for some
+    // frames, E = b * loo for the others, plus frames over T.
+    const Eigen::MatrixXd g = pmsc::test::gaussian(300, 3, 71).cwiseAbs();
+    std::vector<double> rms, loo, big;
+    for (pmsc::Index f = 0; f < 300; ++f) {
+        rms.push_back(0.2 + g(f, 0));
+        loo.push_back(0.2 + g(f, 1));
+        big.push_back(f % 2 == 0 ? 3 * rms.back() * (0.8 + 0.2 * g(f, 2))
+                                 : 2 * loo.back() * (0.9 + 0.1 * g(f, 2)));
+    }
+    const double t = 4.0;
+    pmsc::CalibrationStats s = scores(rms, big);
+    s.keyLoo = loo;
+    pmsc::setPredictedThresholds(s, t, pmsc::CalibrationRule::Threshold, 0.9);
+    pmsc::CalibrationStats r = scores(rms, big), l = scores(loo, big);
+    pmsc::setThresholds(r, t, pmsc::CalibrationRule::MaxRatio, 0.9);
+    pmsc::setThresholds(l, t, pmsc::CalibrationRule::Threshold, 0.9);
+    EXPECT_EQ(s.partEps.rms, r.epsMin) << "the RMS part by the largest ratio whatever the rule";
+    EXPECT_EQ(s.partEps.loo, l.epsMin) << "the leave-one-out part by the rule";
+    EXPECT_EQ(s.epsMin, t);
+    EXPECT_EQ(s.epsMax, std::min(r.band, l.band) * t);
+    ASSERT_EQ(s.parts.size(), 2u);
+    EXPECT_EQ(s.parts[0].keyRms, rms);
+    EXPECT_EQ(s.parts[1].keyRms, loo);
+    int hits = 0, rmsHits = 0, looHits = 0, overT = 0;
+    for (std::size_t f = 0; f < rms.size(); ++f) {
+        const bool either = rms[f] <= r.epsMin || loo[f] <= l.epsMin;
+        EXPECT_EQ(s.keyRms[f] <= t, either) << "frame " << f;
+        hits += s.keyRms[f] <= t;
+        rmsHits += rms[f] <= r.epsMin;
+        looHits += loo[f] <= l.epsMin;
+        overT += big[f] > t;
+        if (s.keyRms[f] <= t) EXPECT_LE(big[f], t) << "a held-out hit over the tolerance, frame " << f;
+    }
+    EXPECT_GT(overT, 0) << "the data must cross T for the check above to mean anything";
+    EXPECT_GT(hits, std::max(rmsHits, looHits)) << "each part finds hits the other misses";
+    // The parts must be scored on the same frames.
+    pmsc::CalibrationStats bad = scores(rms, big);
+    bad.keyLoo = {1.0};
+    EXPECT_THROW(pmsc::setPredictedThresholds(bad, t, pmsc::CalibrationRule::Threshold, 0.9),
+                 std::invalid_argument);
+}
+
+TEST(Calibration, PredictedErrorThroughCalibrateScoresBothPartsOnTheSameFolds) {
+    const KnownRatio d = knownRatioData();
+    const pmsc::CalibrationStats rms = pmsc::calibrate(d.q, 3, d.keys, 4, 0.002, 5);
+    const pmsc::CalibrationStats loo =
+        pmsc::calibrate(d.q, 3, d.keys, 4, 0.002, 5, {}, nullptr, pmsc::CalibrationRule::Threshold, 0.9,
+                        pmsc::KeyErrorNorm::LeaveOneOut);
+    const pmsc::CalibrationStats s =
+        pmsc::calibrate(d.q, 3, d.keys, 4, 0.002, 5, {}, nullptr, pmsc::CalibrationRule::Threshold, 0.9,
+                        pmsc::KeyErrorNorm::Predicted);
+    ASSERT_EQ(s.parts.size(), 2u);
+    EXPECT_EQ(s.parts[0].keyRms, rms.keyRms);
+    EXPECT_EQ(s.parts[1].keyRms, loo.keyRms);
+    EXPECT_DOUBLE_EQ(s.partEps.rms, rms.epsMin);
+    EXPECT_DOUBLE_EQ(s.partEps.loo, loo.epsMin);
+    EXPECT_EQ(s.epsMin, 0.002);
+}
+
 TEST(Calibration, BlendBandSpansTheRuleRatioToTheMedianWithinOneAndAHalfAndTwo) {
     EXPECT_DOUBLE_EQ(pmsc::blendBand({1, 1, 1.8, 1.9}, 1.8), 1.5);  // median 1.8: clamped up
     EXPECT_DOUBLE_EQ(pmsc::blendBand({1, 1, 1, 1.7, 1.75}, 1.75), 1.75);

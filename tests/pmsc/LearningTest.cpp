@@ -1,7 +1,9 @@
 #include "pmsc/Learning.h"
 
 #include "Synthetic.h"
+#include "pmsc/Calibration.h"
 #include "pmsc/Errors.h"
+#include "pmsc/ModelIO.h"
 #include "pmsc/PointMultiplier.h"
 #include "pmsc/Training.h"
 
@@ -79,6 +81,7 @@ pmsc::TrainingOptions options(Index learnRank) {
     o.learnRank = learnRank;
     o.calibrationRule = pmsc::CalibrationRule::Conformal;
     o.calibrationCoverage = 0.9;
+    o.keyErrorNorm = pmsc::KeyErrorNorm::Rms;  // the predicted error's own test resets it
     return o;
 }
 
@@ -121,6 +124,79 @@ TEST(Learning, UpdateMatchesTrainingFromScratchOnTheUnion) {
     EXPECT_GT(learned.epsMin, 0.0);
     EXPECT_DOUBLE_EQ(learned.epsMax, 2 * learned.epsMin);
     EXPECT_EQ(learned.tolerance, old.tolerance);
+}
+
+TEST(Learning, APredictedKeyErrorModelKeepsBothPartsScoresThroughItsFileAndItsUpdate) {
+    const pmsc::FrameSet day1 = patches(0, 80, 41, 2), misses = patches(80, 40, 41, 0);
+    pmsc::TrainingOptions o = options(12);
+    o.calibrationRule.reset();  // the defaults: the predicted error, its leave-one-out part by `threshold`
+    o.keyErrorNorm.reset();
+    const pmsc::Model old = pmsc::train(day1, o);
+    ASSERT_EQ(old.keyErrorNorm, pmsc::KeyErrorNorm::Predicted);
+    EXPECT_EQ(old.epsMin, o.tolerance);
+    EXPECT_GT(old.partEps.rms, 0.0);
+    EXPECT_GT(old.partEps.loo, 0.0);
+    ASSERT_TRUE(old.calibrationRecord.has_value());
+    EXPECT_EQ(old.calibrationRecord->rule, pmsc::CalibrationRule::Threshold);
+    EXPECT_EQ(old.calibrationRecord->keyLoo.size(), 80u);
+    // The file keeps the rule and both parts' scores.
+    const pmsc::Model read = pmsc::decodeModel(pmsc::encodeModel(old), "test");
+    EXPECT_EQ(read.calibrationRecord->rule, pmsc::CalibrationRule::Threshold);
+    EXPECT_EQ(read.calibrationRecord->keyLoo, old.calibrationRecord->keyLoo);
+    EXPECT_EQ(read.partEps.loo, old.partEps.loo);
+
+    pmsc::LearnReport report;
+    const pmsc::Model learned = pmsc::learn(read, misses, {}, &report);
+    EXPECT_EQ(learned.keyErrorNorm, pmsc::KeyErrorNorm::Predicted);
+    EXPECT_EQ(learned.epsMin, o.tolerance);
+    EXPECT_GT(learned.partEps.rms, 0.0);
+    EXPECT_GT(learned.partEps.loo, 0.0);
+    // Each part's threshold is at most what the stored scores alone give (and the new ones alone).
+    ASSERT_EQ(learned.calibrationRecord->keyRms.size(), 120u);
+    ASSERT_EQ(learned.calibrationRecord->keyLoo.size(), 120u);
+    EXPECT_EQ(std::vector<double>(learned.calibrationRecord->keyLoo.begin(),
+                                  learned.calibrationRecord->keyLoo.begin() + 80),
+              old.calibrationRecord->keyLoo);
+    pmsc::CalibrationStats stored;
+    stored.keyRms = old.calibrationRecord->keyRms;
+    stored.keyLoo = old.calibrationRecord->keyLoo;
+    stored.maxPointError = old.calibrationRecord->maxPointError;
+    pmsc::setPredictedThresholds(stored, o.tolerance, pmsc::CalibrationRule::Threshold, 0.9);
+    const auto tail = [](const std::vector<double>& v) {
+        return std::vector<double>(v.begin() + 80, v.end());
+    };
+    pmsc::CalibrationStats fresh;
+    fresh.keyRms = tail(learned.calibrationRecord->keyRms);
+    fresh.keyLoo = tail(learned.calibrationRecord->keyLoo);
+    fresh.maxPointError = tail(learned.calibrationRecord->maxPointError);
+    pmsc::setPredictedThresholds(fresh, o.tolerance, pmsc::CalibrationRule::Threshold, 0.9);
+    EXPECT_EQ(learned.partEps.rms, std::min(stored.partEps.rms, fresh.partEps.rms));
+    EXPECT_EQ(learned.partEps.loo, std::min(stored.partEps.loo, fresh.partEps.loo));
+    EXPECT_EQ(learned.epsMax, std::min(stored.epsMax, fresh.epsMax));
+    // The report keeps the new frames' scores, in the learned model's measure.
+    EXPECT_EQ(report.calibration.keyRms.size(), 40u);
+    EXPECT_EQ(report.calibration.partEps.loo, learned.partEps.loo);
+    EXPECT_NO_THROW(learned.validate());
+}
+
+TEST(Learning, TrainingResolvesTheKeyErrorFromTheOptions) {
+    pmsc::TrainingOptions o;
+    EXPECT_EQ(pmsc::resolvedKeyErrorNorm(o), pmsc::KeyErrorNorm::Rms) << "no tolerance: nothing to predict";
+    EXPECT_EQ(pmsc::resolvedCalibrationRule(o), pmsc::CalibrationRule::MaxRatio);
+    o.tolerance = 0.1;
+    EXPECT_EQ(pmsc::resolvedKeyErrorNorm(o), pmsc::KeyErrorNorm::Predicted);
+    EXPECT_EQ(pmsc::resolvedCalibrationRule(o), pmsc::CalibrationRule::Threshold);
+    o.sharedChannels = true;
+    EXPECT_EQ(pmsc::resolvedKeyErrorNorm(o), pmsc::KeyErrorNorm::Rms);
+    o.sharedChannels = false;
+    o.keyErrorNorm = pmsc::KeyErrorNorm::Rms;
+    EXPECT_EQ(pmsc::resolvedCalibrationRule(o), pmsc::CalibrationRule::MaxRatio);
+    o.calibrationRule = pmsc::CalibrationRule::Conformal;
+    EXPECT_EQ(pmsc::resolvedCalibrationRule(o), pmsc::CalibrationRule::Conformal);
+    // Asked for without a tolerance, the predicted error is refused with a reason.
+    pmsc::TrainingOptions untuned;
+    untuned.keyErrorNorm = pmsc::KeyErrorNorm::Predicted;
+    EXPECT_THROW(pmsc::train(patches(0, 20, 51, 0), untuned), std::invalid_argument);
 }
 
 TEST(Learning, RepeatedUpdatesAgreeWithOneUpdateOfEverything) {

@@ -158,6 +158,52 @@ TEST(PointMultiplier, LeaveOneOutKeyErrorIsWhatEachKeyRowMissesWhenLeftOut) {
               pmsc::KeyErrorNorm::LeaveOneOut);
 }
 
+TEST(PointMultiplier, PredictedKeyErrorIsTheToleranceTimesTheSmallerPartOverItsThreshold) {
+    const std::vector<pmsc::Index> keys{2, 5, 9, 13, 17, 22, 26, 31, 35, 38, 44, 47};
+    pmsc::Model model = makeModel(50, 3, 6, keys);
+    model.keyErrorNorm = pmsc::KeyErrorNorm::Predicted;
+    model.tolerance = 0.4;
+    Eigen::VectorXd frame = model.mean + model.basis * pmsc::test::gaussian(6, 1, 21).col(0);
+    frame += 0.05 * pmsc::test::gaussian(150, 1, 22).col(0);
+    const std::vector<double> k = keyValuesOf(model, frame);
+    const Eigen::MatrixXd bk = pmsc::gatherKeyRows(model.basis, 3, keys);
+    const Eigen::VectorXd centred =
+        Eigen::Map<const Eigen::VectorXd>(k.data(), 36) - pmsc::gatherKeyRows(model.mean, 3, keys).col(0);
+    const Eigen::VectorXd loo = leaveOneOutResiduals(bk, centred);
+    Eigen::VectorXd coords(6);
+    double rms2 = 0, largestLoo = 0;
+    {
+        const pmsc::PointMultiplier pm(model);
+        pm.project(k.data(), coords.data());
+        const Eigen::VectorXd r = centred - bk * coords;
+        for (pmsc::Index key = 0; key < 12; ++key) {
+            rms2 += r.segment(key * 3, 3).squaredNorm();
+            largestLoo = std::max(largestLoo, loo.segment(key * 3, 3).norm());
+        }
+    }
+    const double rms = std::sqrt(rms2 / 12);
+    // Each part in turn the smaller over its threshold, then a part whose threshold is 0.
+    for (const pmsc::PredictedParts eps :
+         {pmsc::PredictedParts{rms, 10 * largestLoo}, pmsc::PredictedParts{10 * rms, largestLoo / 2},
+          pmsc::PredictedParts{0, largestLoo}}) {
+        model.partEps = eps;
+        const pmsc::PointMultiplier pm(model);
+        const double rmsOver = eps.rms > 0 ? rms / eps.rms : std::numeric_limits<double>::infinity();
+        const double expected = 0.4 * std::min(rmsOver, largestLoo / eps.loo);
+        EXPECT_NEAR(pm.keyError(k.data(), coords.data()), expected, 1e-10 * expected);
+    }
+    EXPECT_NEAR(pmsc::predictedPointError({rms, largestLoo}, {rms, largestLoo / 10}, 0.4), 0.4, 1e-15)
+        << "a frame at its RMS part's threshold is predicted at the tolerance";
+    EXPECT_EQ(pmsc::predictedPointError({0, 0}, {0, 0}, 0.4), 0) << "no error: certified by any threshold";
+    EXPECT_TRUE(std::isinf(pmsc::predictedPointError({1e-12, 1e-12}, {0, 0}, 0.4)));
+    EXPECT_TRUE(std::isnan(pmsc::predictedPointError({std::nan(""), 0}, {1, 1}, 0.4)));
+    EXPECT_THROW(pmsc::keyErrorOfResidual(centred, 3, pmsc::KeyErrorNorm::Predicted), std::invalid_argument);
+    // A key value that is not finite is a miss, as for every measure.
+    std::vector<double> bad = k;
+    bad[4] = std::numeric_limits<double>::quiet_NaN();
+    EXPECT_TRUE(std::isnan(pmsc::PointMultiplier(model).keyError(bad.data(), coords.data())));
+}
+
 TEST(PointMultiplier, LeaveOneOutKeyErrorOfSharedChannelsLeavesAKeyOutOfEachChannelsFit) {
     // The channels share the K x M key basis: one leverage per key, each channel its own fit.
     const std::vector<pmsc::Index> keys{1, 4, 8, 11, 15, 19, 23, 27, 30, 34};

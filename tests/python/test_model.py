@@ -61,12 +61,29 @@ class ModelTest(TempDirTest):
         np.testing.assert_allclose(full, m.mean + np.einsum("ncm,fm->fnc", m.basis, coords), atol=1e-9)
         some = np.array([5, 0, 299, 17])
         np.testing.assert_allclose(m.reconstruct(coords[3], points=some), full[3][some], rtol=0, atol=1e-12)
+        # A model with a tolerance predicts its point error, T * min(rms / eps_rms, loo / eps_loo):
+        # the key RMS and the leave-one-out error (below) each over its calibrated threshold.
         residual = keys - full[:, m.key_points]
         rms = np.sqrt((np.linalg.norm(residual, axis=2) ** 2).mean(axis=1))
-        np.testing.assert_allclose(m.key_error(keys), rms, rtol=1e-9)
+        bk = m.basis[m.key_points].reshape(-1, m.basis_size)            # (K*C, M)
+        h = np.einsum("jm,mj->j", bk, m.projector)
+        loo = np.linalg.norm((residual.reshape(len(f), -1) / (1 - h)).reshape(len(f), -1, 3), axis=2).max(axis=1)
+        self.assertEqual(m.info["key_error"], "predicted")
+        parts = m.info["key_error_parts_eps"]
+        predicted = m.info["tolerance"] * np.minimum(rms / parts["rms"], loo / parts["loo"])
+        np.testing.assert_allclose(m.key_error(keys), predicted, rtol=1e-9)
+        self.assertEqual(m.info["eps_min"], m.info["tolerance"])
         self.assertIsInstance(m.key_error(keys[0]), float)
-        self.assertAlmostEqual(m.key_error(keys[0], coords[0]), rms[0], places=12)
-        self.assertEqual(m.info["key_error"], "rms")
+        self.assertAlmostEqual(m.key_error(keys[0], coords[0]), predicted[0], places=12)
+        # key_error="rms": the paper's RMS over the keys (the default without a tolerance).
+        p = pmsc.train(f, max_keys=30, seed=3)
+        self.assertEqual(p.info["key_error"], "rms")
+        pk = f[:, p.key_points]
+        pres = pk - p.reconstruct(p.project(pk))[:, p.key_points]
+        np.testing.assert_allclose(p.key_error(pk), np.sqrt((np.linalg.norm(pres, axis=2) ** 2).mean(axis=1)),
+                                   rtol=1e-9)
+        with self.assertRaises(ValueError):
+            pmsc.train(f, max_keys=30, key_error="predicted")  # nothing to predict without a tolerance
         r = pmsc.train(f, max_keys=30, seed=3, key_error="largest")
         rk = f[:, r.key_points]
         res = rk - r.reconstruct(r.project(rk))[:, r.key_points]
