@@ -28,6 +28,17 @@ PredictedParts keyErrorParts(const Eigen::Ref<const Eigen::VectorXd>& residual, 
             keyErrorOfResidual(residual, channels, KeyErrorNorm::LeaveOneOut, &looScale)};
 }
 
+void appendKeyScore(CalibrationStats& s, const Eigen::Ref<const Eigen::VectorXd>& residual, Index channels,
+                    KeyErrorNorm norm, const Eigen::VectorXd& looScale) {
+    if (norm == KeyErrorNorm::Predicted) {
+        const PredictedParts e = keyErrorParts(residual, channels, looScale);
+        s.keyRms.push_back(e.rms);
+        s.keyLoo.push_back(e.loo);
+    } else {
+        s.keyRms.push_back(keyErrorOfResidual(residual, channels, norm, &looScale));
+    }
+}
+
 double keyErrorOfResidual(const Eigen::Ref<const Eigen::VectorXd>& residual, Index channels,
                           KeyErrorNorm norm, const Eigen::VectorXd* looScale) {
     if (norm == KeyErrorNorm::Predicted)
@@ -62,8 +73,7 @@ Eigen::VectorXd keyRmsFromKeyRows(const Eigen::MatrixXd& qk, const Eigen::Matrix
     Eigen::MatrixXd coords = projector * qk;
     Eigen::MatrixXd r = qk;
     r.noalias() -= bk * coords;
-    const Eigen::VectorXd scale =
-        norm == KeyErrorNorm::LeaveOneOut ? leaveOneOutScale(bk, projector) : Eigen::VectorXd();
+    const Eigen::VectorXd scale = usesLeaveOneOut(norm) ? leaveOneOutScale(bk, projector) : Eigen::VectorXd();
     Eigen::VectorXd e(r.cols());
     for (Index j = 0; j < r.cols(); ++j) e[j] = keyErrorOfResidual(r.col(j), channels, norm, &scale);
     return e;
@@ -210,9 +220,8 @@ void Folds::score(Index first, Index last, CalibrationStats& s) {
     Eigen::MatrixXd uk;
     heldInTimes(keyRows, uk);
     const Eigen::MatrixXd projector = projectorFromKeyRows(uk, channels);
-    const Eigen::VectorXd looScale = norm == KeyErrorNorm::LeaveOneOut || norm == KeyErrorNorm::Predicted
-                                         ? leaveOneOutScale(uk, projector)
-                                         : Eigen::VectorXd();
+    const Eigen::VectorXd looScale =
+        usesLeaveOneOut(norm) ? leaveOneOutScale(uk, projector) : Eigen::VectorXd();
     Eigen::MatrixXd heldOutK = keyRows.middleCols(first, out).colwise() - heldInMean(keyRows);
     const Eigen::MatrixXd coords = projector * heldOutK;
     heldOutK.noalias() -= uk * coords;  // the PM residual at the keys
@@ -230,13 +239,7 @@ void Folds::score(Index first, Index last, CalibrationStats& s) {
     maxOverRanks(comm, pointErr.data(), static_cast<std::size_t>(out));
     for (Index j = 0; j < out; ++j) {
         s.frames.push_back(first + j);
-        if (norm == KeyErrorNorm::Predicted) {
-            const PredictedParts e = keyErrorParts(heldOutK.col(j), channels, looScale);
-            s.keyRms.push_back(e.rms);
-            s.keyLoo.push_back(e.loo);
-        } else {
-            s.keyRms.push_back(keyErrorOfResidual(heldOutK.col(j), channels, norm, &looScale));
-        }
+        appendKeyScore(s, heldOutK.col(j), channels, norm, looScale);
         s.maxPointError.push_back(pointErr[j]);
     }
 }

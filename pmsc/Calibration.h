@@ -147,6 +147,16 @@ void setThresholds(CalibrationStats& s, double tolerance, CalibrationRule rule, 
 /// @throws std::invalid_argument as setThresholds, or when keyLoo and keyRms differ in count
 void setPredictedThresholds(CalibrationStats& s, double tolerance, CalibrationRule looRule, double coverage);
 
+/// Appends one frame's key error by `norm` to s.keyRms, or for KeyErrorNorm::Predicted its two
+/// parts to s.keyRms (key RMS) and s.keyLoo: the held-out scores calibration and `pmsc learn` keep.
+/// `looScale` as for keyErrorOfResidual (leaveOneOutScale when usesLeaveOneOut(norm)).
+void appendKeyScore(CalibrationStats& s, const Eigen::Ref<const Eigen::VectorXd>& residual, Index channels,
+                    KeyErrorNorm norm, const Eigen::VectorXd& looScale);
+/// Whether `norm` reads the key rows' leverages (LeaveOneOut, Predicted).
+inline bool usesLeaveOneOut(KeyErrorNorm norm) {
+    return norm == KeyErrorNorm::LeaveOneOut || norm == KeyErrorNorm::Predicted;
+}
+
 /// The two parts of KeyErrorNorm::Predicted for one frame's key residual (as keyErrorOfResidual).
 PredictedParts keyErrorParts(const Eigen::Ref<const Eigen::VectorXd>& residual, Index channels,
                              const Eigen::VectorXd& looScale);

@@ -52,17 +52,11 @@ void scoreFrames(const Eigen::Ref<const Eigen::MatrixXd>& centered, const Eigen:
     residual.noalias() -= basis * coords;
     const Eigen::VectorXd pointErr = maxPointNormPerColumn(residual, channels);
     const Eigen::MatrixXd keyResidual = gatherKeyRows(residual, channels, keys);
-    const Eigen::VectorXd looScale = norm == KeyErrorNorm::LeaveOneOut || norm == KeyErrorNorm::Predicted
+    const Eigen::VectorXd looScale = usesLeaveOneOut(norm)
                                          ? leaveOneOutScale(gatherKeyRows(basis, channels, keys), projector)
                                          : Eigen::VectorXd();
     for (Index j = 0; j < centered.cols(); ++j) {
-        if (norm == KeyErrorNorm::Predicted) {
-            const PredictedParts e = keyErrorParts(keyResidual.col(j), channels, looScale);
-            out.keyRms.push_back(e.rms);
-            out.keyLoo.push_back(e.loo);
-        } else {
-            out.keyRms.push_back(keyErrorOfResidual(keyResidual.col(j), channels, norm, &looScale));
-        }
+        appendKeyScore(out, keyResidual.col(j), channels, norm, looScale);
         out.maxPointError.push_back(pointErr[j]);
     }
 }

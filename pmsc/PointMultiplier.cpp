@@ -152,8 +152,7 @@ PointMultiplier::PointMultiplier(const Model& model, BasisPrecision precision) :
     const Eigen::Map<const Eigen::MatrixXd> meanColumn(model_.mean.data(), model_.mean.size(), 1);
     keyMean_ = gatherKeyRows(meanColumn, model_.channels, model_.keyPoints).col(0);
     keyBasis_ = gatherKeyRows(model_.basis, model_.basisChannels(), model_.keyPoints);
-    if (model_.keyErrorNorm == KeyErrorNorm::LeaveOneOut || model_.keyErrorNorm == KeyErrorNorm::Predicted)
-        looScale_ = leaveOneOutScale(keyBasis_, model_.projector);
+    if (usesLeaveOneOut(model_.keyErrorNorm)) looScale_ = leaveOneOutScale(keyBasis_, model_.projector);
     // b = P (k - mean_K) = P k - P mean_K: precomputing P mean_K lets project() write straight
     // into the caller's buffer with one GEMV and no temporary.
     if (model_.sharedChannels) {

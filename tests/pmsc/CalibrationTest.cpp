@@ -185,7 +185,9 @@ TEST(Calibration, PredictedErrorHitsWhereEitherPartDoesAndNoHeldOutHitIsOverTheT
         rmsHits += rms[f] <= r.epsMin;
         looHits += loo[f] <= l.epsMin;
         overT += big[f] > t;
-        if (s.keyRms[f] <= t) EXPECT_LE(big[f], t) << "a held-out hit over the tolerance, frame " << f;
+        if (s.keyRms[f] <= t) {
+            EXPECT_LE(big[f], t) << "a held-out hit over the tolerance, frame " << f;
+        }
     }
     EXPECT_GT(overT, 0) << "the data must cross T for the check above to mean anything";
     EXPECT_GT(hits, std::max(rmsHits, looHits)) << "each part finds hits the other misses";
