@@ -22,21 +22,23 @@ Eigen::VectorXd leaveOneOutScale(const Eigen::MatrixXd& bk, const Eigen::MatrixX
     return scale;
 }
 
-PredictedParts keyErrorParts(const Eigen::Ref<const Eigen::VectorXd>& residual, Index channels,
-                             const Eigen::VectorXd& looScale) {
-    return {keyErrorOfResidual(residual, channels, KeyErrorNorm::Rms),
-            keyErrorOfResidual(residual, channels, KeyErrorNorm::LeaveOneOut, &looScale)};
-}
-
 void appendKeyScore(CalibrationStats& s, const Eigen::Ref<const Eigen::VectorXd>& residual, Index channels,
                     KeyErrorNorm norm, const Eigen::VectorXd& looScale) {
     if (norm == KeyErrorNorm::Predicted) {
-        const PredictedParts e = keyErrorParts(residual, channels, looScale);
-        s.keyRms.push_back(e.rms);
-        s.keyLoo.push_back(e.loo);
+        s.keyRms.push_back(keyErrorOfResidual(residual, channels, KeyErrorNorm::Rms));
+        s.keyLoo.push_back(keyErrorOfResidual(residual, channels, KeyErrorNorm::LeaveOneOut, &looScale));
     } else {
         s.keyRms.push_back(keyErrorOfResidual(residual, channels, norm, &looScale));
     }
+}
+
+std::vector<double> predictedErrors(const std::vector<double>& rms, const std::vector<double>& loo,
+                                    PredictedParts eps, double tolerance) {
+    if (rms.size() != loo.size())
+        throw std::invalid_argument("calibration: the predicted error's two parts differ in count");
+    std::vector<double> e(rms.size());
+    for (std::size_t f = 0; f < e.size(); ++f) e[f] = predictedPointError({rms[f], loo[f]}, eps, tolerance);
+    return e;
 }
 
 double keyErrorOfResidual(const Eigen::Ref<const Eigen::VectorXd>& residual, Index channels,
@@ -472,8 +474,7 @@ void setPredictedThresholds(CalibrationStats& s, double tolerance, CalibrationRu
     setThresholds(rms, tolerance, CalibrationRule::MaxRatio, coverage);
     setThresholds(loo, tolerance, looRule, coverage);
     s.partEps = {rms.epsMin, loo.epsMin};
-    for (std::size_t f = 0; f < s.keyRms.size(); ++f)
-        s.keyRms[f] = predictedPointError({rms.keyRms[f], loo.keyRms[f]}, s.partEps, tolerance);
+    s.keyRms = predictedErrors(rms.keyRms, loo.keyRms, s.partEps, tolerance);
     s.tolerance = tolerance;
     s.rule = looRule;
     s.coverage = loo.coverage;

@@ -148,7 +148,8 @@ void setThresholds(CalibrationStats& s, double tolerance, CalibrationRule rule, 
 void setPredictedThresholds(CalibrationStats& s, double tolerance, CalibrationRule looRule, double coverage);
 
 /// Appends one frame's key error by `norm` to s.keyRms, or for KeyErrorNorm::Predicted its two
-/// parts to s.keyRms (key RMS) and s.keyLoo: the held-out scores calibration and `pmsc learn` keep.
+/// parts (the key RMS and the largest leave-one-out key error, as keyErrorOfResidual computes
+/// them) to s.keyRms and s.keyLoo: the held-out scores calibration and `pmsc learn` keep.
 /// `looScale` as for keyErrorOfResidual (leaveOneOutScale when usesLeaveOneOut(norm)).
 void appendKeyScore(CalibrationStats& s, const Eigen::Ref<const Eigen::VectorXd>& residual, Index channels,
                     KeyErrorNorm norm, const Eigen::VectorXd& looScale);
@@ -157,9 +158,10 @@ inline bool usesLeaveOneOut(KeyErrorNorm norm) {
     return norm == KeyErrorNorm::LeaveOneOut || norm == KeyErrorNorm::Predicted;
 }
 
-/// The two parts of KeyErrorNorm::Predicted for one frame's key residual (as keyErrorOfResidual).
-PredictedParts keyErrorParts(const Eigen::Ref<const Eigen::VectorXd>& residual, Index channels,
-                             const Eigen::VectorXd& looScale);
+/// Each frame's predicted point error (predictedPointError) from its raw parts `rms` and `loo`
+/// (the same length) under the part thresholds `eps`.
+std::vector<double> predictedErrors(const std::vector<double>& rms, const std::vector<double>& loo,
+                                    PredictedParts eps, double tolerance);
 
 /// The held-out ratios E_f / e_f that setThresholds() uses (frames with a usable key error).
 std::vector<double> heldOutRatios(const CalibrationStats& s);

@@ -85,13 +85,11 @@ double oldModelKeyRmsMax(const Model& model, const Eigen::Map<const Eigen::Matri
     const Eigen::MatrixXd centered = fresh.colwise() - model.mean;
     scoreFrames(centered, model.basis, model.projector, model.channels, model.keyPoints, model.keyErrorNorm,
                 s);
+    if (model.keyErrorNorm == KeyErrorNorm::Predicted)
+        s.keyRms = predictedErrors(s.keyRms, s.keyLoo, model.partEps, model.tolerance);
     double largest = 0;
-    for (std::size_t f = 0; f < s.keyRms.size(); ++f) {
-        const double e = model.keyErrorNorm == KeyErrorNorm::Predicted
-                             ? predictedPointError({s.keyRms[f], s.keyLoo[f]}, model.partEps, model.tolerance)
-                             : s.keyRms[f];
+    for (double e : s.keyRms)
         if (!(e <= largest)) largest = e;  // NaN wins
-    }
     return largest;
 }
 
@@ -297,10 +295,7 @@ void calibratePredicted(const Model& model, const CalibrationStats& scores, Cali
     PredictedParts eps = fresh.partEps;
     double band = fresh.band;
     if (!record.keyRms.empty() && record.keyLoo.size() == record.keyRms.size()) {
-        CalibrationStats stored;
-        stored.keyRms = record.keyRms;
-        stored.keyLoo = record.keyLoo;
-        stored.maxPointError = record.maxPointError;
+        CalibrationStats stored = record.scores();
         setPredictedThresholds(stored, t, rule, coverage);
         report.calibrationRatioOld = stored.parts[1].ratio;
         eps = {std::min(eps.rms, stored.partEps.rms), std::min(eps.loo, stored.partEps.loo)};
@@ -316,15 +311,9 @@ void calibratePredicted(const Model& model, const CalibrationStats& scores, Cali
     out.partEps = eps;
     out.epsMin = t;
     out.epsMax = band * t;
-    const auto append = [](std::vector<double>& to, const std::vector<double>& from) {
-        to.insert(to.end(), from.begin(), from.end());
-    };
-    append(record.keyRms, scores.keyRms);
-    append(record.keyLoo, scores.keyLoo);
-    append(record.maxPointError, scores.maxPointError);
+    record.append(scores);
     // The report keeps the new frames' scores, in the learned model's measure and thresholds.
-    for (std::size_t f = 0; f < fresh.keyRms.size(); ++f)
-        fresh.keyRms[f] = predictedPointError({scores.keyRms[f], scores.keyLoo[f]}, eps, t);
+    fresh.keyRms = predictedErrors(scores.keyRms, scores.keyLoo, eps, t);
     fresh.partEps = eps;
     fresh.epsMin = out.epsMin;
     fresh.epsMax = out.epsMax;
@@ -350,9 +339,7 @@ void calibrateLearned(const Model& model, const SubspaceUpdate& u,
     report.calibrationRatioNew = scores.ratio;
     double ratio = report.calibrationRatioNew;
     if (!record.keyRms.empty()) {
-        CalibrationStats stored;
-        stored.keyRms = record.keyRms;
-        stored.maxPointError = record.maxPointError;
+        CalibrationStats stored = record.scores();
         setThresholds(stored, model.tolerance, rule, coverage);
         report.calibrationRatioOld = stored.ratio;
         ratio = std::max(ratio, stored.ratio);
@@ -373,9 +360,7 @@ void calibrateLearned(const Model& model, const SubspaceUpdate& u,
     scores.ratio = ratio;
     scores.epsMin = out.epsMin;
     scores.epsMax = out.epsMax;
-    record.keyRms.insert(record.keyRms.end(), scores.keyRms.begin(), scores.keyRms.end());
-    record.maxPointError.insert(record.maxPointError.end(), scores.maxPointError.begin(),
-                                scores.maxPointError.end());
+    record.append(scores);
     report.calibration = std::move(scores);
 }
 

@@ -58,6 +58,23 @@ CalibrationRecord CalibrationRecord::from(const CalibrationStats& s) {
     return r;
 }
 
+CalibrationStats CalibrationRecord::scores() const {
+    CalibrationStats s;
+    s.keyRms = keyRms;
+    s.keyLoo = keyLoo;
+    s.maxPointError = maxPointError;
+    return s;
+}
+
+void CalibrationRecord::append(const CalibrationStats& raw) {
+    const auto add = [](std::vector<double>& to, const std::vector<double>& from) {
+        to.insert(to.end(), from.begin(), from.end());
+    };
+    add(keyRms, raw.keyRms);
+    add(keyLoo, raw.keyLoo);
+    add(maxPointError, raw.maxPointError);
+}
+
 void CalibrationRecord::validate() const {
     if (rule != CalibrationRule::MaxRatio && rule != CalibrationRule::Conformal &&
         rule != CalibrationRule::Threshold)

@@ -55,6 +55,12 @@ struct CalibrationRecord {
     std::vector<double> maxPointError;  ///< E_f of each held-out frame
 
     static CalibrationRecord from(const CalibrationStats& s);
+    /// The stored scores as held-out scores (keyRms, keyLoo, maxPointError) for setThresholds or
+    /// setPredictedThresholds.
+    CalibrationStats scores() const;
+    /// Adds the raw scores of more held-out frames (keyRms, keyLoo when the record keeps them,
+    /// maxPointError), as calibrate() or `pmsc learn`'s cross-fitting gives them.
+    void append(const CalibrationStats& raw);
     void validate() const;
 };
 

@@ -46,20 +46,30 @@ void expectRejected(const std::string& path, std::initializer_list<std::string> 
     for (const auto& f : fragments) EXPECT_NE(what.find(f), std::string::npos) << what;
 }
 
-TEST(ModelFile, AKeyErrorNormThisVersionDoesNotKnowIsRefused) {
-    Model m = smallModel();
-    m.keyErrorNorm = pmsc::KeyErrorNorm::LeaveOneOut;
+/// `m`'s file with a value written over its KEYERROR section at `offset` (0: the norm, 4: the
+/// first part threshold of a predicted error), resealed, at `path`.
+template <typename T>
+void writeWithKeyErrorPoked(const Model& m, std::size_t offset, T value, const std::string& path) {
     std::string bytes = pmsc::encodeModel(m);
     const std::size_t tag = bytes.find("KEYERROR");
     ASSERT_NE(tag, std::string::npos);
-    std::uint32_t norm = 0;
-    std::memcpy(&norm, bytes.data() + tag + 16, sizeof norm);  // after the tag and its length
-    ASSERT_EQ(norm, 2u);
-    poke<std::uint32_t>(bytes, tag + 16, 4);
+    const std::size_t body = tag + 16;  // after the tag and its length
+    if (offset == 0) {
+        std::uint32_t norm = 0;
+        std::memcpy(&norm, bytes.data() + body, sizeof norm);
+        ASSERT_EQ(norm, static_cast<std::uint32_t>(m.keyErrorNorm));
+    }
+    poke<T>(bytes, body + offset, value);
     reseal(bytes);
+    writeBytes(path, bytes);
+}
+
+TEST(ModelFile, AKeyErrorNormThisVersionDoesNotKnowIsRefused) {
+    Model m = smallModel();
+    m.keyErrorNorm = pmsc::KeyErrorNorm::LeaveOneOut;
     TempDir dir;
     const auto path = dir.file("norm.pmsc");
-    writeBytes(path, bytes);
+    writeWithKeyErrorPoked<std::uint32_t>(m, 0, 4, path);
     expectRejected(path, {"key error norm 4", "3 (predicted)"});
 }
 
@@ -77,13 +87,8 @@ TEST(ModelFile, APredictedKeyErrorKeepsItsPartsThresholds) {
     EXPECT_EQ(back.keyErrorNorm, pmsc::KeyErrorNorm::Predicted);
     EXPECT_EQ(back.partEps.rms, 0.125);
     EXPECT_EQ(back.partEps.loo, 0.375);
-    // Without its parts (a section cut after the norm) the file is refused, not read as zeros.
-    std::string bytes = pmsc::encodeModel(m);
-    const std::size_t tag = bytes.find("KEYERROR");
-    ASSERT_NE(tag, std::string::npos);
-    poke<double>(bytes, tag + 20, std::numeric_limits<double>::infinity());
-    reseal(bytes);
-    writeBytes(path, bytes);
+    // A part threshold that is not a finite number is refused with the section and the field.
+    writeWithKeyErrorPoked<double>(m, 4, std::numeric_limits<double>::infinity(), path);
     expectRejected(path, {"KEYERROR", "key RMS part threshold"});
 }
 

@@ -157,10 +157,7 @@ TEST(Learning, APredictedKeyErrorModelKeepsBothPartsScoresThroughItsFileAndItsUp
     EXPECT_EQ(std::vector<double>(learned.calibrationRecord->keyLoo.begin(),
                                   learned.calibrationRecord->keyLoo.begin() + 80),
               old.calibrationRecord->keyLoo);
-    pmsc::CalibrationStats stored;
-    stored.keyRms = old.calibrationRecord->keyRms;
-    stored.keyLoo = old.calibrationRecord->keyLoo;
-    stored.maxPointError = old.calibrationRecord->maxPointError;
+    pmsc::CalibrationStats stored = old.calibrationRecord->scores();
     pmsc::setPredictedThresholds(stored, o.tolerance, pmsc::CalibrationRule::Threshold, 0.9);
     const auto tail = [](const std::vector<double>& v) {
         return std::vector<double>(v.begin() + 80, v.end());
