@@ -10,6 +10,8 @@
 #include <fstream>
 #include <iostream>
 #include <optional>
+#include <string>
+#include <vector>
 
 namespace pmsc::cli {
 
@@ -19,6 +21,7 @@ struct ViewArgs {
     std::string model, scene, sceneFile, bind = "127.0.0.1", web;
     int port = 8080;
     int threads = 0;
+    std::vector<std::string> allowedHosts;
 };
 
 std::optional<ViewArgs> parseViewArgs(const std::vector<std::string>& args) {
@@ -36,6 +39,12 @@ std::optional<ViewArgs> parseViewArgs(const std::vector<std::string>& args) {
     parser.option("--port", "P", "TCP port (default 8080; 0: any free port)",
                   [&](const std::string& v) { a.port = int(parseIndex("--port", v, 0, 65535)); });
     parser.option("--bind", "ADDR", "address to listen on (default 127.0.0.1: this machine only)", a.bind);
+    parser.option("--allow-host", "NAME",
+                  "a host name the page may be reached by besides localhost and the bound address "
+                  "(repeatable; requests naming any other host, and WebSockets from other sites' "
+                  "pages, get 403)",
+                  [&](const std::string& v) { a.allowedHosts.push_back(v); });
+    parser.repeatable("--allow-host");
     parser.option("--web", "DIR", "the page's folder (default: the build's web/viewer)", a.web);
     parser.option("--threads", "T", "engine worker threads (default: every core)",
                   [&](const std::string& v) { a.threads = int(parseIndex("--threads", v, 0, 4096)); });
@@ -64,6 +73,7 @@ int runView(const std::vector<std::string>& args) {
     o.port = a->port;
     o.webRoot = a->web;
     o.threads = a->threads;
+    o.allowedHosts = a->allowedHosts;
     viewer::ViewServer server(model, *scene, o);
     const std::string host = a->bind.find(':') != std::string::npos ? "[" + a->bind + "]" : a->bind;
     std::cout << "pmsc view: http://" << host << ":" << server.port() << "/" << std::endl;

@@ -11,6 +11,7 @@
 #include <boost/beast/websocket.hpp>
 
 #include <atomic>
+#include <cctype>
 #include <chrono>
 #include <cstdlib>
 #include <deque>
@@ -73,6 +74,46 @@ bool readWhole(const std::string& path, std::string& out) {
 }
 
 }  // namespace
+
+namespace {
+std::string lowered(std::string s) {
+    for (char& ch : s) ch = char(std::tolower(static_cast<unsigned char>(ch)));
+    return s;
+}
+}  // namespace
+
+bool hostAllowed(const std::string& host, const std::string& bind, const std::vector<std::string>& allowed) {
+    // The name without the port: "[::1]:8080" -> "::1", "127.0.0.1:8080" -> "127.0.0.1".
+    std::string name;
+    if (!host.empty() && host.front() == '[') {
+        const auto close = host.find(']');
+        if (close == std::string::npos) return false;
+        const std::string rest = host.substr(close + 1);
+        if (!rest.empty() && rest.front() != ':') return false;
+        name = host.substr(1, close - 1);
+    } else {
+        const auto colon = host.find(':');
+        if (colon != std::string::npos && host.find(':', colon + 1) != std::string::npos) return false;
+        name = host.substr(0, colon);
+    }
+    name = lowered(name);
+    if (name.empty()) return false;
+    if (name == "localhost" || name == lowered(bind)) return true;
+    boost::system::error_code ec;
+    const auto address = net::ip::make_address(name, ec);
+    if (!ec && address.is_loopback()) return true;
+    if (!ec && !address.is_unspecified()) {
+        const auto bound = net::ip::make_address(bind, ec);
+        if (!ec && !bound.is_unspecified() && bound == address) return true;
+    }
+    for (const std::string& a : allowed)
+        if (lowered(a) == name) return true;
+    return false;
+}
+
+bool sameOrigin(const std::string& origin, const std::string& host) {
+    return origin.empty() || lowered(origin) == "http://" + lowered(host);
+}
 
 std::string defaultWebRoot() {
     if (const char* env = std::getenv("PMSC_VIEW_WEB"); env && *env) return env;
@@ -179,6 +220,11 @@ struct ViewServer::Impl {
     void accept();
     /// Answers a GET; a body (/api/body/ID) leaves the store with its answer.
     http::response<http::string_body> respond(const http::request<http::string_body>& req);
+    /// Why a request is not answered (hostAllowed, sameOrigin), or empty when it may be.
+    std::string refusal(const http::request<http::string_body>& req) const;
+    /// 403 with the reason, and the connection closed after it.
+    static http::response<http::string_body> forbidden(const http::request<http::string_body>& req,
+                                                       const std::string& why);
     /// A body's answer: its bytes, and its address in the X-Pmsc-Body header (the `body` of the
     /// update it belongs to).
     static http::response<http::string_body> bodyResponse(const http::request<http::string_body>& req,
@@ -341,6 +387,11 @@ public:
 private:
     void onRead(beast::error_code ec) {
         if (ec) return;  // closed, timed out or malformed: Beast has nothing to answer
+        if (const std::string why = server_.refusal(req_); !why.empty()) {
+            res_ = Server::forbidden(req_, why);
+            write();
+            return;
+        }
         if (websocket::is_upgrade(req_)) {
             if (req_.target() == "/api/ws") {
                 stream_.expires_never();
@@ -400,6 +451,28 @@ http::response<http::string_body> ViewServer::Impl::bodyResponse(const http::req
     res.set(http::field::content_type, "application/octet-stream");
     res.set("X-Pmsc-Body", url);
     res.body() = std::move(bytes);
+    res.prepare_payload();
+    return res;
+}
+
+std::string ViewServer::Impl::refusal(const http::request<http::string_body>& req) const {
+    const std::string host(req[http::field::host]);
+    if (!hostAllowed(host, options.bind, options.allowedHosts))
+        return host.empty()
+                   ? "a request must name its Host"
+                   : "host '" + host + "' is not this machine's (pmsc view --allow-host NAME adds one)";
+    const std::string origin(req[http::field::origin]);
+    if (!sameOrigin(origin, host)) return "origin '" + origin + "' is not this server's page";
+    return {};
+}
+
+http::response<http::string_body> ViewServer::Impl::forbidden(const http::request<http::string_body>& req,
+                                                              const std::string& why) {
+    http::response<http::string_body> res = answerTo(req);
+    res.result(http::status::forbidden);
+    res.keep_alive(false);
+    res.set(http::field::content_type, "text/plain");
+    res.body() = "pmsc view: " + why + "\n";
     res.prepare_payload();
     return res;
 }

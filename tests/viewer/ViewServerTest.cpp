@@ -57,12 +57,15 @@ private:
     std::thread thread_;
 };
 
-http::response<http::string_body> request(int port, http::verb verb, const std::string& target) {
+http::response<http::string_body> request(int port, http::verb verb, const std::string& target,
+                                          const std::string& host = "127.0.0.1",
+                                          const std::string& origin = "") {
     net::io_context ioc;
     beast::tcp_stream stream(ioc);
     stream.connect(tcp::endpoint(net::ip::make_address("127.0.0.1"), static_cast<unsigned short>(port)));
     http::request<http::string_body> req{verb, target, 11};
-    req.set(http::field::host, "127.0.0.1");
+    req.set(http::field::host, host);
+    if (!origin.empty()) req.set(http::field::origin, origin);
     http::write(stream, req);
     beast::flat_buffer buffer;
     http::response<http::string_body> res;
@@ -274,6 +277,57 @@ TEST_F(ViewServerTest, AViewerThatLeavesMidFrameFreesTheServerForTheNext) {
         ASSERT_LT(attempt, 50) << "the server still holds the viewer that left";
         std::this_thread::sleep_for(std::chrono::milliseconds(100));
     }
+}
+
+TEST(ViewServerOrigin, OnlyNamesOfThisMachineAndItsOwnPageAreAnswered) {
+    EXPECT_TRUE(hostAllowed("127.0.0.1:8080", "127.0.0.1", {}));
+    EXPECT_TRUE(hostAllowed("localhost:8080", "127.0.0.1", {}));
+    EXPECT_TRUE(hostAllowed("LocalHost", "127.0.0.1", {}));
+    EXPECT_TRUE(hostAllowed("[::1]:8080", "127.0.0.1", {}));
+    EXPECT_TRUE(hostAllowed("127.1.2.3", "127.0.0.1", {}));
+    EXPECT_TRUE(hostAllowed("10.1.2.3:8080", "10.1.2.3", {}));
+    EXPECT_TRUE(hostAllowed("0.0.0.0:8080", "0.0.0.0", {}));
+    EXPECT_TRUE(hostAllowed("render7:8080", "0.0.0.0", {"render7"}));
+    EXPECT_FALSE(hostAllowed("evil.example:8080", "127.0.0.1", {}));  // a DNS-rebinding name
+    EXPECT_FALSE(hostAllowed("render7:8080", "0.0.0.0", {}));
+    EXPECT_FALSE(hostAllowed("10.1.2.3:8080", "0.0.0.0", {}));
+    EXPECT_FALSE(hostAllowed("", "127.0.0.1", {}));
+    EXPECT_FALSE(hostAllowed("[::1", "127.0.0.1", {}));
+    EXPECT_FALSE(hostAllowed("127.0.0.1:80:80", "127.0.0.1", {}));
+    EXPECT_TRUE(sameOrigin("", "127.0.0.1:8080"));
+    EXPECT_TRUE(sameOrigin("http://127.0.0.1:8080", "127.0.0.1:8080"));
+    EXPECT_FALSE(sameOrigin("http://evil.example", "127.0.0.1:8080"));
+    EXPECT_FALSE(sameOrigin("http://127.0.0.1:9999", "127.0.0.1:8080"));
+    EXPECT_FALSE(sameOrigin("null", "127.0.0.1:8080"));
+}
+
+TEST_F(ViewServerTest, AnotherSitesPageOrHostNameGets403AndNoSession) {
+    const Running server(smallVolume().model);
+    const int port = server.port();
+    const std::string self = "127.0.0.1:" + std::to_string(port);
+    EXPECT_EQ(request(port, http::verb::get, "/api/scene", self, "http://" + self).result(),
+              http::status::ok);
+    // DNS rebinding: a name of the attacker's pointing at 127.0.0.1.
+    const auto rebound = request(port, http::verb::get, "/api/scene", "evil.example:" + std::to_string(port));
+    EXPECT_EQ(rebound.result(), http::status::forbidden);
+    EXPECT_NE(rebound.body().find("evil.example"), std::string::npos);
+    EXPECT_EQ(request(port, http::verb::get, "/api/scene", self, "http://evil.example").result(),
+              http::status::forbidden);
+    // A WebSocket from another site's page is refused at the handshake; the server's own page is not.
+    {
+        net::io_context ioc;
+        websocket::stream<beast::tcp_stream> ws(ioc);
+        beast::get_lowest_layer(ws).connect(
+            tcp::endpoint(net::ip::make_address("127.0.0.1"), static_cast<unsigned short>(port)));
+        ws.set_option(websocket::stream_base::decorator(
+            [](websocket::request_type& req) { req.set(http::field::origin, "http://evil.example"); }));
+        websocket::response_type res;
+        beast::error_code ec;
+        ws.handshake(res, self, "/api/ws", ec);
+        EXPECT_EQ(ec, websocket::error::upgrade_declined);
+    }
+    Viewer v(port);
+    EXPECT_EQ(v.nextText()["type"], "hello");
 }
 
 TEST_F(ViewServerTest, AnAddressInUseOrAMissingPageIsOneLine) {
