@@ -126,15 +126,26 @@ IctRig loadIctRig(const std::string& folder) {
 }
 
 FrameSet poseIctFrames(const IctRig& rig, Index frames, unsigned seed,
-                       const std::vector<std::string>& without) {
-    std::vector<char> held(rig.shapes.size(), 0);
-    for (const auto& name : without) {
+                       const std::vector<std::string>& without,
+                       const std::vector<std::pair<std::string, double>>& hold) {
+    const auto shapeNamed = [&](const std::string& name) {
         const auto it = std::find_if(rig.shapes.begin(), rig.shapes.end(),
                                      [&](const IctRig::Shape& s) { return s.name == name; });
         if (it == rig.shapes.end())
             throw InputError("no blendshape '" + name +
                              "' in the rig (jawOpen is the hinge, not a blendshape)");
-        held[static_cast<std::size_t>(it - rig.shapes.begin())] = 1;
+        return static_cast<std::size_t>(it - rig.shapes.begin());
+    };
+    // held[s]: shape s does not follow its curve; fixed[s] is its weight in every frame.
+    std::vector<char> held(rig.shapes.size(), 0);
+    std::vector<double> fixed(rig.shapes.size(), 0.0);
+    for (const auto& name : without) held[shapeNamed(name)] = 1;
+    for (const auto& [name, weight] : hold) {
+        if (!(weight >= 0 && weight <= 1))
+            throw InputError("held weight of '" + name + "' must be in [0, 1]");
+        const std::size_t s = shapeNamed(name);
+        held[s] = 1;
+        fixed[s] = weight;
     }
     FrameSet out(frames, rig.points, 3);
     std::mt19937_64 rng(0x1C7FACEull ^ (static_cast<std::uint64_t>(seed) * 0x9E3779B97F4A7C15ull));
@@ -160,10 +171,9 @@ FrameSet poseIctFrames(const IctRig& rig, Index frames, unsigned seed,
         Eigen::Map<Eigen::VectorXd> x(out.frame(f), 3 * rig.points);
         x = rig.neutral;
         for (std::size_t s = 0; s < rig.shapes.size(); ++s) {
-            if (held[s]) continue;
             const Curve& c = curves[s];
             const double signal = 0.75 * (*c.common)(t) + 0.25 * c.own(t);
-            const double w = std::clamp(c.gain * (signal - c.threshold), 0.0, 1.0);
+            const double w = held[s] ? fixed[s] : std::clamp(c.gain * (signal - c.threshold), 0.0, 1.0);
             if (w == 0) continue;
             const auto& shape = rig.shapes[s];
             for (std::size_t i = 0; i < shape.vertices.size(); ++i)

@@ -6,6 +6,7 @@
 #include <Eigen/Core>
 
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace pmsc::synthetic {
@@ -51,8 +52,13 @@ IctRig loadIctRig(const std::string& folder);
 /// @param without blendshapes held at 0 (e.g. train without "mouthPucker", then test
 ///        with it: a control the training set never exercised, section 5). The curves
 ///        of the others do not change.
-/// @throws InputError for a name in `without` that is not a blendshape of the rig.
+/// @param hold  blendshapes held at a fixed weight in every frame instead of their curves (a
+///        control training left still, moved at a chosen amplitude: the novelty sets of
+///        docs/calibration.md). The curves of the others do not change.
+/// @throws InputError for a name in `without` or `hold` that is not a blendshape of the rig, or a
+///         held weight outside [0, 1].
 FrameSet poseIctFrames(const IctRig& rig, Index frames, unsigned seed,
-                       const std::vector<std::string>& without = {});
+                       const std::vector<std::string>& without = {},
+                       const std::vector<std::pair<std::string, double>>& hold = {});
 
 }  // namespace pmsc::synthetic

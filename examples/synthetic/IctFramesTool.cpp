@@ -1,5 +1,8 @@
 // pmsc_ict_frames --data DIR --out F.npy --frames N --seed S [--dtype float32|float64]
-//                 [--without SHAPE,SHAPE...]
+//                 [--without SHAPE,SHAPE...] [--hold SHAPE=W,SHAPE=W...]
+//
+// --without holds blendshapes at 0 (a control the training set never moves); --hold holds them at
+// the weight W in [0, 1] in every frame (that control moved at a chosen amplitude, for test sets).
 //
 // Poses the ICT FaceKit meshes (blendshapes + a rotational jaw, IctFrames.h) into a frames file
 // for `pmsc train` / `pmsc replay`. The folder is always an argument: users clone ICT-FaceKit
@@ -13,6 +16,7 @@
 #include <cstdlib>
 #include <exception>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace {
@@ -21,7 +25,7 @@ int usage(const char* why) {
     std::fprintf(
         stderr,
         "pmsc_ict_frames: %s\nusage: pmsc_ict_frames --data ICT_FACEKIT_DIR --out FRAMES.npy --frames N "
-        "--seed S [--dtype float32|float64] [--without SHAPE,...]\n",
+        "--seed S [--dtype float32|float64] [--without SHAPE,...] [--hold SHAPE=W,...]\n",
         why);
     return 2;
 }
@@ -31,6 +35,7 @@ int usage(const char* why) {
 int main(int argc, char** argv) {
     std::string data, out, dtype = "float32";
     std::vector<std::string> without;
+    std::vector<std::pair<std::string, double>> hold;
     long frames = 0;
     long long seed = -1;
     for (int i = 1; i < argc; ++i) {
@@ -53,6 +58,21 @@ int main(int argc, char** argv) {
                 if (comma == std::string::npos) break;
                 start = comma + 1;
             }
+        } else if (a == "--hold") {
+            for (std::size_t start = 0;;) {
+                const auto comma = v.find(',', start);
+                const std::string item = v.substr(start, comma - start);
+                const auto eq = item.find('=');
+                if (eq == std::string::npos || eq == 0) return usage("--hold takes SHAPE=W,...");
+                const std::string w = item.substr(eq + 1);
+                const double weight = std::strtod(w.c_str(), &end);
+                if (w.empty() || *end || !(weight >= 0 && weight <= 1))
+                    return usage(
+                        ("--hold: the weight of " + item.substr(0, eq) + " must be in [0, 1]").c_str());
+                hold.emplace_back(item.substr(0, eq), weight);
+                if (comma == std::string::npos) break;
+                start = comma + 1;
+            }
         } else if (a == "--dtype") {
             dtype = v;
         } else if (a == "--frames") {
@@ -72,7 +92,8 @@ int main(int argc, char** argv) {
     try {
         const auto start = std::chrono::steady_clock::now();
         const auto rig = pmsc::synthetic::loadIctRig(data);
-        const auto set = pmsc::synthetic::poseIctFrames(rig, frames, static_cast<unsigned>(seed), without);
+        const auto set =
+            pmsc::synthetic::poseIctFrames(rig, frames, static_cast<unsigned>(seed), without, hold);
         pmsc::writeFrames(out, set, dtype == "float32" ? pmsc::NpyDtype::Float32 : pmsc::NpyDtype::Float64);
         const double seconds =
             std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -94,6 +94,27 @@ TEST(IctFrames, PosesDeterministicallyAndHoldsExcludedShapes) {
     EXPECT_THROW(pmsc::synthetic::poseIctFrames(rig, 5, 1, {"mouthPucker"}), pmsc::InputError);
 }
 
+TEST(IctFrames, AHeldShapeTakesItsWeightInEveryFrameAndLeavesTheOtherCurves) {
+    TempDir dir;
+    const Mesh mesh;
+    writeObj(dir.file("generic_neutral_mesh.obj"), mesh.neutral);
+    writeObj(dir.file("jawOpen.obj"), mesh.jawOpen);
+    writeObj(dir.file("smile.obj"), mesh.smile);
+    const auto rig = pmsc::synthetic::loadIctRig(dir.path().string());
+    const auto still = pmsc::synthetic::poseIctFrames(rig, 30, 3, {"smile"});
+    const auto held = pmsc::synthetic::poseIctFrames(rig, 30, 3, {}, {{"smile", 0.5}});
+    for (Index f = 0; f < 30; ++f) {
+        for (Index p = 40; p < 60; ++p)  // the smile's points: neutral + half its delta
+            for (int c = 0; c < 3; ++c)
+                EXPECT_NEAR(held.frame(f)[3 * p + c],
+                            mesh.neutral[p][c] + 0.5 * (mesh.smile[p][c] - mesh.neutral[p][c]), 1e-12);
+        for (Index p = 0; p < 40; ++p)  // the jaw's curve is the same as without the smile
+            for (int c = 0; c < 3; ++c) EXPECT_EQ(held.frame(f)[3 * p + c], still.frame(f)[3 * p + c]);
+    }
+    EXPECT_THROW(pmsc::synthetic::poseIctFrames(rig, 5, 1, {}, {{"smile", 1.5}}), pmsc::InputError);
+    EXPECT_THROW(pmsc::synthetic::poseIctFrames(rig, 5, 1, {}, {{"frown", 0.5}}), pmsc::InputError);
+}
+
 TEST(IctFrames, BadFoldersAndMeshesNameTheFile) {
     TempDir dir;
     EXPECT_THROW(pmsc::synthetic::loadIctRig(dir.file("none")), pmsc::InputError);
