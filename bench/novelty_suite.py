@@ -1,0 +1,153 @@
+#!/usr/bin/env python3
+"""The novelty suite on the ICT face: does the soft cache keep its tolerance on frames that move
+controls the training never moved?
+
+Each set names four blendshapes and a seed. Training: 600 frames of take SEED with the four held
+at 0 (`pmsc_ict_frames --without`), `pmsc train --tolerance T` (1% of the head diagonal) with the
+defaults and with each --variant. Replayed through each model:
+- validation: 200 frames of take SEED + 1, the same four held at 0 (ordinary motion, other takes);
+- novel: the same take's ordinary motion with each of the four held at a weight (`--hold`), alone
+  and in pairs (4 + 6), at three amplitudes (0.33, 0.67, 1.0), 10 frames each: 300 frames.
+
+For each model and set the table gives the hit rate, the frames whose soft-cached error exceeds T
+(hits, blends and local frames alike: what a user would get), the worst frame as a multiple of T,
+and the share of points evaluated in full (0 for a hit, 1 for a whole miss).
+
+    /usr/bin/python3 bench/novelty_suite.py --data ICT-FaceKit/FaceXModel --bin build/bin \\
+        --work /tmp/novelty [--sets A,B,C] [--variant '--energy 0.99999'] [--variant '--regions 0']
+
+Needs numpy (the system python3). Exits 2 with one line on bad arguments or a failed command, and 1
+when any frame of any set comes back over T (so it can gate a release).
+"""
+import argparse
+import itertools
+import json
+import os
+import subprocess
+import sys
+
+# The sets: four controls training leaves still, and the seed of the training take. A is the set the
+# defaults were looked at with; B and C are kept apart from it, to check them.
+SETS = {
+    "A": (1, ["mouthPucker", "cheekPuff_L", "jawLeft", "eyeWide_R"]),
+    "B": (5, ["mouthFunnel", "jawForward", "noseSneer_L", "mouthRollLower"]),
+    "C": (9, ["mouthSmile_L", "browDown_R", "mouthShrugUpper", "jawRight"]),
+}
+AMPLITUDES = (0.33, 0.67, 1.0)
+
+
+def fail(message):
+    print("novelty_suite: " + message, file=sys.stderr)
+    sys.exit(2)
+
+
+def run(cmd):
+    done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    if done.returncode != 0:
+        fail("'" + " ".join(cmd) + "' exited " + str(done.returncode) + ": " + done.stdout.strip()[-400:])
+    return done.stdout
+
+
+def ict(args, out, frames, seed, without, hold=()):
+    cmd = [os.path.join(args.bin, "pmsc_ict_frames"), "--data", args.data, "--out", out, "--frames",
+           str(frames), "--seed", str(seed), "--dtype", "float32"]
+    if without:
+        cmd += ["--without", ",".join(without)]
+    if hold:
+        cmd += ["--hold", ",".join("%s=%g" % h for h in hold)]
+    run(cmd)
+
+
+def make_set(args, np, name):
+    seed, controls = SETS[name]
+    paths = {k: os.path.join(args.work, "%s-%s.npy" % (name, k)) for k in ("train", "validation", "novel")}
+    if not os.path.exists(paths["train"]):
+        ict(args, paths["train"], 600, seed, controls)
+    if not os.path.exists(paths["validation"]):
+        ict(args, paths["validation"], 200, seed + 1, controls)
+    if not os.path.exists(paths["novel"]):
+        parts = []
+        part = os.path.join(args.work, "part.npy")
+        combos = [(c,) for c in controls] + list(itertools.combinations(controls, 2))
+        for amplitude in AMPLITUDES:
+            for combo in combos:
+                ict(args, part, 10, seed + 1, [c for c in controls if c not in combo],
+                    [(c, amplitude) for c in combo])
+                parts.append(np.load(part))
+        np.save(paths["novel"], np.concatenate(parts))
+    return paths
+
+
+def summarise(report_path, tolerance):
+    with open(report_path) as f:
+        frames = json.load(f)["frames"]
+    over = [f for f in frames if f["soft_max_point_error"] > tolerance]
+    return {
+        "frames": len(frames),
+        "hits": sum(1 for f in frames if f["state"] == "hit"),
+        "over": len(over),
+        "over_hits": sum(1 for f in over if f["state"] == "hit"),
+        "over_local": sum(1 for f in over if f.get("local")),
+        "worst": max(f["soft_max_point_error"] for f in frames) / tolerance,
+        "evaluated": sum(f.get("points_evaluated_fraction", 1.0 if f["state"] != "hit" else 0.0)
+                         for f in frames) / len(frames),
+    }
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--data", required=True, help="ICT-FaceKit's FaceXModel folder")
+    p.add_argument("--bin", default="build/bin", help="folder of pmsc and pmsc_ict_frames")
+    p.add_argument("--work", required=True, help="folder for frames, models and reports (reused)")
+    p.add_argument("--sets", default="A,B,C", help="sets to run, of " + ",".join(SETS))
+    p.add_argument("--variant", action="append", default=None,
+                   help="pmsc train options of a model beside the defaults (repeatable; "
+                        "default: '--energy 0.99999')")
+    p.add_argument("--tolerance-percent", type=float, default=1.0, help="T in %% of the head diagonal")
+    args = p.parse_args()
+    try:
+        import numpy as np
+    except ImportError:
+        fail("needs numpy (run it with the system python3)")
+    sets = [s for s in args.sets.split(",") if s]
+    for s in sets:
+        if s not in SETS:
+            fail("no set '%s' (sets: %s)" % (s, ",".join(SETS)))
+    if not os.path.isdir(args.data):
+        fail("no folder " + args.data)
+    os.makedirs(args.work, exist_ok=True)
+    variants = [""] + (args.variant if args.variant is not None else ["--energy 0.99999"])
+    tolerance = None
+    print("| set | pmsc train options | M | validation: hits, over T, worst | novel: hits, over T (hits / local), "
+          "worst, points evaluated |")
+    print("|---|---|---|---|---|")
+    any_over = False
+    for name in sets:
+        paths = make_set(args, np, name)
+        if tolerance is None:
+            out = run([os.path.join(args.bin, "pmsc_ict_frames"), "--data", args.data, "--out",
+                       os.path.join(args.work, "part.npy"), "--frames", "1", "--seed", "0"])
+            diagonal = float(out.split("head bounding-box diagonal ")[1].split()[0])
+            tolerance = args.tolerance_percent / 100 * diagonal
+        for v, variant in enumerate(variants):
+            model = os.path.join(args.work, "%s-%d.pmsc" % (name, v))
+            train = run([os.path.join(args.bin, "pmsc"), "train", "--frames", paths["train"], "--out", model,
+                         "--tolerance", "%.6g" % tolerance] + variant.split())
+            basis = train.split("M = ")[1].split(",")[0] if "M = " in train else "?"
+            row = {}
+            for kind in ("validation", "novel"):
+                report = model + "." + kind + ".json"
+                run([os.path.join(args.bin, "pmsc"), "replay", "--model", model, "--frames", paths[kind],
+                     "--report", report, "--quiet"])
+                row[kind] = summarise(report, tolerance)
+                any_over = any_over or row[kind]["over"] > 0
+            va, no = row["validation"], row["novel"]
+            print("| %s | %s | %s | %d of %d, %d over T, %.3f T | %d of %d, %d over T (%d / %d), %.3f T, %.1f%% |" % (
+                name, variant or "(defaults)", basis, va["hits"], va["frames"], va["over"], va["worst"], no["hits"],
+                no["frames"], no["over"], no["over_hits"], no["over_local"], no["worst"], 100 * no["evaluated"]),
+                flush=True)
+    return 1 if any_over else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
