@@ -46,13 +46,18 @@ void writeObj(const std::string& path, const std::vector<Eigen::Vector3d>& v) {
     out << "f 1 2 3\n";
 }
 
-TEST(IctFrames, FitsTheJawHingeOfAKnownRotation) {
-    TempDir dir;
-    const Mesh mesh;
+/// The test mesh written as an ICT folder (neutral, jawOpen, smile) and read back as a rig.
+pmsc::synthetic::IctRig loadRig(TempDir& dir, const Mesh& mesh) {
     writeObj(dir.file("generic_neutral_mesh.obj"), mesh.neutral);
     writeObj(dir.file("jawOpen.obj"), mesh.jawOpen);
     writeObj(dir.file("smile.obj"), mesh.smile);
-    const auto rig = pmsc::synthetic::loadIctRig(dir.path().string());
+    return pmsc::synthetic::loadIctRig(dir.path().string());
+}
+
+TEST(IctFrames, FitsTheJawHingeOfAKnownRotation) {
+    TempDir dir;
+    const Mesh mesh;
+    const auto rig = loadRig(dir, mesh);
     EXPECT_EQ(rig.points, 60);
     ASSERT_EQ(rig.shapes.size(), 1u);  // jawOpen is the hinge, not a blendshape
     EXPECT_EQ(rig.shapes[0].name, "smile");
@@ -68,10 +73,7 @@ TEST(IctFrames, FitsTheJawHingeOfAKnownRotation) {
 TEST(IctFrames, PosesDeterministicallyAndHoldsExcludedShapes) {
     TempDir dir;
     const Mesh mesh;
-    writeObj(dir.file("generic_neutral_mesh.obj"), mesh.neutral);
-    writeObj(dir.file("jawOpen.obj"), mesh.jawOpen);
-    writeObj(dir.file("smile.obj"), mesh.smile);
-    const auto rig = pmsc::synthetic::loadIctRig(dir.path().string());
+    const auto rig = loadRig(dir, mesh);
     const auto a = pmsc::synthetic::poseIctFrames(rig, 80, 3);
     EXPECT_EQ(a.values, pmsc::synthetic::poseIctFrames(rig, 80, 3).values);
     EXPECT_NE(a.values, pmsc::synthetic::poseIctFrames(rig, 80, 4).values);
@@ -97,10 +99,7 @@ TEST(IctFrames, PosesDeterministicallyAndHoldsExcludedShapes) {
 TEST(IctFrames, AHeldShapeTakesItsWeightInEveryFrameAndLeavesTheOtherCurves) {
     TempDir dir;
     const Mesh mesh;
-    writeObj(dir.file("generic_neutral_mesh.obj"), mesh.neutral);
-    writeObj(dir.file("jawOpen.obj"), mesh.jawOpen);
-    writeObj(dir.file("smile.obj"), mesh.smile);
-    const auto rig = pmsc::synthetic::loadIctRig(dir.path().string());
+    const auto rig = loadRig(dir, mesh);
     const auto still = pmsc::synthetic::poseIctFrames(rig, 30, 3, {"smile"});
     const auto held = pmsc::synthetic::poseIctFrames(rig, 30, 3, {}, {{"smile", 0.5}});
     for (Index f = 0; f < 30; ++f) {
