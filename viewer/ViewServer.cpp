@@ -73,13 +73,11 @@ bool readWhole(const std::string& path, std::string& out) {
     return true;
 }
 
-}  // namespace
-
-namespace {
 std::string lowered(std::string s) {
     for (char& ch : s) ch = char(std::tolower(static_cast<unsigned char>(ch)));
     return s;
 }
+
 }  // namespace
 
 bool hostAllowed(const std::string& host, const std::string& bind, const std::vector<std::string>& allowed) {
@@ -102,10 +100,6 @@ bool hostAllowed(const std::string& host, const std::string& bind, const std::ve
     boost::system::error_code ec;
     const auto address = net::ip::make_address(name, ec);
     if (!ec && address.is_loopback()) return true;
-    if (!ec && !address.is_unspecified()) {
-        const auto bound = net::ip::make_address(bind, ec);
-        if (!ec && !bound.is_unspecified() && bound == address) return true;
-    }
     for (const std::string& a : allowed)
         if (lowered(a) == name) return true;
     return false;

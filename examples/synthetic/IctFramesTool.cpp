@@ -21,6 +21,17 @@
 
 namespace {
 
+/// "a,b,c" -> {"a", "b", "c"}
+std::vector<std::string> splitCommas(const std::string& v) {
+    std::vector<std::string> items;
+    for (std::size_t start = 0;;) {
+        const auto comma = v.find(',', start);
+        items.push_back(v.substr(start, comma - start));
+        if (comma == std::string::npos) return items;
+        start = comma + 1;
+    }
+}
+
 int usage(const char* why) {
     std::fprintf(
         stderr,
@@ -52,16 +63,9 @@ int main(int argc, char** argv) {
         } else if (a == "--out") {
             out = v;
         } else if (a == "--without") {
-            for (std::size_t start = 0;;) {
-                const auto comma = v.find(',', start);
-                without.push_back(v.substr(start, comma - start));
-                if (comma == std::string::npos) break;
-                start = comma + 1;
-            }
+            for (std::string& name : splitCommas(v)) without.push_back(std::move(name));
         } else if (a == "--hold") {
-            for (std::size_t start = 0;;) {
-                const auto comma = v.find(',', start);
-                const std::string item = v.substr(start, comma - start);
+            for (const std::string& item : splitCommas(v)) {
                 const auto eq = item.find('=');
                 if (eq == std::string::npos || eq == 0) return usage("--hold takes SHAPE=W,...");
                 const std::string w = item.substr(eq + 1);
@@ -70,8 +74,6 @@ int main(int argc, char** argv) {
                     return usage(
                         ("--hold: the weight of " + item.substr(0, eq) + " must be in [0, 1]").c_str());
                 hold.emplace_back(item.substr(0, eq), weight);
-                if (comma == std::string::npos) break;
-                start = comma + 1;
             }
         } else if (a == "--dtype") {
             dtype = v;
