@@ -41,7 +41,7 @@ ReplayFrame replayFrame(const PointMultiplier& multiplier, const SoftCachePolicy
             std::copy_n(s.full.data(), values, out);
             break;
         case CacheState::Blend:
-            for (std::size_t i = 0; i < values; ++i) out[i] = (1.0 - w) * s.pm[i] + w * s.full[i];
+            blendPoints(w, model.tolerance, c, s.pm.data(), s.full.data(), out, n);
             break;
     }
     row.pmMaxPointError = maxPointError(s.pm.data(), s.full.data(), n, c);

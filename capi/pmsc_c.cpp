@@ -350,6 +350,24 @@ pmsc_status pmsc_multiplier_reconstruct_points(const pmsc_multiplier* multiplier
     });
 }
 
+pmsc_status pmsc_multiplier_blend(const pmsc_multiplier* multiplier, double weight, const double* pm,
+                                  const double* full, double* out, size_t count) noexcept {
+    return guarded(__func__, [&] {
+        const pmsc::Model& model = modelOf(notNull(multiplier, "multiplier"));
+        require(weight >= 0 && weight <= 1, "weight " + std::to_string(weight) + " is not in [0, 1]");
+        const size_t c = size(model.channels);
+        require(count % c == 0,
+                "count " + std::to_string(count) + " is not a multiple of C = " + std::to_string(c));
+        if (count == 0) return;
+        notNull(pm, "pm");
+        notNull(full, "full");
+        notNull(out, "out");
+        if (out != pm) requireApart(pm, count, out, count, "pm", "out");
+        if (out != full) requireApart(full, count, out, count, "full", "out");
+        pmsc::blendPoints(weight, model.tolerance, model.channels, pm, full, out, pmsc::Index(count / c));
+    });
+}
+
 pmsc_status pmsc_blend(double weight, const double* pm, const double* full, double* out,
                        size_t count) noexcept {
     return guarded(__func__, [&] {
@@ -360,7 +378,6 @@ pmsc_status pmsc_blend(double weight, const double* pm, const double* full, doub
         notNull(out, "out");
         if (out != pm) requireApart(pm, count, out, count, "pm", "out");
         if (out != full) requireApart(full, count, out, count, "full", "out");
-        // The expression of nodes/Blender.cpp and app/Replay.cpp, compiled with the same flags.
         for (std::size_t i = 0; i < count; ++i) out[i] = (1.0 - weight) * pm[i] + weight * full[i];
     });
 }

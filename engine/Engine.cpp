@@ -343,7 +343,7 @@ std::optional<nodes::LocalBranch> Engine::Impl::Bodies::localBranchOf(Impl& impl
 
 std::optional<nodes::LocalCombiner> Engine::Impl::Bodies::featherOf(const Impl& impl) {
     if (!impl.regions) return std::nullopt;
-    return std::optional<nodes::LocalCombiner>(std::in_place, impl.model.channels);
+    return std::optional<nodes::LocalCombiner>(std::in_place, impl.model.channels, impl.model.tolerance);
 }
 
 /// One run's flow graph: its nodes (members, in the order they are built) and the bodies'

@@ -1,5 +1,7 @@
 #include "nodes/Blender.h"
 
+#include "pmsc/SoftCache.h"
+
 namespace pmsc::nodes {
 
 void Blender::operator()(FrameSlot& slot, Index chunkIndex) const {
@@ -7,7 +9,6 @@ void Blender::operator()(FrameSlot& slot, Index chunkIndex) const {
     if (slot.failed() || slot.decision.state != CacheState::Blend) return;
     const FramePlan::Chunk& chunk = plan_.chunks[static_cast<size_t>(chunkIndex)];
     const Index c = plan_.channels;
-    const Index n = chunk.outputCount * c;
     const double* pm;
     if (slot.pmValid) {
         pm = slot.pmValues.data() + chunk.firstOutput * c;
@@ -25,8 +26,9 @@ void Blender::operator()(FrameSlot& slot, Index chunkIndex) const {
         pm = tmp;
     }
     double* out = slot.values.data() + chunk.firstOutput * c;
-    // Element by element, the same expression whatever the chunking or thread count.
-    for (Index i = 0; i < n; ++i) out[i] = (1.0 - w) * pm[i] + w * out[i];
+    // Point by point, the same expression whatever the chunking or thread count; `out` holds the
+    // full values. The weight is raised where PM is over the tolerance (guardedWeight).
+    blendPoints(w, pm_.model().tolerance, c, pm, out, out, chunk.outputCount);
 }
 
 }  // namespace pmsc::nodes

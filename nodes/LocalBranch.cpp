@@ -1,5 +1,7 @@
 #include "nodes/LocalBranch.h"
 
+#include "pmsc/SoftCache.h"
+
 #include <algorithm>
 #include <cmath>
 #include <span>
@@ -65,7 +67,7 @@ void LocalCombiner::operator()(FrameSlot& slot) const {
         if (w >= 1) {
             for (Index ch = 0; ch < c; ++ch) out[ch] = full[ch];
         } else {
-            for (Index ch = 0; ch < c; ++ch) out[ch] = (1.0 - w) * out[ch] + w * full[ch];
+            blendPoints(w, tolerance_, c, out, full, out, 1);
         }
     }
 }

@@ -47,18 +47,22 @@ private:
 };
 
 /// The end of a locally failed-through frame, after every branch: the feathered blend
-/// out_p = (1 - w_p) PM_p + w_p full_p for every point with w_p > 0 (the same expression as the
-/// whole-frame Blender). Runs once per frame, in the task of the frame's last branch.
+/// out_p = (1 - w_p) PM_p + w_p full_p for every point with w_p > 0, w_p raised where PM_p is over
+/// the tolerance (pmsc::blendPoints, the same expression as the whole-frame Blender). Runs once per frame, in
+/// the task of the frame's last branch.
 class LocalCombiner {
 public:
     static constexpr const char* kName = "feather";
 
-    explicit LocalCombiner(Index channels) : channels_(channels) {}
+    /// @param tolerance the model's T: a point's weight is raised where its PM value is further
+    ///                  than T from its full value (pmsc::guardedWeight); 0: never
+    LocalCombiner(Index channels, double tolerance) : channels_(channels), tolerance_(tolerance) {}
 
     void operator()(FrameSlot& slot) const;
 
 private:
     Index channels_;
+    double tolerance_;
 };
 
 }  // namespace pmsc::nodes

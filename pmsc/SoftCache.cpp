@@ -1,5 +1,6 @@
 #include "pmsc/SoftCache.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -40,6 +41,31 @@ CacheDecision SoftCachePolicy::decide(double keyError) const {
     // Strictly inside (epsMin, epsMax), so epsMax > epsMin and the weight is in (0, 1).
     const double w = (keyError - epsMin_) / (epsMax_ - epsMin_);
     return {CacheState::Blend, w};
+}
+
+double guardedWeight(double weight, double pointError, double tolerance) {
+    if (!(tolerance > 0) || !(pointError > tolerance)) return weight;
+    // A hair under T, so that rounding in (1 - w') pm + w' full cannot carry the point over it.
+    constexpr double kUnder = 1.0 - 1e-9;
+    return std::max(weight, 1.0 - kUnder * tolerance / pointError);
+}
+
+double blendedError(double weight, double pmError, double tolerance) {
+    return (1.0 - guardedWeight(weight, pmError, tolerance)) * pmError;
+}
+
+void blendPoints(double weight, double tolerance, Index channels, const double* pm, const double* full,
+                 double* out, Index points) {
+    for (Index p = 0; p < points; ++p) {
+        const Index row = p * channels;
+        double squared = 0;
+        for (Index c = 0; c < channels; ++c) {
+            const double d = pm[row + c] - full[row + c];
+            squared += d * d;
+        }
+        const double w = guardedWeight(weight, std::sqrt(squared), tolerance);
+        for (Index c = 0; c < channels; ++c) out[row + c] = (1.0 - w) * pm[row + c] + w * full[row + c];
+    }
 }
 
 }  // namespace pmsc

@@ -11,7 +11,7 @@
  *     the key points' own error (the model's measure) pmsc_multiplier_key_error
  *     hit, blend or miss, and the weight of the full  pmsc_multiplier_decide       (section 5)
  *     all points, or chosen points                    pmsc_multiplier_reconstruct[_points]
- *     a blend of the PM result and the full result    pmsc_blend
+ *     a blend of the PM result and the full result    pmsc_multiplier_blend (as the engine blends)
  *
  * Errors. Every function returns a pmsc_status, except pmsc_api_version, pmsc_status_name,
  * pmsc_last_error and the *_free functions (which cannot fail). PMSC_OK is 0. Every function that
@@ -45,7 +45,7 @@
  * removes some. A program built against this header runs with a library of the same major
  * version and a minor version at least this one's (compare with pmsc_api_version()). */
 #define PMSC_C_API_VERSION_MAJOR 1
-#define PMSC_C_API_VERSION_MINOR 0
+#define PMSC_C_API_VERSION_MINOR 1
 #define PMSC_C_API_VERSION (PMSC_C_API_VERSION_MAJOR * 1000 + PMSC_C_API_VERSION_MINOR)
 
 #if defined(_WIN32)
@@ -224,11 +224,23 @@ PMSC_C_API pmsc_status pmsc_multiplier_reconstruct_points(const pmsc_multiplier*
                                                           const int64_t* points, size_t point_count,
                                                           double* out, size_t out_count) PMSC_C_NOEXCEPT;
 
-/** A blended frame, element by element: out[i] = (1.0 - weight) * pm[i] + weight * full[i], the
- *  expression `pmsc replay` and the engine use, computed inside the library so the result has
- *  their bits whatever compiler and flags the caller builds with (a compiler may fuse a multiply
- *  and an add into one instruction, which changes the last bit). out may be the same buffer as
- *  pm or full. weight must be in [0, 1].
+/** A blended frame or set of points as `pmsc replay` and the engine blend them: point by point,
+ *  out = (1 - w) * pm + w * full with w = max(weight, 1 - T / e), e the Euclidean distance (over
+ *  the point's C channels) between pm and full and T the model's tolerance, wherever e > T: a
+ *  blended point is never handed back further than T from its full value (a model without a
+ *  tolerance blends with weight alone). Computed inside the library so the result has their bits
+ *  whatever compiler and flags the caller builds with. out may be the same buffer as pm or full.
+ *  weight must be in [0, 1]. Since API 1.1.
+ *  @param[in] count  the number of values of each buffer: a multiple of C (N*C for a whole frame) */
+PMSC_C_API pmsc_status pmsc_multiplier_blend(const pmsc_multiplier* multiplier, double weight,
+                                             const double* pm, const double* full, double* out,
+                                             size_t count) PMSC_C_NOEXCEPT;
+
+/** A blend element by element: out[i] = (1.0 - weight) * pm[i] + weight * full[i], with no
+ *  tolerance (pmsc_multiplier_blend is what the engine does). Computed inside the library so the
+ *  result has the same bits whatever compiler and flags the caller builds with (a compiler may
+ *  fuse a multiply and an add into one instruction, which changes the last bit). out may be the
+ *  same buffer as pm or full. weight must be in [0, 1].
  *  @param[in] count  the number of values of each buffer (N*C for a whole frame) */
 PMSC_C_API pmsc_status pmsc_blend(double weight, const double* pm, const double* full, double* out,
                                   size_t count) PMSC_C_NOEXCEPT;

@@ -225,8 +225,8 @@ void measureAgainstFullPoses(const DemoRun& run, const FaceScene& scene, const M
             r.state = d.state;
             r.weight = d.weight;
             r.pmMax = maxPointError(rec.data(), full.data(), n);
-            // soft = (1 - w) pm + w full, so its error is (1 - w) times PM's, point by point.
-            r.softMax = (1.0 - d.weight) * r.pmMax;
+            // soft = (1 - w) pm + w full point by point, w raised where PM is over the tolerance.
+            r.softMax = blendedError(d.weight, r.pmMax, model.tolerance);
             const Index k = ++done;
             if (k % 32 == 0)
                 run.setup.progress("ground truth", static_cast<double>(k),

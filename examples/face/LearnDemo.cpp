@@ -80,7 +80,8 @@ private:
 };
 
 // The soft cache with thresholds [a, 2a]... or any [a, b]: hit/blend/miss and the soft-cached error
-// (1 - w) E (a blend mixes w of the full pose in; a miss is the full pose).
+// (a blend mixes w of the full pose in, more where PM is over the tolerance: blendedError; a miss is
+// the full pose).
 struct Outcome {
     Index hits = 0, blends = 0, misses = 0;
     Index overTolerance = 0;  // frames whose soft-cached error exceeds T
@@ -96,8 +97,9 @@ Outcome outcome(const std::vector<Score>& scores, double epsMin, double epsMax, 
         o.hits += d.state == CacheState::Hit;
         o.blends += d.state == CacheState::Blend;
         o.misses += d.state == CacheState::Miss;
-        o.softMax = std::max(o.softMax, (1 - d.weight) * s.pmMax);
-        o.overTolerance += tolerance > 0 && (1 - d.weight) * s.pmMax > tolerance;
+        const double soft = blendedError(d.weight, s.pmMax, tolerance);
+        o.softMax = std::max(o.softMax, soft);
+        o.overTolerance += tolerance > 0 && soft > tolerance;
         if (d.state == CacheState::Hit) o.hitMax = std::max(o.hitMax, s.pmMax);
     }
     return o;
@@ -124,7 +126,7 @@ std::pair<double, Index> bestThreshold(const std::vector<Score>& scores, double 
 }
 
 nlohmann::json summarize(const std::vector<Score>& scores, const Model& model, double percent) {
-    const Outcome o = outcome(scores, model.epsMin, model.epsMax);
+    const Outcome o = outcome(scores, model.epsMin, model.epsMax, model.tolerance);
     std::vector<double> e, big;
     double meanKey = 0;
     for (const Score& s : scores) {

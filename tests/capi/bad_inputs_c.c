@@ -235,6 +235,21 @@ static void check_blend(void) {
     EXPECT_STATUS(pmsc_blend(0.5, NULL, NULL, NULL, 0), PMSC_OK);
 }
 
+/* pmsc_multiplier_blend: the test model has no tolerance, so it is pmsc_blend point by point; a
+ * count that is not a multiple of C, a NULL runtime and a bad weight are refused. */
+static void check_multiplier_blend(const pmsc_multiplier* m, size_t c) {
+    double pm[6] = {1, 2, 3, 4, 5, 6}, full[6] = {6, 5, 4, 3, 2, 1}, out[6], plain[6];
+    if (c != 3) return;
+    EXPECT_STATUS(pmsc_multiplier_blend(m, 0.25, pm, full, out, 6), PMSC_OK);
+    EXPECT_STATUS(pmsc_blend(0.25, pm, full, plain, 6), PMSC_OK);
+    for (int i = 0; i < 6; ++i) EXPECT(out[i] == plain[i]);
+    EXPECT_STATUS(pmsc_multiplier_blend(m, 0.25, pm, full, out, 4), PMSC_ERROR_INVALID_ARGUMENT);
+    EXPECT_STATUS(pmsc_multiplier_blend(NULL, 0.25, pm, full, out, 6), PMSC_ERROR_INVALID_ARGUMENT);
+    EXPECT_STATUS(pmsc_multiplier_blend(m, 1.5, pm, full, out, 6), PMSC_ERROR_INVALID_ARGUMENT);
+    EXPECT_STATUS(pmsc_multiplier_blend(m, 0.5, NULL, full, out, 6), PMSC_ERROR_INVALID_ARGUMENT);
+    EXPECT_STATUS(pmsc_multiplier_blend(m, 0.5, NULL, NULL, NULL, 0), PMSC_OK);
+}
+
 /* Two threads share one runtime: each gets the serial results and its own messages. */
 typedef struct thread_job {
     const pmsc_multiplier* m;
@@ -305,6 +320,7 @@ int main(int argc, char** argv) {
         check_threads(m);
     }
     check_blend();
+    if (m != NULL) check_multiplier_blend(m, c);
     pmsc_multiplier_free(m);
     if (failures != 0)
         fprintf(stderr, "%d checks failed\n", failures);

@@ -4,7 +4,7 @@
  *
  * For every frame: the key points' recorded values, their projection, the key error, the
  * soft-cache decision and the reconstruction of every point; the output is the reconstruction for
- * a hit, the recorded frame for a miss and their blend (pmsc_blend) otherwise. Prints the state of
+ * a hit, the recorded frame for a miss and their blend (pmsc_multiplier_blend) otherwise. Prints the state of
  * each frame, one per line ("hit", "blend", "miss"). Exit code 0, or 1 with one line on stderr. */
 #include <pmsc/pmsc.h>
 
@@ -86,7 +86,7 @@ static pmsc_cache_state replay_frame(const pmsc_multiplier* multiplier, replay_b
             memcpy(b->out, recorded, values * sizeof(double));
             break;
         default:
-            CHECK(pmsc_blend(decision.weight, b->pm, recorded, b->out, values));
+            CHECK(pmsc_multiplier_blend(multiplier, decision.weight, b->pm, recorded, b->out, values));
             break;
     }
     return decision.state;

@@ -5,6 +5,7 @@
 #include "evaluators/synthetic/SyntheticSurface.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/NpyIO.h"
+#include "pmsc/SoftCache.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -218,8 +219,9 @@ TEST_F(Cli, ReplayReportHasEveryFieldAndTheOutputMatchesTheInput) {
         } else {
             ASSERT_EQ(state, "blend");
             EXPECT_NEAR(w, (key - model.epsMin) / (model.epsMax - model.epsMin), 1e-12);
+            // (1 - w) PM's error, w raised where PM is over the tolerance.
             EXPECT_NEAR(f.at("soft_max_point_error").get<double>(),
-                        (1 - w) * f.at("pm_max_point_error").get<double>(),
+                        pmsc::blendedError(w, f.at("pm_max_point_error").get<double>(), model.tolerance),
                         1e-6 * (1 + f.at("pm_max_point_error").get<double>()));
         }
         worstSoft = std::max(worstSoft, f.at("soft_max_point_error").get<double>());

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <stdexcept>
+#include <vector>
 
 using pmsc::CacheState;
 using pmsc::SoftCachePolicy;
@@ -87,4 +88,26 @@ TEST(SoftCache, AlwaysMissFailsThroughEveryErrorEvenZero) {
         EXPECT_EQ(d.state, pmsc::CacheState::Miss) << e;
         EXPECT_EQ(d.weight, 1.0) << e;
     }
+}
+
+TEST(SoftCache, ABlendedPointIsNeverHandedBackOverTheTolerance) {
+    // Two points of 3 channels: PM 0.5 away from the full value (under T = 1) and 4 away (over).
+    const std::vector<double> pm = {0.5, 0, 0, 4, 0, 0};
+    const std::vector<double> full(6, 0.0);
+    std::vector<double> out(6);
+    pmsc::blendPoints(0.25, 1.0, 3, pm.data(), full.data(), out.data(), 2);
+    EXPECT_DOUBLE_EQ(out[0], 0.75 * 0.5);  // under T: the frame's weight alone
+    EXPECT_LE(out[3], 1.0);                // over T: the weight raised to 1 - T / e
+    EXPECT_GT(out[3], 1.0 - 1e-6);         // and no further
+    EXPECT_DOUBLE_EQ(pmsc::guardedWeight(0.25, 4.0, 1.0), 1.0 - (1.0 - 1e-9) * 0.25);
+    EXPECT_EQ(pmsc::guardedWeight(0.9, 4.0, 1.0), 0.9);    // a weight already high enough stays
+    EXPECT_EQ(pmsc::guardedWeight(0.25, 4.0, 0.0), 0.25);  // no tolerance: the weight alone
+    EXPECT_DOUBLE_EQ(pmsc::blendedError(0.25, 4.0, 1.0), out[3]);
+    EXPECT_DOUBLE_EQ(pmsc::blendedError(0.25, 0.5, 1.0), out[0]);
+    // In place, into the full buffer (the engine's Blender) and into PM's (the feathered blend).
+    std::vector<double> inFull = full, inPm = pm;
+    pmsc::blendPoints(0.25, 1.0, 3, pm.data(), inFull.data(), inFull.data(), 2);
+    pmsc::blendPoints(0.25, 1.0, 3, inPm.data(), full.data(), inPm.data(), 2);
+    EXPECT_EQ(inFull, out);
+    EXPECT_EQ(inPm, out);
 }
