@@ -11,6 +11,10 @@ TrainingOptions defaultTrainingOptions() {
     // against 0.46%); every 4th frame saved 2 s more for a worst of 0.47%
     // (docs/local-fail-through.md, "Regions by default").
     options.regions.frameStride = 3;
+    // Decision: every model can learn (TrainingOptions::learnable): a few kilobytes of settings
+    // and held-out scores let `pmsc learn` grow M by the training's energy rule and calibrate
+    // with the training's evidence.
+    options.learnable = true;
     return options;
 }
 

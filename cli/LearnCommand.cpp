@@ -130,7 +130,8 @@ int runLearn(const std::vector<std::string>& args) {
             if (!(e > 0)) throw UsageError("--energy: must be in (0, 1], got " + v);
             options.energy = e;
         });
-    parser.option("--rank", "R", "rank the incremental state keeps (default: the model's)",
+    parser.option("--rank", "R",
+                  "rank the incremental state keeps (default: the model's, and up to 4 M during the update)",
                   [&](const std::string& v) { options.maxRank = parseIndex("--rank", v, 1); });
     parser.option("--calibration", "RULE",
                   "threshold, max or conformal (default: the rule the model was calibrated by)", rule);

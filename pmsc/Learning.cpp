@@ -99,7 +99,8 @@ struct SubspaceUpdate {
     UpdateSpan span;             ///< the new frames in span [U J] of `before` and the update
     IncrementalSubspace state;   ///< `before` updated with the new frames
     IncrementalSvdOptions svdOptions;
-    double energy = 0;  ///< the energy rule M was chosen by (0: M fixed)
+    double energy = 0;     ///< the energy rule M was chosen by (0: M fixed)
+    Index storedRank = 0;  ///< directions the learned model's state keeps (at least its M)
     Index basisSize = 0;
     Eigen::MatrixXd basis;
 };
@@ -144,9 +145,17 @@ void updateState(const Model& model, const Eigen::Map<const Eigen::MatrixXd>& fr
             "are represented by the model's " +
             std::to_string(model.basisSize()) + " basis vectors only");
     }
-    u.svdOptions.maxRank = options.maxRank > 0
-                               ? options.maxRank
-                               : (model.learning ? model.learning->maxRank : model.basisSize());
+    // Decision: without --rank the update keeps up to kGrowth x M directions, and the state stored
+    // afterwards keeps the model's rank (or the new M, if larger). Why: the energy rule picks M
+    // within the state's directions, so a state of the model's rank (M, by default) could not take
+    // in what the new frames add; on a take whose second half moves four controls the first half
+    // left still, M stayed 24 and the point error p99.5 came out 1.6x retraining's, where 4 M lets
+    // M grow to 39 (docs/learning-and-calibration.md). The larger state lives only during the update.
+    constexpr Index kGrowth = 4;
+    u.storedRank = options.maxRank > 0 ? options.maxRank
+                                       : (model.learning ? model.learning->maxRank : model.basisSize());
+    u.svdOptions.maxRank =
+        options.maxRank > 0 ? options.maxRank : std::max(u.storedRank, kGrowth * model.basisSize());
     const Index fixedM = options.basis > 0 ? options.basis : model.basisSize();
     if (u.svdOptions.maxRank < fixedM) {
         throw std::invalid_argument("learn: rank " + std::to_string(u.svdOptions.maxRank) +
@@ -154,7 +163,6 @@ void updateState(const Model& model, const Eigen::Map<const Eigen::MatrixXd>& fr
     }
     u.span = spanOfUpdate(u.before, fresh, u.svdOptions);
     u.state = updateInSpan(u.before, u.span, fresh, allColumns(fresh.cols()), u.svdOptions);
-    report.rankAfter = u.state.rank();
     const Index wantedM = chooseLearnedBasis(model, options, report, u);
     report.basisEnergy = u.energy;
     report.tailNorm = u.state.tailNorm();
@@ -165,6 +173,7 @@ void updateState(const Model& model, const Eigen::Map<const Eigen::MatrixXd>& fr
                                   ": the state holds only that many directions");
     }
     u.basis = u.state.u.leftCols(u.basisSize);
+    report.rankAfter = std::min(u.state.rank(), std::max(u.storedRank, u.basisSize));  // what the model keeps
 }
 
 /// Step 2 (keys): the same selector, on the rank-r surrogate U_r diag(sigma) of every frame seen.
@@ -403,12 +412,13 @@ CalibrationRecord learnThresholds(const Model& model, const SubspaceUpdate& u,
 /// Step 4: what the next update needs: the state's directions after the basis.
 LearningState nextLearningState(const LearningState& settings, const SubspaceUpdate& u) {
     LearningState next = settings;
-    next.maxRank = u.svdOptions.maxRank;
+    next.maxRank = std::max(u.storedRank, u.basisSize);
     next.basisEnergy = u.energy;
-    const Index extra = u.state.rank() - u.basisSize;
-    next.extraBasis = u.state.u.rightCols(extra);
-    next.extraSigma = u.state.sigma.tail(extra);
-    next.discardedEnergy = u.state.discardedEnergy;
+    const Index extra = std::min(u.state.rank(), next.maxRank) - u.basisSize;
+    next.extraBasis = u.state.u.middleCols(u.basisSize, extra);
+    next.extraSigma = u.state.sigma.segment(u.basisSize, extra);
+    const Index dropped = u.state.rank() - u.basisSize - extra;  // beyond the stored rank
+    next.discardedEnergy = u.state.discardedEnergy + u.state.sigma.tail(dropped).squaredNorm();
     next.updates = settings.updates + 1;
     return next;
 }

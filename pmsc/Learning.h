@@ -24,7 +24,9 @@ struct LearnOptions {
     /// training's rule, applied to the updated singular values and the exact total energy);
     /// 0 = the model's stored rule (LearningState::basisEnergy; none stored: M kept).
     double energy = 0;
-    Index maxRank = 0;  ///< rank r kept by the state; 0 = the model's (LearningState::maxRank, else M)
+    /// Rank r of the state, during the update and kept after it; 0 = the model's
+    /// (LearningState::maxRank, else M) kept, and up to 4 M during the update so M can grow.
+    Index maxRank = 0;
     /// Default: the model's CalibrationRecord's, else Threshold for a predicted key error (the rule of
     /// its leave-one-out part) and MaxRatio for the others.
     std::optional<CalibrationRule> rule;
@@ -38,7 +40,7 @@ struct LearnOptions {
 /// What learn() did.
 struct LearnReport {
     Index newFrames = 0;
-    Index rankBefore = 0, rankAfter = 0;
+    Index rankBefore = 0, rankAfter = 0;  ///< directions of the model's state before and after
     Index basisBefore = 0, basisAfter = 0;
     double basisEnergy = 0;                 ///< the energy rule M was chosen by; 0: M fixed
     Index keysKept = 0;                     ///< keys of the old model that are keys again

@@ -163,6 +163,7 @@ Model trainSharedChannels(const FrameSet& frames, const TrainingOptions& options
         }
     }
     TrainingOptions one = options;
+    one.learnable = false;  // `pmsc learn` does not take shared-channel models
     one.sharedChannels = false;
     if (options.keyErrorNorm && *options.keyErrorNorm != KeyErrorNorm::Rms)
         throw InputError(std::string("train: the ") + toString(*options.keyErrorNorm) +
@@ -561,7 +562,7 @@ void Trainer::thresholds() {
 void Trainer::learningState() {
     LearningState learning;
     learning.maxRank = std::max(options.learnRank, m);
-    if (options.learnRank < m) {
+    if (options.learnRank > 0 && options.learnRank < m) {
         report.warnings.push_back("learn rank " + std::to_string(options.learnRank) +
                                   " raised to M = " + std::to_string(m));
     }
@@ -660,7 +661,7 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
     }
     t.projector();
     t.thresholds();
-    if (options.learnRank > 0) t.learningState();
+    if (options.learnRank > 0 || options.learnable) t.learningState();
 
     // --- The (N*C)-row arrays go to rank 0, which writes the model.
     t.model.basis = gatherRowsTo(comm, t.basis, t.rows, 0);

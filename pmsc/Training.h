@@ -70,6 +70,13 @@ struct TrainingOptions {
     /// scores), so updates lose only the energy beyond rank r. 0 = a plain model.
     /// @pre 0 or >= the final M (it is raised to M with a warning otherwise).
     Index learnRank = 0;
+    /// Store what `pmsc learn` needs even with learnRank 0: the key-selection settings, the rule M
+    /// was chosen by and the held-out calibration scores (section LEARNING without extra vectors:
+    /// a few kilobytes, learn rank M). Why: without them `pmsc learn` keeps M fixed and calibrates
+    /// from the new frames alone, and on a take whose second half moves controls the first half
+    /// left still its point error p99.5 came out 1.6x retraining's (docs/learning-and-calibration.md).
+    /// `pmsc train`'s default (app::defaultTrainingOptions); ignored with sharedChannels.
+    bool learnable = false;
 
     // --- channels ---
     /// The channels share one basis over the points (Model::sharedChannels): training sees each
