@@ -110,15 +110,38 @@ public:
         row.frame = frame;
         std::vector<double> coords(size_t(model_.coordCount()));
         multiplier_.project(keyValues, coords.data());
-        row.keyRms = multiplier_.keyError(keyValues, coords.data());
+        PredictedParts parts;
+        row.keyRms = multiplier_.keyError(keyValues, coords.data(), &parts);
         row.decision = policy_.decide(row.keyRms);
-        if (row.decision.state == CacheState::Hit) {
+        // As the error monitor: a hit one part alone certifies is checked at the region keys
+        // (kConfirmedShare), and computed whole when the check fails.
+        const bool confirm = row.decision.state == CacheState::Hit && regions_ != nullptr &&
+                             !regions_->regionKeyPoints().empty() &&
+                             model_.keyErrorNorm == KeyErrorNorm::Predicted &&
+                             partsDisagree(parts, model_.partEps);
+        if (row.decision.state == CacheState::Hit && !confirm) {
             row.done = true;
             return row;
         }
         const Index given = static_cast<Index>(known_.answers().size());
         for (Index pass = 1;; ++pass) {
-            std::vector<Index> needs = nextNeeds(frame, keyValues, sources);
+            std::vector<Index> needs;
+            if (confirm && row.decision.state == CacheState::Hit && regionKeysKnown(sources)) {
+                const auto& regionKeys = regions_->regionKeyPoints();
+                std::vector<double> values(regionKeys.size() * size_t(model_.channels));
+                known_.read(sources, frame, regionKeys, values.data());
+                if (multiplier_.largestErrorAt(coords.data(), regionKeys, values.data()) <=
+                    kConfirmedShare * model_.tolerance) {
+                    row.done = true;
+                    break;
+                }
+                row.decision = CacheDecision{CacheState::Blend, 0.0};
+                needs = allUnknown(sources);  // the whole frame, as the error monitor
+            } else if (confirm && row.decision.state != CacheState::Hit) {
+                needs = allUnknown(sources);
+            } else {
+                needs = nextNeeds(frame, keyValues, sources);
+            }
             if (needs.empty()) {
                 row.done = true;
                 break;
@@ -149,15 +172,16 @@ private:
         return unknown(s, all);
     }
 
-    /// A frame that did not hit: its region keys first, then the points its failing regions
-    /// evaluate, or every point when it fails through whole.
-    std::vector<Index> nextNeeds(Index frame, const double* keyValues, const Sources& s) const {
-        if (regions_ == nullptr) return allUnknown(s);
+    /// The region keys not yet known, ascending.
+    std::vector<Index> unknownRegionKeys(const Sources& s) const {
         std::vector<Index> regionKeys = regions_->regionKeyPoints();
         std::sort(regionKeys.begin(), regionKeys.end());
-        std::vector<Index> missing = unknown(s, regionKeys);
-        if (!missing.empty()) return missing;
+        return unknown(s, regionKeys);
+    }
+    bool regionKeysKnown(const Sources& s) const { return unknownRegionKeys(s).empty(); }
 
+    /// Each region's weight of the full result, from the keys and the (known) region keys.
+    std::vector<double> regionWeights(Index frame, const double* keyValues, const Sources& s) const {
         const auto& extra = regions_->regionKeyPoints();
         const Index c = model_.channels, r = regions_->regionCount();
         std::vector<double> extraValues(extra.size() * size_t(c));
@@ -170,6 +194,16 @@ private:
                                   coords.data() + regions_->coordsOffset(i));
             weights[size_t(i)] = regions_->decide(i, e).weight;
         }
+        return weights;
+    }
+
+    /// A frame that did not hit (or whose hit is checked at the region keys): its region keys first, then the
+    /// points its failing regions evaluate, or every point when it fails through whole.
+    std::vector<Index> nextNeeds(Index frame, const double* keyValues, const Sources& s) const {
+        if (regions_ == nullptr) return allUnknown(s);
+        std::vector<Index> missing = unknownRegionKeys(s);
+        if (!missing.empty()) return missing;
+        const std::vector<double> weights = regionWeights(frame, keyValues, s);
         std::vector<double> pointWeights(size_t(model_.points));
         regions_->pointWeights(weights, pointWeights.data());
         std::vector<Index> local(size_t(model_.points));

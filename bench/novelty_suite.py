@@ -16,8 +16,11 @@ and the share of points evaluated in full (0 for a hit, 1 for a whole miss).
     /usr/bin/python3 bench/novelty_suite.py --data ICT-FaceKit/FaceXModel --bin build/bin \\
         --work /tmp/novelty [--sets A,B,C] [--variant '--energy 0.99999'] [--variant '--regions 0']
 
-Needs numpy (the system python3). Exits 2 with one line on bad arguments or a failed command, and 1
-when any frame of any set comes back over T (so it can gate a release).
+`--no-variants` runs the defaults alone (the ctest `novelty.defaults`, label novelty).
+
+Needs numpy (the system python3). Exits 2 with one line on bad arguments or a failed command, 77
+when the face folder is missing and CI is not set (a skip; under CI it is exit 2), and 1 when any
+frame of any set comes back over T (so it can gate a release).
 """
 import argparse
 import itertools
@@ -26,12 +29,15 @@ import os
 import subprocess
 import sys
 
-# The sets: four controls training leaves still, and the seed of the training take. A is the set the
-# defaults were looked at with; B and C are kept apart from it, to check them.
+# The sets: four controls training leaves still, and the seed of the training take. A, B and C are
+# the sets the defaults were chosen with (pmsc::kConfirmedShare among them); D and E were made after
+# the choice and kept apart, to check it.
 SETS = {
     "A": (1, ["mouthPucker", "cheekPuff_L", "jawLeft", "eyeWide_R"]),
     "B": (5, ["mouthFunnel", "jawForward", "noseSneer_L", "mouthRollLower"]),
     "C": (9, ["mouthSmile_L", "browDown_R", "mouthShrugUpper", "jawRight"]),
+    "D": (13, ["mouthRollUpper", "cheekSquint_L", "noseSneer_R", "mouthStretch_L"]),
+    "E": (17, ["browOuterUp_L", "mouthPress_R", "eyeSquint_R", "mouthLowerDown_L"]),
 }
 AMPLITUDES = (0.33, 0.67, 1.0)
 
@@ -99,10 +105,11 @@ def main():
     p.add_argument("--data", required=True, help="ICT-FaceKit's FaceXModel folder")
     p.add_argument("--bin", default="build/bin", help="folder of pmsc and pmsc_ict_frames")
     p.add_argument("--work", required=True, help="folder for frames, models and reports (reused)")
-    p.add_argument("--sets", default="A,B,C", help="sets to run, of " + ",".join(SETS))
+    p.add_argument("--sets", default=",".join(SETS), help="sets to run, of " + ",".join(SETS))
     p.add_argument("--variant", action="append", default=None,
                    help="pmsc train options of a model beside the defaults (repeatable; "
                         "default: '--energy 0.99999')")
+    p.add_argument("--no-variants", action="store_true", help="the defaults alone")
     p.add_argument("--tolerance-percent", type=float, default=1.0, help="T in %% of the head diagonal")
     args = p.parse_args()
     try:
@@ -114,12 +121,15 @@ def main():
         if s not in SETS:
             fail("no set '%s' (sets: %s)" % (s, ",".join(SETS)))
     if not os.path.isdir(args.data):
+        if os.environ.get("CI", "") in ("", "false", "0"):
+            print("novelty_suite: no folder %s: skipped" % args.data, file=sys.stderr)
+            sys.exit(77)
         fail("no folder " + args.data)
     os.makedirs(args.work, exist_ok=True)
-    variants = [""] + (args.variant if args.variant is not None else ["--energy 0.99999"])
+    variants = [""] if args.no_variants else [""] + (args.variant if args.variant is not None else ["--energy 0.99999"])
     tolerance = None
-    print("| set | pmsc train options | M | validation: hits, over T, worst | novel: hits, over T (hits / local), "
-          "worst, points evaluated |")
+    print("| set | pmsc train options | M | validation: hits, over T, worst, points evaluated | novel: hits, over T "
+          "(hits / local), worst, points evaluated |")
     print("|---|---|---|---|---|")
     any_over = False
     for name in sets:
@@ -142,10 +152,10 @@ def main():
                 row[kind] = summarise(report, tolerance)
                 any_over = any_over or row[kind]["over"] > 0
             va, no = row["validation"], row["novel"]
-            print("| %s | %s | %s | %d of %d, %d over T, %.3f T | %d of %d, %d over T (%d / %d), %.3f T, %.1f%% |" % (
-                name, variant or "(defaults)", basis, va["hits"], va["frames"], va["over"], va["worst"], no["hits"],
-                no["frames"], no["over"], no["over_hits"], no["over_local"], no["worst"], 100 * no["evaluated"]),
-                flush=True)
+            print("| %s | %s | %s | %d of %d, %d over T, %.3f T, %.1f%% | %d of %d, %d over T (%d / %d), %.3f T, "
+                  "%.1f%% |" % (name, variant or "(defaults)", basis, va["hits"], va["frames"], va["over"], va["worst"],
+                                100 * va["evaluated"], no["hits"], no["frames"], no["over"], no["over_hits"],
+                                no["over_local"], no["worst"], 100 * no["evaluated"]), flush=True)
     return 1 if any_over else 0
 
 

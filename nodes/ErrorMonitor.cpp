@@ -14,9 +14,17 @@ Route ErrorMonitor::operator()(FrameSlot& slot) const {
         slot.pointsEvaluated = Index(slot.values.size()) / pm_.model().channels;
         return Route::FailThrough;
     }
-    slot.keyError = pm_.keyError(slot.keyValues.data(), slot.coords.data());
+    PredictedParts parts;
+    slot.keyError = pm_.keyError(slot.keyValues.data(), slot.coords.data(), &parts);
     slot.decision = policy_.decide(slot.keyError);
-    if (slot.decision.state == CacheState::Hit) {
+    // A hit that one part of the predicted error certifies and the other does not is checked at the
+    // region keys (partsDisagree, kConfirmedShare): PM's largest error there, against their
+    // computed values.
+    const Model& model = pm_.model();
+    const bool confirm = slot.decision.state == CacheState::Hit && regions_ &&
+                         !regions_->regionKeyPoints().empty() &&
+                         model.keyErrorNorm == KeyErrorNorm::Predicted && partsDisagree(parts, model.partEps);
+    if (slot.decision.state == CacheState::Hit && !confirm) {
         slot.pointsEvaluated = 0;
         return Route::Reconstruct;
     }
@@ -34,6 +42,20 @@ Route ErrorMonitor::operator()(FrameSlot& slot) const {
                 slot.fail(kName, "evaluator '" + evaluator_->name() + "' (region keys): unknown exception");
                 return Route::Done;
             }
+        }
+        if (confirm) {
+            const double largest =
+                pm_.largestErrorAt(slot.coords.data(), regionKeys, slot.regionKeyValues.data());
+            if (largest <= kConfirmedShare * model.tolerance) {
+                slot.pointsEvaluated = 0;
+                return Route::Reconstruct;
+            }
+            // The check saw PM off at a computed point: the whole frame is computed and blended
+            // with weight 0, so every point is PM or, where PM is over T, moved to within T of
+            // the full value (pmsc::blendPoints). The regions' own tests are what missed it.
+            slot.decision = CacheDecision{CacheState::Blend, 0.0};
+            slot.pointsEvaluated = Index(slot.values.size()) / model.channels;
+            return keepPm_ ? Route::Reconstruct : Route::FailThrough;
         }
         const Index r = regions_->regionCount();
         for (Index i = 0; i < r; ++i) {

@@ -61,6 +61,21 @@ struct PredictedParts {
 /// for a zero error, infinite otherwise). NaN in either part gives NaN (a miss).
 double predictedPointError(PredictedParts error, PredictedParts eps, double tolerance);
 
+/// KeyErrorNorm::Predicted: exactly one of the two parts `error` is at or under its threshold in
+/// `eps`. Such a hit rests on one measure while the other says the frame is off what training
+/// saw; on the novelty suite (docs/calibration.md) every hit over the tolerance at the defaults was
+/// one (each part was fooled on one set of controls), so a model with regions checks these hits at
+/// its region keys (kConfirmedShare, nodes/ErrorMonitor.cpp). False for NaN parts.
+bool partsDisagree(PredictedParts error, PredictedParts eps);
+
+/// A hit whose parts disagree stays a hit when PM's largest error at the region keys (a few points
+/// in every region, computed for real) is at most this share of the tolerance; otherwise it is a
+/// blend of weight 0 (PM, and the full value wherever PM is over the tolerance). Why 0.7: at the
+/// region keys the largest error of ordinary frames was up to 2.5 times below the frame's
+/// (novelty suite, validation frames), and the sets' hits over T had region-key errors over 0.7 T
+/// (0.8 let 6 of set C's through); measured on a set kept apart (docs/calibration.md).
+constexpr double kConfirmedShare = 0.7;
+
 /// "rms" / "largest" / "loo" / "predicted"
 const char* toString(KeyErrorNorm norm);
 /// What the command line prints for it: "key RMS error", "largest key error", "largest

@@ -62,6 +62,11 @@ double predictedPointError(PredictedParts error, PredictedParts eps, double tole
     return tolerance * std::min(over(error.rms, eps.rms), over(error.loo, eps.loo));
 }
 
+bool partsDisagree(PredictedParts error, PredictedParts eps) {
+    if (std::isnan(error.rms) || std::isnan(error.loo)) return false;
+    return (error.rms <= eps.rms) != (error.loo <= eps.loo);
+}
+
 double Model::energyCaptured() const {
     // An all-zero training set has nothing to capture; reporting 1 keeps "fraction captured"
     // meaningful (nothing was lost) instead of dividing by zero.

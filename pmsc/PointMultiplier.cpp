@@ -185,7 +185,7 @@ void PointMultiplier::project(const double* keyValues, double* coords) const {
     b -= projectedKeyMean_;
 }
 
-double PointMultiplier::keyError(const double* keyValues, const double* coords) const {
+double PointMultiplier::keyError(const double* keyValues, const double* coords, PredictedParts* parts) const {
     const Index kc = keyMean_.size();
     const Index m = model_.basisSize();
     const Index keys = model_.keyCount();
@@ -259,6 +259,7 @@ double PointMultiplier::keyError(const double* keyValues, const double* coords) 
         case KeyErrorNorm::Rms:
             return rms;
         case KeyErrorNorm::Predicted:
+            if (parts) *parts = {rms, std::sqrt(largest)};
             return predictedPointError({rms, std::sqrt(largest)}, model_.partEps, model_.tolerance);
         case KeyErrorNorm::Largest:
         case KeyErrorNorm::LeaveOneOut:
@@ -295,6 +296,25 @@ void PointMultiplier::reconstructRange(const double* coords, Index first, Index 
     Eigen::Map<Eigen::VectorXd> o(out, count * c);
     o = model_.mean.segment(first * c, count * c);
     o.noalias() += model_.basis.middleRows(first * c, count * c) * b;
+}
+
+double PointMultiplier::largestErrorAt(const double* coords, std::span<const Index> points,
+                                       const double* values) const {
+    const Index c = model_.channels;
+    thread_local std::vector<double> rec;
+    rec.resize(points.size() * static_cast<size_t>(c));
+    reconstructPoints(coords, points, rec.data());
+    double largest = 0;
+    for (size_t i = 0; i < points.size(); ++i) {
+        double squared = 0;
+        for (Index ch = 0; ch < c; ++ch) {
+            const double d = rec[i * size_t(c) + size_t(ch)] - values[i * size_t(c) + size_t(ch)];
+            squared += d * d;
+        }
+        if (!(squared <= largest * largest)) largest = std::sqrt(squared);  // NaN wins
+        if (std::isnan(largest)) return largest;
+    }
+    return largest;
 }
 
 void PointMultiplier::reconstructPoints(const double* coords, std::span<const Index> points,

@@ -40,14 +40,21 @@ public:
     /// the Euclidean norm (over channels) of each key's residual k - (mean_K + B_K b), each key row
     /// first divided by 1 - its leverage for KeyErrorNorm::LeaveOneOut; for KeyErrorNorm::Predicted
     /// both the RMS and the leave-one-out error, combined by predictedPointError. Data units.
-    /// Returns NaN if any key value is not finite.
-    double keyError(const double* keyValues, const double* coords) const;
+    /// Returns NaN if any key value is not finite. `parts`, when given and the model's key error is
+    /// KeyErrorNorm::Predicted, gets the two raw parts (the key RMS and the largest leave-one-out
+    /// key error) the error was combined from (partsDisagree tells whether both certify).
+    double keyError(const double* keyValues, const double* coords, PredictedParts* parts = nullptr) const;
 
     /// All N points: out = mean + B b (N*C doubles).
     void reconstruct(const double* coords, double* out) const;
 
     /// Only the given points (a query by point subset): out[i*C + c].
     void reconstructPoints(const double* coords, std::span<const Index> points, double* out) const;
+
+    /// The largest Euclidean point error (over channels) of the reconstruction at `points` against
+    /// their computed `values` (points.size()*C): a direct measure of PM's error where the calculation
+    /// ran. NaN if a value is not finite.
+    double largestErrorAt(const double* coords, std::span<const Index> points, const double* values) const;
 
     /// Points [first, first+count) into out (count*C doubles): one chunk.
     void reconstructRange(const double* coords, Index first, Index count, double* out) const;

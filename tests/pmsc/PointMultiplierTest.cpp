@@ -191,7 +191,17 @@ TEST(PointMultiplier, PredictedKeyErrorIsTheToleranceTimesTheSmallerPartOverItsT
         const double rmsOver = eps.rms > 0 ? rms / eps.rms : std::numeric_limits<double>::infinity();
         const double expected = 0.4 * std::min(rmsOver, largestLoo / eps.loo);
         EXPECT_NEAR(pm.keyError(k.data(), coords.data()), expected, 1e-10 * expected);
+        pmsc::PredictedParts parts;
+        pm.keyError(k.data(), coords.data(), &parts);  // the raw parts it was combined from
+        EXPECT_NEAR(parts.rms, rms, 1e-12 * rms);
+        EXPECT_NEAR(parts.loo, largestLoo, 1e-12 * largestLoo);
     }
+    // Disagreeing parts: exactly one at or under its threshold.
+    EXPECT_TRUE(pmsc::partsDisagree({1, 3}, {2, 2}));
+    EXPECT_TRUE(pmsc::partsDisagree({3, 2}, {2, 2}));
+    EXPECT_FALSE(pmsc::partsDisagree({1, 1}, {2, 2}));
+    EXPECT_FALSE(pmsc::partsDisagree({3, 3}, {2, 2}));
+    EXPECT_FALSE(pmsc::partsDisagree({std::nan(""), 1}, {2, 2}));
     EXPECT_NEAR(pmsc::predictedPointError({rms, largestLoo}, {rms, largestLoo / 10}, 0.4), 0.4, 1e-15)
         << "a frame at its RMS part's threshold is predicted at the tolerance";
     EXPECT_EQ(pmsc::predictedPointError({0, 0}, {0, 0}, 0.4), 0) << "no error: certified by any threshold";
@@ -259,6 +269,22 @@ TEST(PointMultiplier, PointsAndRangeAgreeWithFullReconstruction) {
     for (int i = 0; i < 21; ++i) EXPECT_NEAR(chunk[i], all[60 + i], 1e-13);
     // Against the definition mean + B b.
     EXPECT_LT((all - (model.mean + model.basis * coords)).cwiseAbs().maxCoeff(), 1e-12);
+}
+
+TEST(PointMultiplier, LargestErrorAtPointsIsTheLargestEuclideanErrorOfTheirReconstruction) {
+    const pmsc::Model model = makeModel(60, 3, 5, {2, 30, 58});
+    const pmsc::PointMultiplier pm(model);
+    const Eigen::VectorXd coords = pmsc::test::gaussian(5, 1, 31).col(0);
+    const std::vector<pmsc::Index> points{4, 11, 40};
+    std::vector<double> values(9);
+    pm.reconstructPoints(coords.data(), points, values.data());
+    EXPECT_EQ(pm.largestErrorAt(coords.data(), points, values.data()), 0.0);
+    values[3] += 3;  // point 11 off by (3, 4, 0): error 5
+    values[4] += 4;
+    values[7] += 1;  // point 40 off by 1
+    EXPECT_NEAR(pm.largestErrorAt(coords.data(), points, values.data()), 5.0, 1e-12);
+    values[8] = std::nan("");
+    EXPECT_TRUE(std::isnan(pm.largestErrorAt(coords.data(), points, values.data())));
 }
 
 TEST(PointMultiplier, UnderdeterminedKeysGiveMinimumNormCoordinates) {
