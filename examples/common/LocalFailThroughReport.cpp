@@ -47,10 +47,11 @@ public:
         }
         maxError.push_back(worst);
         states.push_back(r.state);
+        weights.push_back(r.weight);
         local.push_back(r.local);
         fraction.push_back(double(r.pointsEvaluated) / double(n_));
     }
-    std::vector<double> maxError, fraction;
+    std::vector<double> maxError, fraction, weights;
     std::vector<CacheState> states;
     std::vector<bool> local;
     double err2 = 0, ref2 = 0;  // over every point and channel of every frame
@@ -91,6 +92,8 @@ struct Way {
 struct FrameTotals {
     double worst = 0, fractionAll = 0, fractionNonHit = 0;
     Index nonHit = 0, local = 0, hits = 0, over = 0;
+    /// Hits the region-key check refused (nodes/ErrorMonitor.cpp): blends of weight 0, computed whole.
+    Index refused = 0;
 };
 
 /// Sums the sink's per-frame records: largest error, frames over `limit`, states, fractions evaluated.
@@ -107,6 +110,7 @@ FrameTotals sumFrames(const ErrorSink& sink, double limit) {
             ++t.hits;
         }
         t.local += sink.local[i];
+        t.refused += sink.states[i] == CacheState::Blend && sink.weights[i] == 0 && !sink.local[i];
     }
     return t;
 }
@@ -142,6 +146,7 @@ nlohmann::json errorsOneWay(const Model& model, const PointEvaluator& evaluator,
         j["non_hit_frames"] = t.nonHit;
         j["local_fail_through"] = engine.localFailThrough();
         w["local_frames"] = t.local;
+        w["refused_hits"] = t.refused;
         const engine::RunStats& s = engine.lastStats();
         nlohmann::json regions = nlohmann::json::array();
         for (const auto& r : s.regions) regions.push_back({r.hits, r.blends, r.misses});

@@ -131,7 +131,11 @@ TEST(CornellDemoQuick, LocalChangeMissesAsAWholeFrameIsRoutedLocallyAndStaysUnde
     EXPECT_TRUE(c.at("local_fail_through").get<bool>());
     const nlohmann::json& local = c.at("local");
     const nlohmann::json& whole = c.at("whole_frame");
-    EXPECT_EQ(local.at("local_frames").get<int>(), nonHit) << "a frame failed through whole";
+    // Every frame that missed as a whole went local; a hit the region-key check refused is
+    // computed whole by design (nodes/ErrorMonitor.cpp).
+    EXPECT_EQ(local.at("local_frames").get<int>() + local.at("refused_hits").get<int>(), nonHit)
+        << "a frame failed through whole";
+    EXPECT_GE(local.at("local_frames").get<int>(), 1);
     EXPECT_GT(local.at("points_evaluated_fraction_non_hit_mean").get<double>(), 0);
     EXPECT_LT(local.at("points_evaluated_fraction_non_hit_mean").get<double>(), 0.6);
     EXPECT_DOUBLE_EQ(whole.at("points_evaluated_fraction_non_hit_mean").get<double>(), 1.0);
