@@ -350,20 +350,30 @@ pmsc_status pmsc_multiplier_reconstruct_points(const pmsc_multiplier* multiplier
     });
 }
 
+namespace {
+/// A blend's checks: the weight in [0, 1], and for count > 0 three buffers, out apart from pm and
+/// full unless it is one of them. False when there is nothing to blend (count 0).
+bool blendBuffersUsable(double weight, const double* pm, const double* full, const double* out,
+                        size_t count) {
+    require(weight >= 0 && weight <= 1, "weight " + std::to_string(weight) + " is not in [0, 1]");
+    if (count == 0) return false;
+    notNull(pm, "pm");
+    notNull(full, "full");
+    notNull(out, "out");
+    if (out != pm) requireApart(pm, count, out, count, "pm", "out");
+    if (out != full) requireApart(full, count, out, count, "full", "out");
+    return true;
+}
+}  // namespace
+
 pmsc_status pmsc_multiplier_blend(const pmsc_multiplier* multiplier, double weight, const double* pm,
                                   const double* full, double* out, size_t count) noexcept {
     return guarded(__func__, [&] {
         const pmsc::Model& model = modelOf(notNull(multiplier, "multiplier"));
-        require(weight >= 0 && weight <= 1, "weight " + std::to_string(weight) + " is not in [0, 1]");
         const size_t c = size(model.channels);
         require(count % c == 0,
                 "count " + std::to_string(count) + " is not a multiple of C = " + std::to_string(c));
-        if (count == 0) return;
-        notNull(pm, "pm");
-        notNull(full, "full");
-        notNull(out, "out");
-        if (out != pm) requireApart(pm, count, out, count, "pm", "out");
-        if (out != full) requireApart(full, count, out, count, "full", "out");
+        if (!blendBuffersUsable(weight, pm, full, out, count)) return;
         pmsc::blendPoints(weight, model.tolerance, model.channels, pm, full, out, pmsc::Index(count / c));
     });
 }
@@ -371,13 +381,7 @@ pmsc_status pmsc_multiplier_blend(const pmsc_multiplier* multiplier, double weig
 pmsc_status pmsc_blend(double weight, const double* pm, const double* full, double* out,
                        size_t count) noexcept {
     return guarded(__func__, [&] {
-        require(weight >= 0 && weight <= 1, "weight " + std::to_string(weight) + " is not in [0, 1]");
-        if (count == 0) return;
-        notNull(pm, "pm");
-        notNull(full, "full");
-        notNull(out, "out");
-        if (out != pm) requireApart(pm, count, out, count, "pm", "out");
-        if (out != full) requireApart(full, count, out, count, "full", "out");
+        if (!blendBuffersUsable(weight, pm, full, out, count)) return;
         for (std::size_t i = 0; i < count; ++i) out[i] = (1.0 - weight) * pm[i] + weight * full[i];
     });
 }
