@@ -114,7 +114,7 @@ run_sanitizers() {
   # Unit tests (mathematics, file formats, the C API) under ASan+UBSan.
   configure build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPMSC_SANITIZE=address,undefined \
     -DPMSC_BUILD_EXAMPLES=OFF -DPMSC_BUILD_BENCH=OFF
-  cmake --build build-asan -j "$JOBS" --target pmsc_unit_tests pmsc_io_tests pmsc_capi_test_model pmsc_capi_bad_inputs
+  cmake --build build-asan -j "$JOBS" --target pmsc_unit_tests pmsc_io_tests pmsc_app_tests pmsc_capi_test_model pmsc_capi_bad_inputs
   ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
     ctest --test-dir build-asan -L unit --output-on-failure -j "$JOBS"
   # The engine's tests and pmsc view's session and server (threads of their own around the

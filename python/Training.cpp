@@ -1,5 +1,5 @@
 // pmsc.train: `pmsc train` on NumPy arrays or .npy paths, with the same options and the same model bytes.
-#include "app/TrainingDefaults.h"
+#include "app/Train.h"
 #include "python/Arrays.h"
 #include "python/Errors.h"
 #include "python/PyModel.h"
@@ -81,30 +81,19 @@ TrainingFrames trainingFrames(py::handle frames) {
     return t;
 }
 
-Selector selectorOf(const std::string& s) {
-    if (s == "teleconnection") return Selector::Teleconnection;
-    if (s == "qdeim") return Selector::QDeim;
-    throw InputError("selector: '" + s + "' is not teleconnection or qdeim");
-}
-
-// "" = TrainingOptions decides (resolvedCalibrationRule), as `pmsc train` without --calibration.
-std::optional<CalibrationRule> ruleOf(const std::string& s) {
-    if (s.empty()) return std::nullopt;
-    if (const auto r = calibrationRuleNamed(s)) return *r;
-    throw InputError("calibration: '" + s + "' is not " + kCalibrationRuleChoices);
-}
-
 std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energy, double basisError,
                                     Index maxBasis, double maxError, Index maxKeys, Index block,
                                     std::vector<Index> fiducials, std::vector<Index> gridPoints,
                                     const std::string& selector, double tolerance, Index slices,
-                                    const std::string& calibration, double coverage,
+                                    const std::string& calibration, const py::object& coverage,
                                     const std::string& keyError, Index learnRank, unsigned seed,
                                     int powerIterations, const py::object& regions, const py::object& feather,
                                     Index regionKeys, Index regionStride, bool sharedChannels,
                                     py::object progress) {
-    // `pmsc train`'s defaults: regions chosen from the data ("auto"), learning from every 3rd frame.
-    TrainingOptions o = app::defaultTrainingOptions();
+    // The keyword arguments into app::TrainOptions, checked by the rules `pmsc train` uses.
+    constexpr app::Spelling kPython = app::Spelling::Python;
+    app::TrainOptions request;
+    TrainingOptions& o = request.training;
     o.basis = basis;
     o.energy = energy;
     o.basisMaxError = basisError;
@@ -114,43 +103,29 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     o.block = block;
     o.fiducials = std::move(fiducials);
     o.gridPoints = std::move(gridPoints);
-    o.selector = selectorOf(selector);
+    o.selector = app::selectorNamed(selector, kPython);
     o.tolerance = tolerance;
     o.calibrationSlices = slices;
-    o.calibrationRule = ruleOf(calibration);
-    o.calibrationCoverage = coverage;
-    if (const auto norm = keyErrorNormNamed(keyError))
-        o.keyErrorNorm = *norm;
-    else if (!keyError.empty())
-        throw InputError("key_error: '" + keyError + "' is not " + kKeyErrorNormChoices);
+    o.calibrationRule = app::calibrationNamed(calibration, kPython);
+    if (!coverage.is_none()) request.coverage = coverage.cast<double>();
+    o.keyErrorNorm = app::keyErrorNamed(keyError, kPython);
     o.learnRank = learnRank;
     o.seed = seed;
     o.powerIterations = powerIterations;
     if (py::isinstance<py::str>(regions)) {
-        if (regions.cast<std::string>() != "auto")
-            throw InputError("regions: '" + regions.cast<std::string>() +
-                             "' is not \"auto\" or a region count (0 = none)");
+        app::setRegions(o.regions, regions.cast<std::string>(), kPython);
     } else {
-        const Index count = regions.cast<Index>();
-        if (count < 0) throw InputError("regions: must be >= 0 (0 = none), got " + std::to_string(count));
         o.regions.automatic = false;
-        o.regions.count = count;
+        o.regions.count = regions.cast<Index>();
     }
     if (!feather.is_none()) {
-        const double f = feather.cast<double>();
-        if (!(f >= 0 && f <= 0.5)) throw InputError("feather: must be in [0, 0.5], got " + std::to_string(f));
-        o.regions.featherFraction = f;
+        o.regions.featherFraction = feather.cast<double>();
         o.regions.automaticFeather = false;
     }
-    if (regionStride < 1)
-        throw InputError("region_stride: must be >= 1, got " + std::to_string(regionStride));
     o.regions.frameStride = regionStride;
     o.regions.ownKeys = regionKeys;
     o.sharedChannels = sharedChannels;
-    if (regionKeys < 0)
-        throw InputError("region_keys: must be >= 0 (0 = none), got " + std::to_string(regionKeys));
-    if (!calibration.empty() && !(tolerance > 0))
-        throw InputError("calibration and coverage need a tolerance");
+    app::validate(request, kPython);
 
     TrainingFrames t = trainingFrames(frames);
     // Training runs on this thread (its progress hook is where Ctrl-C is noticed); the hook takes the
@@ -217,7 +192,7 @@ void bindTraining(py::module_& m) {
         "basis_error"_a = 0.0, "max_basis"_a = 256, "max_error"_a = 0.0, "max_keys"_a = 200, "block"_a = 16,
         "fiducials"_a = std::vector<Index>{}, "grid_points"_a = std::vector<Index>{},
         "selector"_a = "teleconnection", "tolerance"_a = 0.0, "slices"_a = 5, "calibration"_a = "",
-        "coverage"_a = 0.9, "key_error"_a = "", "learn_rank"_a = 0, "seed"_a = 20070101u,
+        "coverage"_a = py::none(), "key_error"_a = "", "learn_rank"_a = 0, "seed"_a = 20070101u,
         "power_iterations"_a = 2, "regions"_a = "auto", "feather"_a = py::none(), "region_keys"_a = 4,
         "region_stride"_a = 3, "shared_channels"_a = false, "progress"_a = py::none(),
         "Trains a model as `pmsc train` does (same options, same model bytes). frames: an array (F, N, C), a "
