@@ -3,15 +3,19 @@
 // main() only dispatches: it finds the subcommand in the table below, runs it, and turns every
 // typed error into ONE line on stderr and an exit code (app/ExitCodes.h).
 #include "app/ExitCodes.h"
+#include "cli/CommandRegistry.h"
 #include "cli/Commands.h"
 #include "cli/Interrupt.h"
 #include "pmsc/Errors.h"
 #include "pmsc/Training.h"  // pmsc::Cancelled
 
+#include <algorithm>
 #include <cstdio>
 #include <exception>
 #include <iostream>
+#include <iterator>
 #include <new>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <string_view>
@@ -21,14 +25,8 @@ namespace {
 
 using namespace pmsc::cli;
 
-struct Command {
-    std::string_view name;  ///< one or more words: "train", "demo cornell"
-    std::string_view summary;
-    int (*run)(const std::vector<std::string>& args);
-};
-
-// The dispatch table. Add a row per subcommand; a multi-word name ("demo cornell") wins over
-// its shorter prefix ("demo"). One line per row.
+// The product's commands. Add a row per subcommand; a multi-word name ("demo cornell") wins over
+// its shorter prefix ("demo"). One line per row. The demos register theirs (registeredCommands()).
 // clang-format off
 const Command kCommands[] = {
     {"train", "train a model (basis, key points, thresholds) from frames in a .npy file", runTrain},
@@ -36,13 +34,6 @@ const Command kCommands[] = {
     {"replay", "replay recorded frames through a model's soft cache and report its errors", runReplay},
     {"reconstruct", "drive the soft cache pass by pass through files, for a renderer that bakes the points asked", runReconstruct},
     {"inspect", "show a model file: sizes, key points, basis energy, thresholds", runInspect},
-    {"demo", "the main demo (the Cornell box); with options, the generated shot of 'demo synthetic'", runDemo},
-    {"demo synthetic", "train and replay on a generated shot, and print what the soft cache did", runDemoSynthetic},
-    {"demo cornell", "section 8: Cornell box indirect light, OpenVDB lighting cache, moving cameras", runDemoCornell},
-    {"demo volume", "light scattered in smoke, a sparse volumetric lighting cache in OpenVDB", runDemoVolume},
-    {"demo face", "section 7: a nonlinear face rig on the ICT face, 170 key points, novel-control detection", runDemoFace},
-    {"demo cross", "section 7: cross point multiplication on the ICT face, cheap control face -> full rig", runDemoCross},
-    {"demo learn", "section 5: the nightly loop on the ICT face, misses kept and learned, day 1 vs day 2", runDemoLearn},
     {"run", "render-farm task: a frame range through the soft cache, one resumable file per frame", runRun},
     {"export-frames", "write an evaluator's frames (e.g. an animated asset's poses) as training .npy", runExportFrames},
     {"evaluators", "list the calculations --evaluator accepts, with their NAME[:ARGS] syntax", runEvaluators},
@@ -62,17 +53,27 @@ std::vector<std::string_view> words(std::string_view s) {
     return out;
 }
 
-/// The longest table name whose words start the arguments, or nullptr.
-const Command* findCommand(const std::vector<std::string>& args, std::size_t& used) {
-    const Command* best = nullptr;
+/// Every command: the table's, then the registered ones by name.
+std::vector<Command> allCommands() {
+    std::vector<Command> all(std::begin(kCommands), std::end(kCommands));
+    std::vector<Command> registered = registeredCommands();
+    std::sort(registered.begin(), registered.end(),
+              [](const Command& a, const Command& b) { return a.name < b.name; });
+    all.insert(all.end(), registered.begin(), registered.end());
+    return all;
+}
+
+/// The longest command name whose words start the arguments, or nullptr.
+std::optional<Command> findCommand(const std::vector<std::string>& args, std::size_t& used) {
+    std::optional<Command> best;
     used = 0;
-    for (const auto& command : kCommands) {
+    for (const auto& command : allCommands()) {
         const auto w = words(command.name);
         if (w.size() > args.size() || w.size() <= used) continue;
         bool match = true;
         for (std::size_t i = 0; i < w.size(); ++i) match = match && args[i] == w[i];
         if (match) {
-            best = &command;
+            best = command;
             used = w.size();
         }
     }
@@ -85,7 +86,7 @@ std::string usage() {
            "Point multiplication and soft caching (Meyer & Anderson, Pixar): a statistical\n"
            "model computes all points of a frame from a few key points, and falls through to\n"
            "the full calculation when the key points say the model does not fit.\n\ncommands:\n";
-    for (const auto& c : kCommands) {
+    for (const auto& c : allCommands()) {
         std::string name(c.name);
         out << "  " << name << std::string(name.size() < 16 ? 16 - name.size() : 1, ' ') << c.summary << "\n";
     }
@@ -116,7 +117,7 @@ int main(int argc, char** argv) {
         return kExitOk;
     }
     std::size_t used = 0;
-    const Command* command = findCommand(args, used);
+    const std::optional<Command> command = findCommand(args, used);
     if (!command) return fail(kExitBadInput, "unknown command '" + args[0] + "' (see 'pmsc --help')");
     args.erase(args.begin(), args.begin() + static_cast<std::ptrdiff_t>(used));
 

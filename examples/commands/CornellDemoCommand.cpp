@@ -4,8 +4,9 @@
 // shows progress and prints the summary.
 #include "app/ExitCodes.h"
 #include "cli/Args.h"
-#include "cli/Commands.h"
+#include "cli/CommandRegistry.h"
 #include "cli/Progress.h"
+#include "examples/commands/DemoCommands.h"
 #include "examples/cornell/CornellDemo.h"
 
 #include <cstdio>
@@ -13,7 +14,10 @@
 #include <optional>
 #include <string>
 
-namespace pmsc::cli {
+namespace pmsc::demos {
+
+using namespace pmsc::app;
+using namespace pmsc::cli;
 
 namespace {
 
@@ -129,4 +133,9 @@ int runDemoCornell(const std::vector<std::string>& args) {
     return kExitOk;
 }
 
-}  // namespace pmsc::cli
+// `pmsc demo cornell` and the line `pmsc --help` shows for it.
+const cli::CommandRegistration kDemoCornell{
+    {"demo cornell", "section 8: Cornell box indirect light, OpenVDB lighting cache, moving cameras",
+     runDemoCornell}};
+
+}  // namespace pmsc::demos

@@ -5,8 +5,9 @@
 // progress and prints the summary.
 #include "app/ExitCodes.h"
 #include "cli/Args.h"
-#include "cli/Commands.h"
+#include "cli/CommandRegistry.h"
 #include "cli/Progress.h"
+#include "examples/commands/DemoCommands.h"
 #include "examples/face/FaceDemo.h"
 #include "pmsc/Calibration.h"
 #include "pmsc/KeyError.h"
@@ -15,7 +16,10 @@
 #include <optional>
 #include <string>
 
-namespace pmsc::cli {
+namespace pmsc::demos {
+
+using namespace pmsc::app;
+using namespace pmsc::cli;
 
 namespace {
 
@@ -149,4 +153,9 @@ int runDemoFace(const std::vector<std::string>& args) {
     return kExitOk;
 }
 
-}  // namespace pmsc::cli
+// `pmsc demo face` and the line `pmsc --help` shows for it.
+const cli::CommandRegistration kDemoFace{
+    {"demo face", "section 7: a nonlinear face rig on the ICT face, 170 key points, novel-control detection",
+     runDemoFace}};
+
+}  // namespace pmsc::demos

@@ -2,14 +2,18 @@
 // lives in examples/face (LearnDemo.h); this file parses options, shows progress and prints the summary.
 #include "app/ExitCodes.h"
 #include "cli/Args.h"
-#include "cli/Commands.h"
+#include "cli/CommandRegistry.h"
 #include "cli/Progress.h"
+#include "examples/commands/DemoCommands.h"
 #include "examples/face/LearnDemo.h"
 
 #include <cstdio>
 #include <string>
 
-namespace pmsc::cli {
+namespace pmsc::demos {
+
+using namespace pmsc::app;
+using namespace pmsc::cli;
 
 int runDemoLearn(const std::vector<std::string>& args) {
     std::string data, out;
@@ -119,4 +123,9 @@ int runDemoLearn(const std::vector<std::string>& args) {
     return kExitOk;
 }
 
-}  // namespace pmsc::cli
+// `pmsc demo learn` and the line `pmsc --help` shows for it.
+const cli::CommandRegistration kDemoLearn{
+    {"demo learn", "section 5: the nightly loop on the ICT face, misses kept and learned, day 1 vs day 2",
+     runDemoLearn}};
+
+}  // namespace pmsc::demos

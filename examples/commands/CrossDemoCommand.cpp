@@ -2,14 +2,18 @@
 // experiment lives in examples/face (CrossDemo.h); this file parses options and prints the summary.
 #include "app/ExitCodes.h"
 #include "cli/Args.h"
-#include "cli/Commands.h"
+#include "cli/CommandRegistry.h"
 #include "cli/Progress.h"
+#include "examples/commands/DemoCommands.h"
 #include "examples/face/CrossDemo.h"
 
 #include <cstdio>
 #include <string>
 
-namespace pmsc::cli {
+namespace pmsc::demos {
+
+using namespace pmsc::app;
+using namespace pmsc::cli;
 
 int runDemoCross(const std::vector<std::string>& args) {
     std::string data, out;
@@ -89,4 +93,9 @@ int runDemoCross(const std::vector<std::string>& args) {
     return kExitOk;
 }
 
-}  // namespace pmsc::cli
+// `pmsc demo cross` and the line `pmsc --help` shows for it.
+const cli::CommandRegistration kDemoCross{
+    {"demo cross", "section 7: cross point multiplication on the ICT face, cheap control face -> full rig",
+     runDemoCross}};
+
+}  // namespace pmsc::demos

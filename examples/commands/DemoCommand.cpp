@@ -6,13 +6,14 @@
 #include "app/ExitCodes.h"
 #include "app/Replay.h"
 #include "cli/Args.h"
-#include "cli/Commands.h"
+#include "cli/CommandRegistry.h"
 #include "cli/Interrupt.h"
 #include "cli/Progress.h"
 #include "cli/ReplaySummary.h"
 #include "cli/TrainSummary.h"
 #include "evaluators/ReplayEvaluator.h"
 #include "evaluators/synthetic/SyntheticSurface.h"
+#include "examples/commands/DemoCommands.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
@@ -29,7 +30,10 @@
 #include <system_error>
 #include <utility>
 
-namespace pmsc::cli {
+namespace pmsc::demos {
+
+using namespace pmsc::app;
+using namespace pmsc::cli;
 
 namespace {
 
@@ -273,7 +277,7 @@ void printSpeed(const synthetic::SyntheticSurface& testRig, const Model& model,
 
 int runDemo(const std::vector<std::string>& args) {
     // `pmsc demo` alone (what ./pmsc.sh demo runs) is the paper's main experiment, the Cornell box
-    // (cli/CornellDemoCommand.cpp); with options it is this generated shot.
+    // (CornellDemoCommand.cpp); with options it is this generated shot.
     if (args.empty()) return runDemoCornell({"--out", "pmsc-demo-cornell"});
     return runDemoSynthetic(args);
 }
@@ -297,4 +301,12 @@ int runDemoSynthetic(const std::vector<std::string>& args) {
     return kExitOk;
 }
 
-}  // namespace pmsc::cli
+// `pmsc demo` and the line `pmsc --help` shows for it.
+const cli::CommandRegistration kDemo{
+    {"demo", "the main demo (the Cornell box); with options, the generated shot of 'demo synthetic'",
+     runDemo}};
+const cli::CommandRegistration kDemoSynthetic{
+    {"demo synthetic", "train and replay on a generated shot, and print what the soft cache did",
+     runDemoSynthetic}};
+
+}  // namespace pmsc::demos

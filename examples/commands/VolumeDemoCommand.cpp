@@ -3,15 +3,19 @@
 // (VolumeDemo.h); this file parses options, shows progress and prints the summary.
 #include "app/ExitCodes.h"
 #include "cli/Args.h"
-#include "cli/Commands.h"
+#include "cli/CommandRegistry.h"
 #include "cli/Progress.h"
+#include "examples/commands/DemoCommands.h"
 #include "examples/volume/VolumeDemo.h"
 
 #include <cstdio>
 #include <optional>
 #include <string>
 
-namespace pmsc::cli {
+namespace pmsc::demos {
+
+using namespace pmsc::app;
+using namespace pmsc::cli;
 
 namespace {
 
@@ -208,4 +212,9 @@ int runDemoVolume(const std::vector<std::string>& args) {
     return kExitOk;
 }
 
-}  // namespace pmsc::cli
+// `pmsc demo volume` and the line `pmsc --help` shows for it.
+const cli::CommandRegistration kDemoVolume{
+    {"demo volume", "light scattered in smoke, a sparse volumetric lighting cache in OpenVDB",
+     runDemoVolume}};
+
+}  // namespace pmsc::demos
