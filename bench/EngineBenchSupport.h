@@ -3,6 +3,7 @@
 
 #include "pmsc/Model.h"
 #include "pmsc/PointEvaluator.h"
+#include "tests/common/SplitMix.h"
 
 #include <Eigen/QR>
 
@@ -16,16 +17,8 @@
 
 namespace pmsc::bench {
 
-/// splitmix64, for deterministic synthetic values.
-inline std::uint64_t mix(std::uint64_t x) {
-    x += 0x9e3779b97f4a7c15ull;
-    x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
-    x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
-    return x ^ (x >> 31);
-}
-inline double unit(std::uint64_t a, std::uint64_t b) {
-    return double(mix(a * 0x100000001b3ull ^ mix(b)) >> 11) * (2.0 / 9007199254740992.0) - 1.0;
-}
+using testing::mix;
+using testing::unit;
 
 /// A model with an orthonormal random basis (QR), K keys spread over the N points and the
 /// least-squares projector. The paper's face (section 7) is N = 2986, M = 85, K = 170.

@@ -1,10 +1,10 @@
 // The Python module `pmsc`: training, the model, replay and the evaluation engine from Python,
 // with NumPy arrays in and out. Every long call releases the GIL; errors are the command line's one-line
 // messages as Python exceptions (pmsc.InputError, pmsc.EvaluatorError, pmsc.IoError, pmsc.Cancelled).
-//   Errors.cpp    exceptions, running with the GIL released     PyModel.cpp  pmsc.Model
-//   Training.cpp  pmsc.train                                    Runs.cpp     pmsc.replay, pmsc.run
+//   PyErrors.cpp    exceptions, running with the GIL released   PyModel.cpp  pmsc.Model
+//   PyTraining.cpp  pmsc.train (app/Train.h's options)          Runs.cpp     pmsc.replay, pmsc.run
 //   Arrays.cpp    frames arrays read in place                   Evaluators.cpp  array and Python evaluators
-#include "python/Errors.h"
+#include "python/PyErrors.h"
 #include "python/PyModel.h"
 
 #include <pybind11/pybind11.h>

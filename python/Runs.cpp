@@ -1,7 +1,7 @@
 // pmsc.replay and pmsc.run: the engine over NumPy arrays, with C++ or Python evaluators.
 #include "python/Arrays.h"
-#include "python/Errors.h"
 #include "python/Evaluators.h"
+#include "python/PyErrors.h"
 #include "python/PyModel.h"
 
 #include "app/Replay.h"

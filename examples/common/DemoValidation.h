@@ -4,8 +4,11 @@
 #include "engine/Engine.h"
 #include "pmsc/Errors.h"
 
+#include <algorithm>
 #include <cmath>
 #include <map>
+#include <numeric>
+#include <random>
 #include <set>
 #include <string>
 #include <utility>
@@ -32,6 +35,31 @@ struct RelError {
     }
     double value() const { return ref2 > 0 ? std::sqrt(err2 / ref2) : 0.0; }
 };
+
+/// The points and frames a demo computes a converged reference on: a random subset of the points
+/// (sorted) and the first frames of the validation set.
+struct ReferenceSubset {
+    std::vector<Index> points;
+    Index frames = 0;
+    std::set<Index> frameSet;  ///< the same frames, as ValidationSink takes them
+};
+
+/// Up to `wantedPoints` of `points` points, drawn with the demo's own fixed `seed`, and the first
+/// min(frames, wantedFrames) frames.
+inline ReferenceSubset chooseReferenceSubset(Index points, Index wantedPoints, Index frames,
+                                             Index wantedFrames, unsigned seed) {
+    ReferenceSubset r;
+    r.points.resize(static_cast<std::size_t>(points));
+    std::iota(r.points.begin(), r.points.end(), Index{0});
+    std::mt19937 rng(seed);
+    std::shuffle(r.points.begin(), r.points.end(), rng);
+    r.points.resize(
+        std::min<std::size_t>(r.points.size(), static_cast<std::size_t>(std::max<Index>(0, wantedPoints))));
+    std::sort(r.points.begin(), r.points.end());
+    r.frames = std::min(frames, wantedFrames);
+    for (Index f = 0; f < r.frames; ++f) r.frameSet.insert(f);
+    return r;
+}
 
 /// What the validation run needs from each frame, gathered in the engine's sink (one thread).
 class ValidationSink : public engine::FrameSink {

@@ -29,10 +29,12 @@
 
 namespace pmsc::cornell {
 
+using examples::chooseReferenceSubset;
 using examples::createOutputFolder;
 using examples::DemoClock;
 using examples::DemoSetup;
 using examples::FolderErrorWording;
+using examples::ReferenceSubset;
 using examples::RelError;
 using examples::secondsSince;
 using examples::ValidationSink;
@@ -223,28 +225,6 @@ FullGathers gatherFullFrames(DemoSetup& run, const CornellEvaluator& valEval,
     }
     g.secondsPerFrame = secondsSince(t) / static_cast<double>(fullFrames.size());
     return g;
-}
-
-// The points and frames of the converged reference.
-struct ReferenceSubset {
-    std::vector<Index> points;  // sorted
-    Index frames = 0;           // the first this many scattered frames
-    std::set<Index> frameSet;   // the same, as the sink wants them
-};
-
-// Reference subset (fixed seed): a few thousand random points.
-ReferenceSubset chooseReferenceSubset(const CornellDemoOptions& o, Index n, Index scattered) {
-    ReferenceSubset r;
-    std::vector<Index>& subset = r.points;
-    subset.resize(static_cast<std::size_t>(n));
-    std::iota(subset.begin(), subset.end(), Index{0});
-    std::mt19937 rng(20070101);
-    std::shuffle(subset.begin(), subset.end(), rng);
-    subset.resize(std::min<std::size_t>(subset.size(), static_cast<std::size_t>(o.referencePoints)));
-    std::sort(subset.begin(), subset.end());
-    r.frames = std::min<Index>(scattered, o.referenceFrames);
-    for (Index f = 0; f < r.frames; ++f) r.frameSet.insert(f);
-    return r;
 }
 
 // 5. The validation frames through the engine: key points, projection, soft cache per frame.
@@ -463,7 +443,8 @@ nlohmann::json runCornellDemo(const CornellDemoOptions& o) {
     const ValidationFrames frames = chooseValidationFrames(o, rig);
     const CornellEvaluator valEval(world, frames.lights, o.samples, "cornell");
     FullGathers gathers = gatherFullFrames(run, valEval, frames.fullFrames);
-    const ReferenceSubset reference = chooseReferenceSubset(o, n, frames.scattered);
+    const ReferenceSubset reference =
+        chooseReferenceSubset(n, o.referencePoints, frames.scattered, o.referenceFrames, /*seed=*/20070101);
 
     ValidationSink sink("cornell", gathers.full, frames.renderFrames, reference.points, reference.frameSet);
     sink.scatteredCount = frames.scattered;

@@ -34,10 +34,12 @@ extern char** environ;
 
 namespace pmsc::volume {
 
+using examples::chooseReferenceSubset;
 using examples::createOutputFolder;
 using examples::DemoClock;
 using examples::DemoSetup;
 using examples::FolderErrorWording;
+using examples::ReferenceSubset;
 using examples::RelError;
 using examples::secondsSince;
 using examples::ValidationSink;
@@ -298,28 +300,6 @@ FullFrames calculateFullFrames(DemoSetup& run, const VolumeEvaluator& valEval,
     full.secondsPerFrame = secondsSince(t) / static_cast<double>(fullFrames.size());
     run.timings["validation_full"] = full.secondsPerFrame * static_cast<double>(fullFrames.size());
     return full;
-}
-
-/// The voxels and frames the converged reference is calculated on.
-struct ReferenceSubset {
-    std::vector<Index> points;  // a random subset of the voxels, sorted
-    Index frames = 0;           // the first this many "between" settings
-    std::set<Index> frameSet;
-};
-
-/// 4. (continued) The reference's random voxels and its frames.
-ReferenceSubset chooseReferenceSubset(const VolumeDemoOptions& o, Index n, Index between) {
-    ReferenceSubset ref;
-    std::vector<Index>& subset = ref.points;
-    subset.resize(static_cast<std::size_t>(n));
-    std::iota(subset.begin(), subset.end(), Index{0});
-    std::mt19937 rng(20130711);
-    std::shuffle(subset.begin(), subset.end(), rng);
-    subset.resize(std::min<std::size_t>(subset.size(), static_cast<std::size_t>(o.referencePoints)));
-    std::sort(subset.begin(), subset.end());
-    ref.frames = std::min<Index>(between, o.referenceFrames);
-    for (Index f = 0; f < ref.frames; ++f) ref.frameSet.insert(f);
-    return ref;
 }
 
 /// 5. The validation frames through the engine: key voxels, projection, soft cache per frame.
@@ -705,7 +685,8 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& options) {
     const VolumeEvaluator valEval(world, frames.lights, "volume");
     const Index testFrames = valEval.frameCount();
     FullFrames full = calculateFullFrames(run, valEval, frames.fullFrames, n);
-    const ReferenceSubset reference = chooseReferenceSubset(o, n, frames.between);
+    const ReferenceSubset reference =
+        chooseReferenceSubset(n, o.referencePoints, frames.between, o.referenceFrames, /*seed=*/20130711);
 
     ValidationSink sink("volume", full.values, frames.renderFrames, reference.points, reference.frameSet);
     sink.scatteredCount = frames.between;

@@ -5,6 +5,7 @@
 #include "pmsc/PointEvaluator.h"
 #include "pmsc/PointMultiplier.h"
 #include "pmsc/SoftCache.h"
+#include "tests/common/SplitMix.h"
 
 #include <Eigen/QR>
 
@@ -25,18 +26,6 @@
 #include <vector>
 
 namespace pmsc::testing {
-
-/// splitmix64: a well-mixed 64-bit hash, so synthetic values are deterministic per (frame, row).
-inline std::uint64_t mix(std::uint64_t x) {
-    x += 0x9e3779b97f4a7c15ull;
-    x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
-    x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
-    return x ^ (x >> 31);
-}
-/// Uniform in [-1, 1).
-inline double unit(std::uint64_t a, std::uint64_t b) {
-    return double(mix(a * 0x100000001b3ull ^ mix(b)) >> 11) * (2.0 / 9007199254740992.0) - 1.0;
-}
 
 /// A model built by hand: orthonormal random basis (QR), random mean, keys spread evenly over
 /// the points, projector from makeProjector. No training involved, so engine tests do not

@@ -1,5 +1,5 @@
 // Errors as Python exceptions with the command line's messages, and long calls with the GIL released.
-#include "python/Errors.h"
+#include "python/PyErrors.h"
 
 #include "app/ExitCodes.h"
 #include "pmsc/Errors.h"

@@ -1,7 +1,7 @@
 // pmsc.train: `pmsc train` on NumPy arrays or .npy paths, with the same options and the same model bytes.
 #include "app/Train.h"
 #include "python/Arrays.h"
-#include "python/Errors.h"
+#include "python/PyErrors.h"
 #include "python/PyModel.h"
 
 #include "pmsc/Communicator.h"
