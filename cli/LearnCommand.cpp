@@ -1,17 +1,13 @@
 // `pmsc learn`: a model + new frames (e.g. the misses `--keep-misses` kept) -> an updated model,
 // without the original training frames (paper section 5, "training could be done each night").
 #include "app/ExitCodes.h"
+#include "app/Learn.h"
 #include "cli/Args.h"
 #include "cli/Commands.h"
 #include "cli/Format.h"
 #include "cli/Progress.h"
-#include "pmsc/AtomicFile.h"
-#include "pmsc/Errors.h"
 #include "pmsc/Learning.h"
-#include "pmsc/ModelIO.h"
-#include "pmsc/NpyIO.h"
 
-#include <chrono>
 #include <cmath>
 #include <iostream>
 
@@ -33,31 +29,6 @@ std::vector<std::string> splitPaths(const std::string& text) {
     }
     return out;
 }
-
-// The frames of every file, one after the other; all must agree in N and C.
-FrameSet readAll(const std::vector<std::string>& paths) {
-    std::vector<FrameFile> files;
-    Index frames = 0;
-    for (const auto& p : paths) {
-        files.push_back(readFrames(p));
-        const FrameSet& f = files.back().frames;
-        const FrameSet& first = files.front().frames;
-        if (f.points != first.points || f.channels != first.channels)
-            throw InputError(p + ": frames have " + std::to_string(f.points) + " points x " +
-                             std::to_string(f.channels) + " channels, " + paths.front() + " has " +
-                             std::to_string(first.points) + " x " + std::to_string(first.channels));
-        frames += f.frames;
-    }
-    if (files.size() == 1) return std::move(files.front().frames);
-    FrameSet all(frames, files.front().frames.points, files.front().frames.channels);
-    auto at = all.values.begin();
-    for (const auto& f : files) at = std::copy(f.frames.values.begin(), f.frames.values.end(), at);
-    return all;
-}
-
-}  // namespace
-
-namespace {
 
 /// What `pmsc learn` did, for the person who ran it: sizes, times, thresholds before and after.
 void printLearnSummary(const std::string& modelPath, const std::string& outPath, const Model& model,
@@ -102,8 +73,10 @@ void printLearnSummary(const std::string& modelPath, const std::string& outPath,
 }  // namespace
 
 int runLearn(const std::vector<std::string>& args) {
-    std::string modelPath, framesText, outPath, rule;
-    LearnOptions options;
+    app::LearnOptions request;
+    std::string& modelPath = request.model;
+    std::string framesText, &outPath = request.out, rule;
+    pmsc::LearnOptions& options = request.learning;
     bool quiet = false;
     ArgParser parser(
         "learn", "--model MODEL.pmsc --frames NEW.npy[,MORE.npy...] --out NEW_MODEL.pmsc [options]",
@@ -149,47 +122,21 @@ int runLearn(const std::vector<std::string>& args) {
         [&](const std::string& v) { options.slices = parseIndex("--slices", v, 2); });
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
-    if (options.basis > 0 && options.energy > 0) parser.fail("--basis and --energy both set M: give one");
-    if (!rule.empty()) {
-        if (const auto r = calibrationRuleNamed(rule))
-            options.rule = *r;
-        else
-            parser.fail("--calibration: '" + rule + "' is not " + kCalibrationRuleChoices);
-    }
-    std::vector<std::string> paths;
     try {
-        paths = splitPaths(framesText);
-    } catch (const UsageError& e) {
+        request.frames = splitPaths(framesText);
+        options.rule = app::calibrationNamed(rule, app::Spelling::CommandLine);
+        app::validate(request, app::Spelling::CommandLine);
+    } catch (const std::invalid_argument& e) {  // UsageError, app::OptionError
         parser.fail(e.what());
     }
 
-    AtomicFile(outPath).abandon();  // an unwritable destination fails now, not after the work
-    const auto start = std::chrono::steady_clock::now();
-    const Model model = readModel(modelPath);
-    if (model.cross)
-        throw InputError(modelPath +
-                         " is a cross model (train --targets): pmsc learn updates plain models; retrain "
-                         "on all (control, target) pairs");
-    if (model.sharedChannels)
-        throw InputError(modelPath +
-                         " shares one basis among its channels (train --shared-channels): pmsc learn "
-                         "updates models with a basis per channel in this version; retrain on all frames");
-    const FrameSet frames = readAll(paths);
-    if (frames.points != model.points || frames.channels != model.channels)
-        throw InputError(paths.front() + ": frames have " + std::to_string(frames.points) + " points x " +
-                         std::to_string(frames.channels) + " channels, but the model " + modelPath + " has " +
-                         std::to_string(model.points) + " x " + std::to_string(model.channels));
     Progress progress("learn", !quiet);
-    options.progress = [&](std::string_view stage, double done, double total) {
-        return progress.update(stage, done, total);
-    };
-    LearnReport report;
-    const Model learned = learn(model, frames, options, &report);
-    writeModel(outPath, learned);
+    const app::LearnOutcome outcome =
+        app::learnFiles(request, [&](std::string_view stage, double done, double total) {
+            return progress.update(stage, done, total);
+        });
     progress.finish();
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-
-    printLearnSummary(modelPath, outPath, model, learned, report, seconds);
+    printLearnSummary(modelPath, outPath, outcome.before, outcome.learned, outcome.report, outcome.seconds);
     return kExitOk;
 }
 

@@ -1,4 +1,6 @@
-// pmsc.train: `pmsc train` on NumPy arrays or .npy paths, with the same options and the same model bytes.
+// pmsc.train and pmsc.learn: `pmsc train` and `pmsc learn` on NumPy arrays or .npy paths, with the same
+// options (app/Train.h, app/Learn.h) and the same model bytes.
+#include "app/Learn.h"
 #include "app/Train.h"
 #include "python/Arrays.h"
 #include "python/PyErrors.h"
@@ -81,6 +83,37 @@ TrainingFrames trainingFrames(py::handle frames) {
     return t;
 }
 
+/// A progress hook for training or learning on this thread (where Ctrl-C is noticed): it takes the
+/// GIL only to call `progress` and to check signals, a few hundred times per call at most.
+class PythonProgress {
+public:
+    explicit PythonProgress(py::object progress) : progress_(std::move(progress)) {}
+    ProgressFn function() {
+        return [this](std::string_view stage, double done, double total) {
+            py::gil_scoped_acquire gil;
+            try {
+                if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+                if (!progress_.is_none()) {
+                    py::object r = progress_(std::string(stage), done, total);
+                    if (!r.is_none() && !r.cast<bool>()) return false;
+                }
+                return true;
+            } catch (py::error_already_set& e) {
+                error_.emplace(std::move(e));
+                return false;
+            }
+        };
+    }
+    /// After pmsc::Cancelled: KeyboardInterrupt, or what `progress` raised, if that was the cause.
+    void rethrow() {
+        if (error_) throw std::move(*error_);
+    }
+
+private:
+    py::object progress_;
+    std::optional<py::error_already_set> error_;
+};
+
 std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energy, double basisError,
                                     Index maxBasis, double maxError, Index maxKeys, Index block,
                                     std::vector<Index> fiducials, std::vector<Index> gridPoints,
@@ -128,23 +161,8 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     app::validate(request, kPython);
 
     TrainingFrames t = trainingFrames(frames);
-    // Training runs on this thread (its progress hook is where Ctrl-C is noticed); the hook takes the
-    // GIL only to call `progress` and to check signals, a few hundred times per training at most.
-    std::optional<py::error_already_set> pythonError;
-    o.progress = [&](std::string_view stage, double done, double total) {
-        py::gil_scoped_acquire gil;
-        try {
-            if (PyErr_CheckSignals() != 0) throw py::error_already_set();
-            if (!progress.is_none()) {
-                py::object r = progress(std::string(stage), done, total);
-                if (!r.is_none() && !r.cast<bool>()) return false;
-            }
-            return true;
-        } catch (py::error_already_set& e) {
-            pythonError.emplace(std::move(e));
-            return false;
-        }
-    };
+    PythonProgress hook(progress);
+    o.progress = hook.function();
     TrainingReport report;
     Model model;
     try {
@@ -169,7 +187,7 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
             model = train(t.copy, o, &report);
         }
     } catch (const Cancelled&) {
-        if (pythonError) throw std::move(*pythonError);  // KeyboardInterrupt, or what `progress` raised
+        hook.rethrow();
         throw;
     }
     auto result = std::make_shared<PyModel>(std::move(model));
@@ -180,6 +198,53 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     r["seconds"] = report.seconds;
     r["residual_per_round"] = report.residualPerRound;
     r["calibration_ratio"] = report.calibration.ratio;
+    result->trainingReport = r;
+    return result;
+}
+
+std::shared_ptr<PyModel> learnModel(const PyModel& model, py::handle frames, Index basis, double energy,
+                                    Index rank, const std::string& calibration, const py::object& coverage,
+                                    Index slices, py::object progress) {
+    // The keyword arguments into app::LearnOptions, checked by the rules `pmsc learn` uses.
+    constexpr app::Spelling kPython = app::Spelling::Python;
+    app::LearnOptions request;
+    pmsc::LearnOptions& o = request.learning;
+    o.basis = basis;
+    o.energy = energy;
+    o.maxRank = rank;
+    o.rule = app::calibrationNamed(calibration, kPython);
+    if (!coverage.is_none()) o.coverage = coverage.cast<double>();
+    o.slices = slices;
+    app::validate(request, kPython);
+    app::checkLearnable(model.get(), "model");
+
+    TrainingFrames t = trainingFrames(frames);
+    if (t.view) {
+        const FrameArray& a = *t.view;
+        t.copy = FrameSet(a.frames(), a.points(), a.channels());
+        std::copy(a.doubles(), a.doubles() + t.copy.values.size(), t.copy.values.begin());
+    }
+    app::checkFramesFit(model.get(), "model", t.copy, "frames");
+    PythonProgress hook(std::move(progress));
+    o.progress = hook.function();
+    LearnReport report;
+    Model learned;
+    try {
+        py::gil_scoped_release nogil;
+        learned = learn(model.get(), t.copy, o, &report);
+    } catch (const Cancelled&) {
+        hook.rethrow();
+        throw;
+    }
+    auto result = std::make_shared<PyModel>(std::move(learned));
+    py::dict r;
+    r["warnings"] = report.warnings;
+    r["new_frames"] = report.newFrames;
+    r["basis_before"] = report.basisBefore;
+    r["basis_after"] = report.basisAfter;
+    r["keys_kept"] = report.keysKept;
+    r["seconds"] = report.seconds;
+    r["new_frames_max_point_error"] = report.newFramesMaxPointError;
     result->trainingReport = r;
     return result;
 }
@@ -197,6 +262,13 @@ void bindTraining(py::module_& m) {
         "region_stride"_a = 3, "shared_channels"_a = false, "progress"_a = py::none(),
         "Trains a model as `pmsc train` does (same options, same model bytes). frames: an array (F, N, C), a "
         ".npy path, or a list of them (shots). progress(stage, done, total) may return False to cancel.");
+    m.def(
+        "learn", &learnModel, "model"_a, "frames"_a, py::kw_only(), "basis"_a = 0, "energy"_a = 0.0,
+        "rank"_a = 0, "calibration"_a = "", "coverage"_a = py::none(), "slices"_a = 0,
+        "progress"_a = py::none(),
+        "Updates a model with new frames as `pmsc learn` does (same options, same model bytes), without its "
+        "training frames. frames: an array (F, N, C), a .npy path, or a list of them. Returns the learned "
+        "model; its training_report says what the update did.");
 }
 
 }  // namespace pmsc::python

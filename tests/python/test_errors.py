@@ -77,6 +77,14 @@ class ErrorTest(TempDirTest):
             self.model.project(np.zeros(5))
         with self.assertRaisesRegex(pmsc.InputError, "selector: 'nope'"):
             pmsc.train(self.frames, selector="nope")
+        with self.assertRaisesRegex(pmsc.InputError, "^coverage needs calibration threshold or conformal"):
+            pmsc.train(self.frames, tolerance=0.1, calibration="max", coverage=0.8)
+        with self.assertRaisesRegex(pmsc.InputError, "^basis and energy both set M: give one"):
+            pmsc.learn(self.model, self.frames, basis=4, energy=0.9)
+        with self.assertRaisesRegex(pmsc.InputError, "^calibration: 'tight' is not threshold, max or conformal"):
+            pmsc.learn(self.model, self.frames, calibration="tight")
+        with self.assertRaisesRegex(pmsc.InputError, "frames: frames have 50 points x 3 channels, but the model"):
+            pmsc.learn(self.model, self.frames[:, :50])
 
 
 if __name__ == "__main__":

@@ -130,6 +130,23 @@ class ModelTest(TempDirTest):
         self.assertEqual(self.model.to_bytes(), cli)
         self.assertEqual(pmsc.train(npy, max_keys=30, tolerance=0.05, seed=3).to_bytes(), cli)
 
+    def test_learn_gives_the_command_lines_model_bytes(self):
+        # pmsc.learn is `pmsc learn` (app/Learn.h): the same update, the same bytes, from an array or a path.
+        self.require_cli()
+        first, second = synthetic_frames(seed=4)[:40], synthetic_frames(seed=4, novel=20)[40:]
+        model = pmsc.train(first, max_keys=30, tolerance=0.05, seed=3)
+        model.save(self.path("day1.pmsc"))
+        np.save(self.path("new.npy"), second)
+        run_cli("learn", "--model", self.path("day1.pmsc"), "--frames", self.path("new.npy"), "--out",
+                self.path("day2.pmsc"), "--quiet")
+        with open(self.path("day2.pmsc"), "rb") as f:
+            cli = f.read()
+        learned = pmsc.learn(model, second)
+        self.assertEqual(learned.to_bytes(), cli)
+        self.assertEqual(pmsc.learn(model, self.path("new.npy")).to_bytes(), cli)
+        self.assertEqual(learned.train_frames, 80)
+        self.assertEqual(learned.training_report["new_frames"], 40)
+
     def test_regions_by_default_as_the_command_line(self):
         # Local motion on a surface (each of 24 bumps moves a few percent of 2,025 points): `pmsc
         # train --tolerance` learns regions without being told; pmsc.train does the same, byte for byte.
