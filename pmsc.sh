@@ -27,6 +27,7 @@ PACKAGES=(
   libembree-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   nlohmann-json3-dev libpng-dev
+  libcli11-dev  # the TOML/INI reader of every command's --config FILE
   libboost-dev  # Boost.Beast and Asio: the HTTP/WebSocket server of pmsc view
   libassimp-dev assimp-testmodels slurm-wlm munge
   libopenmpi-dev openmpi-bin  # mpirun -n P pmsc train, srun --mpi=pmix

@@ -1,5 +1,9 @@
 #include "cli/Args.h"
 
+#include <CLI/Config.hpp>
+#include <CLI/ConfigFwd.hpp>
+#include <CLI/Error.hpp>
+
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -55,7 +59,96 @@ bool ArgParser::given(const std::string& name) const {
     return false;
 }
 
-bool ArgParser::parse(const std::vector<std::string>& args) {
+namespace {
+
+/// The value of --config in `args` (before any "--"), "" when not given; removes it from `args`.
+std::string takeConfigPath(std::vector<std::string>& args, const ArgParser& parser) {
+    std::string path;
+    for (std::size_t i = 0; i < args.size(); ++i) {
+        if (args[i] == "--") break;
+        const bool inline_ = args[i].rfind("--config=", 0) == 0;
+        if (args[i] != "--config" && !inline_) continue;
+        if (!path.empty()) parser.fail("--config given twice");
+        if (inline_) {
+            path = args[i].substr(9);
+            args.erase(args.begin() + static_cast<std::ptrdiff_t>(i));
+        } else {
+            if (i + 1 >= args.size()) parser.fail("missing value for --config");
+            path = args[i + 1];
+            args.erase(args.begin() + static_cast<std::ptrdiff_t>(i),
+                       args.begin() + static_cast<std::ptrdiff_t>(i) + 2);
+        }
+        if (path.empty()) parser.fail("--config: empty file name");
+        --i;
+    }
+    return path;
+}
+
+/// The items of a TOML file (or an INI file: .ini, .cfg, with ';' comments), read by CLI11.
+std::vector<CLI::ConfigItem> readConfig(const std::string& path, const ArgParser& parser) {
+    const auto dot = path.rfind('.');
+    const std::string ext = dot == std::string::npos ? "" : path.substr(dot);
+    try {
+        if (ext == ".ini" || ext == ".cfg") return CLI::ConfigINI().from_file(path);
+        return CLI::ConfigTOML().from_file(path);
+    } catch (const CLI::Error& e) {
+        parser.fail("--config " + path + ": " + e.what());
+    }
+}
+
+}  // namespace
+
+void ArgParser::applyConfig(const std::string& path) {
+    // Decision: a farm job keeps its options in one file for every command it runs. Top-level keys
+    // must be options of this command (a typo fails, as on the command line); a section named
+    // after a command ([train], [run], [demo.cornell]) holds that command's own; other sections are
+    // left to their commands. The command line wins over the file, option by option.
+    std::string section = command_;
+    for (char& c : section)
+        if (c == ' ') c = '.';
+    for (const CLI::ConfigItem& item : readConfig(path, *this)) {
+        if (item.name == "++" || item.name == "--") continue;  // CLI11's marks of a section's start and end
+        std::string parents;
+        for (const auto& p : item.parents) parents += (parents.empty() ? "" : ".") + p;
+        if (!parents.empty() && parents != section) continue;
+        const std::string name = "--" + item.name;
+        Option* o = find(name);
+        if (!o || name == "--config")
+            fail("--config " + path + ": '" + item.name + "' is not an option of pmsc " + command_);
+        if (given(name)) continue;  // the command line's value
+        if (o->isFlag) {
+            if (item.inputs.size() != 1 || (item.inputs[0] != "true" && item.inputs[0] != "false"))
+                fail("--config " + path + ": " + item.name + " is a flag: true or false");
+            if (item.inputs[0] == "true") applyValue(*o, "");
+            continue;
+        }
+        if (item.inputs.empty()) fail("--config " + path + ": " + item.name + " has no value");
+        if (item.inputs.size() > 1 && !o->repeatable)
+            fail("--config " + path + ": " + item.name + " takes one value, got " +
+                 std::to_string(item.inputs.size()));
+        for (const std::string& value : item.inputs) applyValue(*o, value);
+    }
+}
+
+void ArgParser::applyValue(Option& o, const std::string& value) {
+    try {
+        o.apply(value);
+    } catch (const UsageError& e) {
+        fail(e.what());
+    }
+    given_.push_back(o.name);
+}
+
+bool ArgParser::parse(const std::vector<std::string>& commandLine) {
+    for (const auto& arg : commandLine) {
+        if (arg == "--") break;
+        if (arg == "--help" || arg == "-h") {
+            std::cout << help();
+            return false;
+        }
+    }
+    std::vector<std::string> args = commandLine;
+    const std::string configPath = takeConfigPath(args, *this);
     std::size_t nextPositional = 0;
     const auto positionalAt = [&](std::size_t i) -> Option* {
         std::size_t seen = 0;
@@ -63,21 +156,10 @@ bool ArgParser::parse(const std::vector<std::string>& args) {
             if (o.positional && seen++ == i) return &o;
         return nullptr;
     };
-    const auto apply = [&](Option& o, const std::string& value) {
-        try {
-            o.apply(value);
-        } catch (const UsageError& e) {
-            fail(e.what());
-        }
-        given_.push_back(o.name);
-    };
+    const auto apply = [&](Option& o, const std::string& value) { applyValue(o, value); };
     bool onlyPositionals = false;
     for (std::size_t i = 0; i < args.size(); ++i) {
         const std::string& arg = args[i];
-        if (!onlyPositionals && (arg == "--help" || arg == "-h")) {
-            std::cout << help();
-            return false;
-        }
         if (!onlyPositionals && arg == "--") {
             onlyPositionals = true;
             continue;
@@ -106,6 +188,7 @@ bool ArgParser::parse(const std::vector<std::string>& args) {
         if (!p) fail("unexpected argument '" + arg + "'");
         apply(*p, arg);
     }
+    if (!configPath.empty()) applyConfig(configPath);
     for (const auto& o : options_)
         if (o.required && !given(o.name)) fail("missing " + o.name);
     return true;
@@ -125,6 +208,10 @@ std::string ArgParser::help() const {
         out << "  " << l << std::string(width - l.size() + 2, ' ') << o.help
             << (o.required ? " (required)" : "") << "\n";
     }
+    out << "  --config FILE" << std::string(width > 13 ? width - 13 + 2 : 2, ' ')
+        << "options from a TOML or INI file: name = value, without the dashes (flags true/false, lists\n"
+        << std::string(width + 4, ' ') << "for repeated options); section [" << command_
+        << "] or the top level; the command line wins\n";
     out << "  --help" << std::string(width - 6 + 2, ' ') << "this help\n";
     return out.str();
 }

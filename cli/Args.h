@@ -20,7 +20,8 @@ struct UsageError : std::invalid_argument {
 };
 
 /// The small argument parser every subcommand shares: `--name VALUE`,
-/// `--name=VALUE`, flags, positionals, `--help`. Every mistake becomes one
+/// `--name=VALUE`, flags, positionals, `--help`, and `--config FILE` (the options from a TOML or
+/// INI file, read by CLI11; the command line wins). Every mistake becomes one
 /// UsageError line naming the command and the option, e.g.
 /// "train: --basis: 'ten' is not an integer (see 'pmsc train --help')".
 class ArgParser {
@@ -70,6 +71,8 @@ private:
         bool repeatable = false;
     };
     Option* find(const std::string& name);
+    void applyValue(Option& o, const std::string& value);
+    void applyConfig(const std::string& path);
 
     std::string command_, synopsis_, description_;
     std::vector<Option> options_;

@@ -415,7 +415,10 @@ int runRun(const std::vector<std::string>& args) {
         parser.fail(e.what());
     }
     o.commandLine = "pmsc run";
-    for (const auto& a : args) o.commandLine += " " + quoteForShell(a);
+    for (const auto& a : args) {
+        o.commandLine += ' ';
+        o.commandLine += quoteForShell(a);
+    }
     o.cancel = &interruptFlag();
 
     const Model model = readModel(o.modelPath);

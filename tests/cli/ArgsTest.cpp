@@ -1,6 +1,10 @@
 #include "cli/Args.h"
 
+#include "../io/TempDir.h"
+
 #include <gtest/gtest.h>
+
+#include <fstream>
 
 namespace {
 
@@ -99,6 +103,98 @@ TEST(Args, HelpListsEveryOption) {
     EXPECT_NE(help.find("the model (required)"), std::string::npos);
     EXPECT_NE(help.find("--quiet"), std::string::npos);
     EXPECT_NE(help.find("--help"), std::string::npos);
+}
+
+/// A `train`-like parser over `o`, for the --config tests.
+struct ConfigCase {
+    std::vector<std::string> frames;
+    std::string out;
+    double tolerance = 0;
+    bool quiet = false;
+    ArgParser parser{"train", "", ""};
+    ConfigCase() {
+        parser.option(
+            "--frames", "F", "f", [this](const std::string& v) { frames.push_back(v); }, true);
+        parser.repeatable("--frames");
+        parser.option("--out", "F", "o", out, true);
+        parser.option("--tolerance", "T", "t", [this](const std::string& v) {
+            tolerance = pmsc::cli::parseDouble("--tolerance", v, 0);
+        });
+        parser.flag("--quiet", "q", quiet);
+    }
+};
+
+std::string writeFile(const pmsc::test::TempDir& dir, const std::string& name, const std::string& text) {
+    const std::string path = (dir.path() / name).string();
+    std::ofstream(path) << text;
+    return path;
+}
+
+TEST(ArgsConfig, TopLevelAndTheCommandsSectionApplyOtherSectionsAreLeftToTheirCommands) {
+    pmsc::test::TempDir dir;
+    const std::string toml =
+        writeFile(dir, "job.toml",
+                  "quiet = true\n[train]\nframes = [\"a.npy\", \"b.npy\"]\ntolerance = 0.02\n"
+                  "[run]\nmodel = \"m.pmsc\"\n");
+    ConfigCase c;
+    ASSERT_TRUE(c.parser.parse({"--config", toml, "--out", "m.pmsc"}));
+    EXPECT_EQ(c.frames, (std::vector<std::string>{"a.npy", "b.npy"}));
+    EXPECT_EQ(c.out, "m.pmsc");
+    EXPECT_DOUBLE_EQ(c.tolerance, 0.02);
+    EXPECT_TRUE(c.quiet);
+}
+
+TEST(ArgsConfig, TheCommandLineWinsOptionByOption) {
+    pmsc::test::TempDir dir;
+    const std::string toml = writeFile(
+        dir, "job.toml", "[train]\nframes = [\"a.npy\", \"b.npy\"]\nout = \"file.pmsc\"\ntolerance = 0.02\n");
+    ConfigCase c;
+    ASSERT_TRUE(c.parser.parse({"--frames", "c.npy", "--config=" + toml, "--tolerance", "0.5"}));
+    EXPECT_EQ(c.frames, (std::vector<std::string>{"c.npy"}));  // the list is replaced, not appended to
+    EXPECT_EQ(c.out, "file.pmsc");
+    EXPECT_DOUBLE_EQ(c.tolerance, 0.5);
+}
+
+TEST(ArgsConfig, AnIniFileReadsTheSame) {
+    pmsc::test::TempDir dir;
+    const std::string ini =
+        writeFile(dir, "job.ini", "; a farm job\n[train]\nframes = a.npy\nout = m.pmsc\nquiet = true\n");
+    ConfigCase c;
+    ASSERT_TRUE(c.parser.parse({"--config", ini}));
+    EXPECT_EQ(c.frames, (std::vector<std::string>{"a.npy"}));
+    EXPECT_TRUE(c.quiet);
+}
+
+TEST(ArgsConfig, EveryMistakeInTheFileIsOneLineNamingTheFileAndTheKey) {
+    pmsc::test::TempDir dir;
+    const auto message = [&](const std::string& text) {
+        const std::string path = writeFile(dir, "bad.toml", text);
+        ConfigCase c;
+        return usageMessage(c.parser, {"--config", path, "--frames", "a.npy", "--out", "m.pmsc"});
+    };
+    const std::string bad = (dir.path() / "bad.toml").string();
+    EXPECT_EQ(
+        message("tolerence = 0.1\n"),
+        "train: --config " + bad + ": 'tolerence' is not an option of pmsc train (see 'pmsc train --help')");
+    EXPECT_EQ(message("quiet = maybe\n"),
+              "train: --config " + bad + ": quiet is a flag: true or false (see 'pmsc train --help')");
+    EXPECT_EQ(message("tolerance = [1, 2]\n"),
+              "train: --config " + bad + ": tolerance takes one value, got 2 (see 'pmsc train --help')");
+    EXPECT_EQ(message("tolerance = \"ten\"\n"),
+              "train: --tolerance: 'ten' is not a number (see 'pmsc train --help')");
+    EXPECT_EQ(
+        message("config = \"other.toml\"\n"),
+        "train: --config " + bad + ": 'config' is not an option of pmsc train (see 'pmsc train --help')");
+    ConfigCase c;
+    const std::string missing = (dir.path() / "missing.toml").string();
+    EXPECT_NE(usageMessage(c.parser, {"--config", missing}).find("--config " + missing + ": "),
+              std::string::npos);
+    ConfigCase twice;
+    EXPECT_EQ(usageMessage(twice.parser, {"--config", "a.toml", "--config", "b.toml"}),
+              "train: --config given twice (see 'pmsc train --help')");
+    ConfigCase noValue;
+    EXPECT_EQ(usageMessage(noValue.parser, {"--config"}),
+              "train: missing value for --config (see 'pmsc train --help')");
 }
 
 }  // namespace
