@@ -303,4 +303,35 @@ TrainOutcome trainPlanned(const TrainOptions& options, TrainPlan& plan, Communic
     return outcome;
 }
 
+CrossOutcome trainCrossFiles(const TrainOptions& options, ProgressFn progress) {
+    const std::string &controlPath = options.frames.front(), &targetsPath = options.targets;
+    if (!options.out.empty()) AtomicFile(options.out).abandon();
+    const auto start = std::chrono::steady_clock::now();
+    const NpyInfo ci = readNpyInfo(controlPath), ti = readNpyInfo(targetsPath);
+    if (ci.frames != ti.frames)
+        throw InputError("train: " + controlPath + " has " + std::to_string(ci.frames) +
+                         " control frames but " + targetsPath + " has " + std::to_string(ti.frames) +
+                         " target frames: cross training needs one target frame per control frame");
+    if (ci.channels != ti.channels)
+        throw InputError("train: " + controlPath + " has " + std::to_string(ci.channels) + " channels but " +
+                         targetsPath + " has " + std::to_string(ti.channels) +
+                         ": cross training needs the same channels");
+    const FrameSet control = readFrames(controlPath).frames;
+    const FrameSet target = readFrames(targetsPath).frames;
+    CrossOptions cross;
+    cross.training = options.training;
+    cross.coverage = options.training.calibrationCoverage;
+    cross.slices = options.training.calibrationSlices;
+    cross.training.progress = std::move(progress);
+    CrossOutcome outcome;
+    outcome.model = trainCross(control, target, cross, &outcome.report);
+    if (!options.out.empty()) writeModel(options.out, outcome.model);
+    outcome.controlPoints = ci.points;
+    outcome.targetPoints = ti.points;
+    outcome.channels = ci.channels;
+    outcome.pairs = control.frames;
+    outcome.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return outcome;
+}
+
 }  // namespace pmsc::app

@@ -1,8 +1,10 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include "app/OptionError.h"
 #include "app/TrainingDefaults.h"
 #include "pmsc/Communicator.h"
+#include "pmsc/Cross.h"
 #include "pmsc/Model.h"
 #include "pmsc/RowBlocks.h"
 #include "pmsc/Training.h"
@@ -15,19 +17,6 @@
 #include <vector>
 
 namespace pmsc::app {
-
-/// How a front end spells an option in its messages: `--region-keys` on the command line,
-/// `region_keys` in Python. The rules are written once, with the command line's names.
-enum class Spelling { CommandLine, Python };
-
-/// "region-keys" -> "--region-keys" or "region_keys".
-std::string optionName(std::string_view name, Spelling spelling);
-
-/// An option, or a combination of options, that training cannot take. A std::invalid_argument:
-/// exit code 2 on the command line, ValueError in Python.
-struct OptionError : std::invalid_argument {
-    using std::invalid_argument::invalid_argument;
-};
 
 /// Everything `pmsc train` and Python's `pmsc.train` are asked, in one struct: the frames, where the
 /// model goes, and the training settings with their defaults (defaultTrainingOptions()). The front
@@ -95,6 +84,20 @@ struct TrainOutcome {
 /// `options.out` (when not empty). `progress` is TrainingOptions::progress (null: none).
 TrainOutcome trainPlanned(const TrainOptions& options, TrainPlan& plan, Communicator& comm,
                           ProgressFn progress = {});
+
+/// A cross model (paper section 7) trained from `options.frames` (the control, one file) and
+/// `options.targets`, and what training said.
+struct CrossOutcome {
+    Model model;
+    CrossReport report;
+    Index controlPoints = 0, targetPoints = 0, channels = 0, pairs = 0;
+    double seconds = 0;  ///< wall time of reading, training and writing
+};
+
+/// Trains a cross model and writes `options.out` (when not empty). Fails on an unwritable
+/// destination and on pairs that cannot match (frame or channel counts) from the headers, before
+/// anything is read.
+CrossOutcome trainCrossFiles(const TrainOptions& options, ProgressFn progress = {});
 
 /// The whole training set in memory: the shots read one after the other into one FrameSet.
 FrameSet readShots(const std::vector<Shot>& shots);

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <iostream>
+#include <regex>
 #include <sstream>
 
 namespace pmsc::cli {
@@ -271,6 +272,22 @@ NpyDtype parseDtype(const std::string& option, const std::string& text) {
     if (text == "float64") return NpyDtype::Float64;
     if (text == "float32") return NpyDtype::Float32;
     throw UsageError(option + ": expected float64 or float32, got '" + text + "'");
+}
+
+app::FrameSpan parseFrameSpan(const std::string& option, const std::string& text) {
+    static const std::regex pattern(R"(^(\d+)(?:-(\d+))?(?::(\d+))?$)");
+    std::smatch m;
+    if (!std::regex_match(text, m, pattern))
+        throw UsageError(option + ": expected FIRST-LAST[:STEP] (for example 0-99 or 0-99:2), got '" + text +
+                         "'");
+    app::FrameSpan s;
+    s.first = parseIndex(option, m[1].str());
+    s.last = m[2].matched ? parseIndex(option, m[2].str()) : s.first;
+    s.step = m[3].matched ? parseIndex(option, m[3].str(), 1) : 1;
+    if (s.last < s.first) throw UsageError(option + ": the range " + text + " ends before it starts");
+    // Keep `last` on the grid, so count() and text() agree with what runs.
+    s.last = s.first + (s.last - s.first) / s.step * s.step;
+    return s;
 }
 
 }  // namespace pmsc::cli

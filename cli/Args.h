@@ -1,6 +1,7 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include "app/FarmFrames.h"
 #include "pmsc/FrameSet.h"
 #include "pmsc/NpyIO.h"
 
@@ -93,5 +94,9 @@ std::vector<Index> parseIndexList(const std::string& option, const std::string& 
 std::pair<double, double> parseDoublePair(const std::string& option, const std::string& text);
 /// An .npy element type: "float64" or "float32".
 NpyDtype parseDtype(const std::string& option, const std::string& text);
+
+/// Parses "A-B", "A-B:STEP" or a single frame "A" (A <= B, STEP >= 1, all >= 0).
+/// @throws UsageError naming `option`.
+app::FrameSpan parseFrameSpan(const std::string& option, const std::string& text);
 
 }  // namespace pmsc::cli

@@ -1,9 +1,9 @@
 // `pmsc export-frames`: an evaluator's full frames as a .npy training set (a user's own
 // character, posed by skin:ASSET, becomes the frames `pmsc train` learns from).
 #include "app/ExitCodes.h"
+#include "app/FarmFrames.h"
 #include "cli/Args.h"
 #include "cli/Commands.h"
-#include "cli/FarmFrames.h"
 #include "cli/Interrupt.h"
 #include "cli/Progress.h"
 #include "evaluators/EvaluatorRegistry.h"
@@ -62,7 +62,7 @@ int runExportFrames(const std::vector<std::string>& args) {
 
     spec = specOrAsset(spec);
     const std::unique_ptr<PointEvaluator> evaluator = evaluators::makeEvaluator(spec);
-    FrameSpan span{0, evaluator->frameCount() - 1, 1};
+    app::FrameSpan span{0, evaluator->frameCount() - 1, 1};
     if (!framesText.empty()) {
         try {
             span = parseFrameSpan("--frames", framesText);
@@ -70,7 +70,7 @@ int runExportFrames(const std::vector<std::string>& args) {
             parser.fail(e.what());
         }
     }
-    checkFramesInside(span, *evaluator, spec);
+    app::checkFramesInside(span, *evaluator, spec);
     const Index n = evaluator->pointCount(), c = evaluator->channelCount(), count = span.count();
 
     NpyFrameWriter writer(outPath, count, n, c, type);  // a temporary file until commit()

@@ -1,10 +1,10 @@
 // `pmsc replay`: recorded frames through a model's soft cache, with a report of what it did.
+#include "app/CrossReplay.h"
 #include "app/ExitCodes.h"
 #include "app/MemoryLimit.h"
 #include "app/Replay.h"
 #include "cli/Args.h"
 #include "cli/Commands.h"
-#include "cli/CrossReplay.h"
 #include "cli/Interrupt.h"
 #include "cli/Progress.h"
 #include "cli/ReplaySummary.h"
@@ -114,16 +114,16 @@ int replayCross(const ReplayArgs& a, const Model& model) {
     std::optional<NpyFrameWriter> out;
     if (!outPath.empty()) out.emplace(outPath, control.frameCount(), nt, model.channels, control.dtype());
     Progress progress("replay", !a.quiet);
-    CrossReplayOptions co;
+    app::CrossReplayOptions co;
     co.threads = options.threads;
     co.cancel = &interruptFlag();
     co.progress = [&](Index done, Index total) {
         progress.update("frames", static_cast<double>(done), static_cast<double>(total));
     };
-    const CrossReplayResult result =
-        crossReplay(model, control, truth ? &*truth : nullptr, co, out ? &*out : nullptr);
+    const app::CrossReplayResult result =
+        app::crossReplay(model, control, truth ? &*truth : nullptr, co, out ? &*out : nullptr);
     progress.finish();
-    const std::string text = crossReplayReport(model, result).dump(2) + "\n";
+    const std::string text = app::crossReplayReport(model, result).dump(2) + "\n";
     report.write(text.data(), text.size());
     if (out) out->commit();
     report.commit();

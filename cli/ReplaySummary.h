@@ -1,6 +1,7 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include "app/CrossReplay.h"
 #include "app/Replay.h"
 
 #include <ostream>
@@ -11,5 +12,8 @@ namespace pmsc::cli {
 /// alone and soft-cached, the thresholds and the speed.
 void printReplaySummary(std::ostream& out, const Model& model, const app::ReplayResult& result,
                         bool epsOverridden);
+
+/// What a cross replay did (app::crossReplay), as `pmsc replay` prints it for a cross model.
+void printCrossReplaySummary(std::ostream& out, const Model& model, const app::CrossReplayResult& result);
 
 }  // namespace pmsc::cli

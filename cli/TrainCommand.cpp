@@ -315,10 +315,7 @@ int trainModel(TrainArgs& a) {
 int runTrain(const std::vector<std::string>& args) {
     std::optional<TrainArgs> a = parseTrainArgs(args);
     if (!a) return kExitOk;
-    if (!a->request.targets.empty())
-        return runTrainCross(a->request.frames.front(), a->request.targets, a->request.out,
-                             a->request.training, a->request.training.calibrationCoverage,
-                             a->request.training.calibrationSlices, a->quiet);
+    if (!a->request.targets.empty()) return runTrainCross(a->request, a->quiet);
     return trainModel(*a);
 }
 

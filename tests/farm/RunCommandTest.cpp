@@ -4,7 +4,7 @@
 // process on a real motion-capture clip from assimp-testmodels, killed with SIGKILL mid-run and
 // resumed; every bad input checked for its exit code, its one stderr line and the absence of any
 // partial file. Figures are printed (and recorded as test properties).
-#include "cli/RunCommand.h"
+#include "app/Run.h"
 #include "evaluators/EvaluatorRegistry.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
@@ -496,17 +496,16 @@ private:
 TEST_F(FarmRun, EvaluatorFailureKeepsEarlierFramesAndReportsTheFrame) {
     const pmsc::Model m = pmsc::readModel(model);
     const fs::path out = root / "failing";
-    pmsc::cli::RunOptions o;
+    pmsc::app::RunOptions o;
     o.modelPath = model;
     o.evaluatorSpec = "failing";
-    o.frames = pmsc::cli::parseFrameSpan("--frames", "0-19");
+    o.frames = pmsc::app::FrameSpan{0, 19, 1};
     o.outDir = out.string();
-    o.quiet = true;
     o.threads = 2;
     const auto inner = pmsc::evaluators::makeEvaluator(kSpec);  // as the command line makes it
     FailingOn failing(*inner, 12);
     try {
-        pmsc::cli::runFrames(m, failing, o);
+        pmsc::app::runFrames(m, failing, o);
         FAIL() << "expected an EvaluatorError";
     } catch (const pmsc::EvaluatorError& e) {
         EXPECT_NE(std::string(e.what()).find("frame 12"), std::string::npos) << e.what();

@@ -1,10 +1,9 @@
 // libFuzzer target: the text the command line takes apart: frame ranges ("A-B[:STEP]",
-// cli/FarmFrames), evaluator specs ("NAME[:ARGS]", evaluators/EvaluatorRegistry, and the skin
+// cli/Args), evaluator specs ("NAME[:ARGS]", evaluators/EvaluatorRegistry, and the skin
 // evaluator's "ASSET[:fps=F][:animation=A]"), and the option parser with its number converters
 // (cli/Args). The first byte picks the parser; the rest is the text. The contract: a parser
 // returns a value that meets its documented invariants or throws the documented exception type.
 #include "cli/Args.h"
-#include "cli/FarmFrames.h"
 #include "evaluators/EvaluatorRegistry.h"
 #include "evaluators/SkinEvaluator.h"
 #include "pmsc/Errors.h"
@@ -21,7 +20,7 @@ using namespace pmsc;
 namespace {
 
 void frameRange(const std::string& text) {
-    cli::FrameSpan s;
+    app::FrameSpan s;
     try {
         s = cli::parseFrameSpan("--frames", text);
     } catch (const cli::UsageError&) {
@@ -30,7 +29,7 @@ void frameRange(const std::string& text) {
     if (s.first < 0 || s.last < s.first || s.step < 1 || (s.last - s.first) % s.step != 0 || s.count() < 1)
         std::abort();
     // What text() prints parses back to the same range.
-    const cli::FrameSpan again = cli::parseFrameSpan("--frames", s.text());
+    const app::FrameSpan again = cli::parseFrameSpan("--frames", s.text());
     if (again.first != s.first || again.last != s.last || again.step != s.step) std::abort();
 }
 

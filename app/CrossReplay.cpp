@@ -1,8 +1,6 @@
-#include "cli/CrossReplay.h"
-#include "cli/Commands.h"
+#include "app/CrossReplay.h"
 
 #include "app/Replay.h"  // percentiles
-#include "cli/Format.h"
 #include "pmsc/Cross.h"
 #include "pmsc/Errors.h"
 
@@ -14,7 +12,7 @@
 #include <cmath>
 #include <mutex>
 
-namespace pmsc::cli {
+namespace pmsc::app {
 
 CrossReplayResult crossReplay(const Model& model, const PointEvaluator& control, const PointEvaluator* truth,
                               const CrossReplayOptions& options, NpyFrameWriter* out) {
@@ -76,11 +74,7 @@ nlohmann::ordered_json pct(const Percentiles& p) {
     return {{"p50", p.p50}, {"p99", p.p99}, {"p995", p.p995}, {"max", p.max}};
 }
 
-/// The per-frame columns and counts both the report and the printed summary are made of.
-struct CrossTally {
-    std::vector<double> key, bound, error;  // error only when the targets were measured
-    Index inside = 0, overTolerance = 0;
-};
+}  // namespace
 
 CrossTally tally(const Model& model, const CrossReplayResult& result) {
     CrossTally t;
@@ -95,8 +89,6 @@ CrossTally tally(const Model& model, const CrossReplayResult& result) {
     }
     return t;
 }
-
-}  // namespace
 
 nlohmann::ordered_json crossReplayReport(const Model& model, const CrossReplayResult& result) {
     const CrossState& st = *model.cross;
@@ -147,39 +139,4 @@ nlohmann::ordered_json crossReplayReport(const Model& model, const CrossReplayRe
     return {{"summary", summary}, {"frames", rows}};
 }
 
-void printCrossReplaySummary(std::ostream& out, const Model& model, const CrossReplayResult& result) {
-    const CrossState& st = *model.cross;
-    const double frames = static_cast<double>(result.frames.size());
-    const CrossTally t = tally(model, result);
-    const std::vector<double>&key = t.key, &bound = t.bound, &error = t.error;
-    const Index inside = t.inside, over = t.overTolerance;
-    out << "cross replay: " << result.frames.size() << " control frames of " << st.controlPoints
-        << " points -> " << model.points - st.controlPoints
-        << " target points through M = " << model.basisSize() << ", K = " << model.keyCount()
-        << " control keys in " << fmt("%.3f", result.seconds) << " s ("
-        << fmt("%.1f", frames / std::max(result.seconds, 1e-9)) << " frames/s, " << result.threads
-        << " threads)\n";
-    out << "  fail-through impossible (cross point multiplication): every frame is the reconstruction\n";
-    out << "  bound       target's largest point error <= " << fmt("%.6g", st.quantile) << " x (key RMS + "
-        << fmt("%.6g", st.scale) << ") for " << fmt("%.0f", 100 * st.coverage)
-        << "% of frames like the held-out training pairs (" << st.keyRms.size() << ")\n";
-    const Percentiles k = percentiles(key), b = percentiles(bound);
-    out << "  per frame                        p50         p99       p99.5         max\n";
-    out << "    control key RMS         " << fmt(" %11.5g", k.p50) << fmt(" %11.5g", k.p99)
-        << fmt(" %11.5g", k.p995) << fmt(" %11.5g", k.max) << "\n";
-    out << "    bound                   " << fmt(" %11.5g", b.p50) << fmt(" %11.5g", b.p99)
-        << fmt(" %11.5g", b.p995) << fmt(" %11.5g", b.max) << "\n";
-    if (result.measured) {
-        const Percentiles e = percentiles(error);
-        out << "    target error (measured) " << fmt(" %11.5g", e.p50) << fmt(" %11.5g", e.p99)
-            << fmt(" %11.5g", e.p995) << fmt(" %11.5g", e.max) << "\n";
-        out << "  coverage    " << inside << " of " << result.frames.size() << " frames inside their bound ("
-            << fmt("%.1f", 100.0 * static_cast<double>(inside) / std::max(frames, 1.0)) << "%; stated "
-            << fmt("%.0f", 100 * st.coverage) << "%)\n";
-    }
-    if (model.tolerance > 0)
-        out << "  tolerance   " << over << " frames have a bound over " << fmt("%.6g", model.tolerance)
-            << "\n";
-}
-
-}  // namespace pmsc::cli
+}  // namespace pmsc::app

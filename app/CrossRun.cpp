@@ -1,9 +1,9 @@
 // `pmsc run` with a cross model: an evaluator of the CONTROL (e.g. face-control:DIR)
 // is evaluated at the control key points only; the target frames come from the joint subspace and
 // are written one file per frame (FrameOutput: atomic, resumable). No fail-through exists.
-#include "cli/CrossRun.h"
+#include "app/CrossRun.h"
 
-#include "cli/Args.h"
+#include "app/OptionError.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Cross.h"
 #include "pmsc/Errors.h"
@@ -16,7 +16,7 @@
 #include <atomic>
 #include <chrono>
 
-namespace pmsc::cli {
+namespace pmsc::app {
 
 RunReport runCrossFrames(const Model& model, const PointEvaluator& control, const RunOptions& options) {
     const auto start = std::chrono::steady_clock::now();
@@ -29,12 +29,12 @@ RunReport runCrossFrames(const Model& model, const PointEvaluator& control, cons
                          options.modelPath + " takes a control of " + std::to_string(cross.controlPoints()) +
                          " points x " + std::to_string(model.channels) + " channels");
     if (!options.keepMisses.empty())
-        throw UsageError("--keep-misses: " + options.modelPath + " is a cross model, which has no misses");
+        throw OptionError("--keep-misses: " + options.modelPath + " is a cross model, which has no misses");
     if (options.wholeFrameFailThrough)
-        throw UsageError("--whole-frame-fail-through: " + options.modelPath +
-                         " is a cross model, which cannot fail through");
+        throw OptionError("--whole-frame-fail-through: " + options.modelPath +
+                          " is a cross model, which cannot fail through");
     if (options.format != "npy")
-        throw UsageError("--format: a cross model writes its target frames as npy only");
+        throw OptionError("--format: a cross model writes its target frames as npy only");
     checkFramesInside(span, control, options.evaluatorSpec);
     const FrameOutput output(options.outDir, "npy", {}, cross.targetPoints(), model.channels, options.dtype);
     ensureWritableFolder(options.outDir);
@@ -104,4 +104,4 @@ RunReport runCrossFrames(const Model& model, const PointEvaluator& control, cons
     return report;
 }
 
-}  // namespace pmsc::cli
+}  // namespace pmsc::app

@@ -1,7 +1,7 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
-#include "cli/FarmFrames.h"
+#include "app/FarmFrames.h"
 
-#include "cli/Args.h"
+#include "app/OptionError.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 
@@ -10,35 +10,18 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
-#include <regex>
 #include <unordered_set>
 
 #include <unistd.h>
 
 namespace fs = std::filesystem;
 
-namespace pmsc::cli {
+namespace pmsc::app {
 
 std::string FrameSpan::text() const {
     std::string t = std::to_string(first) + "-" + std::to_string(last);
     if (step != 1) t += ":" + std::to_string(step);
     return t;
-}
-
-FrameSpan parseFrameSpan(const std::string& option, const std::string& text) {
-    static const std::regex pattern(R"(^(\d+)(?:-(\d+))?(?::(\d+))?$)");
-    std::smatch m;
-    if (!std::regex_match(text, m, pattern))
-        throw UsageError(option + ": expected FIRST-LAST[:STEP] (for example 0-99 or 0-99:2), got '" + text +
-                         "'");
-    FrameSpan s;
-    s.first = parseIndex(option, m[1].str());
-    s.last = m[2].matched ? parseIndex(option, m[2].str()) : s.first;
-    s.step = m[3].matched ? parseIndex(option, m[3].str(), 1) : 1;
-    if (s.last < s.first) throw UsageError(option + ": the range " + text + " ends before it starts");
-    // Keep `last` on the grid, so count() and text() agree with what runs.
-    s.last = s.first + (s.last - s.first) / s.step * s.step;
-    return s;
 }
 
 void checkFramesInside(const FrameSpan& span, const PointEvaluator& evaluator, const std::string& spec) {
@@ -76,7 +59,7 @@ FrameOutput::FrameOutput(std::string dir, const std::string& format,
         }
         offered += ", " + w->extension().substr(1);
     }
-    throw UsageError("--format: this evaluator writes " + offered + ", not '" + format + "'");
+    throw OptionError("--format: this evaluator writes " + offered + ", not '" + format + "'");
 }
 
 std::string FrameOutput::path(Index frame) const {
@@ -154,4 +137,4 @@ void ensureWritableFolder(const std::string& dir) {
     ::unlink(probe.c_str());
 }
 
-}  // namespace pmsc::cli
+}  // namespace pmsc::app

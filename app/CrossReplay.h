@@ -12,7 +12,7 @@
 #include <ostream>
 #include <vector>
 
-namespace pmsc::cli {
+namespace pmsc::app {
 
 /// One frame of a cross point-multiplication replay (pmsc/Cross.h).
 struct CrossFrame {
@@ -49,6 +49,11 @@ CrossReplayResult crossReplay(const Model& model, const PointEvaluator& control,
 /// fraction of frames inside their bound) and one row per frame.
 nlohmann::ordered_json crossReplayReport(const Model& model, const CrossReplayResult& result);
 
-void printCrossReplaySummary(std::ostream& out, const Model& model, const CrossReplayResult& result);
+/// The per-frame columns and counts both the report and the printed summary are made of.
+struct CrossTally {
+    std::vector<double> key, bound, error;  ///< error only when the targets were measured
+    Index inside = 0, overTolerance = 0;    ///< frames inside their bound; bounds over the tolerance
+};
+CrossTally tally(const Model& model, const CrossReplayResult& result);
 
-}  // namespace pmsc::cli
+}  // namespace pmsc::app

@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-namespace pmsc::cli {
+namespace pmsc::app {
 
 /// Frames first, first+step, ..., up to and including `last` (the command line's "A-B[:STEP]").
 struct FrameSpan {
@@ -22,10 +22,6 @@ struct FrameSpan {
     /// "A-B" or "A-B:S", as typed.
     std::string text() const;
 };
-
-/// Parses "A-B", "A-B:STEP" or a single frame "A" (A <= B, STEP >= 1, all >= 0).
-/// @throws UsageError naming `option`.
-FrameSpan parseFrameSpan(const std::string& option, const std::string& text);
 
 /// @throws InputError ("frames A-B are outside the evaluator's frames 0-F (SPEC)") unless every
 /// frame of `span` is one of the evaluator's.
@@ -51,7 +47,7 @@ public:
     /// @param[in] writers  what the evaluator offers (may be empty)
     /// @param[in] points, channels  N and C of every frame
     /// @param[in] dtype    element type of .npy frames
-    /// @throws UsageError for a format neither npy nor offered (the offered ones are listed).
+    /// @throws OptionError for a format neither npy nor offered (the offered ones are listed).
     FrameOutput(std::string dir, const std::string& format,
                 const std::vector<std::shared_ptr<const FrameWriter>>& writers, Index points, Index channels,
                 NpyDtype dtype);
@@ -94,4 +90,4 @@ std::vector<std::shared_ptr<const FrameWriter>> offeredWriters(const PointEvalua
 /// @throws IoError naming the folder and the system's reason.
 void ensureWritableFolder(const std::string& dir);
 
-}  // namespace pmsc::cli
+}  // namespace pmsc::app

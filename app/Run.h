@@ -1,15 +1,16 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-#include "cli/FarmFrames.h"
+#include "app/FarmFrames.h"
 #include "pmsc/Model.h"
 #include "pmsc/NpyIO.h"
 #include "pmsc/PointEvaluator.h"
+#include "pmsc/Training.h"  // ProgressFn
 
 #include <atomic>
 #include <string>
 
-namespace pmsc::cli {
+namespace pmsc::app {
 
 /// What `pmsc run` was asked to do (a render-farm task).
 struct RunOptions {
@@ -23,10 +24,11 @@ struct RunOptions {
     int threads = 0;                     ///< 0: every core
     std::uint64_t memoryLimit = 0;       ///< bytes the frames in flight may hold; 0 = no limit
     bool force = false;                  ///< redo frames whose output is already valid
-    bool quiet = false;                  ///< no progress display
     bool wholeFrameFailThrough = false;  ///< models with regions: no local fail-through
-    double logSeconds = 10;              ///< plain progress lines this often when stderr is not a terminal
-    std::string commandLine;             ///< as typed, for the stats
+    /// Called as frames are delivered ("D/T frames, F frames/s, hits H%", done, total), at most ten
+    /// times a second; returning false does not stop the run (`cancel` does). Null: none.
+    ProgressFn progress;
+    std::string commandLine;                    ///< as typed, for the stats
     const std::atomic<bool>* cancel = nullptr;  ///< set by another thread (SIGINT/SIGTERM) to stop
     /// Non-empty: append the frames that blended or missed (full values) to this .npy
     /// (`--keep-misses`, pmsc::KeptFrames), also when the run fails or is interrupted afterwards.
@@ -55,11 +57,11 @@ std::string defaultStatsPath(const std::string& outDir, const FrameSpan& frames)
 ///
 /// Checks, in this order, before any evaluation or any file is written:
 /// evaluator N and C == the model's (InputError), frames inside 0..frameCount()-1 (InputError),
-/// the format is npy or offered by the evaluator (UsageError), the output folder can be created
+/// the format is npy or offered by the evaluator (OptionError), the output folder can be created
 /// and written (IoError).
 /// Afterwards the stats JSON is written atomically, also when the run then fails (evaluator
 /// failure, I/O failure, interruption: "status" and "error" say which), and the error rethrown.
-/// @throws InputError, UsageError, IoError, EvaluatorError, pmsc::Cancelled.
+/// @throws InputError, OptionError, IoError, EvaluatorError, pmsc::Cancelled.
 RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const RunOptions& options);
 
-}  // namespace pmsc::cli
+}  // namespace pmsc::app

@@ -1,9 +1,9 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
-#include "cli/RunCommand.h"
+#include "app/Run.h"
 
-namespace pmsc::cli {
+namespace pmsc::app {
 
 /// `pmsc run` with a cross model: `control` is an evaluator of the control (N = the
 /// model's control points), evaluated at the key points only; the target frames are written one
@@ -13,4 +13,4 @@ namespace pmsc::cli {
 /// the output folder.
 RunReport runCrossFrames(const Model& model, const PointEvaluator& control, const RunOptions& options);
 
-}  // namespace pmsc::cli
+}  // namespace pmsc::app
