@@ -60,12 +60,10 @@ double median(std::vector<double> v) {
 
 }  // namespace
 
-Model trainCross(const FrameSet& control, const FrameSet& target, const CrossOptions& options,
-                 CrossReport* reportOut) {
-    const auto start = std::chrono::steady_clock::now();
-    CrossReport local;
-    CrossReport& report = reportOut ? *reportOut : local;
-    report = CrossReport{};
+namespace {
+
+/// trainCross's preconditions: pairs that match, enough of them, settings a cross model takes.
+void checkCrossInputs(const FrameSet& control, const FrameSet& target, const CrossOptions& options) {
     if (control.frames != target.frames) {
         throw InputError("train: the control has " + std::to_string(control.frames) +
                          " frames and the targets " + std::to_string(target.frames) +
@@ -96,7 +94,48 @@ Model trainCross(const FrameSet& control, const FrameSet& target, const CrossOpt
         throw std::invalid_argument("train: key candidates are set by cross training (the control's points)");
     checkFinite(control, "control");
     checkFinite(target, "target");
+}
 
+/// The bound on a target's largest point error from the held-out pairs' scores (section CROSSPM):
+/// error <= quantile x (key RMS + scale), the quantile conformal at the coverage asked.
+CrossState crossBound(const CalibrationStats& s, Index controlPoints, const CrossOptions& options,
+                      std::vector<std::string>& warnings) {
+    CrossState st;
+    st.controlPoints = controlPoints;
+    st.coverage = options.coverage;
+    st.slices = options.slices;
+    st.keyRms = s.keyRms;
+    st.targetError = s.maxPointError;
+    st.scale = median(st.keyRms);
+    if (!(st.scale > 0)) {
+        // Every held-out key error is zero (K*C == M, or a target that is an exact function of
+        // keys the basis holds): fall back to a scale from the target errors so scores exist.
+        st.scale = std::max(1e-300, median(st.targetError));
+        warnings.push_back(
+            "cross: every held-out control key error is 0; the bound's scale is the median held-out target "
+            "error");
+    }
+    std::vector<double> scores(st.keyRms.size());
+    for (size_t i = 0; i < scores.size(); ++i) scores[i] = st.targetError[i] / (st.keyRms[i] + st.scale);
+    st.quantile = conformalQuantile(scores, st.coverage);
+    const double n = static_cast<double>(scores.size());
+    if ((n + 1) * st.coverage > n * (1 + 1e-9)) {
+        warnings.push_back("cross: " + std::to_string(scores.size()) +
+                           " held-out pairs are too few for the quantile at coverage " +
+                           std::to_string(st.coverage) + "; the bound uses the largest score");
+    }
+    return st;
+}
+
+}  // namespace
+
+Model trainCross(const FrameSet& control, const FrameSet& target, const CrossOptions& options,
+                 CrossReport* reportOut) {
+    const auto start = std::chrono::steady_clock::now();
+    CrossReport local;
+    CrossReport& report = reportOut ? *reportOut : local;
+    report = CrossReport{};
+    checkCrossInputs(control, target, options);
     const Index nc = control.points, nt = target.points, c = control.channels, f = control.frames;
     report.controlPoints = nc;
     report.targetPoints = nt;
@@ -128,34 +167,11 @@ Model trainCross(const FrameSet& control, const FrameSet& target, const CrossOpt
     const CalibrationStats s = calibrate(targetRows, one, keyRows, model.keyPoints, model.basisSize(),
                                          /*tolerance, unused here=*/1.0, options.slices, gram);
     for (const auto& note : s.notes) report.training.warnings.push_back(note);
-    CrossState st;
-    st.controlPoints = nc;
-    st.coverage = options.coverage;
-    st.slices = options.slices;
-    st.keyRms = s.keyRms;
-    st.targetError = s.maxPointError;
-    st.scale = median(st.keyRms);
-    if (!(st.scale > 0)) {
-        // Every held-out key error is zero (K*C == M, or a target that is an exact function of
-        // keys the basis holds): fall back to a scale from the target errors so scores exist.
-        st.scale = std::max(1e-300, median(st.targetError));
-        report.training.warnings.push_back(
-            "cross: every held-out control key error is 0; the bound's scale is the median held-out target "
-            "error");
-    }
-    std::vector<double> scores(st.keyRms.size());
-    for (size_t i = 0; i < scores.size(); ++i) scores[i] = st.targetError[i] / (st.keyRms[i] + st.scale);
-    st.quantile = conformalQuantile(scores, st.coverage);
-    const double n = static_cast<double>(scores.size());
-    if ((n + 1) * st.coverage > n * (1 + 1e-9)) {
-        report.training.warnings.push_back("cross: " + std::to_string(scores.size()) +
-                                           " held-out pairs are too few for the quantile at coverage " +
-                                           std::to_string(st.coverage) +
-                                           "; the bound uses the largest score");
-    }
+    CrossState st = crossBound(s, nc, options, report.training.warnings);
+    const double n = static_cast<double>(st.keyRms.size());
     Index inside = 0;
-    for (size_t i = 0; i < scores.size(); ++i) inside += st.targetError[i] <= st.bound(st.keyRms[i]);
-    report.heldOutCoverage = scores.empty() ? 0.0 : static_cast<double>(inside) / n;
+    for (size_t i = 0; i < st.keyRms.size(); ++i) inside += st.targetError[i] <= st.bound(st.keyRms[i]);
+    report.heldOutCoverage = st.keyRms.empty() ? 0.0 : static_cast<double>(inside) / n;
     model.cross = std::move(st);
     model.validate();
     model.cross->validate(model.points, model.keyPoints);

@@ -165,6 +165,81 @@ KeySelection selectKeysTeleconnection(const Eigen::Ref<const Eigen::MatrixXd>& q
     return selectKeysTeleconnection(blocks, one, basis, firstBlock, firstSigma, options, g);
 }
 
+namespace {
+
+/// One round's keys (section 4): the block's vectors Varimax-rotated, visited by the variance they
+/// carry (column j of the rotated block carries ||diag(sigma) t_j||^2 of the block's energy), a
+/// teleconnection pair from each until the budget is met.
+void addRoundKeys(const Eigen::MatrixXd& blockU, const Eigen::VectorXd& blockSigma,
+                  const TeleconnectionOptions& options, Index channels, KeySet& keys, Communicator& comm,
+                  Index firstPoint) {
+    const VarimaxResult rotated = varimax(blockU, options.varimax, comm);
+    const Index b = blockU.cols();
+    Eigen::VectorXd variance(b);
+    for (Index j = 0; j < b; ++j)
+        variance[j] = (blockSigma.array() * rotated.rotation.col(j).array()).matrix().squaredNorm();
+    std::vector<Index> order(static_cast<size_t>(b));
+    std::iota(order.begin(), order.end(), Index{0});
+    std::stable_sort(order.begin(), order.end(), [&](Index a, Index c) { return variance[a] > variance[c]; });
+    for (Index j : order) {
+        if (keys.size() >= options.maxKeys) break;
+        addTeleconnectionPair(rotated.rotated.col(j), channels, keys, options.maxKeys, comm, firstPoint);
+    }
+}
+
+/// The next block of the residual R = Q - B C: its leading `block` singular values, and its left
+/// vectors in `blockU` (this rank's rows). From R^T R = G - W^T C - C^T W + C^T C, an F x F
+/// eigenproblem with no pass over Q, unless the residual is too small for that subtraction.
+TruncatedSvd nextResidualBlock(RowBlocks& q, Communicator& comm, const Eigen::MatrixXd& basis,
+                               const Eigen::MatrixXd& projected, const Eigen::MatrixXd& coords,
+                               const Eigen::MatrixXd& gram, Index block, double sigmaQ,
+                               Eigen::MatrixXd& blockU) {
+    Eigen::MatrixXd rtr = gram;
+    {
+        const Eigen::MatrixXd cross = projected.transpose() * coords;  // W^T C
+        rtr -= cross;
+        rtr -= cross.transpose();
+        rtr.noalias() += coords.transpose() * coords;
+    }
+    TruncatedSvd next = svdFromGram(Eigen::MatrixXd(0, q.frames()), rtr, block, 0, 1e-6 * sigmaQ);
+    Eigen::MatrixXd vs;
+    if (next.sigma.size() > 0) {
+        // U_R = R V_R S^-1 = Q (V_R S^-1) - B (C V_R S^-1): one pass, the residual never formed.
+        vs = next.v * next.sigma.cwiseInverse().asDiagonal();
+        blockU = timesRight(q, vs);
+        blockU.noalias() -= basis * (coords * vs);
+        return next;
+    }
+    // The residual is too small for the subtraction above (sigma_R <= 1e-6 sigma_1(Q): it cancels
+    // to rounding). Decision: form R = Q - B C block by block and take the Gram of R itself (one
+    // pass), then U_R = R V S^-1 (another). Replaces the randomized SVD of the explicit residual,
+    // which needs 2q + 2 passes and a distributed tall QR out of core. As that SVD did, it keeps
+    // every vector above 1e-7 of the residual's own largest (so rounding-level residuals still cue
+    // keys until the budget is met); only an exactly zero residual ends the selection.
+    Eigen::MatrixXd gr = Eigen::MatrixXd::Zero(q.frames(), q.frames());
+    Eigen::MatrixXd r;
+    for (Index bl = 0; bl < q.blockCount(); ++bl) {
+        r = q.block(bl);
+        r.noalias() -= basis.middleRows(q.blockFirstRow(bl), q.blockRows(bl)) * coords;
+        gr.selfadjointView<Eigen::Lower>().rankUpdate(r.transpose());
+    }
+    comm.sum(gr.data(), static_cast<std::size_t>(gr.size()));
+    gr.triangularView<Eigen::StrictlyUpper>() = gr.transpose();
+    next = svdFromGram(Eigen::MatrixXd(0, q.frames()), gr, block, 0, 0.0);
+    blockU.resize(q.ownedRows(), next.sigma.size());
+    if (next.sigma.size() > 0) {
+        vs = next.v * next.sigma.cwiseInverse().asDiagonal();
+        for (Index bl = 0; bl < q.blockCount(); ++bl) {
+            r = q.block(bl);
+            r.noalias() -= basis.middleRows(q.blockFirstRow(bl), q.blockRows(bl)) * coords;
+            blockU.middleRows(q.blockFirstRow(bl), q.blockRows(bl)).noalias() = r * vs;
+        }
+    }
+    return next;
+}
+
+}  // namespace
+
 KeySelection selectKeysTeleconnection(RowBlocks& q, Communicator& comm, const Eigen::MatrixXd& basis,
                                       const Eigen::Ref<const Eigen::MatrixXd>& firstBlock,
                                       const Eigen::VectorXd& firstSigma, const TeleconnectionOptions& options,
@@ -200,24 +275,8 @@ KeySelection selectKeysTeleconnection(RowBlocks& q, Communicator& comm, const Ei
     Eigen::VectorXd blockSigma = firstSigma.head(blockU.cols());
     for (Index round = 1;; ++round) {
         const Index before = keys.size();
-        if (blockU.cols() > 0 && keys.size() < options.maxKeys) {
-            const VarimaxResult rotated = varimax(blockU, options.varimax, comm);
-            // Visit rotated vectors by the variance they carry: column j of the rotated block
-            // carries ||diag(sigma) t_j||^2 of the block's energy.
-            const Index b = blockU.cols();
-            Eigen::VectorXd variance(b);
-            for (Index j = 0; j < b; ++j)
-                variance[j] = (blockSigma.array() * rotated.rotation.col(j).array()).matrix().squaredNorm();
-            std::vector<Index> order(static_cast<size_t>(b));
-            std::iota(order.begin(), order.end(), Index{0});
-            std::stable_sort(order.begin(), order.end(),
-                             [&](Index a, Index c) { return variance[a] > variance[c]; });
-            for (Index j : order) {
-                if (keys.size() >= options.maxKeys) break;
-                addTeleconnectionPair(rotated.rotated.col(j), channels, keys, options.maxKeys, comm,
-                                      q.firstPoint());
-            }
-        }
+        if (blockU.cols() > 0 && keys.size() < options.maxKeys)
+            addRoundKeys(blockU, blockSigma, options, channels, keys, comm, q.firstPoint());
         {
             const std::vector<Index> added(keys.keys().begin() + qk.rows() / channels, keys.keys().end());
             const Eigen::MatrixXd rows = keyRowsOfQ(q, comm, added);
@@ -234,50 +293,9 @@ KeySelection selectKeysTeleconnection(RowBlocks& q, Communicator& comm, const Ei
         if (!progressed || keys.size() >= options.maxKeys || keys.size() >= n) break;
         if (options.maxError > 0 && worst <= options.maxError) break;
 
-        // Next block: the residual's leading vectors (cueing + projection error left over), from
-        // R^T R = G - W^T C - C^T W + C^T C: an F x F eigenproblem, no pass over Q.
-        Eigen::MatrixXd rtr = gram;
-        {
-            const Eigen::MatrixXd cross = projected.transpose() * coords;  // W^T C
-            rtr -= cross;
-            rtr -= cross.transpose();
-            rtr.noalias() += coords.transpose() * coords;
-        }
-        TruncatedSvd next = svdFromGram(Eigen::MatrixXd(0, q.frames()), rtr, options.block, 0, 1e-6 * sigmaQ);
-        Eigen::MatrixXd vs;
-        if (next.sigma.size() > 0) {
-            // U_R = R V_R S^-1 = Q (V_R S^-1) - B (C V_R S^-1): one pass, the residual never formed.
-            vs = next.v * next.sigma.cwiseInverse().asDiagonal();
-            blockU = timesRight(q, vs);
-            blockU.noalias() -= basis * (coords * vs);
-        } else {
-            // The residual is too small for the subtraction above (sigma_R <= 1e-6 sigma_1(Q):
-            // it cancels to rounding). Decision: form R = Q - B C block by block and take the Gram
-            // of R itself (one pass), then U_R = R V S^-1 (another). Replaces the randomized SVD
-            // of the explicit residual, which needs 2q + 2 passes and a distributed tall QR out of
-            // core. As that SVD did, it keeps every vector above 1e-7 of the residual's own largest
-            // (so rounding-level residuals still cue keys until the budget is met); only an
-            // exactly zero residual ends the selection.
-            Eigen::MatrixXd gr = Eigen::MatrixXd::Zero(q.frames(), q.frames());
-            Eigen::MatrixXd r;
-            for (Index bl = 0; bl < q.blockCount(); ++bl) {
-                r = q.block(bl);
-                r.noalias() -= basis.middleRows(q.blockFirstRow(bl), q.blockRows(bl)) * coords;
-                gr.selfadjointView<Eigen::Lower>().rankUpdate(r.transpose());
-            }
-            comm.sum(gr.data(), static_cast<std::size_t>(gr.size()));
-            gr.triangularView<Eigen::StrictlyUpper>() = gr.transpose();
-            next = svdFromGram(Eigen::MatrixXd(0, q.frames()), gr, options.block, 0, 0.0);
-            blockU.resize(q.ownedRows(), next.sigma.size());
-            if (next.sigma.size() > 0) {
-                vs = next.v * next.sigma.cwiseInverse().asDiagonal();
-                for (Index bl = 0; bl < q.blockCount(); ++bl) {
-                    r = q.block(bl);
-                    r.noalias() -= basis.middleRows(q.blockFirstRow(bl), q.blockRows(bl)) * coords;
-                    blockU.middleRows(q.blockFirstRow(bl), q.blockRows(bl)).noalias() = r * vs;
-                }
-            }
-        }
+        // Next block: the residual's leading vectors (cueing + projection error left over).
+        TruncatedSvd next =
+            nextResidualBlock(q, comm, basis, projected, coords, gram, options.block, sigmaQ, blockU);
         blockSigma = std::move(next.sigma);
         if (blockU.cols() == 0) break;  // the residual is numerically zero: nothing left to cue
     }

@@ -24,6 +24,99 @@ VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const V
     return varimax(loadings, options, one);
 }
 
+namespace {
+
+/// The criterion of loadings left as they are (fewer than two columns, or no rows): from the
+/// column moments summed over ranks (varimaxCriterion on one rank).
+double unrotatedCriterion(const Eigen::Ref<const Eigen::MatrixXd>& loadings, Index p, Communicator& comm) {
+    const Index k = loadings.cols();
+    Eigen::VectorXd moments(2 * k);
+    for (Index j = 0; j < k; ++j) {
+        moments[j] = loadings.col(j).squaredNorm();
+        moments[k + j] = loadings.col(j).array().square().square().sum();
+    }
+    comm.sum(moments.data(), static_cast<std::size_t>(moments.size()));
+    double total = 0;
+    for (Index j = 0; j < k && p > 0; ++j) {
+        const double m2 = moments[j] / static_cast<double>(p);
+        total += moments[k + j] / static_cast<double>(p) - m2 * m2;
+    }
+    return total;
+}
+
+/// The varimax gradient G = X^T (Z.^3 - Z diag(colSquares)/p) = X^T Z.^3 - (X^T X) T
+/// diag(colSquares)/p, Z = X T, and the criterion, at a rotation T. The blocks are tall (N*C rows,
+/// ~16 columns), so memory passes, not flops, set the cost of an iteration: each evaluation streams
+/// X once, in row chunks small enough to stay in cache, making Z, Z.^3, the column moments
+/// (criterion) and X^T Z.^3 from the chunk while it is hot; Z itself is never stored.
+class VarimaxGradient {
+public:
+    VarimaxGradient(const Eigen::MatrixXd& x, Index p, Communicator& comm)
+        : x_(x),
+          comm_(comm),
+          rows_(x.rows()),
+          k_(x.cols()),
+          chunk_(std::max<Index>(1, std::min<Index>(rows_, 512))),
+          zc_(chunk_, k_),
+          cubes_(chunk_, k_),
+          colSquares_(k_),
+          colQuartics_(k_),
+          inverseRows_(1.0 / static_cast<double>(p)) {
+        xtx_ = x.transpose() * x;
+        comm.sum(xtx_.data(), static_cast<std::size_t>(xtx_.size()));
+    }
+
+    /// Fills `g` for `rotation` and returns the criterion there (== varimaxCriterion(X T)).
+    double evaluate(const Eigen::MatrixXd& rotation, Eigen::MatrixXd& g) {
+        g.setZero();
+        colSquares_.setZero();
+        colQuartics_.setZero();
+        for (Index r0 = 0; r0 < rows_; r0 += chunk_) {
+            const Index h = std::min(chunk_, rows_ - r0);
+            auto z = zc_.topRows(h);
+            auto c = cubes_.topRows(h);
+            z.noalias() = x_.middleRows(r0, h) * rotation;
+            for (Index j = 0; j < k_; ++j) {
+                double s2 = 0, s4 = 0;
+                for (Index i = 0; i < h; ++i) {
+                    const double v = z(i, j);
+                    const double v2 = v * v;
+                    c(i, j) = v2 * v;
+                    s2 += v2;
+                    s4 += v2 * v2;
+                }
+                colSquares_[j] += s2;
+                colQuartics_[j] += s4;
+            }
+            g.noalias() += x_.middleRows(r0, h).transpose() * c;
+        }
+        if (comm_.size() > 1) {
+            // One reduction per step: G's partial sums and both column moments.
+            Eigen::VectorXd sums(k_ * k_ + 2 * k_);
+            sums.head(k_ * k_) = Eigen::Map<const Eigen::VectorXd>(g.data(), k_ * k_);
+            sums.segment(k_ * k_, k_) = colSquares_;
+            sums.tail(k_) = colQuartics_;
+            comm_.sum(sums.data(), static_cast<std::size_t>(sums.size()));
+            g = Eigen::Map<const Eigen::MatrixXd>(sums.data(), k_, k_);
+            colSquares_ = sums.segment(k_ * k_, k_);
+            colQuartics_ = sums.tail(k_);
+        }
+        g.noalias() -= xtx_ * rotation * (colSquares_ * inverseRows_).asDiagonal();
+        const Eigen::ArrayXd m2 = colSquares_.array() * inverseRows_;
+        return (colQuartics_.array() * inverseRows_ - m2 * m2).sum();
+    }
+
+private:
+    const Eigen::MatrixXd& x_;
+    Communicator& comm_;
+    Index rows_, k_, chunk_;
+    Eigen::MatrixXd xtx_, zc_, cubes_;
+    Eigen::VectorXd colSquares_, colQuartics_;
+    double inverseRows_;
+};
+
+}  // namespace
+
 VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const VarimaxOptions& options,
                       Communicator& comm) {
     if (!(options.tolerance >= 0)) throw std::invalid_argument("varimax: tolerance must be >= 0");
@@ -38,19 +131,7 @@ VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const V
     if (k < 2 || p == 0) {
         result.rotated = loadings;
         result.converged = true;
-        // The criterion from the column moments summed over ranks (varimaxCriterion on one rank).
-        Eigen::VectorXd moments(2 * k);
-        for (Index j = 0; j < k; ++j) {
-            moments[j] = loadings.col(j).squaredNorm();
-            moments[k + j] = loadings.col(j).array().square().square().sum();
-        }
-        comm.sum(moments.data(), static_cast<std::size_t>(moments.size()));
-        double total = 0;
-        for (Index j = 0; j < k && p > 0; ++j) {
-            const double m2 = moments[j] / static_cast<double>(p);
-            total += moments[k + j] / static_cast<double>(p) - m2 * m2;
-        }
-        result.objective.push_back(total);
+        result.objective.push_back(unrotatedCriterion(loadings, p, comm));
         return result;
     }
 
@@ -62,66 +143,14 @@ VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const V
         for (Index i = 0; i < localRows; ++i)
             if (scale[i] > 0) x.row(i) /= scale[i];
     }
-
-    // G = X^T (Z.^3 - Z diag(colSquares)/p) = X^T Z.^3 - (X^T X) T diag(colSquares)/p, Z = X T.
-    // The blocks are tall (N*C rows, ~16 columns), so memory passes, not flops, set the cost of an
-    // iteration. Each iteration therefore streams X once, in row chunks small enough to stay in
-    // cache: Z, Z.^3, the column moments (criterion) and X^T Z.^3 are all made from the chunk
-    // while it is hot, and Z itself is never stored until the end.
-    Eigen::MatrixXd xtx = x.transpose() * x;
-    comm.sum(xtx.data(), static_cast<std::size_t>(xtx.size()));
-    const Index chunk = std::max<Index>(1, std::min<Index>(localRows, 512));
-    Eigen::MatrixXd zc(chunk, k);
-    Eigen::MatrixXd cubes(chunk, k);
-    Eigen::VectorXd colSquares(k);
-    Eigen::VectorXd colQuartics(k);
+    VarimaxGradient gradient(x, p, comm);
     Eigen::MatrixXd g(k, k);
-    const double inverseRows = 1.0 / static_cast<double>(p);
-    // Fills g (the gradient matrix) for the current rotation and returns the criterion there.
-    auto evaluate = [&]() {
-        g.setZero();
-        colSquares.setZero();
-        colQuartics.setZero();
-        for (Index r0 = 0; r0 < localRows; r0 += chunk) {
-            const Index h = std::min(chunk, localRows - r0);
-            auto z = zc.topRows(h);
-            auto c = cubes.topRows(h);
-            z.noalias() = x.middleRows(r0, h) * result.rotation;
-            for (Index j = 0; j < k; ++j) {
-                double s2 = 0, s4 = 0;
-                for (Index i = 0; i < h; ++i) {
-                    const double v = z(i, j);
-                    const double v2 = v * v;
-                    c(i, j) = v2 * v;
-                    s2 += v2;
-                    s4 += v2 * v2;
-                }
-                colSquares[j] += s2;
-                colQuartics[j] += s4;
-            }
-            g.noalias() += x.middleRows(r0, h).transpose() * c;
-        }
-        if (comm.size() > 1) {
-            // One reduction per step: G's partial sums and both column moments.
-            Eigen::VectorXd sums(k * k + 2 * k);
-            sums.head(k * k) = Eigen::Map<const Eigen::VectorXd>(g.data(), k * k);
-            sums.segment(k * k, k) = colSquares;
-            sums.tail(k) = colQuartics;
-            comm.sum(sums.data(), static_cast<std::size_t>(sums.size()));
-            g = Eigen::Map<const Eigen::MatrixXd>(sums.data(), k, k);
-            colSquares = sums.segment(k * k, k);
-            colQuartics = sums.tail(k);
-        }
-        g.noalias() -= xtx * result.rotation * (colSquares * inverseRows).asDiagonal();
-        const Eigen::ArrayXd m2 = colSquares.array() * inverseRows;
-        return (colQuartics.array() * inverseRows - m2 * m2).sum();  // == varimaxCriterion(X T)
-    };
-    double criterion = evaluate();
+    double criterion = gradient.evaluate(result.rotation, g);
     result.objective.push_back(criterion);
     for (int it = 0; it < options.maxIterations; ++it) {
         Eigen::JacobiSVD<Eigen::MatrixXd> svd(g, Eigen::ComputeFullU | Eigen::ComputeFullV);
         result.rotation.noalias() = svd.matrixU() * svd.matrixV().transpose();
-        const double next = evaluate();
+        const double next = gradient.evaluate(result.rotation, g);
         result.objective.push_back(next);
         ++result.iterations;
         // Relative gain of the criterion itself (R stops on the sum of G's singular values, a

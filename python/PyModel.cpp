@@ -139,21 +139,23 @@ py::dict modelInfo(const Model& m) {
 
 }  // namespace
 
-void bindModel(py::module_& m) {
-    py::class_<PyModel, std::shared_ptr<PyModel>>(
-        m, "Model",
-        "A trained model: mean, basis, key points, projector and soft-cache thresholds (a .pmsc file).")
-        .def_static(
-            "load",
-            [](const std::filesystem::path& path) {
-                Model model;
-                {
-                    py::gil_scoped_release nogil;
-                    model = readModel(path.string());
-                }
-                return std::make_shared<PyModel>(std::move(model));
-            },
-            "path"_a, "Reads a .pmsc model (pmsc.InputError naming the file and the problem).")
+using ModelClass = py::class_<PyModel, std::shared_ptr<PyModel>>;
+
+namespace {
+
+/// pmsc.Model's files and bytes: load, save, from_bytes, to_bytes, pickle.
+void bindModelFiles(ModelClass& c) {
+    c.def_static(
+         "load",
+         [](const std::filesystem::path& path) {
+             Model model;
+             {
+                 py::gil_scoped_release nogil;
+                 model = readModel(path.string());
+             }
+             return std::make_shared<PyModel>(std::move(model));
+         },
+         "path"_a, "Reads a .pmsc model (pmsc.InputError naming the file and the problem).")
         .def(
             "save",
             [](const PyModel& self, const std::filesystem::path& path) {
@@ -173,9 +175,13 @@ void bindModel(py::module_& m) {
         .def(py::pickle([](const PyModel& self) { return py::bytes(encodeModel(self.get())); },
                         [](const py::bytes& b) {
                             return std::make_shared<PyModel>(decodeModel(std::string(b), "<pickle>"));
-                        }))
-        .def_property_readonly(
-            "points", [](const PyModel& s) { return s.get().points; }, "N")
+                        }));
+}
+
+/// pmsc.Model's sizes, thresholds and read-only views, and its arithmetic.
+void bindModelViews(ModelClass& c) {
+    c.def_property_readonly(
+         "points", [](const PyModel& s) { return s.get().points; }, "N")
         .def_property_readonly(
             "channels", [](const PyModel& s) { return s.get().channels; }, "C")
         .def_property_readonly(
@@ -243,6 +249,16 @@ void bindModel(py::module_& m) {
             return "<pmsc.Model N=" + std::to_string(m.points) + " C=" + std::to_string(m.channels) +
                    " M=" + std::to_string(m.basisSize()) + " K=" + std::to_string(m.keyCount()) + ">";
         });
+}
+
+}  // namespace
+
+void bindModel(py::module_& m) {
+    ModelClass c(
+        m, "Model",
+        "A trained model: mean, basis, key points, projector and soft-cache thresholds (a .pmsc file).");
+    bindModelFiles(c);
+    bindModelViews(c);
 }
 
 }  // namespace pmsc::python

@@ -4,6 +4,7 @@
 // The experiment itself lives in examples/face (FaceDemo.h); this file parses options, shows
 // progress and prints the summary.
 #include "app/ExitCodes.h"
+#include "app/Train.h"
 #include "cli/Args.h"
 #include "cli/CommandRegistry.h"
 #include "cli/Progress.h"
@@ -44,6 +45,41 @@ void printLocalFailThrough(const nlohmann::json& local) {
                 s.at(std::string("local") == way ? "speedup_local" : "speedup_whole_frame").get<double>());
         }
     }
+}
+
+/// What the face demo did, from its report: sizes, calibration, validation, novel frames, speed.
+void printFaceDemoSummary(const nlohmann::json& r, const std::string& out) {
+    auto num = [&](const char* key) { return r.at(key).get<double>(); };
+    std::printf(
+        "ICT face (section 7): %ld points, %ld key points (%ld Multi-PIE fiducials), %ld basis vectors\n",
+        r.at("points").get<long>(), r.at("key_points").get<long>(), r.at("fiducials").get<long>(),
+        r.at("basis").get<long>());
+    std::printf(
+        "  training   %ld frames (%ld sequences); eps [%.4f, %.4f] for a tolerance of %.2f%% of the head "
+        "diagonal\n",
+        r.at("train_frames").get<long>(), r.at("sequences").at("training").get<long>(), num("eps_min"),
+        num("eps_max"), num("tolerance_pct_bbox"));
+    std::printf("  validation %ld frames through the engine: hit %.1f%%, blend %.1f%%, miss %.1f%%\n",
+                r.at("test_frames").get<long>(), 100 * num("hit_rate"), 100 * num("blend_rate"),
+                100 * num("miss_rate"));
+    std::printf(
+        "  error      PM largest point error, 99.5th percentile of frames: %.3f%% of the head diagonal;\n"
+        "             soft-cached, worst frame of all: %.3f%%\n",
+        num("max_error_pct_bbox_p995"), num("soft_max_error_pct_bbox_max"));
+    std::printf("  novel      %ld frames moving controls never trained: %.1f%% caught (blend or miss)\n",
+                r.at("novel_frames").get<long>(), 100 * num("novel_nonhit_rate"));
+    std::printf(
+        "  speed      full pose %.1f ms/frame, PMSC %.2f ms/frame (keys %.2f, projection %.3f, "
+        "reconstruction %.2f): "
+        "speedup %.1fx\n",
+        1e3 * num("full_seconds_per_frame"), 1e3 * num("pmsc_seconds_per_frame"),
+        1e3 * r.at("timing").at("key_posing").get<double>(),
+        1e3 * r.at("timing").at("projection").get<double>(),
+        1e3 * r.at("timing").at("reconstruction").get<double>(), num("speedup"));
+    if (r.contains("local_fail_through")) printLocalFailThrough(r.at("local_fail_through"));
+    std::printf(
+        "  wrote      %s/report.json, frames.csv, keys.png, worst/typical/novel .png and .obj  [%.0f s]\n",
+        out.c_str(), r.at("seconds").at("total").get<double>());
 }
 
 }  // namespace
@@ -101,15 +137,11 @@ int runDemoFace(const std::vector<std::string>& args) {
     if (basis) options.basis = static_cast<long>(*basis);
     if (regions) options.regions = static_cast<long>(*regions);
     if (seed) options.seed = static_cast<unsigned>(*seed);
-    if (!keyError.empty()) {
-        options.keyErrorNorm = keyErrorNormNamed(keyError);
-        if (!options.keyErrorNorm)
-            parser.fail("--key-error: '" + keyError + "' is not " + kKeyErrorNormChoices);
-    }
-    if (!calibration.empty()) {
-        options.calibrationRule = calibrationRuleNamed(calibration);
-        if (!options.calibrationRule)
-            parser.fail("--calibration: '" + calibration + "' is not " + kCalibrationRuleChoices);
+    try {
+        options.keyErrorNorm = app::keyErrorNamed(keyError, app::Spelling::CommandLine);
+        options.calibrationRule = app::calibrationNamed(calibration, app::Spelling::CommandLine);
+    } catch (const app::OptionError& e) {
+        parser.fail(e.what());
     }
 
     Progress progress("demo face", !quiet);
@@ -119,37 +151,7 @@ int runDemoFace(const std::vector<std::string>& args) {
     const nlohmann::json r = face::runFaceDemo(options);
     progress.finish();
 
-    auto num = [&](const char* key) { return r.at(key).get<double>(); };
-    std::printf(
-        "ICT face (section 7): %ld points, %ld key points (%ld Multi-PIE fiducials), %ld basis vectors\n",
-        r.at("points").get<long>(), r.at("key_points").get<long>(), r.at("fiducials").get<long>(),
-        r.at("basis").get<long>());
-    std::printf(
-        "  training   %ld frames (%ld sequences); eps [%.4f, %.4f] for a tolerance of %.2f%% of the head "
-        "diagonal\n",
-        r.at("train_frames").get<long>(), r.at("sequences").at("training").get<long>(), num("eps_min"),
-        num("eps_max"), num("tolerance_pct_bbox"));
-    std::printf("  validation %ld frames through the engine: hit %.1f%%, blend %.1f%%, miss %.1f%%\n",
-                r.at("test_frames").get<long>(), 100 * num("hit_rate"), 100 * num("blend_rate"),
-                100 * num("miss_rate"));
-    std::printf(
-        "  error      PM largest point error, 99.5th percentile of frames: %.3f%% of the head diagonal;\n"
-        "             soft-cached, worst frame of all: %.3f%%\n",
-        num("max_error_pct_bbox_p995"), num("soft_max_error_pct_bbox_max"));
-    std::printf("  novel      %ld frames moving controls never trained: %.1f%% caught (blend or miss)\n",
-                r.at("novel_frames").get<long>(), 100 * num("novel_nonhit_rate"));
-    std::printf(
-        "  speed      full pose %.1f ms/frame, PMSC %.2f ms/frame (keys %.2f, projection %.3f, "
-        "reconstruction %.2f): "
-        "speedup %.1fx\n",
-        1e3 * num("full_seconds_per_frame"), 1e3 * num("pmsc_seconds_per_frame"),
-        1e3 * r.at("timing").at("key_posing").get<double>(),
-        1e3 * r.at("timing").at("projection").get<double>(),
-        1e3 * r.at("timing").at("reconstruction").get<double>(), num("speedup"));
-    if (r.contains("local_fail_through")) printLocalFailThrough(r.at("local_fail_through"));
-    std::printf(
-        "  wrote      %s/report.json, frames.csv, keys.png, worst/typical/novel .png and .obj  [%.0f s]\n",
-        out.c_str(), r.at("seconds").at("total").get<double>());
+    printFaceDemoSummary(r, out);
     return kExitOk;
 }
 

@@ -15,55 +15,11 @@ namespace pmsc::demos {
 using namespace pmsc::app;
 using namespace pmsc::cli;
 
-int runDemoLearn(const std::vector<std::string>& args) {
-    std::string data, out;
-    bool quick = false, quiet = false;
-    face::LearnDemoOptions o;
-    int threads = 0;
-    double tolerance = 0, coverage = 0;
-    ArgParser parser(
-        "demo learn",
-        "--data DIR --out DIR2 [--quick] [--threads T] [--tolerance PCT] [--coverage C] [--quiet]",
-        "The nightly loop of paper section 5 on the ICT face: a model trained on the face demo's\n"
-        "training sequences runs day 1's shot (sequences moving controls training never saw) and keeps\n"
-        "its misses; `pmsc learn` updates the model with them overnight (timed against training from\n"
-        "scratch on everything); day 2's shot (the same controls, other performances) runs through the\n"
-        "day-1, learned and scratch models. Also compares the calibration rules on the validation\n"
-        "sequences. Writes DIR2/report.json, frames.csv, day1/day2/scratch.pmsc, day1-misses.npy.");
-    parser.option("--data", "DIR", "the ICT-FaceKit FaceXModel folder", data, true);
-    parser.option("--out", "DIR2", "output folder (created if missing)", out, true);
-    parser.option("--threads", "T", "worker threads (default: every core)", [&](const std::string& v) {
-        threads = static_cast<int>(parseIndex("--threads", v, 1, 1024));
-    });
-    parser.option("--tolerance", "PCT", "largest error of a hit, % of the head diagonal (default 1)",
-                  [&](const std::string& v) { tolerance = parseDouble("--tolerance", v, 0.001, 100); });
-    std::string rule;
-    parser.option("--calibration", "RULE", "rule of the loop's models: max (default) or conformal", rule);
-    parser.option("--coverage", "C", "coverage of --calibration conformal (default 0.9)",
-                  [&](const std::string& v) {
-                      coverage = parseDouble("--coverage", v, 0.0, 1.0);
-                      if (!(coverage > 0 && coverage < 1))
-                          throw UsageError("--coverage: must be in (0, 1), got " + v);
-                  });
-    parser.flag("--quick", "short sequences, smaller model: a smoke test of the whole loop", quick);
-    parser.flag("--quiet", "no progress display", quiet);
-    if (!parser.parse(args)) return kExitOk;
-    if (quick) o = face::LearnDemoOptions::quickOptions();
-    if (!rule.empty() && rule != "max" && rule != "conformal")
-        parser.fail("--calibration: '" + rule + "' is not max or conformal");
-    o.conformal = rule == "conformal";
-    o.dataDir = data;
-    o.outDir = out;
-    o.threads = threads;
-    if (tolerance > 0) o.tolerancePercent = tolerance;
-    if (coverage > 0) o.coverage = coverage;
-    Progress progress("demo learn", !quiet);
-    o.progress = [&](std::string_view stage, double done, double total) {
-        return progress.update(stage, done, total);
-    };
-    const nlohmann::json r = face::runLearnDemo(o);
-    progress.finish();
+namespace {
 
+/// What the nightly loop did, from its report: day 1, day 2 through the three models, the
+/// validation sequences, learn against retraining, the calibration rules.
+void printLearnDemoSummary(const nlohmann::json& r, const std::string& out) {
     auto rate = [](const nlohmann::json& s) { return 100.0 * s.at("hit_rate").get<double>(); };
     auto soft = [](const nlohmann::json& s) { return s.at("soft_max_error_pct_bbox").get<double>(); };
     auto pm = [](const nlohmann::json& s, const char* q) {
@@ -120,6 +76,60 @@ int runDemoLearn(const std::vector<std::string>& args) {
         "  wrote   %s/report.json, frames.csv, day1.pmsc, day2.pmsc, scratch.pmsc, day1-misses.npy  [%.0f "
         "s]\n",
         out.c_str(), r.at("seconds").at("total").get<double>());
+}
+
+}  // namespace
+
+int runDemoLearn(const std::vector<std::string>& args) {
+    std::string data, out;
+    bool quick = false, quiet = false;
+    face::LearnDemoOptions o;
+    int threads = 0;
+    double tolerance = 0, coverage = 0;
+    ArgParser parser(
+        "demo learn",
+        "--data DIR --out DIR2 [--quick] [--threads T] [--tolerance PCT] [--coverage C] [--quiet]",
+        "The nightly loop of paper section 5 on the ICT face: a model trained on the face demo's\n"
+        "training sequences runs day 1's shot (sequences moving controls training never saw) and keeps\n"
+        "its misses; `pmsc learn` updates the model with them overnight (timed against training from\n"
+        "scratch on everything); day 2's shot (the same controls, other performances) runs through the\n"
+        "day-1, learned and scratch models. Also compares the calibration rules on the validation\n"
+        "sequences. Writes DIR2/report.json, frames.csv, day1/day2/scratch.pmsc, day1-misses.npy.");
+    parser.option("--data", "DIR", "the ICT-FaceKit FaceXModel folder", data, true);
+    parser.option("--out", "DIR2", "output folder (created if missing)", out, true);
+    parser.option("--threads", "T", "worker threads (default: every core)", [&](const std::string& v) {
+        threads = static_cast<int>(parseIndex("--threads", v, 1, 1024));
+    });
+    parser.option("--tolerance", "PCT", "largest error of a hit, % of the head diagonal (default 1)",
+                  [&](const std::string& v) { tolerance = parseDouble("--tolerance", v, 0.001, 100); });
+    std::string rule;
+    parser.option("--calibration", "RULE", "rule of the loop's models: max (default) or conformal", rule);
+    parser.option("--coverage", "C", "coverage of --calibration conformal (default 0.9)",
+                  [&](const std::string& v) {
+                      coverage = parseDouble("--coverage", v, 0.0, 1.0);
+                      if (!(coverage > 0 && coverage < 1))
+                          throw UsageError("--coverage: must be in (0, 1), got " + v);
+                  });
+    parser.flag("--quick", "short sequences, smaller model: a smoke test of the whole loop", quick);
+    parser.flag("--quiet", "no progress display", quiet);
+    if (!parser.parse(args)) return kExitOk;
+    if (quick) o = face::LearnDemoOptions::quickOptions();
+    if (!rule.empty() && rule != "max" && rule != "conformal")
+        parser.fail("--calibration: '" + rule + "' is not max or conformal");
+    o.conformal = rule == "conformal";
+    o.dataDir = data;
+    o.outDir = out;
+    o.threads = threads;
+    if (tolerance > 0) o.tolerancePercent = tolerance;
+    if (coverage > 0) o.coverage = coverage;
+    Progress progress("demo learn", !quiet);
+    o.progress = [&](std::string_view stage, double done, double total) {
+        return progress.update(stage, done, total);
+    };
+    const nlohmann::json r = face::runLearnDemo(o);
+    progress.finish();
+
+    printLearnDemoSummary(r, out);
     return kExitOk;
 }
 
