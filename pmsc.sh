@@ -123,7 +123,7 @@ run_sanitizers() {
   if [ -d engine ] && grep -q pmsc_engine_tests tests/engine/CMakeLists.txt 2>/dev/null; then
     configure build-tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPMSC_SANITIZE=thread \
       -DPMSC_BUILD_EXAMPLES=OFF -DPMSC_BUILD_BENCH=OFF
-    cmake --build build-tsan -j "$JOBS" --target pmsc_engine_tests pmsc_viewer_tests
+    cmake --build build-tsan -j "$JOBS" --target pmsc_engine_tests pmsc_nodes_tests pmsc_viewer_tests
     # A oneTBB worker can end inside the uninstrumented libtbb after a test passed, which
     # ThreadSanitizer reports as "finished with ignores enabled" (no race, no test failure of
     # its own). Such a test runs once more; any other report fails the suite.

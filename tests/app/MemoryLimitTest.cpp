@@ -5,7 +5,7 @@
 // tests/scaleout/cgroup-train.sh runs `pmsc train` inside a real memory cgroup.
 #include "app/MemoryLimit.h"
 
-#include "../io/TempDir.h"
+#include "tests/common/TempDir.h"
 
 #include <gtest/gtest.h>
 

@@ -1,6 +1,6 @@
 #include "cli/Args.h"
 
-#include "../io/TempDir.h"
+#include "tests/common/TempDir.h"
 
 #include <gtest/gtest.h>
 

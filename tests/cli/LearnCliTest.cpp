@@ -1,6 +1,6 @@
 // `pmsc learn`, `--keep-misses` (replay and run) and the calibration options of `pmsc train`, through
 // the real binary: success paths, appending across runs, and bad inputs.
-#include "CliRunner.h"
+#include "tests/common/CliRunner.h"
 #include "evaluators/synthetic/SyntheticSurface.h"
 #include "pmsc/KeptFrames.h"
 #include "pmsc/ModelIO.h"

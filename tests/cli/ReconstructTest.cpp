@@ -1,7 +1,7 @@
 // `pmsc reconstruct` end to end: the soft cache driven pass by pass through files, with a
 // "renderer" that answers each pass from recorded frames (NaN everywhere it was not asked), must
 // give `pmsc replay`'s output and states byte for byte; and every bad input is one line.
-#include "CliRunner.h"
+#include "tests/common/CliRunner.h"
 #include "SyntheticShot.h"
 #include "evaluators/synthetic/SyntheticSurface.h"
 #include "pmsc/ModelIO.h"

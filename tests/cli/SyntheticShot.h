@@ -1,7 +1,7 @@
 // The small generated shot the command-line tests share.
 #pragma once
 
-#include "../io/TempDir.h"
+#include "tests/common/TempDir.h"
 #include "evaluators/synthetic/SyntheticSurface.h"
 #include "pmsc/NpyIO.h"
 

@@ -4,7 +4,7 @@
 #include "evaluators/ReplayEvaluator.h"
 #include "pmsc/NpyIO.h"
 #include "tests/engine/Synthetic.h"
-#include "tests/io/TempDir.h"
+#include "tests/common/TempDir.h"
 
 #include <gtest/gtest.h>
 

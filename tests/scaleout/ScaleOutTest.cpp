@@ -2,7 +2,7 @@
 // MPI ranks, and training under an address-space limit smaller than the training matrix. Every
 // path must give the model of in-memory, single-process training: the same M and keys, bases
 // within 1e-9 principal angle, the same largest training residual.
-#include "../cli/CliRunner.h"
+#include "tests/common/CliRunner.h"
 #include "pmsc/Communicator.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/NpyIO.h"

@@ -4,7 +4,7 @@
 // writes the same bytes as `replay:` on the same file; a child that crashes, hangs, answers short
 // or NaN, or exits at start ends the run with exit code 3 and one stderr line, and leaves only
 // the complete frames before the failure.
-#include "tests/cli/CliRunner.h"
+#include "tests/common/CliRunner.h"
 #include "tests/common/MissingData.h"
 
 #include <gtest/gtest.h>
@@ -22,7 +22,7 @@ using pmsc::test::TempDir;
 
 const std::string kPython = PMSC_PYTHON;
 const std::string kSource = PMSC_SOURCE_DIR;
-const std::string kFault = kPython + " " + kSource + "/tests/exec/fault_child.py";
+const std::string kFault = kPython + " " + kSource + "/tests/evaluators/exec/fault_child.py";
 
 std::string bytes(const std::filesystem::path& p) {
     std::ifstream in(p, std::ios::binary);

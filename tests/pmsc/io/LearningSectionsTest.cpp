@@ -1,5 +1,5 @@
 // The model-file sections of `pmsc learn`: LEARNSVD and CALIBRAT round trips and bad bytes.
-#include "SmallModel.h"
+#include "tests/common/SmallModel.h"
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
 

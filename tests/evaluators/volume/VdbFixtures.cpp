@@ -1,4 +1,4 @@
-#include "VdbFixtures.h"
+#include "tests/evaluators/volume/VdbFixtures.h"
 
 #include <openvdb/openvdb.h>
 

@@ -29,7 +29,7 @@ namespace {
 const std::string kPmsc = PMSC_BINARY;
 const std::string kSource = PMSC_SOURCE_DIR;
 const std::string kPython = PMSC_PYTHON;
-const std::string kFault = kPython + " " + kSource + "/tests/exec/fault_child.py";
+const std::string kFault = kPython + " " + kSource + "/tests/evaluators/exec/fault_child.py";
 
 std::string messageOf(const std::function<void()>& f) {
     try {

@@ -1,7 +1,7 @@
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
 
-#include "TempDir.h"
+#include "tests/common/TempDir.h"
 
 #include <gtest/gtest.h>
 

@@ -2,9 +2,9 @@
 // exits 0, writes a complete report, and the learned model is a real update of the day-1 one: its
 // frames are the day-1 frames plus the kept ones, its basis is the scratch model's to a fraction of
 // a degree, and no soft-cached frame of the max-rule loop exceeds the tolerance.
-#include "FaceTestData.h"
 #include "pmsc/KeptFrames.h"
 #include "pmsc/ModelIO.h"
+#include "tests/common/FaceTestData.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

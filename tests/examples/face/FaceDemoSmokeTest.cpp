@@ -2,8 +2,8 @@
 // report has every documented field, within bounds that hold even for the quick run's
 // undertrained model (3 training sequences): the soft cache keeps every frame under the 1%
 // tolerance by failing through, and catches the novel controls.
-#include "FaceTestData.h"
 #include "evaluators/face/ObjReader.h"
+#include "tests/common/FaceTestData.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

@@ -1,8 +1,8 @@
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
 
-#include "SmallModel.h"
-#include "TempDir.h"
+#include "tests/common/SmallModel.h"
+#include "tests/common/TempDir.h"
 
 #include <gtest/gtest.h>
 #include <Eigen/QR>

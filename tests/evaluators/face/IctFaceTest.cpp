@@ -1,6 +1,6 @@
-#include "FaceTestData.h"
 #include "evaluators/face/IctFace.h"
 #include "pmsc/Errors.h"
+#include "tests/common/FaceTestData.h"
 
 #include <gtest/gtest.h>
 

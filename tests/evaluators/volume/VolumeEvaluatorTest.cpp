@@ -1,9 +1,9 @@
 // The full calculation per voxel: physics against closed forms, the march's convergence, the
 // determinism the engine relies on, the colour control, the light rig and the spec's errors.
-#include "VdbFixtures.h"
 #include "evaluators/volume/VolumeEvaluator.h"
 #include "pmsc/Errors.h"
 #include "tests/common/MissingData.h"
+#include "tests/evaluators/volume/VdbFixtures.h"
 
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>

@@ -1,5 +1,5 @@
-#include "FaceTestData.h"
 #include "evaluators/face/FaceRig.h"
+#include "tests/common/FaceTestData.h"
 
 #include <gtest/gtest.h>
 #include <tbb/parallel_for.h>

@@ -3,8 +3,8 @@
 // are control points, and its figures are sane (errors finite and under 2% of the head diagonal at
 // the median although the quick model sees only 2 short sequences, a bound that holds on most
 // validation frames, cross PM faster than the full rig).
-#include "FaceTestData.h"
 #include "pmsc/ModelIO.h"
+#include "tests/common/FaceTestData.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

@@ -1,7 +1,7 @@
 // The ICT-style rig generator on a tiny mesh written by the test, where the jaw hinge is known.
-#include "../io/TempDir.h"
 #include "examples/synthetic/IctFrames.h"
 #include "pmsc/Errors.h"
+#include "tests/common/TempDir.h"
 
 #include <gtest/gtest.h>
 

@@ -1,9 +1,9 @@
 // `pmsc demo volume --quick` end to end (the real program, its report, OpenVDB's own vdb_print on
 // a cache file) and the volume evaluator's bad inputs through the command line: one line, exit 2.
-#include "VdbFixtures.h"
 #include "evaluators/volume/DensityVolume.h"
 #include "examples/volume/VolumeDemo.h"
 #include "tests/common/MissingData.h"
+#include "tests/evaluators/volume/VdbFixtures.h"
 
 #include <nlohmann/json.hpp>
 

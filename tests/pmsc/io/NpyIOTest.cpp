@@ -1,7 +1,7 @@
 #include "pmsc/Errors.h"
 #include "pmsc/NpyIO.h"
 
-#include "TempDir.h"
+#include "tests/common/TempDir.h"
 
 #include <gtest/gtest.h>
 

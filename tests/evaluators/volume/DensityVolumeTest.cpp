@@ -1,9 +1,9 @@
 // The density grid: bad inputs (one line each), the ray march against an analytic integral, the
 // smoke made from a mesh, and the cache grid's topology and file round trip.
-#include "VdbFixtures.h"
 #include "evaluators/volume/DensityVolume.h"
 #include "pmsc/Errors.h"
 #include "tests/common/MissingData.h"
+#include "tests/evaluators/volume/VdbFixtures.h"
 
 #include <gtest/gtest.h>
 

@@ -1,7 +1,7 @@
 // Runs the built `pmsc` program and captures what it did.
 #pragma once
 
-#include "../io/TempDir.h"
+#include "tests/common/TempDir.h"
 
 #include <cstdlib>
 #include <string>
