@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <memory>
 
@@ -220,6 +221,14 @@ nlohmann::ordered_json replayReport(const Model& model, const ReplayResult& resu
         summary["region_states"] = std::move(regions);
     }
     return json{{"summary", std::move(summary)}, {"frames", std::move(frames)}};
+}
+
+void checkEps(const std::pair<double, double>& eps, Spelling spelling) {
+    if (!(eps.first >= 0 && eps.first <= eps.second && std::isfinite(eps.second))) {
+        char got[96];
+        std::snprintf(got, sizeof got, "%g, %g", eps.first, eps.second);
+        throw OptionError(optionName("eps", spelling) + ": need 0 <= MIN <= MAX, got " + got);
+    }
 }
 
 }  // namespace pmsc::app

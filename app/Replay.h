@@ -1,6 +1,8 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include "app/OptionError.h"
+
 #include "pmsc/KeptFrames.h"
 #include "pmsc/Metrics.h"
 #include "pmsc/Model.h"
@@ -52,6 +54,10 @@ struct ReplayOptions {
     /// thread at a time: an in-memory output (the Python module's array) instead of or besides `out`.
     std::function<void(Index sequence, const double* values)> frameOut;
 };
+
+/// An --eps override [MIN, MAX] (replay, run, Python's eps=): finite, 0 <= MIN <= MAX.
+/// @throws OptionError naming the option as `spelling` names it.
+void checkEps(const std::pair<double, double>& eps, Spelling spelling);
 
 struct ReplayResult {
     double epsMin = 0, epsMax = 0;    ///< thresholds used

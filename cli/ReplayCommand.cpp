@@ -43,8 +43,11 @@ std::optional<ReplayArgs> parseReplayArgs(const std::vector<std::string>& args) 
     parser.option("--eps", "MIN,MAX", "override the model's thresholds (key RMS, data units)",
                   [&](const std::string& v) {
                       const auto eps = parseDoublePair("--eps", v);
-                      if (!(eps.first >= 0 && eps.first <= eps.second))
-                          throw UsageError("--eps: need 0 <= MIN <= MAX, got " + v);
+                      try {
+                          app::checkEps(eps, app::Spelling::CommandLine);
+                      } catch (const app::OptionError& e) {
+                          throw UsageError(e.what());
+                      }
                       options.eps = eps;
                   });
     parser.option("--threads", "T", "worker threads (default: every core; results do not depend on it)",

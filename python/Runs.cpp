@@ -32,9 +32,7 @@ py::object jsonToPython(const std::string& text) { return py::module_::import("j
 std::optional<std::pair<double, double>> epsOf(const py::object& eps) {
     if (eps.is_none()) return std::nullopt;
     const auto e = eps.cast<std::pair<double, double>>();
-    if (!(e.first >= 0 && e.first <= e.second && std::isfinite(e.second)))
-        throw InputError("eps: need 0 <= MIN <= MAX, got (" + std::to_string(e.first) + ", " +
-                         std::to_string(e.second) + ")");
+    app::checkEps(e, app::Spelling::Python);
     return e;
 }
 
