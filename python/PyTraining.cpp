@@ -104,9 +104,17 @@ public:
             }
         };
     }
-    /// After pmsc::Cancelled: KeyboardInterrupt, or what `progress` raised, if that was the cause.
-    void rethrow() {
-        if (error_) throw std::move(*error_);
+    /// Runs `work` (training or learning) with the GIL released; when it was cancelled by
+    /// KeyboardInterrupt or by what `progress` raised, that is what propagates.
+    template <class Work>
+    void run(Work&& work) {
+        try {
+            py::gil_scoped_release nogil;
+            work();
+        } catch (const Cancelled&) {
+            if (error_) throw std::move(*error_);
+            throw;
+        }
     }
 
 private:
@@ -165,8 +173,7 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     o.progress = hook.function();
     TrainingReport report;
     Model model;
-    try {
-        py::gil_scoped_release nogil;
+    hook.run([&] {
         if (t.view && o.sharedChannels && t.view->channels() > 1) {
             // Channels sharing the basis train from a frame set in memory (the channels become frames).
             const FrameArray& a = *t.view;
@@ -186,10 +193,7 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
         } else {
             model = train(t.copy, o, &report);
         }
-    } catch (const Cancelled&) {
-        hook.rethrow();
-        throw;
-    }
+    });
     auto result = std::make_shared<PyModel>(std::move(model));
     py::dict r;
     r["warnings"] = report.warnings;
@@ -229,13 +233,7 @@ std::shared_ptr<PyModel> learnModel(const PyModel& model, py::handle frames, Ind
     o.progress = hook.function();
     LearnReport report;
     Model learned;
-    try {
-        py::gil_scoped_release nogil;
-        learned = learn(model.get(), t.copy, o, &report);
-    } catch (const Cancelled&) {
-        hook.rethrow();
-        throw;
-    }
+    hook.run([&] { learned = learn(model.get(), t.copy, o, &report); });
     auto result = std::make_shared<PyModel>(std::move(learned));
     py::dict r;
     r["warnings"] = report.warnings;
