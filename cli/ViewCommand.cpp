@@ -21,7 +21,7 @@ struct ViewArgs {
     std::string model, scene, sceneFile, bind = "127.0.0.1", web;
     int port = 8080;
     int threads = 0;
-    std::vector<std::string> allowedHosts;
+    std::vector<std::string> allowedHosts, allowedOrigins;
 };
 
 std::optional<ViewArgs> parseViewArgs(const std::vector<std::string>& args) {
@@ -45,6 +45,16 @@ std::optional<ViewArgs> parseViewArgs(const std::vector<std::string>& args) {
                   "pages, get 403)",
                   [&](const std::string& v) { a.allowedHosts.push_back(v); });
     parser.repeatable("--allow-host");
+    parser.option("--allow-origin", "ORIGIN",
+                  "a page's origin (scheme://host[:port], e.g. http://notebook:8888) that may use the "
+                  "API and drive the session besides this server's own page (repeatable)",
+                  [&](const std::string& v) {
+                      if (v.find("://") == std::string::npos || v.back() == '/')
+                          throw UsageError("--allow-origin: '" + v +
+                                           "' is not an origin (scheme://host[:port], no path)");
+                      a.allowedOrigins.push_back(v);
+                  });
+    parser.repeatable("--allow-origin");
     parser.option("--web", "DIR", "the page's folder (default: the build's web/viewer)", a.web);
     parser.option("--threads", "T", "engine worker threads (default: every core)",
                   [&](const std::string& v) { a.threads = int(parseIndex("--threads", v, 0, 4096)); });
@@ -74,6 +84,7 @@ int runView(const std::vector<std::string>& args) {
     o.webRoot = a->web;
     o.threads = a->threads;
     o.allowedHosts = a->allowedHosts;
+    o.allowedOrigins = a->allowedOrigins;
     viewer::ViewServer server(model, *scene, o);
     const std::string host = a->bind.find(':') != std::string::npos ? "[" + a->bind + "]" : a->bind;
     std::cout << "pmsc view: http://" << host << ":" << server.port() << "/" << std::endl;

@@ -105,8 +105,11 @@ bool hostAllowed(const std::string& host, const std::string& bind, const std::ve
     return false;
 }
 
-bool sameOrigin(const std::string& origin, const std::string& host) {
-    return origin.empty() || lowered(origin) == "http://" + lowered(host);
+bool sameOrigin(const std::string& origin, const std::string& host, const std::vector<std::string>& allowed) {
+    if (origin.empty() || lowered(origin) == "http://" + lowered(host)) return true;
+    for (const std::string& a : allowed)
+        if (lowered(a) == lowered(origin)) return true;
+    return false;
 }
 
 std::string defaultWebRoot() {
@@ -456,7 +459,8 @@ std::string ViewServer::Impl::refusal(const http::request<http::string_body>& re
                    ? "a request must name its Host"
                    : "host '" + host + "' is not this machine's (pmsc view --allow-host NAME adds one)";
     const std::string origin(req[http::field::origin]);
-    if (!sameOrigin(origin, host)) return "origin '" + origin + "' is not this server's page";
+    if (!sameOrigin(origin, host, options.allowedOrigins))
+        return "origin '" + origin + "' is not this server's page (pmsc view --allow-origin ORIGIN adds one)";
     return {};
 }
 

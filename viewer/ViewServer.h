@@ -25,6 +25,10 @@ struct ViewServerOptions {
     /// bound address: the names a remote viewer reaches this machine by when it binds to all
     /// interfaces (`pmsc view --allow-host NAME`). See hostAllowed().
     std::vector<std::string> allowedHosts;
+    /// Origins (scheme://host[:port]) whose pages may use the API and drive the session besides the
+    /// server's own page: for a user who deliberately serves a page of their own elsewhere
+    /// (`pmsc view --allow-origin ORIGIN`). See sameOrigin().
+    std::vector<std::string> allowedOrigins;
 };
 
 /// Whether a request whose Host header is `host` may be answered: its name (the port taken off)
@@ -34,10 +38,12 @@ struct ViewServerOptions {
 bool hostAllowed(const std::string& host, const std::string& bind, const std::vector<std::string>& allowed);
 
 /// Whether a request with headers Origin `origin` (empty: none, a client that is not a browser)
-/// and Host `host` comes from the server's own page: no Origin, or an Origin of http://HOST
-/// exactly. Why: a browser lets any page open a WebSocket to any address and sends the page's
-/// origin with it; only the page this server served may drive the session.
-bool sameOrigin(const std::string& origin, const std::string& host);
+/// and Host `host` comes from the server's own page or an origin the user allowed: no Origin, an
+/// Origin of http://HOST exactly, or one of `allowed` exactly (case aside). Why: a browser lets any
+/// page open a WebSocket to any address and sends the page's origin with it; only the page this
+/// server served, and pages the user named, may drive the session.
+bool sameOrigin(const std::string& origin, const std::string& host,
+                const std::vector<std::string>& allowed = {});
 
 /// The page's folder: PMSC_VIEW_WEB if set, else the installed share/pmsc/web/viewer beside the
 /// program's prefix if it exists, else the source tree's web/viewer the build was made from.

@@ -31,7 +31,8 @@ using test::smallVolume;
 /// A server on a free port, served by its own thread for the test's duration.
 class Running {
 public:
-    explicit Running(const Model& model, std::size_t httpBodyBytes = 256 * 1024) {
+    explicit Running(const Model& model, std::size_t httpBodyBytes = 256 * 1024,
+                     std::vector<std::string> allowedOrigins = {}) {
         web_ = smallVolume().dir + "/web";
         std::filesystem::create_directories(web_ + "/src");
         std::ofstream(web_ + "/index.html") << "<!doctype html><title>pmsc view</title>";
@@ -41,6 +42,7 @@ public:
         o.webRoot = web_;
         o.threads = 2;
         o.httpBodyBytes = httpBodyBytes;
+        o.allowedOrigins = std::move(allowedOrigins);
         server_ = std::make_unique<ViewServer>(model, *smallVolume().scene, o);
         thread_ = std::thread([this] { server_->run(stop_); });
     }
@@ -299,6 +301,21 @@ TEST(ViewServerOrigin, OnlyNamesOfThisMachineAndItsOwnPageAreAnswered) {
     EXPECT_FALSE(sameOrigin("http://evil.example", "127.0.0.1:8080"));
     EXPECT_FALSE(sameOrigin("http://127.0.0.1:9999", "127.0.0.1:8080"));
     EXPECT_FALSE(sameOrigin("null", "127.0.0.1:8080"));
+    // --allow-origin: a page the user serves elsewhere, exactly (case aside), nothing else.
+    EXPECT_TRUE(sameOrigin("http://Notebook:8888", "127.0.0.1:8080", {"http://notebook:8888"}));
+    EXPECT_FALSE(sameOrigin("http://notebook:8889", "127.0.0.1:8080", {"http://notebook:8888"}));
+    EXPECT_FALSE(sameOrigin("http://evil.example", "127.0.0.1:8080", {"http://notebook:8888"}));
+}
+
+TEST_F(ViewServerTest, AnAllowedOriginsPageIsAnsweredAndOnlyIt) {
+    const Running server(smallVolume().model, 256 * 1024, {"http://notebook:8888"});
+    const int port = server.port();
+    const std::string self = "127.0.0.1:" + std::to_string(port);
+    EXPECT_EQ(request(port, http::verb::get, "/api/scene", self, "http://notebook:8888").result(),
+              http::status::ok);
+    const auto other = request(port, http::verb::get, "/api/scene", self, "http://notebook:9999");
+    EXPECT_EQ(other.result(), http::status::forbidden);
+    EXPECT_NE(other.body().find("--allow-origin"), std::string::npos) << other.body();
 }
 
 TEST_F(ViewServerTest, AnotherSitesPageOrHostNameGets403AndNoSession) {
