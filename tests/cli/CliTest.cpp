@@ -1,11 +1,11 @@
 // The `pmsc` program end to end: success paths and every kind of bad input, through the real
 // binary (exit codes, the one stderr line, and no output file left behind).
-#include "tests/common/CliRunner.h"
 #include "SyntheticShot.h"
 #include "evaluators/synthetic/SyntheticSurface.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/NpyIO.h"
 #include "pmsc/SoftCache.h"
+#include "tests/common/CliRunner.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

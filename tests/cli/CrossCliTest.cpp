@@ -2,9 +2,9 @@
 // through the real binary: an exact affine control -> target map comes back to rounding, the report
 // says fail-through is impossible and gives each frame's key error and bound, and bad inputs fail
 // with one line, a non-zero exit code and no output file.
-#include "tests/common/CliRunner.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/NpyIO.h"
+#include "tests/common/CliRunner.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

@@ -1,10 +1,10 @@
 // `pmsc learn`, `--keep-misses` (replay and run) and the calibration options of `pmsc train`, through
 // the real binary: success paths, appending across runs, and bad inputs.
-#include "tests/common/CliRunner.h"
 #include "evaluators/synthetic/SyntheticSurface.h"
 #include "pmsc/KeptFrames.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/NpyIO.h"
+#include "tests/common/CliRunner.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

@@ -1,11 +1,11 @@
 // `pmsc reconstruct` end to end: the soft cache driven pass by pass through files, with a
 // "renderer" that answers each pass from recorded frames (NaN everywhere it was not asked), must
 // give `pmsc replay`'s output and states byte for byte; and every bad input is one line.
-#include "tests/common/CliRunner.h"
 #include "SyntheticShot.h"
 #include "evaluators/synthetic/SyntheticSurface.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/NpyIO.h"
+#include "tests/common/CliRunner.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

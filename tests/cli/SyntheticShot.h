@@ -1,9 +1,9 @@
 // The small generated shot the command-line tests share.
 #pragma once
 
-#include "tests/common/TempDir.h"
 #include "evaluators/synthetic/SyntheticSurface.h"
 #include "pmsc/NpyIO.h"
+#include "tests/common/TempDir.h"
 
 #include <string>
 

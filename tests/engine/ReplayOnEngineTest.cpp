@@ -3,8 +3,8 @@
 #include "app/Replay.h"
 #include "evaluators/ReplayEvaluator.h"
 #include "pmsc/NpyIO.h"
-#include "tests/engine/Synthetic.h"
 #include "tests/common/TempDir.h"
+#include "tests/engine/Synthetic.h"
 
 #include <gtest/gtest.h>
 

@@ -2,12 +2,12 @@
 // MPI ranks, and training under an address-space limit smaller than the training matrix. Every
 // path must give the model of in-memory, single-process training: the same M and keys, bases
 // within 1e-9 principal angle, the same largest training residual.
-#include "tests/common/CliRunner.h"
 #include "pmsc/Communicator.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/NpyIO.h"
 #include "pmsc/RowBlocks.h"
 #include "pmsc/Training.h"
+#include "tests/common/CliRunner.h"
 
 #include <gtest/gtest.h>
 #include <Eigen/SVD>

@@ -1,7 +1,7 @@
 // The model-file sections of `pmsc learn`: LEARNSVD and CALIBRAT round trips and bad bytes.
-#include "tests/common/SmallModel.h"
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
+#include "tests/common/SmallModel.h"
 
 #include <gtest/gtest.h>
 
