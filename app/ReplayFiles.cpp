@@ -54,7 +54,7 @@ CrossReplayResult replayCrossFiles(const ReplayFileOptions& o, const Model& mode
     co.threads = o.replay.threads;
     co.cancel = o.replay.cancel;
     co.progress = o.replay.progress;
-    const CrossReplayResult result =
+    CrossReplayResult result =
         crossReplay(model, control, truth ? &*truth : nullptr, co, out ? &*out : nullptr);
     const std::string text = crossReplayReport(model, result).dump(2) + "\n";
     report.write(text.data(), text.size());
