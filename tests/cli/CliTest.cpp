@@ -8,6 +8,8 @@
 #include "tests/common/CliRunner.h"
 
 #include <gtest/gtest.h>
+
+#include <fstream>
 #include <nlohmann/json.hpp>
 
 #include <cmath>
@@ -445,6 +447,17 @@ TEST_F(Cli, UsageMistakes) {
     expectFailure(runPmsc(dir, {"train", "--frames", shot_->train, "--out", out, "--key-error", "predicted"}),
                   2, {"--key-error predicted needs --tolerance"});
     expectFailure(runPmsc(dir, {"frobnicate"}), 2, {"unknown command 'frobnicate'"});
+    expectFailure(runPmsc(dir, {"view", "--model", out, "--allow-origin", "notebook:8888"}), 2,
+                  {"--allow-origin", "'notebook:8888' is not an origin"});
+    {
+        // A config file's mistakes are the command line's: one line, exit 2, nothing written.
+        const TempDir configDir;
+        const std::string config = configDir.file("job.toml");
+        std::ofstream(config) << "[train]\ntolerence = 0.1\n";
+        expectFailure(runPmsc(dir, {"train", "--config", config, "--frames", shot_->train, "--out", out}), 2,
+                      {"--config " + config + ": 'tolerence' is not an option of pmsc train"});
+        EXPECT_FALSE(std::filesystem::exists(out));
+    }
     expectFailure(runPmsc(dir, {"inspect"}), 2, {"missing MODEL.pmsc"});
     EXPECT_TRUE(outputs(dir).empty());
 }
