@@ -5,6 +5,7 @@
 // validation frames, cross PM faster than the full rig).
 #include "pmsc/ModelIO.h"
 #include "tests/common/FaceTestData.h"
+#include "tests/examples/face/DemoRun.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -19,20 +20,15 @@ namespace {
 namespace fs = std::filesystem;
 
 TEST(CrossDemoSmoke, QuickRunWritesACompleteReport) {
-#ifndef PMSC_BINARY
-    GTEST_SKIP() << "the pmsc program is not built";
-#else
     PMSC_REQUIRE_ICT();
-    std::string pattern = (fs::temp_directory_path() / "pmsc-cross-demo-XXXXXX").string();
-    ASSERT_NE(::mkdtemp(pattern.data()), nullptr);
-    const fs::path dir = pattern, out = dir / "out";
-    const std::string command = std::string("'") + PMSC_BINARY + "' demo cross --data '" + test::ictFolder() +
-                                "' --out '" + out.string() + "' --quick --quiet >'" +
-                                (dir / "stdout").string() + "' 2>'" + (dir / "stderr").string() + "'";
-    const int status = std::system(command.c_str());
-    ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << command;
-    std::ifstream in(out / "report.json");
-    const nlohmann::json r = nlohmann::json::parse(in);
+    const test::DemoFolder folder("pmsc-cross-demo");
+    const fs::path out = folder.path / "out";
+    ASSERT_EQ(test::runPmsc("demo cross --data '" + test::ictFolder() + "' --out '" + out.string() +
+                                "' --quick --quiet",
+                            folder),
+              0)
+        << test::slurp(folder.path / "stderr");
+    const nlohmann::json r = nlohmann::json::parse(test::slurp(out / "report.json"));
     for (const char* key : {"model", "bound", "validation", "novel", "speed", "frames"})
         EXPECT_TRUE(r.contains(key)) << key;
     const auto& v = r.at("validation");
@@ -45,9 +41,6 @@ TEST(CrossDemoSmoke, QuickRunWritesACompleteReport) {
     const Model model = readModel((out / "cross.pmsc").string());
     ASSERT_TRUE(model.cross.has_value());
     for (Index k : model.keyPoints) EXPECT_LT(k, model.cross->controlPoints);
-    std::error_code ignored;
-    fs::remove_all(dir, ignored);
-#endif
 }
 
 }  // namespace

@@ -4,6 +4,7 @@
 // tolerance by failing through, and catches the novel controls.
 #include "evaluators/face/ObjReader.h"
 #include "tests/common/FaceTestData.h"
+#include "tests/examples/face/DemoRun.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -20,48 +21,20 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string slurp(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    std::ostringstream s;
-    s << in.rdbuf();
-    return s.str();
-}
+using test::DemoFolder;
+using test::slurp;
 
-struct Folder {
-    fs::path path;
-    Folder() {
-        std::string pattern = (fs::temp_directory_path() / "pmsc-face-demo-XXXXXX").string();
-        if (!::mkdtemp(pattern.data())) throw std::runtime_error("mkdtemp failed");
-        path = pattern;
-    }
-    ~Folder() {
-        std::error_code ignored;
-        fs::remove_all(path, ignored);
-    }
-};
-
-#ifdef PMSC_BINARY
-int run(const std::string& arguments, const Folder& folder) {
-    const std::string command = std::string("'") + PMSC_BINARY + "' " + arguments + " >'" +
-                                (folder.path / "stdout").string() + "' 2>'" +
-                                (folder.path / "stderr").string() + "'";
-    const int status = std::system(command.c_str());
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
-#endif
+int run(const std::string& arguments, const DemoFolder& folder) { return test::runPmsc(arguments, folder); }
 
 TEST(FaceDemoSmoke, QuickRunWritesACompleteReport) {
-#ifndef PMSC_BINARY
-    GTEST_SKIP() << "the pmsc program is not built";
-#else
     PMSC_REQUIRE_ICT();
-    Folder folder;
+    DemoFolder folder;
     const fs::path out = folder.path / "out";
     ASSERT_EQ(run("demo face --data '" + test::ictFolder() + "' --out '" + out.string() + "' --quick --quiet",
                   folder),
               0)
-        << slurp((folder.path / "stderr").string());
-    const nlohmann::json r = nlohmann::json::parse(slurp((out / "report.json").string()));
+        << slurp(folder.path / "stderr");
+    const nlohmann::json r = nlohmann::json::parse(slurp(out / "report.json"));
     for (const char* field :
          {"points", "key_points", "basis", "train_frames", "test_frames", "full_seconds_per_frame",
           "pmsc_seconds_per_frame", "speedup", "hit_rate", "blend_rate", "miss_rate",
@@ -122,24 +95,19 @@ TEST(FaceDemoSmoke, QuickRunWritesACompleteReport) {
                   s.at("whole_frame").at("points_evaluated_fraction_mean").get<double>())
             << set;
     }
-#endif
 }
 
 TEST(FaceDemoSmoke, MissingDataIsOneLineAndExitCode2WithoutOutput) {
-#ifndef PMSC_BINARY
-    GTEST_SKIP() << "the pmsc program is not built";
-#else
-    Folder folder;
+    DemoFolder folder;
     const fs::path out = folder.path / "out";
     EXPECT_EQ(run("demo face --data '" + (folder.path / "no-such-folder").string() + "' --out '" +
                       out.string() + "' --quick --quiet",
                   folder),
               2);
-    const std::string err = slurp((folder.path / "stderr").string());
+    const std::string err = slurp(folder.path / "stderr");
     EXPECT_EQ(std::count(err.begin(), err.end(), '\n'), 1) << err;
     EXPECT_NE(err.find("generic_neutral_mesh.obj"), std::string::npos) << err;
     EXPECT_FALSE(fs::exists(out / "report.json"));
-#endif
 }
 
 }  // namespace

@@ -5,6 +5,7 @@
 #include "pmsc/KeptFrames.h"
 #include "pmsc/ModelIO.h"
 #include "tests/common/FaceTestData.h"
+#include "tests/examples/face/DemoRun.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -19,20 +20,15 @@ namespace {
 namespace fs = std::filesystem;
 
 TEST(LearnDemoSmoke, QuickNightlyLoopWritesACompleteReport) {
-#ifndef PMSC_BINARY
-    GTEST_SKIP() << "the pmsc program is not built";
-#else
     PMSC_REQUIRE_ICT();
-    std::string pattern = (fs::temp_directory_path() / "pmsc-learn-demo-XXXXXX").string();
-    ASSERT_NE(::mkdtemp(pattern.data()), nullptr);
-    const fs::path dir = pattern, out = dir / "out";
-    const std::string command = std::string("'") + PMSC_BINARY + "' demo learn --data '" + test::ictFolder() +
-                                "' --out '" + out.string() + "' --quick --quiet >'" +
-                                (dir / "stdout").string() + "' 2>'" + (dir / "stderr").string() + "'";
-    const int status = std::system(command.c_str());
-    ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << command;
-    std::ifstream in(out / "report.json");
-    const nlohmann::json r = nlohmann::json::parse(in);
+    const test::DemoFolder folder("pmsc-learn-demo");
+    const fs::path out = folder.path / "out";
+    ASSERT_EQ(test::runPmsc("demo learn --data '" + test::ictFolder() + "' --out '" + out.string() +
+                                "' --quick --quiet",
+                            folder),
+              0)
+        << test::slurp(folder.path / "stderr");
+    const nlohmann::json r = nlohmann::json::parse(test::slurp(out / "report.json"));
     for (const char* key :
          {"frames", "models", "day1", "day2", "validation", "learn_vs_scratch", "calibration"})
         EXPECT_TRUE(r.contains(key)) << key;
@@ -49,9 +45,6 @@ TEST(LearnDemoSmoke, QuickNightlyLoopWritesACompleteReport) {
     ASSERT_TRUE(day2.learning.has_value());
     EXPECT_EQ(day2.learning->updates, 1);
     EXPECT_EQ(readKeptFrameNumbers((out / "day1-misses.npy").string()).size(), static_cast<size_t>(kept));
-    std::error_code ignored;
-    fs::remove_all(dir, ignored);
-#endif
 }
 
 }  // namespace
