@@ -2,6 +2,7 @@
 
 #include "engine/Engine.h"
 #include "pmsc/Errors.h"
+#include "pmsc/HitCheck.h"
 #include "pmsc/PointMultiplier.h"
 #include "pmsc/RegionMultiplier.h"
 #include "pmsc/Training.h"  // pmsc::Cancelled
@@ -101,7 +102,12 @@ class FramePlanner {
 public:
     FramePlanner(const Model& model, const SoftCachePolicy& policy, const RegionMultiplier* regions,
                  const KnownValues& known)
-        : model_(model), multiplier_(model), policy_(policy), regions_(regions), known_(known) {}
+        : model_(model),
+          multiplier_(model),
+          check_(model, multiplier_),
+          policy_(policy),
+          regions_(regions),
+          known_(known) {}
 
     /// Decides frame f from its keys and the answers given, and returns its row; `sources` gets
     /// where each value the frame used comes from.
@@ -113,31 +119,31 @@ public:
         PredictedParts parts;
         row.keyRms = multiplier_.keyError(keyValues, coords.data(), &parts);
         row.decision = policy_.decide(row.keyRms);
-        // As the error monitor: a hit one part alone certifies is checked at the region keys
-        // (kConfirmedShare), and computed whole when the check fails.
-        const bool confirm = row.decision.state == CacheState::Hit && regions_ != nullptr &&
-                             !regions_->regionKeyPoints().empty() &&
-                             model_.keyErrorNorm == KeyErrorNorm::Predicted &&
-                             partsDisagree(parts, model_.partEps);
-        if (row.decision.state == CacheState::Hit && !confirm) {
+        // As the error monitor: a hit one part alone certifies is checked (HitCheck), and computed
+        // whole when the check fails.
+        const bool check = check_.needed(row.decision, parts);
+        if (row.decision.state == CacheState::Hit && !check) {
             row.done = true;
             return row;
         }
+        const std::vector<Index> checkPoints =
+            check ? check_.points(keyValues, coords.data()) : std::vector<Index>{};
         const Index given = static_cast<Index>(known_.answers().size());
         for (Index pass = 1;; ++pass) {
             std::vector<Index> needs;
-            if (confirm && row.decision.state == CacheState::Hit && regionKeysKnown(sources)) {
-                const auto& regionKeys = regions_->regionKeyPoints();
-                std::vector<double> values(regionKeys.size() * size_t(model_.channels));
-                known_.read(sources, frame, regionKeys, values.data());
-                if (multiplier_.largestErrorAt(coords.data(), regionKeys, values.data()) <=
-                    kConfirmedShare * model_.tolerance) {
-                    row.done = true;
-                    break;
+            if (check && row.decision.state == CacheState::Hit) {
+                needs = unknown(sources, checkPoints);
+                if (needs.empty()) {
+                    std::vector<double> values(checkPoints.size() * size_t(model_.channels));
+                    known_.read(sources, frame, checkPoints, values.data());
+                    if (check_.passes(coords.data(), checkPoints, values.data())) {
+                        row.done = true;
+                        break;
+                    }
+                    row.decision = CacheDecision{CacheState::Blend, 0.0};
+                    needs = allUnknown(sources);  // the whole frame, as the error monitor
                 }
-                row.decision = CacheDecision{CacheState::Blend, 0.0};
-                needs = allUnknown(sources);  // the whole frame, as the error monitor
-            } else if (confirm && row.decision.state != CacheState::Hit) {
+            } else if (check) {
                 needs = allUnknown(sources);
             } else {
                 needs = nextNeeds(frame, keyValues, sources);
@@ -178,7 +184,6 @@ private:
         std::sort(regionKeys.begin(), regionKeys.end());
         return unknown(s, regionKeys);
     }
-    bool regionKeysKnown(const Sources& s) const { return unknownRegionKeys(s).empty(); }
 
     /// Each region's weight of the full result, from the keys and the (known) region keys.
     std::vector<double> regionWeights(Index frame, const double* keyValues, const Sources& s) const {
@@ -197,8 +202,8 @@ private:
         return weights;
     }
 
-    /// A frame that did not hit (or whose hit is checked at the region keys): its region keys first, then the
-    /// points its failing regions evaluate, or every point when it fails through whole.
+    /// A frame that did not hit: its region keys first, then the points its failing regions
+    /// evaluate, or every point when it fails through whole.
     std::vector<Index> nextNeeds(Index frame, const double* keyValues, const Sources& s) const {
         if (regions_ == nullptr) return allUnknown(s);
         std::vector<Index> missing = unknownRegionKeys(s);
@@ -216,6 +221,7 @@ private:
 
     const Model& model_;
     PointMultiplier multiplier_;
+    HitCheck check_;
     SoftCachePolicy policy_;
     const RegionMultiplier* regions_;
     const KnownValues& known_;

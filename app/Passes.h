@@ -24,12 +24,15 @@ namespace pmsc::app {
 /// The renderer first computes every frame's key points. Each pass then says, per frame, which
 /// points the soft cache still needs; the renderer computes those and hands them back as the
 /// answer to that pass. A frame needs, in order:
-///   1. nothing more, when its keys hit;
+///   1. nothing more, when its keys hit, unless only one part of the predicted error certifies
+///      the hit: then the points of its check (HitCheck: region keys and the neighbours of its
+///      worst keys), and every point when the check fails;
 ///   2. for a model with regions (local fail-through), the region keys
 ///      (LocalRegions::extraKeyPoints) when the frame does not hit as a whole;
 ///   3. the points its failing regions evaluate fully (a local frame), or every point (a frame that
 ///      fails through whole): the keys and the points already answered are never asked again.
-/// So a frame takes at most two passes beyond its keys, and a hit costs only its K keys.
+/// So a frame takes at most two passes beyond its keys, and a hit costs its K keys (and its
+/// check's points when it is checked).
 ///
 /// Decision: the passes are stateless. Each call is given the key values and every answer so
 /// far, in pass order, and re-derives from them what each pass asked for (the decisions are

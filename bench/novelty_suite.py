@@ -38,6 +38,9 @@ SETS = {
     "C": (9, ["mouthSmile_L", "browDown_R", "mouthShrugUpper", "jawRight"]),
     "D": (13, ["mouthRollUpper", "cheekSquint_L", "noseSneer_R", "mouthStretch_L"]),
     "E": (17, ["browOuterUp_L", "mouthPress_R", "eyeSquint_R", "mouthLowerDown_L"]),
+    "F": (21, ["mouthUpperUp_L", "mouthFrown_R", "cheekRaiser_R", "mouthDimple_L"]),
+    "G": (25, ["mouthLeft", "mouthShrugLower", "browInnerUp_R", "mouthSmile_R"]),
+    "H": (29, ["mouthClose", "mouthStretch_R", "cheekPuff_R", "eyeBlink_L"]),
 }
 AMPLITUDES = (0.33, 0.67, 1.0)
 

@@ -92,6 +92,9 @@ void printModelJson(const Model& model, const ModelFileFacts& file) {
         j["region_key_points"] = model.regions->extraKeyPoints;
         j["regions"] = std::move(regions);
     }
+    if (model.keyNeighbours)
+        j["key_neighbours"] = {{"per_key", model.keyNeighbours->perKey},
+                               {"positions", model.keyNeighbours->fromMean ? "mean" : "given"}};
     if (model.learning)
         j["learning"] = {{"rank", model.learning->maxRank},
                          {"stored_vectors", model.basisSize() + model.learning->extraBasis.cols()},
@@ -152,12 +155,16 @@ void printModelText(const Model& model, const ModelFileFacts& file) {
               << "\n";
     std::cout << "  residual      largest point error of PM on the training frames: "
               << fmt("%.6g", model.trainMaxPointResidual) << "\n";
+    if (model.keyNeighbours)
+        std::cout << "  neighbours    " << model.keyNeighbours->perKey << " per key (from the "
+                  << (model.keyNeighbours->fromMean ? "training mean" : "positions given to train")
+                  << "): a hit one part of the key error alone certifies is checked near its worst keys\n";
     if (model.regions) {
         const LocalRegions& lr = *model.regions;
         std::cout << "  regions       R = " << lr.regionCount() << " (local fail-through), feather width "
                   << fmt("%.6g", lr.featherWidth) << ", whole frame above "
                   << fmt("%.3g", 100 * lr.maxLocalFraction) << "% of the points, " << lr.extraKeyPoints.size()
-                  << " region keys (evaluated for frames that miss as a whole)\n";
+                  << " region keys (evaluated for frames that miss as a whole, and for checked hits)\n";
         std::cout << "    region   points  keys  basis     eps_min     eps_max\n";
         for (Index r = 0; r < lr.regionCount(); ++r) {
             const Region& g = lr.regions[size_t(r)];

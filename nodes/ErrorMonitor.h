@@ -2,6 +2,7 @@
 #pragma once
 
 #include "nodes/FrameSlot.h"
+#include "pmsc/HitCheck.h"
 #include "pmsc/PointEvaluator.h"
 #include "pmsc/PointMultiplier.h"
 #include "pmsc/RegionMultiplier.h"
@@ -27,7 +28,7 @@ public:
     /// @param[in] keepPm  the PM result is wanted for every frame (diagnostics), so a miss
     ///                    with finite keys still goes through reconstruction first
     ErrorMonitor(const PointMultiplier& pm, SoftCachePolicy policy, bool keepPm)
-        : pm_(pm), policy_(policy), keepPm_(keepPm) {}
+        : pm_(pm), policy_(policy), keepPm_(keepPm), check_(pm.model(), pm) {}
     /// With local fail-through: a frame that does not hit as a whole is decided region
     /// by region (each region's own projection, key error and thresholds). It goes the local
     /// route unless its feathered weights send more than the regions' largest local fraction of
@@ -37,18 +38,34 @@ public:
     /// The region keys (LocalRegions::extraKeyPoints) are evaluated here, through `evaluator`,
     /// only for such frames: a hit costs what it cost without regions. An evaluator failure
     /// there fails the frame.
+    /// With `evaluator`, a hit that one part of the predicted error alone certifies is checked
+    /// (HitCheck): the check's points are computed through `evaluator`, and a hit that fails the
+    /// check is computed whole and blended with weight 0.
     ErrorMonitor(const PointMultiplier& pm, SoftCachePolicy policy, bool keepPm,
                  const RegionMultiplier* regions, const PointEvaluator* evaluator)
-        : pm_(pm), policy_(policy), keepPm_(keepPm), regions_(regions), evaluator_(evaluator) {}
+        : pm_(pm),
+          policy_(policy),
+          keepPm_(keepPm),
+          regions_(regions),
+          evaluator_(evaluator),
+          check_(pm.model(), pm) {}
 
     Route operator()(FrameSlot& slot) const;
 
 private:
+    /// A hit HitCheck::needed: computes the check's points; a hit, or the whole frame.
+    Route checkHit(FrameSlot& slot) const;
+    /// The frame's whole-frame route when it does not hit (regions did not take it locally).
+    Route whole(FrameSlot& slot) const;
+    /// Evaluates `points` of the slot's frame into `out`; false (the frame failed) on an exception.
+    bool evaluateInto(FrameSlot& slot, std::span<const Index> points, double* out, const char* what) const;
+
     const PointMultiplier& pm_;
     SoftCachePolicy policy_;
     bool keepPm_;
     const RegionMultiplier* regions_ = nullptr;
     const PointEvaluator* evaluator_ = nullptr;
+    HitCheck check_;
 };
 
 }  // namespace pmsc::nodes

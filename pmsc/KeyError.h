@@ -64,19 +64,9 @@ double predictedPointError(PredictedParts error, PredictedParts eps, double tole
 /// KeyErrorNorm::Predicted: exactly one of the two parts `error` is at or under its threshold in
 /// `eps`. Such a hit rests on one measure while the other says the frame is off what training
 /// saw; on the novelty suite (docs/calibration.md) every hit over the tolerance at the defaults was
-/// one (each part was fooled on one set of controls), so a model with regions checks these hits at
-/// its region keys (kConfirmedShare, nodes/ErrorMonitor.cpp). False for NaN parts.
+/// one (each part was fooled on one set of controls), so these hits are checked where the calculation runs
+/// (HitCheck.h). False for NaN parts.
 bool partsDisagree(PredictedParts error, PredictedParts eps);
-
-/// A hit whose parts disagree stays a hit when PM's largest error at the region keys (a few points
-/// in every region, computed for real) is at most this share of the tolerance; otherwise the frame
-/// is computed whole and blended with weight 0 (PM, and the full value wherever PM is over the
-/// tolerance). Why 0.7: chosen on novelty sets A-C (docs/calibration.md), where it took every hit
-/// over T out (0.8 let 6 of set C's through) and kept 178 of set B's 184 validation hits (0.5 kept
-/// 154). On sets D and E, made after the choice, it leaves 27 and 4 frames over T where there were 44
-/// and 7: the region keys do not see every error, and a lower share keeps fewer hits without
-/// reaching zero (0.3 still leaves one of E's).
-constexpr double kConfirmedShare = 0.7;
 
 /// "rms" / "largest" / "loo" / "predicted"
 const char* toString(KeyErrorNorm norm);

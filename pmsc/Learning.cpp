@@ -1,6 +1,7 @@
 #include "pmsc/Learning.h"
 
 #include "pmsc/Errors.h"
+#include "pmsc/KeyNeighbours.h"
 #include "pmsc/KeyPointSelector.h"
 #include "pmsc/LearningState.h"
 #include "pmsc/QDeim.h"
@@ -228,6 +229,30 @@ Model learnedCore(const Model& model, const SubspaceUpdate& u, const std::vector
     out.projector = makeProjector(out.basis, model.channels, keys);
     out.tolerance = model.tolerance;
     return out;
+}
+
+/// The learned model's key neighbours (KeyNeighbours): the old ones when the keys are the same;
+/// recomputed from the learned mean when they came from the mean (it is still a shape: learning
+/// adds frames of the same calculation) and the keys changed; none, with a warning, when they came
+/// from positions the user gave, which the model does not keep.
+void learnedKeyNeighbours(const Model& model, Model& out, LearnReport& report) {
+    if (!model.keyNeighbours || out.keyErrorNorm != KeyErrorNorm::Predicted) return;
+    if (out.keyPoints == model.keyPoints) {
+        out.keyNeighbours = model.keyNeighbours;
+        return;
+    }
+    const Index perKey = model.keyNeighbours->perKey;
+    if (model.keyNeighbours->fromMean && out.channels == 3 && out.points - out.keyCount() >= perKey) {
+        const Eigen::MatrixXd mean =
+            Eigen::Map<const Eigen::MatrixXd>(out.mean.data(), 3, out.points).transpose();
+        out.keyNeighbours = nearestToKeys(mean, out.keyPoints, perKey, true);
+        return;
+    }
+    report.warnings.push_back(
+        "the model's key neighbours came from positions given to train, which learn does not have (the "
+        "keys change): the learned model has none, so nothing checks a hit one part of its key error alone "
+        "certifies; "
+        "train again to get them");
 }
 
 /// Step 3, cross-fitting: each slice of the new frames is scored by a model that never saw it
@@ -489,6 +514,7 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
         u.basis.conservativeResize(Eigen::NoChange, u.basisSize);
     }
     Model out = learnedCore(model, u, keys);
+    learnedKeyNeighbours(model, out, report);
     report.basisAfter = u.basisSize;
     report.largestAngle =
         largestPrincipalAngle(u.basis, model.basis.leftCols(std::min(u.basisSize, model.basisSize())));

@@ -144,6 +144,7 @@ void Model::validate() const {
     if (!singularValues.allFinite()) invalid("singular values contain NaN or Inf");
     if (!allFinite(projector)) invalid("projector contains NaN or Inf");
     if (regions) regions->validate(*this);
+    if (keyNeighbours) keyNeighbours->validate(*this);
     if (learning) learning->validate(rows, m, points);
     if (calibrationRecord) calibrationRecord->validate();
 }

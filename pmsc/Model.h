@@ -4,6 +4,7 @@
 #include "pmsc/CrossState.h"
 #include "pmsc/FrameSet.h"
 #include "pmsc/KeyError.h"
+#include "pmsc/KeyNeighbours.h"
 #include "pmsc/LearningState.h"
 #include "pmsc/Regions.h"
 
@@ -64,6 +65,9 @@ struct Model {
     // --- optional parts: each one is a tagged section of a version-2 model file (ModelSections.h)
     /// Local fail-through: regions with their own keys, projection and thresholds.
     std::optional<LocalRegions> regions;
+    /// The points nearest each key, where a hit one part of the predicted error alone certifies
+    /// is checked (HitCheck.h; section KEYNEAR).
+    std::optional<KeyNeighbours> keyNeighbours;
     /// `pmsc learn`: the incremental-SVD state beyond the basis and the key-selection
     /// settings (section LEARNSVD; written by `pmsc train --learn-rank` and `pmsc learn`).
     std::optional<LearningState> learning;

@@ -1,6 +1,7 @@
 #include "pmsc/ModelSections.h"
 
 #include "pmsc/Cross.h"
+#include "pmsc/KeyNeighbours.h"
 #include "pmsc/LearningSections.h"
 #include "pmsc/Model.h"
 #include "pmsc/Regions.h"
@@ -43,10 +44,11 @@ std::span<const ModelSectionCodec> modelSectionCodecs() {
     // One line per feature. The order is the order of the sections in a written file.
     static const ModelSectionCodec codecs[] = {
         regionsSectionCodec(),
-        learningSectionCodec(),     // LEARNSVD (`pmsc learn`)
-        calibrationSectionCodec(),  // CALIBRAT (`pmsc learn`)
-        crossSectionCodec(),        // CROSSPM (cross point multiplication)
-        keyErrorSectionCodec(),     // KEYERROR (the largest key as the soft cache's measure)
+        learningSectionCodec(),       // LEARNSVD (`pmsc learn`)
+        calibrationSectionCodec(),    // CALIBRAT (`pmsc learn`)
+        crossSectionCodec(),          // CROSSPM (cross point multiplication)
+        keyErrorSectionCodec(),       // KEYERROR (the largest key as the soft cache's measure)
+        keyNeighboursSectionCodec(),  // KEYNEAR (where a hit one part certifies is checked)
     };
     return codecs;
 }

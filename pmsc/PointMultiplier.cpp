@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 #include <vector>
 
 namespace pmsc {
@@ -296,6 +297,24 @@ void PointMultiplier::reconstructRange(const double* coords, Index first, Index 
     Eigen::Map<Eigen::VectorXd> o(out, count * c);
     o = model_.mean.segment(first * c, count * c);
     o.noalias() += model_.basis.middleRows(first * c, count * c) * b;
+}
+
+void PointMultiplier::keyResiduals(const double* keyValues, const double* coords, double* perKey) const {
+    if (model_.sharedChannels)
+        throw std::logic_error("PointMultiplier::keyResiduals: a model whose channels share the basis");
+    const Index c = model_.channels;
+    const Index m = model_.basisSize();
+    const Index kc = keyMean_.size();
+    const Eigen::VectorXd predicted = keyMean_ + keyBasis_ * Eigen::Map<const Eigen::VectorXd>(coords, m);
+    for (Index x = 0; x < kc; x += c) {
+        double squared = 0;
+        for (Index ch = 0; ch < c; ++ch) {
+            const double scale = looScale_.size() > 0 ? looScale_[x + ch] : 1.0;
+            const double r = (keyValues[x + ch] - predicted[x + ch]) * scale;
+            squared += r * r;
+        }
+        perKey[x / c] = std::sqrt(squared);
+    }
 }
 
 double PointMultiplier::largestErrorAt(const double* coords, std::span<const Index> points,

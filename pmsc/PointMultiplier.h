@@ -45,6 +45,12 @@ public:
     /// key error) the error was combined from (partsDisagree tells whether both certify).
     double keyError(const double* keyValues, const double* coords, PredictedParts* parts = nullptr) const;
 
+    /// Each key's residual (K doubles): the Euclidean norm over its channels of k - (mean_K + B_K b),
+    /// each row divided by 1 - its leverage when the model's key error reads leave-one-out
+    /// residuals (KeyErrorNorm::LeaveOneOut, Predicted). For models whose channels do not share
+    /// the basis. NaN for a key with a non-finite value.
+    void keyResiduals(const double* keyValues, const double* coords, double* perKey) const;
+
     /// All N points: out = mean + B b (N*C doubles).
     void reconstruct(const double* coords, double* out) const;
 

@@ -60,6 +60,14 @@ double basisSupport(const Model& model) {
     return total > 0 ? weighted / total : 1.0;
 }
 
+Eigen::MatrixXd meanShape(const Model& model, double rmsMotion) {
+    if (model.channels != 3 || model.sharedChannels) return {};
+    const Eigen::MatrixXd mean = Eigen::Map<const Eigen::MatrixXd>(model.mean.data(), 3, model.points);
+    const double diagonal = (mean.rowwise().maxCoeff() - mean.rowwise().minCoeff()).norm();
+    if (!(rmsMotion <= kMostMotion * diagonal)) return {};
+    return mean.transpose();
+}
+
 RegionChoice chooseRegions(const Model& model, const RegionOptions& options, double tolerance,
                            double rmsMotion) {
     RegionChoice choice;

@@ -15,6 +15,11 @@ namespace pmsc {
 /// surface deformed whole) is not. In [0, 1].
 double basisSupport(const Model& model);
 
+/// The training mean as N x 3 positions (one row per point) when it is a shape: 3 channels, and
+/// the frames' RMS motion about it (`rmsMotion`) at most kMostMotion of its bounding-box diagonal
+/// (light moves by more: rule 2 of chooseRegions). Empty otherwise.
+Eigen::MatrixXd meanShape(const Model& model, double rmsMotion);
+
 /// The regions `pmsc train` learns when not told (RegionOptions::automatic), and why.
 struct RegionChoice {
     Index count = 0;             ///< regions to learn; 0: the model stays whole (version 1)

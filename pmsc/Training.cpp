@@ -2,6 +2,7 @@
 
 #include "pmsc/Calibration.h"
 #include "pmsc/Errors.h"
+#include "pmsc/KeyNeighbours.h"
 #include "pmsc/KeyPointSelector.h"
 #include "pmsc/PointMultiplier.h"
 #include "pmsc/QDeim.h"
@@ -305,6 +306,9 @@ struct Trainer {
     void learningState();
     /// Regions of local fail-through (paper section 9), on the final core.
     void regions();
+    /// The points nearest each key (KeyNeighbours), where a hit one part of the predicted error
+    /// alone certifies is checked; rank 0, on the final core.
+    void keyNeighbours();
 };
 
 void Trainer::progress(std::string_view stage, double done, double total) const {
@@ -614,6 +618,23 @@ void Trainer::regions() {
     progress("regions", 1, 1);
 }
 
+void Trainer::keyNeighbours() {
+    // Only the predicted error's check reads them (HitCheck), and only point positions give them a
+    // meaning: the positions the regions take, or the training mean when it is a shape.
+    if (model.keyErrorNorm != KeyErrorNorm::Predicted || model.sharedChannels) return;
+    const Index k = model.keyCount();
+    if (model.points - k < kNeighboursPerKey) return;
+    const bool given = options.regions.positions.size() > 0;
+    Eigen::MatrixXd positions = options.regions.positions;
+    if (!given) {
+        const double frames = static_cast<double>(std::max<Index>(1, model.trainFrames));
+        positions =
+            meanShape(model, std::sqrt(model.totalEnergy / (static_cast<double>(model.points) * frames)));
+    }
+    if (positions.rows() != model.points || positions.cols() != 3) return;
+    model.keyNeighbours = nearestToKeys(positions, model.keyPoints, kNeighboursPerKey, !given);
+}
+
 }  // namespace
 
 KeyErrorNorm resolvedKeyErrorNorm(const TrainingOptions& options) {
@@ -667,6 +688,7 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
     t.model.basis = gatherRowsTo(comm, t.basis, t.rows, 0);
     t.model.mean = gatherRowsTo(comm, q.mean(), t.rows, 0);
     if (options.regions.count > 0 || options.regions.automatic) t.regions();
+    if (comm.rank() == 0) t.keyNeighbours();
     if (comm.rank() == 0) t.model.validate();
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return std::move(t.model);

@@ -92,7 +92,8 @@ struct Way {
 struct FrameTotals {
     double worst = 0, fractionAll = 0, fractionNonHit = 0;
     Index nonHit = 0, local = 0, hits = 0, over = 0;
-    /// Hits the region-key check refused (nodes/ErrorMonitor.cpp): blends of weight 0, computed whole.
+    /// Hits the check of a hit one measure alone certifies refused (pmsc/HitCheck.h): blends of weight 0,
+    /// computed whole.
     Index refused = 0;
 };
 

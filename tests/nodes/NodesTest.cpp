@@ -124,6 +124,55 @@ TEST_F(Nodes, ErrorMonitorRoutesByTheSoftCachePolicy) {
     EXPECT_EQ(monitor(slot), Route::Done);
 }
 
+TEST_F(Nodes, ErrorMonitorChecksAHitOnePartAloneCertifies) {
+    // The fixture's model with a predicted key error whose RMS part certifies every frame and whose
+    // leave-one-out part certifies none, and 4 neighbours per key: every hit is checked.
+    Model checked = model;
+    checked.keyErrorNorm = KeyErrorNorm::Predicted;
+    checked.partEps = {1e6, 1e-12};
+    KeyNeighbours near;
+    near.perKey = 4;
+    std::set<Index> keys(checked.keyPoints.begin(), checked.keyPoints.end());
+    for (Index k = 0; k < checked.keyCount(); ++k) {
+        for (Index p = 0, taken = 0; taken < near.perKey; ++p) {
+            const Index point = (checked.keyPoints[size_t(k)] + 1 + p) % checked.points;
+            if (keys.count(point)) continue;
+            near.points.push_back(point);
+            ++taken;
+        }
+    }
+    checked.keyNeighbours = near;
+    const FramePlan plan = FramePlan::make(checked, {}, 16, false);
+    FrameSlot slot(plan, checked.keyCount(), checked.basisSize(), false);
+    const auto route = [&](double tolerance) {
+        checked.tolerance = tolerance;
+        const PointMultiplier pmChecked(checked);
+        const SoftCachePolicy hitsAll(tolerance, 2 * tolerance);
+        slot.reset(0, 1);
+        KeyPointEvaluator{checked, evaluator}(slot);
+        Projector{pmChecked}(slot);
+        return ErrorMonitor{pmChecked, hitsAll, false, nullptr, &evaluator}(slot);
+    };
+    // PM within the tolerance at the checked points: a hit, which paid for them.
+    EXPECT_EQ(route(1e6), Route::Reconstruct);
+    EXPECT_EQ(slot.decision.state, CacheState::Hit);
+    EXPECT_GT(slot.pointsEvaluated, 0);
+    EXPECT_LE(slot.pointsEvaluated, kCheckedKeys * near.perKey);
+    // PM off at a checked point (the data's noise against a tiny tolerance): the whole frame,
+    // blended with weight 0.
+    EXPECT_EQ(route(1e-12), Route::FailThrough);
+    EXPECT_EQ(slot.decision.state, CacheState::Blend);
+    EXPECT_EQ(slot.decision.weight, 0.0);
+    EXPECT_EQ(slot.pointsEvaluated, checked.points);
+    // Without an evaluator the monitor cannot check, and the hit is PM's (the one-frame tools).
+    checked.tolerance = 1e-12;
+    const PointMultiplier pmChecked(checked);
+    slot.reset(0, 1);
+    KeyPointEvaluator{checked, evaluator}(slot);
+    Projector{pmChecked}(slot);
+    EXPECT_EQ((ErrorMonitor{pmChecked, SoftCachePolicy(1e-12, 2e-12), false}(slot)), Route::Reconstruct);
+}
+
 TEST_F(Nodes, BlenderIsTheLinearInterpolationOfSectionFive) {
     const FramePlan plan = FramePlan::make(model, {}, 100, false);
     FrameSlot slot(plan, model.keyCount(), model.basisSize(), false);

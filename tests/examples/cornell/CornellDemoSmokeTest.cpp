@@ -131,7 +131,7 @@ TEST(CornellDemoQuick, LocalChangeMissesAsAWholeFrameIsRoutedLocallyAndStaysUnde
     EXPECT_TRUE(c.at("local_fail_through").get<bool>());
     const nlohmann::json& local = c.at("local");
     const nlohmann::json& whole = c.at("whole_frame");
-    // Every frame that missed as a whole went local; a hit the region-key check refused is
+    // Every frame that missed as a whole went local; a hit the hit check (HitCheck) refused is
     // computed whole by design (nodes/ErrorMonitor.cpp).
     EXPECT_EQ(local.at("local_frames").get<int>() + local.at("refused_hits").get<int>(), nonHit)
         << "a frame failed through whole";

@@ -84,9 +84,12 @@ TEST(FaceDemoSmoke, QuickRunWritesACompleteReport) {
         ASSERT_TRUE(local.contains(set)) << set;
         const nlohmann::json& s = local.at(set);
         EXPECT_GT(s.at("frames").get<long>(), 0) << set;
-        EXPECT_DOUBLE_EQ(s.at("whole_frame").at("points_evaluated_fraction_mean").get<double>(),
-                         1.0 - s.at("hit_rate").get<double>())
-            << set;
+        // A hit pays nothing, or, when checked (pmsc::HitCheck), its check's points: the region
+        // keys and at most 64 neighbours, under 3% of the face's points.
+        const double hit = s.at("hit_rate").get<double>();
+        const double evaluated = s.at("whole_frame").at("points_evaluated_fraction_mean").get<double>();
+        EXPECT_GE(evaluated, 1.0 - hit - 1e-12) << set;
+        EXPECT_LE(evaluated, 1.0 - hit + 0.03 * hit) << set;
         for (const char* way : {"local", "whole_frame"})
             EXPECT_LT(s.at(way).at("soft_max_error_pct_bbox_max").get<double>(),
                       r.at("tolerance_pct_bbox").get<double>())

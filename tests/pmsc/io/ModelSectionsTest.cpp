@@ -229,3 +229,51 @@ TEST(ModelSections, RegionsWithoutFeatherEntriesRoundTrip) {
     EXPECT_TRUE(r.regions->featherFactor.empty());
     EXPECT_EQ(r.regions->featherStart, m.regions->featherStart);
 }
+
+namespace {
+
+/// smallModel() with key neighbours: 2 per key (its 7 points, keys {4, 0, 6}).
+Model smallModelWithKeyNeighbours() {
+    Model m = smallModel();
+    pmsc::KeyNeighbours near;
+    near.perKey = 2;
+    near.fromMean = false;
+    near.points = {3, 5, 1, 2, 5, 3};
+    m.keyNeighbours = near;
+    return m;
+}
+
+TEST(ModelSections, KeyNeighboursRoundTripBitExact) {
+    const Model m = smallModelWithKeyNeighbours();
+    const std::string bytes = pmsc::encodeModel(m);
+    EXPECT_EQ(std::string(bytes.data() + kTagAt, 8), std::string("KEYNEAR\0", 8));
+    const Model r = pmsc::decodeModel(bytes, "m.pmsc");
+    ASSERT_TRUE(r.keyNeighbours.has_value());
+    EXPECT_EQ(r.keyNeighbours->perKey, 2);
+    EXPECT_FALSE(r.keyNeighbours->fromMean);
+    EXPECT_EQ(r.keyNeighbours->points, m.keyNeighbours->points);
+    EXPECT_EQ(pmsc::encodeModel(r), bytes);
+}
+
+TEST(ModelSections, BadKeyNeighboursAreRejectedWithTheField) {
+    const std::string good = pmsc::encodeModel(smallModelWithKeyNeighbours());
+    // Payload: u32 source, u64 per key, u64[K*P] points.
+    std::string bytes = good;
+    poke<std::uint32_t>(bytes, kPayloadAt, 7);
+    reseal(bytes);
+    expectMessage(bytes, {"key neighbours' source 7"});
+    bytes = good;
+    poke<std::uint64_t>(bytes, kPayloadAt + 4, 0);
+    reseal(bytes);
+    expectMessage(bytes, {"key neighbours per key 0"});
+    bytes = good;
+    poke<std::uint64_t>(bytes, kPayloadAt + 4, 5);  // N - K = 4
+    reseal(bytes);
+    expectMessage(bytes, {"key neighbours per key 5"});
+    bytes = good;
+    poke<std::uint64_t>(bytes, kPayloadAt + 12, 7);  // a point outside [0, N)
+    reseal(bytes);
+    expectMessage(bytes, {"key neighbour point"});
+}
+
+}  // namespace

@@ -1,0 +1,65 @@
+#include "pmsc/HitCheck.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <vector>
+
+namespace pmsc {
+
+HitCheck::HitCheck(const Model& model, const PointMultiplier& pm) : model_(model), pm_(pm) {
+    if (model.regions) regionKeys_ = model.regions->extraKeyPoints;
+    std::sort(regionKeys_.begin(), regionKeys_.end());
+    available_ = model.keyErrorNorm == KeyErrorNorm::Predicted && !model.sharedChannels &&
+                 (!regionKeys_.empty() || model.keyNeighbours.has_value());
+}
+
+bool HitCheck::needed(const CacheDecision& decision, PredictedParts parts) const {
+    return available_ && decision.state == CacheState::Hit && partsDisagree(parts, model_.partEps);
+}
+
+std::vector<Index> HitCheck::points(const double* keyValues, const double* coords) const {
+    std::vector<Index> out = regionKeys_;
+    if (model_.keyNeighbours) {
+        const Index k = model_.keyCount();
+        std::vector<double> residual(static_cast<size_t>(k));
+        pm_.keyResiduals(keyValues, coords, residual.data());
+        std::vector<Index> order(static_cast<size_t>(k));
+        std::iota(order.begin(), order.end(), Index{0});
+        const Index checked = std::min(kCheckedKeys, k);
+        // Largest residual first, NaN first of all (a key that is not finite is the worst), ties
+        // by key number: the same keys on every machine.
+        std::partial_sort(order.begin(), order.begin() + checked, order.end(), [&](Index a, Index b) {
+            const double ra = residual[size_t(a)], rb = residual[size_t(b)];
+            if (std::isnan(ra) != std::isnan(rb)) return std::isnan(ra);
+            if (ra != rb) return ra > rb;
+            return a < b;
+        });
+        for (Index i = 0; i < checked; ++i) {
+            const auto near = model_.keyNeighbours->of(order[size_t(i)]);
+            out.insert(out.end(), near.begin(), near.end());
+        }
+    }
+    std::sort(out.begin(), out.end());
+    out.erase(std::unique(out.begin(), out.end()), out.end());
+    return out;
+}
+
+bool HitCheck::passes(const double* coords, std::span<const Index> points, const double* values) const {
+    const Index c = model_.channels;
+    std::vector<double> pm(points.size() * size_t(c));
+    pm_.reconstructPoints(coords, points, pm.data());
+    for (size_t i = 0; i < points.size(); ++i) {
+        double squared = 0;
+        for (Index ch = 0; ch < c; ++ch) {
+            const double d = pm[i * size_t(c) + size_t(ch)] - values[i * size_t(c) + size_t(ch)];
+            squared += d * d;
+        }
+        const bool regionKey = std::binary_search(regionKeys_.begin(), regionKeys_.end(), points[i]);
+        const double share = regionKey ? kConfirmedShare : kNeighbourShare;
+        if (!(std::sqrt(squared) <= share * model_.tolerance)) return false;  // NaN fails
+    }
+    return true;
+}
+
+}  // namespace pmsc

@@ -1,0 +1,67 @@
+// pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
+#pragma once
+
+#include "pmsc/Model.h"
+#include "pmsc/PointMultiplier.h"
+#include "pmsc/SoftCache.h"
+
+#include <span>
+#include <vector>
+
+namespace pmsc {
+
+/// The keys whose neighbours a check computes: the kCheckedKeys with the largest (leave-one-out)
+/// residuals. With kNeighboursPerKey = 16, at most 64 points besides the region keys.
+constexpr Index kCheckedKeys = 4;
+
+/// A checked hit stands when PM's largest error at the region keys is at most kConfirmedShare of the
+/// tolerance and at the key neighbours at most kNeighbourShare of it; otherwise the frame is
+/// computed whole and blended with weight 0 (PM, and the full value wherever PM is over the
+/// tolerance). Why 0.7 at the region keys: chosen on the novelty suite's sets A-C
+/// (docs/calibration.md), where it took every hit over T out (0.8 let 6 of set C's through) and kept
+/// 178 of set B's 184 validation hits (0.5 kept 154). Why 0.9 at the neighbours: they sit where the
+/// error is (next to the keys that show it), so a smaller margin is enough; with them sets D and E,
+/// which the region keys alone let through (27 and 4 frames over T), have none, and the check only
+/// adds points to the region keys' check, so it refuses every hit that check refused. 0.9 at both
+/// kept more hits (5,460 against 5,315 on sets A-H, both bases) and let 10 more frames over T.
+constexpr double kConfirmedShare = 0.7;
+constexpr double kNeighbourShare = 0.9;
+
+/// The check of a hit that one part of the predicted error alone certifies (KeyErrorNorm::Predicted,
+/// partsDisagree): PM against the calculation at a few points it did not fit.
+///
+/// Why: such a hit rests on one measure while the other says the frame is off what training saw;
+/// on the novelty suite every hit over the tolerance at the defaults was one. The points are
+///  - the region keys (LocalRegions::extraKeyPoints), a few in every region of local fail-through;
+///  - the key neighbours (KeyNeighbours) of the kCheckedKeys keys with the largest leave-one-out
+///    residuals: a motion training never saw shows first at the keys nearest it, and the fit bends
+///    PM towards those keys, so the points around them are where PM is furthest off (on the suite's
+///    hits over T, the largest error of those 64 points was 0.95-1.2 T).
+/// Neither the region keys nor the neighbours are in the projection, so PM's error there is a
+/// prediction, not a fit.
+///
+/// Thread safety: all methods are const and may run concurrently.
+class HitCheck {
+public:
+    /// Keeps references to `model` and `pm` (PM of the same model), which must outlive it.
+    HitCheck(const Model& model, const PointMultiplier& pm);
+
+    /// The model has a predicted key error and points to check at (region keys or key neighbours).
+    bool available() const { return available_; }
+    /// A frame with this decision and these parts is checked: a hit whose parts disagree.
+    bool needed(const CacheDecision& decision, PredictedParts parts) const;
+    /// The points the check of this frame computes, ascending, each once.
+    std::vector<Index> points(const double* keyValues, const double* coords) const;
+    /// The hit stands: PM's error at each of `points` against its computed value (`values`,
+    /// points.size()*C) is at most kConfirmedShare * T at a region key and kNeighbourShare * T at
+    /// any other point (NaN fails).
+    bool passes(const double* coords, std::span<const Index> points, const double* values) const;
+
+private:
+    const Model& model_;
+    const PointMultiplier& pm_;
+    std::vector<Index> regionKeys_;  ///< ascending
+    bool available_ = false;
+};
+
+}  // namespace pmsc

@@ -1,0 +1,181 @@
+// The check of a hit one part of the predicted error alone certifies (HitCheck.h) and the points
+// it reads near the keys (KeyNeighbours.h).
+#include "pmsc/HitCheck.h"
+#include "pmsc/KeyNeighbours.h"
+#include "pmsc/Training.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+#include <stdexcept>
+#include <vector>
+
+namespace {
+
+using pmsc::Index;
+using pmsc::Model;
+
+/// A 30 x 30 sheet in the unit square (3 channels: positions) waving in three smooth modes, or,
+/// with `light`, values far larger than the sheet's extent (not a shape).
+pmsc::FrameSet sheetFrames(Index frames, bool light = false) {
+    constexpr Index side = 30;
+    pmsc::FrameSet set(frames, side * side, 3);
+    for (Index f = 0; f < frames; ++f) {
+        const double a = std::sin(0.31 * double(f)), b = std::cos(0.17 * double(f) + 1), c = std::sin(0.07 * double(f) + 2);
+        for (Index p = 0; p < side * side; ++p) {
+            const double x = double(p % side) / double(side - 1), y = double(p / side) / double(side - 1);
+            double* v = set.frame(f) + 3 * p;
+            v[0] = x + 0.02 * c * x * y;
+            v[1] = y;
+            v[2] = 0.1 * a * std::sin(3.14159 * x) + 0.1 * b * std::cos(3.14159 * y) + 0.05 * c * x;
+            if (light) {
+                for (int ch = 0; ch < 3; ++ch) v[ch] = 10 * (a * x + b * y + c) + double(ch);
+            }
+        }
+    }
+    return set;
+}
+
+Model trainSheet(bool light = false, double tolerance = 0.01, Index regions = 0) {
+    pmsc::TrainingOptions o;
+    o.regions.count = regions;
+    o.basis = 3;
+    o.maxKeys = 12;
+    o.tolerance = tolerance;
+    return pmsc::train(sheetFrames(60, light), o);
+}
+
+TEST(KeyNeighbours, AreTheNearestPointsThatAreNotKeysNearestFirst) {
+    Eigen::MatrixXd line = Eigen::MatrixXd::Zero(10, 3);
+    for (Index i = 0; i < 10; ++i) line(i, 0) = double(i);
+    const std::vector<Index> keys = {0, 5, 6};
+    const pmsc::KeyNeighbours near = pmsc::nearestToKeys(line, keys, 2, true);
+    EXPECT_EQ(near.perKey, 2);
+    EXPECT_TRUE(near.fromMean);
+    // Key 5: 4 at 1, then 3 and 7 at 2 (the lower index first); key 6: 7, then 4 and 8 at 2.
+    EXPECT_EQ(near.points, (std::vector<Index>{1, 2, 4, 3, 7, 4}));
+}
+
+TEST(KeyNeighbours, RejectBadArguments) {
+    const Eigen::MatrixXd points = Eigen::MatrixXd::Random(5, 3);
+    const std::vector<Index> keys = {0, 1};
+    EXPECT_THROW(pmsc::nearestToKeys(points, keys, 0, true), std::invalid_argument);
+    EXPECT_THROW(pmsc::nearestToKeys(points, keys, 4, true), std::invalid_argument);  // only 3 non-key points
+    EXPECT_THROW(pmsc::nearestToKeys(points, std::vector<Index>{7}, 1, true), std::invalid_argument);
+    EXPECT_THROW(pmsc::nearestToKeys(Eigen::MatrixXd::Zero(5, 2), keys, 1, true), std::invalid_argument);
+}
+
+TEST(KeyNeighbours, TrainingKeepsThemForAShapeWithAPredictedKeyErrorOnly) {
+    const Model shape = trainSheet();
+    ASSERT_EQ(shape.keyErrorNorm, pmsc::KeyErrorNorm::Predicted);
+    ASSERT_TRUE(shape.keyNeighbours.has_value());
+    EXPECT_EQ(shape.keyNeighbours->perKey, pmsc::kNeighboursPerKey);
+    EXPECT_TRUE(shape.keyNeighbours->fromMean);
+    EXPECT_NO_THROW(shape.validate());
+    // Key 0's neighbours are the points of the mean nearest it, none of them a key.
+    const Eigen::MatrixXd mean = Eigen::Map<const Eigen::MatrixXd>(shape.mean.data(), 3, shape.points).transpose();
+    const std::set<Index> keys(shape.keyPoints.begin(), shape.keyPoints.end());
+    const auto first = shape.keyNeighbours->of(0);
+    const double farthest = (mean.row(first.back()) - mean.row(shape.keyPoints[0])).norm();
+    for (const Index p : first) EXPECT_EQ(keys.count(p), 0u);
+    Index closer = 0;
+    for (Index p = 0; p < shape.points; ++p)
+        if (!keys.count(p) && (mean.row(p) - mean.row(shape.keyPoints[0])).norm() < farthest - 1e-12) ++closer;
+    EXPECT_LE(closer, pmsc::kNeighboursPerKey);
+
+    EXPECT_FALSE(trainSheet(true).keyNeighbours.has_value()) << "light is not a shape";
+    EXPECT_FALSE(trainSheet(false, 0).keyNeighbours.has_value()) << "no tolerance: the key RMS, nothing to check";
+}
+
+/// A model whose predicted error's parts always disagree (the RMS part certifies every frame, the
+/// leave-one-out part none), so every hit is checked.
+Model disagreeing() {
+    Model m = trainSheet();
+    m.partEps.rms = 1e6;
+    m.partEps.loo = 1e-12;
+    return m;
+}
+
+TEST(HitCheck, ChecksOnlyHitsWhosePartsDisagree) {
+    const Model m = disagreeing();
+    const pmsc::PointMultiplier pm(m);
+    const pmsc::HitCheck check(m, pm);
+    EXPECT_TRUE(check.available());
+    EXPECT_TRUE(check.needed({pmsc::CacheState::Hit, 0}, {1, 1}));
+    EXPECT_FALSE(check.needed({pmsc::CacheState::Blend, 0.5}, {1, 1}));
+    EXPECT_FALSE(check.needed({pmsc::CacheState::Hit, 0}, {1, 1e-13})) << "both parts certify";
+    Model rms = m;
+    rms.keyErrorNorm = pmsc::KeyErrorNorm::Rms;
+    const pmsc::PointMultiplier pmRms(rms);
+    EXPECT_FALSE(pmsc::HitCheck(rms, pmRms).available());
+    Model bare = m;
+    bare.keyNeighbours.reset();
+    const pmsc::PointMultiplier pmBare(bare);
+    EXPECT_FALSE(pmsc::HitCheck(bare, pmBare).available()) << "nothing to check at";
+}
+
+TEST(HitCheck, ReadsTheNeighboursOfTheKeysWithTheLargestResidualsAndHoldsPmToTheTolerance) {
+    const Model m = disagreeing();
+    const pmsc::PointMultiplier pm(m);
+    const pmsc::HitCheck check(m, pm);
+    const pmsc::FrameSet frames = sheetFrames(61);
+    const Index c = m.channels, k = m.keyCount();
+    std::vector<double> keys(size_t(k * c)), coords(size_t(m.coordCount()));
+    for (Index i = 0; i < k; ++i)
+        for (Index ch = 0; ch < c; ++ch) keys[size_t(i * c + ch)] = frames.frame(60)[m.keyPoints[size_t(i)] * c + ch];
+    // Key 5 off by far more than the fit can absorb: its neighbours are among the points checked.
+    keys[size_t(5 * c + 2)] += 1.0;
+    pm.project(keys.data(), coords.data());
+    const std::vector<Index> points = check.points(keys.data(), coords.data());
+    EXPECT_TRUE(std::is_sorted(points.begin(), points.end()));
+    EXPECT_EQ(std::adjacent_find(points.begin(), points.end()), points.end());
+    EXPECT_LE(Index(points.size()), pmsc::kCheckedKeys * pmsc::kNeighboursPerKey);
+    for (const Index p : m.keyNeighbours->of(5)) EXPECT_TRUE(std::binary_search(points.begin(), points.end(), p)) << p;
+
+    // PM's own values pass; one value 0.95 T away fails; one 0.85 T away passes.
+    std::vector<double> values(points.size() * size_t(c));
+    pm.reconstructPoints(coords.data(), points, values.data());
+    EXPECT_TRUE(check.passes(coords.data(), points, values.data()));
+    values[1] += 0.85 * m.tolerance;
+    EXPECT_TRUE(check.passes(coords.data(), points, values.data()));
+    values[1] += 0.10 * m.tolerance;
+    EXPECT_FALSE(check.passes(coords.data(), points, values.data()));
+    values[1] = std::nan("");
+    EXPECT_FALSE(check.passes(coords.data(), points, values.data()));
+}
+
+TEST(HitCheck, HoldsPmCloserAtTheRegionKeysThanAtTheNeighbours) {
+    Model m = trainSheet(false, 0.01, 8);
+    ASSERT_TRUE(m.regions.has_value());
+    ASSERT_FALSE(m.regions->extraKeyPoints.empty()) << "regions holding few keys get keys of their own";
+    m.partEps = {1e6, 1e-12};
+    const pmsc::PointMultiplier pm(m);
+    const pmsc::HitCheck check(m, pm);
+    const Index c = m.channels;
+    std::vector<double> keys(size_t(m.keyCount() * c)), coords(size_t(m.coordCount()));
+    const pmsc::FrameSet frames = sheetFrames(61);
+    for (Index i = 0; i < m.keyCount(); ++i)
+        for (Index ch = 0; ch < c; ++ch) keys[size_t(i * c + ch)] = frames.frame(60)[m.keyPoints[size_t(i)] * c + ch];
+    pm.project(keys.data(), coords.data());
+    const std::vector<Index> points = check.points(keys.data(), coords.data());
+    std::vector<double> values(points.size() * size_t(c));
+    pm.reconstructPoints(coords.data(), points, values.data());
+    const auto& regionKeys = m.regions->extraKeyPoints;
+    size_t regionKey = points.size(), neighbour = points.size();
+    for (size_t i = 0; i < points.size(); ++i) {
+        const bool isRegionKey = std::find(regionKeys.begin(), regionKeys.end(), points[i]) != regionKeys.end();
+        (isRegionKey ? regionKey : neighbour) = i;
+    }
+    ASSERT_LT(regionKey, points.size());
+    ASSERT_LT(neighbour, points.size());
+    std::vector<double> off = values;
+    off[neighbour * size_t(c)] += (pmsc::kConfirmedShare + 0.05) * m.tolerance;
+    EXPECT_TRUE(check.passes(coords.data(), points, off.data())) << "within kNeighbourShare at a neighbour";
+    off = values;
+    off[regionKey * size_t(c)] += (pmsc::kConfirmedShare + 0.05) * m.tolerance;
+    EXPECT_FALSE(check.passes(coords.data(), points, off.data())) << "over kConfirmedShare at a region key";
+}
+
+}  // namespace
