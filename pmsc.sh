@@ -41,6 +41,10 @@ WEB_PACKAGES=(nodejs)
 # renders the page (WebGL through SwiftShader).
 BROWSER_PACKAGES=(chromium)
 
+# Blender as the calculation (ctest label blender, `./pmsc.sh test` only): Debian's Blender runs
+# headless as an exec child; its Python is the system python3 with numpy (docs/blender.md).
+BLENDER_PACKAGES=(blender)
+
 # `./pmsc.sh fuzz` only: clang and its libFuzzer/sanitizer runtimes.
 FUZZ_PACKAGES=(clang-14 libclang-rt-14-dev)
 # `./pmsc.sh format` and `./pmsc.sh tidy`.
@@ -145,7 +149,7 @@ case "$cmd" in
     ensure_packages; ensure_web; build_release
     shift; exec "$BUILD/bin/pmsc" demo "$@" ;;
   test)
-    ensure_packages "${STYLE_PACKAGES[@]}" "${BROWSER_PACKAGES[@]}"; ensure_web; check_format; build_release
+    ensure_packages "${STYLE_PACKAGES[@]}" "${BROWSER_PACKAGES[@]}" "${BLENDER_PACKAGES[@]}"; ensure_web; check_format; build_release
     ctest --test-dir "$BUILD" --output-on-failure -j "$JOBS" -L '^(unit|cli)$'
     ctest --test-dir "$BUILD" --output-on-failure -j "$JOBS" -LE '^(unit|cli)$' ;;
   format)

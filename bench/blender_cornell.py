@@ -1,0 +1,187 @@
+#!/usr/bin/env python3
+"""The Cornell box relit by Blender's Cycles through pmsc: training frames, a model, a light path
+training never saw, against Cycles computing every point.
+
+    /usr/bin/python3 bench/blender_cornell.py --bin build/bin --share share/blender --work /tmp/bc \\
+        [--points 10000] [--grid 12] [--path 30] [--samples 64] [--tolerance-share 0.1] [--train OPTIONS] [--check]
+
+Steps (each a command a lighting TD would type; docs/blender.md):
+  1. `blender -b --python cornell_box.py` builds the measured box as a .blend: a point light on a
+     grid x grid lattice below the ceiling (frames 1 .. grid^2, the training frames), then along a
+     path of --path frames over and below it;
+  2. `pmsc-blender cornell.blend sample` draws --points points on its surfaces;
+  3. `pmsc export-frames exec:pmsc-blender ...` bakes every point of the training frames and, as the
+     reference, of the path frames (one thread: the child's own time per call is logged);
+  4. `pmsc train --tolerance T` (T = --tolerance-share of the training frames' largest point value,
+     as `pmsc demo cornell` sets it, and the --train options);
+  5. `pmsc run` over the path frames, Cycles computing the keys (and what misses) in one Blender.
+Prints the speedup (Cycles' time for every point of a path frame over pmsc's per path frame,
+both measured inside the same child, one thread, same samples; and the same over the commands'
+wall times, Blender's start and pmsc's own work included), the RMS error against the full
+result, the hit rate, the frames over T, and the key call's time split into Blender's fixed cost
+(a bake of the key points at 1 sample) and the samples, and the noise of Cycles' full result (the
+path frames baked again with another seed). --check exits 1 when the soft-cached path's RMS error
+against the full result is over --check-rms (the tests' gate: the noise makes a largest point error
+no gate; docs/blender.md).
+
+Exit codes: 0 done, 1 --check failed, 2 bad arguments or a failed command (one line), 77 Blender
+missing and CI not set (a skip; under CI it is exit 2).
+"""
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+
+
+def fail(message):
+    print("blender_cornell: " + message, file=sys.stderr)
+    sys.exit(2)
+
+
+def run(cmd, env=None):
+    done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    if done.returncode != 0:
+        fail("'" + " ".join(cmd)[:300] + "' exited " + str(done.returncode) + ": " + done.stdout.strip()[-600:])
+    return done.stdout
+
+
+def timings(path):
+    """(frame, points, seconds) of every call the child logged."""
+    rows = []
+    if os.path.exists(path):
+        with open(path) as f:
+            for line in f:
+                frame, count, seconds = line.split()
+                rows.append((int(frame), int(count), float(seconds)))
+    return rows
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--bin", default="build/bin", help="folder of pmsc")
+    p.add_argument("--share", default="share/blender", help="folder of pmsc-blender and its scripts")
+    p.add_argument("--work", required=True, help="folder for the scene, frames, model and outputs")
+    p.add_argument("--points", type=int, default=10000)
+    p.add_argument("--grid", type=int, default=12)
+    p.add_argument("--path", type=int, default=30)
+    p.add_argument("--samples", type=int, default=64)
+    p.add_argument("--tolerance-share", type=float, default=0.1)
+    p.add_argument("--train", default="", help="more `pmsc train` options, as one string (e.g. '--basis 32')")
+    p.add_argument("--reuse", action="store_true",
+                   help="keep the scene, points and training frames of --work when they are there (timing again)")
+    p.add_argument("--check", action="store_true", help="exit 1 when the RMS error is over --check-rms")
+    p.add_argument("--check-rms", type=float, default=0.05, help="the largest RMS error --check accepts")
+    args = p.parse_args()
+    try:
+        import numpy as np
+    except ImportError:
+        fail("needs numpy (run it with the system python3)")
+    blender = shutil.which("blender")
+    if blender is None:
+        if os.environ.get("CI", "") in ("", "false", "0"):
+            print("blender_cornell: no blender on PATH: skipped (apt-get install blender)", file=sys.stderr)
+            sys.exit(77)
+        fail("no blender on PATH (apt-get install blender)")
+    if args.points < 100 or args.grid < 2 or args.path < 1 or args.samples < 1 or not args.tolerance_share > 0:
+        fail("--points >= 100, --grid >= 2, --path >= 1, --samples >= 1 and --tolerance-share > 0")
+    os.makedirs(args.work, exist_ok=True)
+    w = lambda name: os.path.join(args.work, name)
+    pmsc = os.path.join(args.bin, "pmsc")
+    launcher = os.path.abspath(os.path.join(args.share, "pmsc-blender"))
+
+    reuse = args.reuse and all(os.path.exists(w(f)) for f in ("cornell.blend", "points.npy", "train.npy"))
+    if not reuse:
+        run([blender, "-b", "--factory-startup", "--python-exit-code", "2", "--python",
+             os.path.join(args.share, "cornell_box.py"), "--", "--out", w("cornell.blend"), "--grid", str(args.grid),
+             "--path", str(args.path)])
+        run([launcher, w("cornell.blend"), "sample", "--out", w("points.npy"), "--count", str(args.points)])
+    frames = args.grid * args.grid + args.path
+    train_span, path_span = "0-%d" % (args.grid * args.grid - 1), "%d-%d" % (args.grid * args.grid, frames - 1)
+
+    def evaluator(samples, log, seed=0):
+        return ("exec:PMSC_BLENDER_TIMING=%s %s %s serve --points %s --frames 1-%d --samples %d --seed %d"
+                % (log, launcher, w("cornell.blend"), w("points.npy"), frames, samples, seed))
+
+    for name in ("full", "seed", "run", "fixed") if reuse else ("train", "full", "seed", "run", "fixed"):
+        if os.path.exists(w(name + ".log")):
+            os.remove(w(name + ".log"))
+    if not reuse:
+        run([pmsc, "export-frames", evaluator(args.samples, w("train.log")), "--out", w("train.npy"), "--frames",
+             train_span, "--threads", "1", "--quiet"])
+    began = time.perf_counter()
+    run([pmsc, "export-frames", evaluator(args.samples, w("full.log")), "--out", w("full.npy"), "--frames",
+         path_span, "--threads", "1", "--quiet"])
+    full_wall = time.perf_counter() - began
+    # The noise of Cycles' full result: the path frames again with another seed.
+    run([pmsc, "export-frames", evaluator(args.samples, w("seed.log"), 1), "--out", w("full-seed1.npy"), "--frames",
+         path_span, "--threads", "1", "--quiet"])
+    train = np.load(w("train.npy"))
+    tolerance = args.tolerance_share * float(np.sqrt((train ** 2).sum(axis=2)).max())
+    out = run([pmsc, "train", "--frames", w("train.npy"), "--out", w("model.pmsc"), "--tolerance", "%.6g" % tolerance]
+              + args.train.split())
+    shutil.rmtree(w("run"), ignore_errors=True)
+    began = time.perf_counter()
+    run([pmsc, "run", "--model", w("model.pmsc"), "--evaluator", evaluator(args.samples, w("run.log")), "--frames",
+         path_span, "--out", w("run"), "--threads", "1", "--quiet"])
+    wall = time.perf_counter() - began
+    # Blender's fixed cost of a key call: the same calls at 1 sample.
+    shutil.rmtree(w("fixed"), ignore_errors=True)
+    run([pmsc, "run", "--model", w("model.pmsc"), "--evaluator", evaluator(1, w("fixed.log")), "--frames",
+         path_span, "--out", w("fixed"), "--threads", "1", "--quiet"])
+
+    full = np.load(w("full.npy"))
+    first = args.grid * args.grid
+    got = np.stack([np.load(os.path.join(w("run"), "frame.%06d.npy" % (first + i)))[0] for i in range(args.path)])
+    with open(os.path.join(w("run"), "pmsc-run.%s.json" % path_span)) as f:
+        stats = json.load(f)
+    point_error = np.sqrt(((got - full) ** 2).sum(axis=2))
+    rms = float(np.sqrt(((got - full) ** 2).sum() / (full ** 2).sum()))
+    keys = len(json.loads(run([pmsc, "inspect", w("model.pmsc"), "--json"]))["key_indices"])
+    full_calls = timings(w("full.log"))
+    run_calls = timings(w("run.log"))
+    key_calls = [t for t in run_calls if t[1] == keys]
+    fixed_calls = [t for t in timings(w("fixed.log")) if t[1] == keys]
+    full_per_frame = sum(t[2] for t in full_calls) / len(full_calls)
+    pmsc_per_frame = sum(t[2] for t in run_calls) / args.path
+    key_call = sum(t[2] for t in key_calls) / max(1, len(key_calls))
+    fixed = sum(t[2] for t in fixed_calls) / max(1, len(fixed_calls))
+    over = int((point_error.max(axis=1) > tolerance).sum())
+    other = np.load(w("full-seed1.npy"))
+    # One draw's noise: two independent draws differ by sqrt(2) times it.
+    noise_rms = float(np.sqrt(((other - full) ** 2).sum() / (2 * (full ** 2).sum())))
+    noise_point = np.sqrt(((other - full) ** 2).sum(axis=2) / 2)
+    report = {
+        "points": args.points, "keys": keys, "training_frames": args.grid * args.grid, "path_frames": args.path,
+        "samples": args.samples, "tolerance": tolerance,
+        "hit_rate": stats["hit_rate"], "hits": stats["hits"], "blends": stats["blends"], "misses": stats["misses"],
+        "rms_rel_error": rms,
+        "noise_rms_rel": noise_rms,
+        "noise_largest_point_over_tolerance": float(noise_point.max() / tolerance),
+        "frames_over_tolerance": over,
+        "largest_point_error_over_tolerance": float(point_error.max() / tolerance),
+        "cycles_seconds_per_frame": full_per_frame,
+        "pmsc_seconds_per_frame": pmsc_per_frame,
+        "speedup": full_per_frame / pmsc_per_frame,
+        "key_call_seconds": key_call,
+        "key_call_fixed_seconds": fixed,
+        "key_call_samples_seconds": key_call - fixed,
+        "speedup_wall": full_wall / wall,
+        "cycles_export_wall_seconds": full_wall,
+        "pmsc_run_wall_seconds": wall,
+        "train_summary": [l for l in out.splitlines() if l.strip().startswith(("basis", "key points", "eps"))],
+    }
+    with open(w("report.json"), "w") as f:
+        json.dump(report, f, indent=2)
+    print(json.dumps(report, indent=2))
+    if args.check and rms > args.check_rms:
+        print("blender_cornell: RMS error %.4f against Cycles' full result, over --check-rms %.4f"
+              % (rms, args.check_rms), file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

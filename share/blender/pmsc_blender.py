@@ -1,0 +1,291 @@
+"""pmsc's Blender child: Cycles computes the light arriving at points of a .blend, for pmsc.
+
+Run by Blender (Debian's: its Python is the system Python 3, with numpy):
+
+  blender -b SCENE.blend --python-exit-code 2 --python pmsc_blender.py -- sample --out POINTS.npy \\
+      --count N [--seed S] [--skip NAME,...]
+  blender -b SCENE.blend --python-exit-code 2 --python pmsc_blender.py -- serve --points POINTS.npy \\
+      --frames FIRST-LAST [--samples 64] [--light direct,indirect] [--threads 1] [--seed 0] 1>&2
+
+`sample` draws N points on the scene's mesh surfaces, by area, with the surface normal at each
+(an N x 6 float64 .npy: x y z nx ny nz, world space), deterministically for a seed. `serve` is an
+exec-protocol child (docs/exec-protocol.md): pmsc's frame f is the scene's frame FIRST + f (its
+animated lights, objects and materials), and the values of a point are the RGB irradiance Cycles
+computes there (a diffuse bake without colour: the light arriving, as a white diffuse surface
+facing the normal would reflect it). `1>&2` keeps Blender's own messages off the protocol: the
+child answers on its standard input, which is the socket pmsc gives it.
+
+How a point is computed: one small triangle (a probe) per asked point, at the point and facing its
+normal, in a mesh of its own; a Cycles bake of type DIFFUSE with the asked passes and no colour
+into a float colour attribute on the probe's vertices; the value is the mean of its three. The
+probes are invisible to every secondary ray (diffuse, glossy, transmission, volume, shadow), so
+they cast no shadow and light nothing; they stay visible to the camera, which the bake needs. The
+probe mesh of a point set is kept and reused (the key points are asked every frame), so a call
+pays Cycles' synchronisation of the scene and the samples, not a mesh build.
+
+Failures answer with one line (status 1), and pmsc fails the frame: a frame outside the range, a
+point outside the file. A .blend that does not open, a bad argument or a missing numpy ends Blender
+with exit code 2 before the hello, which pmsc reports with the child's last stderr line.
+"""
+import argparse
+import os
+import socket
+import struct
+import sys
+import time
+
+import bpy
+import numpy as np
+
+HELLO = struct.Struct("<8sIIQQ")   # magic, version, channels, points, frames
+REQUEST = struct.Struct("<IIqQQ")  # kind (1 list, 2 range), 0, frame, count, first
+RESPONSE = struct.Struct("<IIQ")   # status (0 values, 1 error), 0, length
+LIST, RANGE = 1, 2
+PASSES = {"direct": "DIRECT", "indirect": "INDIRECT"}
+
+
+def fail(message):
+    print("pmsc_blender.py: " + message, file=sys.stderr, flush=True)
+    sys.exit(2)
+
+
+def frame_range(text):
+    try:
+        first, last = (int(v) for v in text.split("-"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not FIRST-LAST")
+    if last < first:
+        raise argparse.ArgumentTypeError(f"'{text}': LAST is before FIRST")
+    return first, last
+
+
+def scene_meshes(skip):
+    """The scene's visible mesh objects (evaluated: modifiers applied), minus those named in skip."""
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    for obj in bpy.context.scene.objects:
+        if obj.type == "MESH" and obj.name not in skip and not obj.name.startswith("pmsc_probe") \
+                and not obj.hide_render:
+            yield obj.evaluated_get(depsgraph)
+
+
+def sample(args):
+    """N points on the surfaces by area, with their normals (deterministic for a seed)."""
+    tris, normals, areas = [], [], []
+    for obj in scene_meshes(set(args.skip.split(",")) if args.skip else set()):
+        mesh = obj.to_mesh()
+        mesh.calc_loop_triangles()
+        m = np.array(obj.matrix_world)
+        verts = np.empty(len(mesh.vertices) * 3)
+        mesh.vertices.foreach_get("co", verts)
+        verts = verts.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
+        idx = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int64)
+        mesh.loop_triangles.foreach_get("vertices", idx)
+        t = verts[idx.reshape(-1, 3)]
+        cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+        area = 0.5 * np.linalg.norm(cross, axis=1)
+        keep = area > 0
+        tris.append(t[keep])
+        normals.append(cross[keep] / (2 * area[keep, None]))
+        areas.append(area[keep])
+        obj.to_mesh_clear()
+    if not tris:
+        fail("the scene has no mesh surface to sample")
+    tris, normals, areas = np.concatenate(tris), np.concatenate(normals), np.concatenate(areas)
+    rng = np.random.default_rng(args.seed)
+    which = rng.choice(len(areas), size=args.count, p=areas / areas.sum())
+    u, v = rng.random(args.count), rng.random(args.count)
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    t = tris[which]
+    points = t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])
+    out = np.concatenate([points, normals[which]], axis=1)
+    tmp = args.out + ".partial.npy"
+    np.save(tmp, out)
+    os.replace(tmp, args.out)
+    lo, hi = points.min(0), points.max(0)
+    print(f"pmsc_blender.py: wrote {args.out}: {args.count} points on {len(areas)} triangles, "
+          f"bounding-box diagonal {np.linalg.norm(hi - lo):.6g}", file=sys.stderr, flush=True)
+
+
+class Probes:
+    """Probe meshes of point sets, kept for reuse; one bake per call."""
+
+    def __init__(self, points, normals, passes, keep=4):
+        self.points, self.normals, self.passes, self.keep = points, normals, passes, keep
+        lo, hi = points.min(0), points.max(0)
+        diagonal = float(np.linalg.norm(hi - lo)) or 1.0
+        self.size = 1e-4 * diagonal    # probe radius: far below the scene's detail
+        self.lift = 1e-4 * diagonal    # above its surface, so its own surface does not shadow it
+        self.cache = []                # (key, object), most recent last
+
+    def _build(self, ids):
+        p, n = self.points[ids], self.normals[ids]
+        # A frame (t, b, n) per point, right-handed, so the triangle's winding faces n.
+        helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+        t = np.cross(helper, n)
+        t /= np.linalg.norm(t, axis=1, keepdims=True)
+        b = np.cross(n, t)
+        c = p + self.lift * n
+        s, h = self.size, self.size * np.sqrt(3) / 2
+        verts = np.stack([c + s * t, c - 0.5 * s * t + h * b, c - 0.5 * s * t - h * b], axis=1)
+        mesh = bpy.data.meshes.new("pmsc_probe")
+        count = len(ids)
+        mesh.vertices.add(3 * count)
+        mesh.vertices.foreach_set("co", verts.reshape(-1))
+        mesh.loops.add(3 * count)
+        mesh.loops.foreach_set("vertex_index", np.arange(3 * count, dtype=np.int32))
+        mesh.polygons.add(count)
+        mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * count, 3, dtype=np.int32))
+        mesh.polygons.foreach_set("loop_total", np.full(count, 3, dtype=np.int32))
+        mesh.update()
+        mesh.color_attributes.new("pmsc_light", "FLOAT_COLOR", "POINT")
+        mesh.attributes.active_color = mesh.color_attributes["pmsc_light"]
+        mat = bpy.data.materials.get("pmsc_probe") or bpy.data.materials.new("pmsc_probe")
+        mesh.materials.append(mat)
+        obj = bpy.data.objects.new("pmsc_probe", mesh)
+        for ray in ("visible_diffuse", "visible_glossy", "visible_transmission", "visible_volume_scatter",
+                    "visible_shadow"):
+            setattr(obj, ray, False)
+        bpy.context.scene.collection.objects.link(obj)
+        return obj
+
+    def object_for(self, ids):
+        key = ids.tobytes()
+        for i, (k, obj) in enumerate(self.cache):
+            if k == key:
+                self.cache.append(self.cache.pop(i))
+                return obj
+        obj = self._build(ids)
+        self.cache.append((key, obj))
+        if len(self.cache) > self.keep:
+            _, old = self.cache.pop(0)
+            mesh = old.data
+            bpy.data.objects.remove(old)
+            bpy.data.meshes.remove(mesh)
+        return obj
+
+    def bake(self, ids):
+        obj = self.object_for(ids)
+        for other in bpy.context.view_layer.objects:
+            other.select_set(False)
+        for _, probe in self.cache:
+            probe.hide_render = probe is not obj  # the other probe sets stay out of the scene's sync
+        obj.select_set(True)
+        bpy.context.view_layer.objects.active = obj
+        bpy.ops.object.bake(type="DIFFUSE", pass_filter=self.passes, target="VERTEX_COLORS", margin=0,
+                            use_clear=True)
+        colors = np.empty(len(obj.data.vertices) * 4, dtype=np.float32)
+        obj.data.color_attributes["pmsc_light"].data.foreach_get("color", colors)
+        return colors.reshape(-1, 3, 4)[:, :, :3].mean(axis=1).astype(np.float64)
+
+
+def read_exactly(sock, size):
+    data = bytearray()
+    while len(data) < size:
+        chunk = sock.recv(size - len(data))
+        if not chunk:
+            raise EOFError
+        data += chunk
+    return bytes(data)
+
+
+def load_points(path):
+    try:
+        table = np.load(path)
+    except (OSError, ValueError) as error:
+        fail(f"{path}: {error}")
+    if table.ndim != 2 or table.shape[1] != 6 or not np.isfinite(table).all():
+        fail(f"{path}: expected N x 6 finite values (x y z nx ny nz), got shape {table.shape}")
+    if not (np.linalg.norm(table[:, 3:], axis=1) > 0).all():
+        fail(f"{path}: a point has a zero normal")
+    return table
+
+
+def serve(args):
+    table = load_points(args.points)
+    normals = table[:, 3:] / np.linalg.norm(table[:, 3:], axis=1, keepdims=True)
+    passes = set()
+    for name in args.light.split(","):
+        if name not in PASSES:
+            fail(f"--light: '{name}' is not direct or indirect")
+        passes.add(PASSES[name])
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = args.samples
+    scene.cycles.seed = args.seed
+    scene.cycles.use_animated_seed = False
+    scene.cycles.use_adaptive_sampling = False  # the same samples at every point
+    # A bake with denoising on and no denoiser in the build (Debian's has no OpenImageDenoise)
+    # finishes with every value 0: off, the values are the samples' mean.
+    scene.cycles.use_denoising = False
+    scene.render.threads_mode = "FIXED"
+    scene.render.threads = args.threads
+    first, last = args.frames
+    probes = Probes(table[:, :3], normals, passes)
+    sock = socket.socket(fileno=os.dup(0))
+    sock.sendall(HELLO.pack(b"PMSCEXEC", 1, 3, len(table), last - first + 1))
+    timing = os.environ.get("PMSC_BLENDER_TIMING")
+    while True:
+        try:
+            kind, _, frame, count, start = REQUEST.unpack(read_exactly(sock, REQUEST.size))
+            ids = (np.frombuffer(read_exactly(sock, 8 * count), dtype="<u8").astype(np.int64) if kind == LIST
+                   else np.arange(start, start + count, dtype=np.int64))
+        except EOFError:
+            return
+        try:
+            if not 0 <= frame <= last - first:
+                raise ValueError(f"frame {frame} outside [0, {last - first}]")
+            if count and (ids.min() < 0 or ids.max() >= len(table)):
+                raise ValueError(f"a point outside [0, {len(table)})")
+            began = time.perf_counter()
+            scene.frame_set(first + frame)
+            values = np.ascontiguousarray(probes.bake(ids), dtype="<f8")
+            if timing:
+                with open(timing, "a") as log:
+                    log.write(f"{frame} {count} {time.perf_counter() - began:.6f}\n")
+        except Exception as error:  # one line; pmsc fails the frame
+            text = f"{type(error).__name__}: {error}".replace("\n", " ").encode()
+            sock.sendall(RESPONSE.pack(1, 0, len(text)) + text)
+        else:
+            sock.sendall(RESPONSE.pack(0, 0, values.size) + values.tobytes())
+
+
+class Parser(argparse.ArgumentParser):
+    """Argument mistakes end with one line (the last line of stderr is what pmsc reports)."""
+
+    def error(self, message):
+        fail(message)
+
+
+def main(argv):
+    p = Parser(prog="pmsc_blender.py")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
+    s = sub.add_parser("sample", help="points on the scene's surfaces")
+    s.add_argument("--out", required=True)
+    s.add_argument("--count", type=int, required=True)
+    s.add_argument("--seed", type=int, default=1)
+    s.add_argument("--skip", default="", help="mesh objects not to sample, comma-separated")
+    v = sub.add_parser("serve", help="an exec-protocol child")
+    v.add_argument("--points", required=True, help="N x 6 .npy from `sample` (or your own)")
+    v.add_argument("--frames", required=True, type=frame_range, help="the scene's frames FIRST-LAST")
+    v.add_argument("--samples", type=int, default=64)
+    v.add_argument("--light", default="direct,indirect", help="passes: direct, indirect or both")
+    v.add_argument("--threads", type=int, default=1)
+    v.add_argument("--seed", type=int, default=0, help="Cycles' seed (another seed: another draw of the noise)")
+    args = p.parse_args(argv)
+    # Blender goes on with its default scene when the .blend it was given does not open.
+    if not bpy.data.filepath:
+        fail("Blender opened no .blend (a missing or unreadable file, or none given before --python)")
+    if args.command == "sample":
+        if args.count < 1:
+            fail("--count must be at least 1")
+        sample(args)
+    else:
+        if args.samples < 1 or args.threads < 1:
+            fail("--samples and --threads must be at least 1")
+        serve(args)
+
+
+if __name__ == "__main__":
+    main(sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else [])

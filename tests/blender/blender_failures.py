@@ -1,0 +1,76 @@
+#!/usr/bin/env python3
+"""Each way pmsc's Blender child fails gives one line naming what went wrong, exit code 3 from
+`pmsc export-frames`, and no output file (docs/blender.md, "Failures").
+
+Exit codes: 0 every case as expected, 1 a case was not, 77 no Blender and CI not set (a skip; under
+CI it is a failure, exit 2).
+"""
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+
+
+def main():
+    p = argparse.ArgumentParser()
+    p.add_argument("--bin", required=True)
+    p.add_argument("--share", required=True)
+    p.add_argument("--work", required=True)
+    args = p.parse_args()
+    if shutil.which("blender") is None:
+        if os.environ.get("CI", "") in ("", "false", "0"):
+            print("blender_failures: no blender on PATH: skipped", file=sys.stderr)
+            return 77
+        print("blender_failures: no blender on PATH (apt-get install blender)", file=sys.stderr)
+        return 2
+    os.makedirs(args.work, exist_ok=True)
+    w = lambda name: os.path.join(args.work, name)
+    launcher = os.path.join(args.share, "pmsc-blender")
+    pmsc = os.path.join(args.bin, "pmsc")
+    built = subprocess.run(["blender", "-b", "--factory-startup", "--python-exit-code", "2", "--python",
+                            os.path.join(args.share, "cornell_box.py"), "--", "--out", w("box.blend"), "--grid", "2",
+                            "--path", "1"], capture_output=True, text=True)
+    sampled = subprocess.run([launcher, w("box.blend"), "sample", "--out", w("points.npy"), "--count", "50"],
+                             capture_output=True, text=True)
+    if built.returncode != 0 or sampled.returncode != 0:
+        print("blender_failures: could not build the scene: " + (built.stderr + sampled.stderr)[-400:], file=sys.stderr)
+        return 1
+    with open(w("bad.npy"), "wb") as f:
+        f.write(b"not a numpy file")
+    with open(w("crash.py"), "w") as f:  # a Blender that dies in the middle of a frame
+        f.write("import os, signal\nos.kill(os.getpid(), signal.SIGSEGV)\n")
+    serve = lambda blend, *rest: "exec:%s %s serve --points %s --frames 1-5 --samples 4 %s" % (
+        launcher, blend, w("points.npy"), " ".join(rest))
+    cases = [
+        ("no .blend", serve(w("missing.blend")), "cannot read"),
+        ("not a .blend", serve(w("points.npy")), "is not a .blend file"),
+        ("bad points", "exec:%s %s serve --points %s --frames 1-5" % (launcher, w("box.blend"), w("bad.npy")), "bad.npy"),
+        ("bad frames", "exec:%s %s serve --points %s --frames 5-1" % (launcher, w("box.blend"), w("points.npy")),
+         "LAST is before FIRST"),
+        ("bad light", serve(w("box.blend"), "--light sun"), "'sun' is not direct or indirect"),
+        ("no blender", serve(w("box.blend")), "no 'no-such-blender' on PATH"),
+        ("crash", "exec:blender -b %s --python %s 1>&2" % (w("box.blend"), w("crash.py")), "signal"),
+    ]
+    bad = 0
+    for name, spec, expected in cases:
+        env = dict(os.environ)
+        if name == "no blender":
+            env["PMSC_BLENDER"] = "no-such-blender"
+        out = w("out.npy")
+        if os.path.exists(out):
+            os.remove(out)
+        done = subprocess.run([pmsc, "export-frames", spec, "--out", out, "--quiet"], capture_output=True, text=True,
+                              env=env)
+        lines = [l for l in done.stderr.splitlines() if l.strip()]
+        ok = done.returncode == 3 and len(lines) == 1 and expected in lines[0] and not os.path.exists(out)
+        print("%-12s exit %d: %s" % (name, done.returncode, lines[-1] if lines else "(nothing)"))
+        if not ok:
+            print("blender_failures: %s: expected exit 3, one line containing '%s', no %s" % (name, expected, out),
+                  file=sys.stderr)
+            bad += 1
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
