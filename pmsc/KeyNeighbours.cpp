@@ -13,10 +13,11 @@ namespace pmsc {
 
 void KeyNeighbours::validate(const Model& model) const {
     if (perKey < 1 || perKey > model.points - model.keyCount())
-        throw std::invalid_argument("key neighbours: " + std::to_string(perKey) + " per key is outside [1, N - K]");
+        throw std::invalid_argument("key neighbours: " + std::to_string(perKey) +
+                                    " per key is outside [1, N - K]");
     if (static_cast<Index>(points.size()) != model.keyCount() * perKey)
-        throw std::invalid_argument("key neighbours: " + std::to_string(points.size()) + " points, expected K * " +
-                                    std::to_string(perKey));
+        throw std::invalid_argument("key neighbours: " + std::to_string(points.size()) +
+                                    " points, expected K * " + std::to_string(perKey));
     for (const Index p : points) {
         if (p < 0 || p >= model.points)
             throw std::invalid_argument("key neighbours: point " + std::to_string(p) + " is outside [0, N)");
@@ -28,10 +29,12 @@ KeyNeighbours nearestToKeys(const Eigen::Ref<const Eigen::MatrixXd>& positions, 
     const Index n = positions.rows();
     if (positions.cols() != 3) throw std::invalid_argument("nearestToKeys: positions must be N x 3");
     if (perKey < 1 || perKey > n - static_cast<Index>(keys.size()))
-        throw std::invalid_argument("nearestToKeys: " + std::to_string(perKey) + " per key is outside [1, N - K]");
+        throw std::invalid_argument("nearestToKeys: " + std::to_string(perKey) +
+                                    " per key is outside [1, N - K]");
     std::vector<char> isKey(static_cast<size_t>(n), 0);
     for (const Index k : keys) {
-        if (k < 0 || k >= n) throw std::invalid_argument("nearestToKeys: key point " + std::to_string(k) + " out of range");
+        if (k < 0 || k >= n)
+            throw std::invalid_argument("nearestToKeys: key point " + std::to_string(k) + " out of range");
         isKey[size_t(k)] = 1;
     }
     KeyNeighbours out;
@@ -43,7 +46,8 @@ KeyNeighbours nearestToKeys(const Eigen::Ref<const Eigen::MatrixXd>& positions, 
     for (const Index k : keys) {
         distance.clear();
         for (Index p = 0; p < n; ++p) {
-            if (!isKey[size_t(p)]) distance.emplace_back((positions.row(p) - positions.row(k)).squaredNorm(), p);
+            if (!isKey[size_t(p)])
+                distance.emplace_back((positions.row(p) - positions.row(k)).squaredNorm(), p);
         }
         // Pairs compare by distance, then index: the same neighbours on every machine.
         std::partial_sort(distance.begin(), distance.begin() + perKey, distance.end());
@@ -67,7 +71,8 @@ ModelSectionCodec keyNeighboursSectionCodec() {
             [](ByteReader& in, Model& m) {
                 KeyNeighbours near;
                 const std::uint32_t fromMean = in.u32("key neighbours' source");
-                if (fromMean > 1) in.fail("key neighbours' source " + std::to_string(fromMean) + " is not 0 or 1");
+                if (fromMean > 1)
+                    in.fail("key neighbours' source " + std::to_string(fromMean) + " is not 0 or 1");
                 near.fromMean = fromMean == 1;
                 const auto n = static_cast<std::uint64_t>(m.points);
                 const auto k = static_cast<std::uint64_t>(m.keyCount());

@@ -19,8 +19,9 @@ struct ModelSectionCodec;
 /// the keys nearest it, and the fit bends PM towards those keys, so the points around them, which
 /// the fit did not see, are where PM is furthest off.
 struct KeyNeighbours {
-    Index perKey = 0;           ///< points per key
-    std::vector<Index> points;  ///< K * perKey: key k's nearest non-key points at [k*perKey, (k+1)*perKey), nearest first
+    Index perKey = 0;  ///< points per key
+    std::vector<Index>
+        points;  ///< K * perKey: key k's nearest non-key points at [k*perKey, (k+1)*perKey), nearest first
     /// The positions were the training mean (a shape): `pmsc learn` recomputes them from the
     /// learned mean when the keys change. False: positions the user gave, which learn does not have.
     bool fromMean = true;

@@ -23,7 +23,8 @@ pmsc::FrameSet sheetFrames(Index frames, bool light = false) {
     constexpr Index side = 30;
     pmsc::FrameSet set(frames, side * side, 3);
     for (Index f = 0; f < frames; ++f) {
-        const double a = std::sin(0.31 * double(f)), b = std::cos(0.17 * double(f) + 1), c = std::sin(0.07 * double(f) + 2);
+        const double a = std::sin(0.31 * double(f)), b = std::cos(0.17 * double(f) + 1),
+                     c = std::sin(0.07 * double(f) + 2);
         for (Index p = 0; p < side * side; ++p) {
             const double x = double(p % side) / double(side - 1), y = double(p / side) / double(side - 1);
             double* v = set.frame(f) + 3 * p;
@@ -75,18 +76,21 @@ TEST(KeyNeighbours, TrainingKeepsThemForAShapeWithAPredictedKeyErrorOnly) {
     EXPECT_TRUE(shape.keyNeighbours->fromMean);
     EXPECT_NO_THROW(shape.validate());
     // Key 0's neighbours are the points of the mean nearest it, none of them a key.
-    const Eigen::MatrixXd mean = Eigen::Map<const Eigen::MatrixXd>(shape.mean.data(), 3, shape.points).transpose();
+    const Eigen::MatrixXd mean =
+        Eigen::Map<const Eigen::MatrixXd>(shape.mean.data(), 3, shape.points).transpose();
     const std::set<Index> keys(shape.keyPoints.begin(), shape.keyPoints.end());
     const auto first = shape.keyNeighbours->of(0);
     const double farthest = (mean.row(first.back()) - mean.row(shape.keyPoints[0])).norm();
     for (const Index p : first) EXPECT_EQ(keys.count(p), 0u);
     Index closer = 0;
     for (Index p = 0; p < shape.points; ++p)
-        if (!keys.count(p) && (mean.row(p) - mean.row(shape.keyPoints[0])).norm() < farthest - 1e-12) ++closer;
+        if (!keys.count(p) && (mean.row(p) - mean.row(shape.keyPoints[0])).norm() < farthest - 1e-12)
+            ++closer;
     EXPECT_LE(closer, pmsc::kNeighboursPerKey);
 
     EXPECT_FALSE(trainSheet(true).keyNeighbours.has_value()) << "light is not a shape";
-    EXPECT_FALSE(trainSheet(false, 0).keyNeighbours.has_value()) << "no tolerance: the key RMS, nothing to check";
+    EXPECT_FALSE(trainSheet(false, 0).keyNeighbours.has_value())
+        << "no tolerance: the key RMS, nothing to check";
 }
 
 /// A model whose predicted error's parts always disagree (the RMS part certifies every frame, the
@@ -124,7 +128,8 @@ TEST(HitCheck, ReadsTheNeighboursOfTheKeysWithTheLargestResidualsAndHoldsPmToThe
     const Index c = m.channels, k = m.keyCount();
     std::vector<double> keys(size_t(k * c)), coords(size_t(m.coordCount()));
     for (Index i = 0; i < k; ++i)
-        for (Index ch = 0; ch < c; ++ch) keys[size_t(i * c + ch)] = frames.frame(60)[m.keyPoints[size_t(i)] * c + ch];
+        for (Index ch = 0; ch < c; ++ch)
+            keys[size_t(i * c + ch)] = frames.frame(60)[m.keyPoints[size_t(i)] * c + ch];
     // Key 5 off by far more than the fit can absorb: its neighbours are among the points checked.
     keys[size_t(5 * c + 2)] += 1.0;
     pm.project(keys.data(), coords.data());
@@ -132,7 +137,8 @@ TEST(HitCheck, ReadsTheNeighboursOfTheKeysWithTheLargestResidualsAndHoldsPmToThe
     EXPECT_TRUE(std::is_sorted(points.begin(), points.end()));
     EXPECT_EQ(std::adjacent_find(points.begin(), points.end()), points.end());
     EXPECT_LE(Index(points.size()), pmsc::kCheckedKeys * pmsc::kNeighboursPerKey);
-    for (const Index p : m.keyNeighbours->of(5)) EXPECT_TRUE(std::binary_search(points.begin(), points.end(), p)) << p;
+    for (const Index p : m.keyNeighbours->of(5))
+        EXPECT_TRUE(std::binary_search(points.begin(), points.end(), p)) << p;
 
     // PM's own values pass; one value 0.95 T away fails; one 0.85 T away passes.
     std::vector<double> values(points.size() * size_t(c));
@@ -157,7 +163,8 @@ TEST(HitCheck, HoldsPmCloserAtTheRegionKeysThanAtTheNeighbours) {
     std::vector<double> keys(size_t(m.keyCount() * c)), coords(size_t(m.coordCount()));
     const pmsc::FrameSet frames = sheetFrames(61);
     for (Index i = 0; i < m.keyCount(); ++i)
-        for (Index ch = 0; ch < c; ++ch) keys[size_t(i * c + ch)] = frames.frame(60)[m.keyPoints[size_t(i)] * c + ch];
+        for (Index ch = 0; ch < c; ++ch)
+            keys[size_t(i * c + ch)] = frames.frame(60)[m.keyPoints[size_t(i)] * c + ch];
     pm.project(keys.data(), coords.data());
     const std::vector<Index> points = check.points(keys.data(), coords.data());
     std::vector<double> values(points.size() * size_t(c));
@@ -165,7 +172,8 @@ TEST(HitCheck, HoldsPmCloserAtTheRegionKeysThanAtTheNeighbours) {
     const auto& regionKeys = m.regions->extraKeyPoints;
     size_t regionKey = points.size(), neighbour = points.size();
     for (size_t i = 0; i < points.size(); ++i) {
-        const bool isRegionKey = std::find(regionKeys.begin(), regionKeys.end(), points[i]) != regionKeys.end();
+        const bool isRegionKey =
+            std::find(regionKeys.begin(), regionKeys.end(), points[i]) != regionKeys.end();
         (isRegionKey ? regionKey : neighbour) = i;
     }
     ASSERT_LT(regionKey, points.size());
