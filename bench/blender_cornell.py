@@ -15,7 +15,8 @@ Steps (each a command a lighting TD would type; docs/blender.md):
   4. `pmsc train --tolerance T` (T = --tolerance-share of the training frames' largest point value,
      as `pmsc demo cornell` sets it, and the --train options);
   5. `pmsc run` over the path frames, Cycles computing the keys (and what misses) in one Blender.
-Prints the speedup (Cycles' time for every point of a path frame over pmsc's per path frame,
+Renders the first path frame with Blender (full | pmsc | 10 x difference, path000.png) and prints
+the speedup (Cycles' time for every point of a path frame over pmsc's per path frame,
 both measured inside the same child, one thread, same samples; and the same over the commands'
 wall times, Blender's start and pmsc's own work included), the RMS error against the full
 result, the hit rate, the frames over T, and the key call's time split into Blender's fixed cost
@@ -173,6 +174,11 @@ def main():
         "pmsc_run_wall_seconds": wall,
         "train_summary": [l for l in out.splitlines() if l.strip().startswith(("basis", "key points", "eps"))],
     }
+    # The first path frame as Blender renders the values: full | pmsc | 10 x difference.
+    run([blender, "-b", w("cornell.blend"), "--python-exit-code", "2", "--python",
+         os.path.join(args.share, "show_values.py"), "--", "--points", w("points.npy"), "--full", w("full.npy"),
+         "--pmsc", os.path.join(w("run"), "frame.%06d.npy" % first), "--index", "0", "--out", w("path000.png")])
+    report["picture"] = w("path000.png")
     with open(w("report.json"), "w") as f:
         json.dump(report, f, indent=2)
     print(json.dumps(report, indent=2))

@@ -129,7 +129,7 @@ def main(argv):
     cam_data.angle_y = math.radians(39.3077)
     cam = bpy.data.objects.new("Camera", cam_data)
     cam.location = to_blender((278, 273, -800))
-    cam.rotation_euler = (math.radians(90), 0, 0)  # looks along +y (the data's +z), z up
+    cam.rotation_euler = (math.radians(90), 0, math.radians(180))  # looks along -y (the data's +z), z up
     scene.collection.objects.link(cam)
     scene.camera = cam
     scene.render.resolution_x = scene.render.resolution_y = 256
