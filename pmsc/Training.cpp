@@ -306,6 +306,12 @@ struct Trainer {
     void learningState();
     /// Regions of local fail-through (paper section 9), on the final core.
     void regions();
+    /// RMS over points and frames of a point's motion about its mean (the mean-removed matrix's
+    /// energy per point and frame; read for 3-channel data only): whether the mean is a shape.
+    double rmsMotion() const {
+        const double cells = static_cast<double>(std::max<Index>(1, model.points * model.trainFrames));
+        return std::sqrt(model.totalEnergy / cells);
+    }
     /// The points nearest each key (KeyNeighbours), where a hit one part of the predicted error
     /// alone certifies is checked; rank 0, on the final core.
     void keyNeighbours();
@@ -598,11 +604,7 @@ void Trainer::regions() {
             report.regions = "none: regions are learned in memory on one process";
             return;
         }
-        // RMS over points and frames of a point's motion about its mean (read for 3-channel data only).
-        const Eigen::MatrixXd& all = inMemory->matrix();
-        const double rmsMotion =
-            std::sqrt(all.squaredNorm() / static_cast<double>(std::max<Index>(1, all.size() / 3)));
-        const RegionChoice choice = chooseRegions(model, chosen, options.tolerance, rmsMotion);
+        const RegionChoice choice = chooseRegions(model, chosen, options.tolerance, rmsMotion());
         report.regions = choice.reason;
         if (choice.count == 0) return;
         chosen.count = choice.count;
@@ -626,11 +628,7 @@ void Trainer::keyNeighbours() {
     if (model.points - k < kNeighboursPerKey) return;
     const bool given = options.regions.positions.size() > 0;
     Eigen::MatrixXd positions = options.regions.positions;
-    if (!given) {
-        const double frames = static_cast<double>(std::max<Index>(1, model.trainFrames));
-        positions =
-            meanShape(model, std::sqrt(model.totalEnergy / (static_cast<double>(model.points) * frames)));
-    }
+    if (!given) positions = meanShape(model, rmsMotion());
     if (positions.rows() != model.points || positions.cols() != 3) return;
     model.keyNeighbours = nearestToKeys(positions, model.keyPoints, kNeighboursPerKey, !given);
 }

@@ -107,6 +107,28 @@ def sample(args):
           f"bounding-box diagonal {np.linalg.norm(hi - lo):.6g}", file=sys.stderr, flush=True)
 
 
+def facing_polygons(name, centres, normals, corners):
+    """A mesh of one polygon per point: `corners` (k, 2) offsets in units of the point's tangent
+    frame (t, b), counter-clockwise about the normal, so each polygon faces its normal."""
+    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+    t = np.cross(helper, normals)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    b = np.cross(normals, t)
+    k = len(corners)
+    verts = centres[:, None, :] + corners[None, :, :1] * t[:, None, :] + corners[None, :, 1:] * b[:, None, :]
+    count = len(centres)
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(k * count)
+    mesh.vertices.foreach_set("co", verts.reshape(-1))
+    mesh.loops.add(k * count)
+    mesh.loops.foreach_set("vertex_index", np.arange(k * count, dtype=np.int32))
+    mesh.polygons.add(count)
+    mesh.polygons.foreach_set("loop_start", np.arange(0, k * count, k, dtype=np.int32))
+    mesh.polygons.foreach_set("loop_total", np.full(count, k, dtype=np.int32))
+    mesh.update()
+    return mesh
+
+
 class Probes:
     """Probe meshes of point sets, kept for reuse; one bake per call."""
 
@@ -120,24 +142,9 @@ class Probes:
 
     def _build(self, ids):
         p, n = self.points[ids], self.normals[ids]
-        # A frame (t, b, n) per point, right-handed, so the triangle's winding faces n.
-        helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
-        t = np.cross(helper, n)
-        t /= np.linalg.norm(t, axis=1, keepdims=True)
-        b = np.cross(n, t)
-        c = p + self.lift * n
         s, h = self.size, self.size * np.sqrt(3) / 2
-        verts = np.stack([c + s * t, c - 0.5 * s * t + h * b, c - 0.5 * s * t - h * b], axis=1)
-        mesh = bpy.data.meshes.new("pmsc_probe")
-        count = len(ids)
-        mesh.vertices.add(3 * count)
-        mesh.vertices.foreach_set("co", verts.reshape(-1))
-        mesh.loops.add(3 * count)
-        mesh.loops.foreach_set("vertex_index", np.arange(3 * count, dtype=np.int32))
-        mesh.polygons.add(count)
-        mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * count, 3, dtype=np.int32))
-        mesh.polygons.foreach_set("loop_total", np.full(count, 3, dtype=np.int32))
-        mesh.update()
+        triangle = np.array([[s, 0.0], [-0.5 * s, h], [-0.5 * s, -h]])
+        mesh = facing_polygons("pmsc_probe", p + self.lift * n, n, triangle)
         mesh.color_attributes.new("pmsc_light", "FLOAT_COLOR", "POINT")
         mesh.attributes.active_color = mesh.color_attributes["pmsc_light"]
         mat = bpy.data.materials.get("pmsc_probe") or bpy.data.materials.new("pmsc_probe")

@@ -18,6 +18,9 @@ import tempfile
 import bpy
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from pmsc_blender import facing_polygons  # noqa: E402  (beside this script, installed or not)
+
 
 def fail(message):
     print("show_values.py: " + message, file=sys.stderr, flush=True)
@@ -39,23 +42,8 @@ def load(path, index, count):
 
 
 def splats(points, normals, radius):
-    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
-    t = np.cross(helper, normals)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    b = np.cross(normals, t)
-    c = points + 1e-4 * normals
-    corners = np.stack([c - radius * t - radius * b, c + radius * t - radius * b,
-                        c + radius * t + radius * b, c - radius * t + radius * b], axis=1)
-    n = len(points)
-    mesh = bpy.data.meshes.new("pmsc_show")
-    mesh.vertices.add(4 * n)
-    mesh.vertices.foreach_set("co", corners.reshape(-1))
-    mesh.loops.add(4 * n)
-    mesh.loops.foreach_set("vertex_index", np.arange(4 * n, dtype=np.int32))
-    mesh.polygons.add(n)
-    mesh.polygons.foreach_set("loop_start", np.arange(0, 4 * n, 4, dtype=np.int32))
-    mesh.polygons.foreach_set("loop_total", np.full(n, 4, dtype=np.int32))
-    mesh.update()
+    square = radius * np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+    mesh = facing_polygons("pmsc_show", points + 1e-4 * normals, normals, square)
     mesh.color_attributes.new("value", "FLOAT_COLOR", "POINT")
     mat = bpy.data.materials.new("pmsc_show")
     mat.use_nodes = True
