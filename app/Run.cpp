@@ -101,6 +101,13 @@ private:
 
 }  // namespace
 
+BasisPrecision runBasisPrecision(const RunOptions& options) {
+    if (options.basisPrecision) return *options.basisPrecision;
+    const bool storedInFloat =
+        options.format == "vdb" || (options.format == "npy" && options.dtype == NpyDtype::Float32);
+    return storedInFloat ? BasisPrecision::Single : BasisPrecision::Double;
+}
+
 std::string defaultStatsPath(const std::string& outDir, const FrameSpan& frames) {
     std::string name = "pmsc-run." + std::to_string(frames.first) + "-" + std::to_string(frames.last);
     if (frames.step != 1) name += "_by" + std::to_string(frames.step);
@@ -171,6 +178,7 @@ EngineOutcome runEngineGroups(const Model& model, const PointEvaluator& evaluato
     engineOptions.cancel = options.cancel;
     engineOptions.localFailThrough = !options.wholeFrameFailThrough;
     engineOptions.memoryLimit = options.memoryLimit;
+    engineOptions.basisPrecision = runBasisPrecision(options);
     Index doneBefore = 0;
     auto lastShown = Clock::now() - std::chrono::seconds(1);
     const Index total = static_cast<Index>(toDo.size());
@@ -260,6 +268,7 @@ nlohmann::json statsJson(const Model& model, const RunOptions& options, const Fr
     j["out"] = options.outDir;
     j["format"] = output.extension().substr(1);
     j["threads"] = options.threads;
+    j["basis_precision"] = runBasisPrecision(options) == BasisPrecision::Single ? "single" : "double";
     j["frame_buffer_budget_bytes"] = options.memoryLimit;
     j["force"] = options.force;
     j["frames_evaluated"] = report.evaluated;

@@ -5,9 +5,11 @@
 #include "pmsc/Model.h"
 #include "pmsc/NpyIO.h"
 #include "pmsc/PointEvaluator.h"
-#include "pmsc/Training.h"  // ProgressFn
+#include "pmsc/PointMultiplier.h"  // BasisPrecision
+#include "pmsc/Training.h"         // ProgressFn
 
 #include <atomic>
+#include <optional>
 #include <string>
 
 namespace pmsc::app {
@@ -20,6 +22,8 @@ struct RunOptions {
     std::string outDir;                  ///< one file per frame goes here
     std::string format = "npy";          ///< "npy" or an extension the evaluator offers ("obj", "vdb")
     NpyDtype dtype = NpyDtype::Float64;  ///< of .npy frames
+    /// The basis a hit's reconstruction reads; empty: runBasisPrecision's choice for the format.
+    std::optional<BasisPrecision> basisPrecision;
     std::string statsPath;               ///< empty: OUT/pmsc-run.<A-B>.json
     int threads = 0;                     ///< 0: every core
     std::uint64_t memoryLimit = 0;       ///< bytes the frames in flight may hold; 0 = no limit
@@ -47,6 +51,12 @@ struct RunReport {
     double seconds = 0;  ///< wall time of the whole run
     std::string statsPath;
 };
+
+/// The basis precision a run reconstructs with: options.basisPrecision when given, else Single when
+/// every frame is stored in float (.vdb, .npy float32) and Double otherwise. Why: a hit's time on a
+/// large cache is the pass over the basis, and the float basis halves its bytes; its values
+/// differ from the double's by about 1e-7 relative, the rounding the float file applies anyway.
+BasisPrecision runBasisPrecision(const RunOptions& options);
 
 /// The stats file's default name for a range: OUT/pmsc-run.A-B.json (":S" -> "_byS").
 std::string defaultStatsPath(const std::string& outDir, const FrameSpan& frames);

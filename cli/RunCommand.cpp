@@ -67,6 +67,18 @@ int runRun(const std::vector<std::string>& args) {
     parser.option("--format", "npy|obj|vdb",
                   "frame file format (default npy; others if the evaluator offers them)", o.format);
     parser.option("--dtype", "float64|float32", ".npy element type (default float64)", dtype);
+    parser.option(
+        "--basis-precision", "single|double",
+        "the basis a hit reads (default: single when frames are stored in float, vdb or npy float32;\n"
+        "double otherwise): single halves the bytes a hit reads, within a float's rounding",
+        [&](const std::string& v) {
+            if (v == "single")
+                o.basisPrecision = BasisPrecision::Single;
+            else if (v == "double")
+                o.basisPrecision = BasisPrecision::Double;
+            else
+                throw UsageError("--basis-precision: '" + v + "' is not single or double");
+        });
     parser.option("--stats", "FILE.json", "stats file (default DIR/pmsc-run.A-B.json)", o.statsPath);
     parser.option("--log-every", "SECONDS",
                   "progress line interval when stderr is not a terminal (default 10; 0 = every update)",

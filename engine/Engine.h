@@ -82,10 +82,10 @@ struct EngineOptions {
     /// core busy with frames already. Needs an evaluator whose subsets are cheap
     /// (PointEvaluator::FailThroughShape::cheapSubsets; ignored otherwise). Same values either way.
     Index keyPiecePoints = 0;
-    /// What a hit's and a blend's point multiplication read the basis in (models whose channels
-    /// share it). Single halves the memory a hit of a large cache reads, and its time; for clients
-    /// that display the values (`pmsc view`). Double, the default, is what every batch run and
-    /// comparison uses.
+    /// What a hit's and a blend's point multiplication read the basis in. Single halves the
+    /// memory a hit of a large cache reads, and its time: for outputs stored in float (`pmsc run`
+    /// writing .vdb or .npy float32, the demos' grids) and clients that display the values
+    /// (`pmsc view`). Double, the default, is what a double output and every comparison uses.
     BasisPrecision basisPrecision = BasisPrecision::Double;
     /// Fail through with one PointEvaluator::evaluateAll() call per frame instead of
     /// chunks (for evaluators whose full evaluation shares work between points). Also on when

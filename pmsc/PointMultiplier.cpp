@@ -15,7 +15,8 @@ using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::Ro
 using RowMajorMap = Eigen::Map<RowMajor>;
 using ConstRowMajorMap = Eigen::Map<const RowMajor>;
 
-/// The basis of a model whose channels share it, copied in panels of kPanel rows: panel p holds
+/// The basis, copied in panels of kPanel rows (rows of N points when the channels share it, of
+/// N*C point channels otherwise): panel p holds
 /// rows [p*kPanel, (p+1)*kPanel) column-major (kPanel x M, the last one padded with zeros), one
 /// contiguous block, read front to back. Decisions, measured at N = 254,000, M = 40, C = 3
 /// (`pmsc_volume_bench --benchmark_filter=Reconstruct`):
@@ -78,7 +79,15 @@ void tileRows(const Scalar* block, Index m, const double* coords, const double* 
     for (int ch = 0; ch < kC; ++ch) result.row(ch) = acc[ch].transpose();
 }
 
-/// Points [first, first+count) of a model whose channels share the basis, from its panels.
+/// The rows a panel reconstruction reads: the mean (rows x c, channel-minor) of `rows` basis
+/// rows of `m` columns. A model whose channels share the basis has rows = N and c = C; a model
+/// whose channels have rows of their own has rows = N*C and c = 1 (each channel is a row).
+struct PanelRows {
+    const double* mean;
+    Index rows, m, c;
+};
+
+/// Rows [first, first+count) of `rows`, from their panels.
 /// kC > 0 fixes C at compile time (and takes whole tiles in registers); Scalar is the panels'
 /// (BasisPrecision), the sums are double. Every panel is computed whole, the same instructions
 /// for the same row whatever the range: a range that starts or ends inside a panel computes it
@@ -86,10 +95,10 @@ void tileRows(const Scalar* block, Index m, const double* coords, const double* 
 /// the same bits in any chunking, in any build (FMA contraction may differ between a vectorized
 /// loop and a scalar remainder, never between two runs of one loop).
 template <int kC, typename Scalar>
-void sharedReconstruct(const Model& model, const Scalar* panels, const double* coords, Index first,
-                       Index count, double* out) {
-    const Index c = kC > 0 ? kC : model.channels;
-    const Index m = model.basisSize();
+void panelReconstruct(const PanelRows& rows_, const Scalar* panels, const double* coords, Index first,
+                      Index count, double* out) {
+    const Index c = kC > 0 ? kC : rows_.c;
+    const Index m = rows_.m;
     // Scratch for any C (acc) and for a panel a range cuts (its mean and its values); a range of
     // whole panels, the engine's blocks, needs none.
     std::vector<double> acc, scratchMean, scratchOut;
@@ -99,14 +108,14 @@ void sharedReconstruct(const Model& model, const Scalar* panels, const double* c
         scratchMean.resize(panelValues);
         scratchOut.resize(panelValues);
     }
-    const double* mean = model.mean.data();
+    const double* mean = rows_.mean;
     for (Index at = first; at < first + count;) {
         const Index panel = at / kPanel, start = panel * kPanel, lo = at - start;
         const Index rows = std::min(kPanel - lo, first + count - at);
         const bool whole = rows == kPanel;
         const double* mu = mean + start * c;
         if (!whole) {
-            const Index valid = std::min(kPanel, model.points - start);
+            const Index valid = std::min(kPanel, rows_.rows - start);
             std::fill(scratchMean.begin(), scratchMean.end(), 0.0);
             std::copy(mu, mu + valid * c, scratchMean.begin());
             mu = scratchMean.data();
@@ -126,23 +135,23 @@ void sharedReconstruct(const Model& model, const Scalar* panels, const double* c
 }
 
 template <typename Scalar>
-void sharedReconstructC(const Model& model, const Scalar* panels, const double* coords, Index first,
-                        Index count, double* out) {
-    switch (model.channels) {
+void panelReconstructC(const PanelRows& rows, const Scalar* panels, const double* coords, Index first,
+                       Index count, double* out) {
+    switch (rows.c) {
         case 1:
-            sharedReconstruct<1>(model, panels, coords, first, count, out);
+            panelReconstruct<1>(rows, panels, coords, first, count, out);
             break;
         case 2:
-            sharedReconstruct<2>(model, panels, coords, first, count, out);
+            panelReconstruct<2>(rows, panels, coords, first, count, out);
             break;
         case 3:
-            sharedReconstruct<3>(model, panels, coords, first, count, out);
+            panelReconstruct<3>(rows, panels, coords, first, count, out);
             break;
         case 4:
-            sharedReconstruct<4>(model, panels, coords, first, count, out);
+            panelReconstruct<4>(rows, panels, coords, first, count, out);
             break;
         default:
-            sharedReconstruct<0>(model, panels, coords, first, count, out);
+            panelReconstruct<0>(rows, panels, coords, first, count, out);
             break;
     }
 }
@@ -156,11 +165,16 @@ PointMultiplier::PointMultiplier(const Model& model, BasisPrecision precision) :
     if (usesLeaveOneOut(model_.keyErrorNorm)) looScale_ = leaveOneOutScale(keyBasis_, model_.projector);
     // b = P (k - mean_K) = P k - P mean_K: precomputing P mean_K lets project() write straight
     // into the caller's buffer with one GEMV and no temporary.
+    // The basis in panels, in the precision asked for, for either layout: a copy (the model keeps
+    // its column-major basis for training, learning and the subset queries), paid back on every
+    // hit. The panels' pass ran 3x faster than Eigen's GEMV over the column-major (N*C) x M
+    // basis at N = 160,000, C = 3, M = 32 (`pmsc_engine_bench --benchmark_filter=Reconstruct`):
+    // one stream read front to back against M streams N*C*8 bytes apart.
+    if (precision == BasisPrecision::Single)
+        singlePanels_ = panelsOf<float>(model_.basis);
+    else
+        panels_ = panelsOf<double>(model_.basis);
     if (model_.sharedChannels) {
-        if (precision == BasisPrecision::Single)
-            singlePanels_ = panelsOf<float>(model_.basis);
-        else
-            panels_ = panelsOf<double>(model_.basis);
         projectedKeyMean_.resize(model_.coordCount());
         RowMajorMap(projectedKeyMean_.data(), model_.basisSize(), model_.channels).noalias() =
             model_.projector * ConstRowMajorMap(keyMean_.data(), model_.keyCount(), model_.channels);
@@ -270,33 +284,23 @@ double PointMultiplier::keyError(const double* keyValues, const double* coords, 
 }
 
 void PointMultiplier::reconstruct(const double* coords, double* out) const {
-    if (model_.sharedChannels) {
-        reconstructRange(coords, 0, model_.points, out);
-        return;
-    }
-    const Index rows = model_.mean.size();
-    Eigen::Map<const Eigen::VectorXd> b(coords, model_.basisSize());
-    Eigen::Map<Eigen::VectorXd> o(out, rows);
-    // One pass over the basis (a GEMV), the bandwidth-bound hot path of a hit.
-    o = model_.mean;
-    o.noalias() += model_.basis * b;
+    reconstructRange(coords, 0, model_.points, out);
 }
 
 void PointMultiplier::reconstructRange(const double* coords, Index first, Index count, double* out) const {
-    const Index c = model_.channels;
-    if (model_.sharedChannels) {
-        // out (count x C) = mean + basis rows (count x M) * coords (M x C): one pass over the
-        // N x M basis for all channels, a third of the (N*C) x M one's memory traffic at C = 3.
-        if (singlePanels_.size() > 0)
-            sharedReconstructC(model_, singlePanels_.data(), coords, first, count, out);
-        else
-            sharedReconstructC(model_, panels_.data(), coords, first, count, out);
-        return;
-    }
-    Eigen::Map<const Eigen::VectorXd> b(coords, model_.basisSize());
-    Eigen::Map<Eigen::VectorXd> o(out, count * c);
-    o = model_.mean.segment(first * c, count * c);
-    o.noalias() += model_.basis.middleRows(first * c, count * c) * b;
+    // One pass over the basis rows of the range, the bandwidth-bound hot path of a hit.
+    const Index c = model_.channels, m = model_.basisSize();
+    // Shared channels: out (count x C) = mean + basis rows (count x M) * coords (M x C), one pass
+    // over the N x M basis for all channels, a third of the (N*C) x M one's memory traffic at
+    // C = 3. Channels with rows of their own: each channel's row is a row of the panels, one
+    // channel each.
+    const PanelRows rows = model_.sharedChannels ? PanelRows{model_.mean.data(), model_.points, m, c}
+                                                 : PanelRows{model_.mean.data(), model_.points * c, m, 1};
+    const Index scale = model_.sharedChannels ? 1 : c;
+    if (singlePanels_.size() > 0)
+        panelReconstructC(rows, singlePanels_.data(), coords, first * scale, count * scale, out);
+    else
+        panelReconstructC(rows, panels_.data(), coords, first * scale, count * scale, out);
 }
 
 void PointMultiplier::keyResiduals(const double* keyValues, const double* coords, double* perKey) const {

@@ -7,14 +7,16 @@
 
 namespace pmsc {
 
-/// The numbers a reconstruction reads the basis of a model whose channels share it in
-/// (Model::sharedChannels; other models always read the model's doubles).
+/// The numbers a reconstruction reads the basis in.
 enum class BasisPrecision {
-    /// The model's doubles: the reconstruction every batch path and test compares against.
+    /// The model's doubles: the reconstruction every test compares against, and what a batch
+    /// path whose output is double (.npy float64, the Python and C APIs) reads.
     Double,
     /// A float copy: half the memory a hit reads, the bound on its time for a large cache; sums
-    /// are still accumulated in double. Values differ from Double's by about 1e-7 relative,
-    /// far below a half float's 2^-11: for clients that display (`pmsc view` sends halves).
+    /// are still accumulated in double. Values differ from Double's by about 1e-7 relative, the
+    /// rounding of a float itself: for outputs stored in float (.vdb, .npy float32, `pmsc run`'s
+    /// default there) and clients that display (`pmsc view` sends halves). The copy adds half
+    /// the basis's bytes to the memory a model holds.
     Single,
 };
 
@@ -70,9 +72,9 @@ private:
     Eigen::VectorXd keyMean_;           // K*C
     Eigen::MatrixXd keyBasis_;          // (K*C) x M; K x M when the channels share the basis
     Eigen::VectorXd projectedKeyMean_;  // M (or M x C): P mean_K, so project() needs no temporary
-    Eigen::VectorXd panels_;            // shared channels: the basis in panels of rows (PointMultiplier.cpp)
-    Eigen::VectorXf singlePanels_;      // the same in float, instead, for BasisPrecision::Single
-    Eigen::VectorXd looScale_;          // KeyErrorNorm::LeaveOneOut: 1 / (1 - leverage) per key row
+    Eigen::VectorXd panels_;  // BasisPrecision::Double: the basis in panels of rows (PointMultiplier.cpp)
+    Eigen::VectorXf singlePanels_;  // BasisPrecision::Single: the basis (either layout) in float panels
+    Eigen::VectorXd looScale_;      // KeyErrorNorm::LeaveOneOut: 1 / (1 - leverage) per key row
 };
 
 }  // namespace pmsc

@@ -233,6 +233,8 @@ engine::RunStats runValidationThroughEngine(DemoSetup& run, const Model& model,
     engine::EngineOptions eopt;
     eopt.threads = run.threads;
     eopt.keepPointMultiplication = true;
+    // The cache goes out as float grids (.vdb): the float basis, as `pmsc run --format vdb` reads.
+    eopt.basisPrecision = BasisPrecision::Single;
     eopt.progress = [&](const engine::Progress& p) {
         run.progress("validation through the engine", static_cast<double>(p.framesDone),
                      static_cast<double>(p.framesTotal));

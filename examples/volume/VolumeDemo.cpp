@@ -308,6 +308,8 @@ engine::RunStats runThroughEngine(DemoSetup& run, const Model& model, const Volu
     engine::EngineOptions eopt;
     eopt.threads = run.threads;
     eopt.keepPointMultiplication = true;
+    // The cache goes out as float grids (.vdb): the float basis, as `pmsc run --format vdb` reads.
+    eopt.basisPrecision = BasisPrecision::Single;
     eopt.progress = [&run](const engine::Progress& p) {
         run.progress("validation through the engine", static_cast<double>(p.framesDone),
                      static_cast<double>(p.framesTotal));

@@ -21,6 +21,7 @@
 #include <unistd.h>
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
@@ -327,6 +328,32 @@ TEST_F(FarmRun, StepsThreadCountsAndFormatsGiveTheSameFrames) {
         }
     }
     EXPECT_TRUE(fs::exists(stepped / "pmsc-run.0-57_by3.json"));
+    EXPECT_EQ(readJson(one / "pmsc-run.0-59.json")["basis_precision"], "double") << "float64 frames";
+
+    // Float32 frames read the float basis by default: the same frames as the double basis's
+    // within a float's rounding, and the stats say which basis ran.
+    const fs::path single = root / "float32", dbl = root / "float32-double";
+    auto f = runArgs(single, "0-9");
+    f.insert(f.end(), {"--dtype", "float32"});
+    auto d = runArgs(dbl, "0-9");
+    d.insert(d.end(), {"--dtype", "float32", "--basis-precision", "double"});
+    ASSERT_EQ(pmscRun(f, root / "logs", "float32").code, 0);
+    ASSERT_EQ(pmscRun(d, root / "logs", "float32-double").code, 0);
+    EXPECT_EQ(readJson(single / "pmsc-run.0-9.json")["basis_precision"], "single");
+    EXPECT_EQ(readJson(dbl / "pmsc-run.0-9.json")["basis_precision"], "double");
+    for (Index fr = 0; fr < 10; ++fr) {
+        char name[32];
+        std::snprintf(name, sizeof name, "frame.%06lld.npy", static_cast<long long>(fr));
+        const pmsc::FrameSet a32 = pmsc::readFrames((single / name).string()).frames;
+        const pmsc::FrameSet b32 = pmsc::readFrames((dbl / name).string()).frames;
+        ASSERT_EQ(a32.values.size(), b32.values.size()) << name;
+        double largest = 0, scale = 0;
+        for (size_t i = 0; i < a32.values.size(); ++i) {
+            largest = std::max(largest, std::abs(a32.values[i] - b32.values[i]));
+            scale = std::max(scale, std::abs(b32.values[i]));
+        }
+        EXPECT_LE(largest, 1e-6 * scale) << name;
+    }
 
     // The skin evaluator offers .obj: a mesh per frame, also resumable.
     const fs::path obj = root / "obj";
@@ -427,6 +454,7 @@ TEST_F(FarmRun, EveryBadInputHasItsExitCodeOneLineAndNoPartialFile) {
         {"unknown evaluator", run(outDir(), {}, "", "teapot"), 2},
         {"malformed frame range", run(outDir(), {}, "", "", "9-3"), 2},
         {"format the evaluator does not offer", run(outDir(), {"--format", "vdb"}), 2},
+        {"unknown basis precision", run(outDir(), {"--basis-precision", "half"}), 2},
     };
     std::string table = "[ figures  ] bad input -> exit code, message\n";
     for (const auto& c : cases) {
@@ -553,6 +581,7 @@ TEST(FarmRunCornell, VdbFramesAreWrittenSkippedWhenValidAndRedoneWhenDamaged) {
     ASSERT_EQ(r.code, 0) << r.err;
     const auto stats = readJson(dir / "vdb" / "pmsc-run.144-149.json");
     EXPECT_EQ(stats["format"], "vdb");
+    EXPECT_EQ(stats["basis_precision"], "single") << "a float grid reads the float basis";
     EXPECT_EQ(stats["frames_skipped"].get<Index>(), 5);
     EXPECT_EQ(stats["frames_replaced_invalid"].get<Index>(), 1);
     EXPECT_EQ(stats["frames_evaluated"].get<Index>(), 1);
