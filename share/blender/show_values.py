@@ -4,8 +4,9 @@
         --full FULL.npy --pmsc PMSC.npy [--index 0] [--gain 10] [--size 256] --out IMAGE.png
 
 POINTS.npy is the N x 6 file of `pmsc-blender ... sample` (positions and normals); FULL.npy and
-PMSC.npy are frames of values at those points ((F, N, 3) or (N, 3); --index picks the frame), such
-as `pmsc export-frames` and `pmsc run` write. Each point is drawn through the scene's camera as a
+PMSC.npy are frames of values at those points ((F, N, 3) or (N, 3); --index picks the frame of a
+file with more than one, so a frame of `pmsc export-frames`' file compares with `pmsc run`'s
+one-frame file of it). Each point is drawn through the scene's camera as a
 small square facing its normal, emitting its value (scaled so the full result's 99th percentile
 is white; the difference |pmsc - full| is scaled by --gain more); the scene's own objects are hidden.
 The three renders go side by side into one PNG.
@@ -32,7 +33,9 @@ def load(path, index, count):
         a = np.load(path)
     except (OSError, ValueError) as error:
         fail(f"{path}: {error}")
-    if a.ndim == 3:
+    if a.ndim == 3 and a.shape[0] == 1:
+        a = a[0]
+    elif a.ndim == 3:
         if not 0 <= index < a.shape[0]:
             fail(f"{path}: no frame {index} (it has {a.shape[0]})")
         a = a[index]

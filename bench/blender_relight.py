@@ -1,15 +1,18 @@
 #!/usr/bin/env python3
-"""The Cornell box relit by Blender's Cycles through pmsc: training frames, a model, a light path
-training never saw, against Cycles computing every point.
+"""A scene relit by Blender's Cycles through pmsc: training frames, a model, a light path training
+never saw, against Cycles computing every point.
 
-    /usr/bin/python3 bench/blender_cornell.py --bin build/bin --share share/blender --work /tmp/bc \\
-        [--points 10000] [--grid 12] [--path 30] [--samples 64] [--tolerance-share 0.1] [--train OPTIONS] [--check]
+    /usr/bin/python3 bench/blender_relight.py --bin build/bin --share share/blender --work /tmp/bc \\
+        [--blend SCENE.blend] [--points 10000] [--grid 12] [--path 30] [--samples 64] [--tolerance-share 0.1]
+        [--train OPTIONS] [--check]
 
 Steps (each a command a lighting TD would type; docs/blender.md):
-  1. `blender -b --python cornell_box.py` builds the measured box as a .blend: a point light on a
-     grid x grid lattice below the ceiling (frames 1 .. grid^2, the training frames), then along a
-     path of --path frames over and below it;
-  2. `pmsc-blender cornell.blend sample` draws --points points on its surfaces;
+  1. the scene: without --blend, `blender -b --python cornell_box.py` builds the measured Cornell
+     box as a .blend, a point light on a grid x grid lattice below the ceiling (frames 1 .. grid^2,
+     the training frames), then along a path of --path frames over and below it; with --blend,
+     `blender -b SCENE.blend --python animate_light.py` keys a new point light on a lattice over the
+     scene's meshes and a path across it the same way (its other lights stay);
+  2. `pmsc-blender scene.blend sample` draws --points points on its surfaces;
   3. `pmsc export-frames exec:pmsc-blender ...` bakes every point of the training frames and, as the
      reference, of the path frames (one thread: the child's own time per call is logged);
   4. `pmsc train --tolerance T` (T = --tolerance-share of the training frames' largest point value,
@@ -38,7 +41,7 @@ import time
 
 
 def fail(message):
-    print("blender_cornell: " + message, file=sys.stderr)
+    print("blender_relight: " + message, file=sys.stderr)
     sys.exit(2)
 
 
@@ -65,6 +68,7 @@ def main():
     p.add_argument("--bin", default="build/bin", help="folder of pmsc")
     p.add_argument("--share", default="share/blender", help="folder of pmsc-blender and its scripts")
     p.add_argument("--work", required=True, help="folder for the scene, frames, model and outputs")
+    p.add_argument("--blend", default="", help="a .blend to relight (default: the Cornell box, built)")
     p.add_argument("--points", type=int, default=10000)
     p.add_argument("--grid", type=int, default=12)
     p.add_argument("--path", type=int, default=30)
@@ -83,7 +87,7 @@ def main():
     blender = shutil.which("blender")
     if blender is None:
         if os.environ.get("CI", "") in ("", "false", "0"):
-            print("blender_cornell: no blender on PATH: skipped (apt-get install blender)", file=sys.stderr)
+            print("blender_relight: no blender on PATH: skipped (apt-get install blender)", file=sys.stderr)
             sys.exit(77)
         fail("no blender on PATH (apt-get install blender)")
     if args.points < 100 or args.grid < 2 or args.path < 1 or args.samples < 1 or not args.tolerance_share > 0:
@@ -93,18 +97,26 @@ def main():
     pmsc = os.path.join(args.bin, "pmsc")
     launcher = os.path.abspath(os.path.join(args.share, "pmsc-blender"))
 
-    reuse = args.reuse and all(os.path.exists(w(f)) for f in ("cornell.blend", "points.npy", "train.npy"))
+    if args.blend and not os.path.isfile(args.blend):
+        fail("--blend " + args.blend + ": no such file")
+    scene = w("scene.blend")
+    reuse = args.reuse and all(os.path.exists(w(f)) for f in ("scene.blend", "points.npy", "train.npy"))
     if not reuse:
-        run([blender, "-b", "--factory-startup", "--python-exit-code", "2", "--python",
-             os.path.join(args.share, "cornell_box.py"), "--", "--out", w("cornell.blend"), "--grid", str(args.grid),
-             "--path", str(args.path)])
-        run([launcher, w("cornell.blend"), "sample", "--out", w("points.npy"), "--count", str(args.points)])
+        if args.blend:
+            run([blender, "-b", os.path.abspath(args.blend), "--python-exit-code", "2", "--python",
+                 os.path.join(args.share, "animate_light.py"), "--", "--out", scene, "--grid", str(args.grid),
+                 "--path", str(args.path)])
+        else:
+            run([blender, "-b", "--factory-startup", "--python-exit-code", "2", "--python",
+                 os.path.join(args.share, "cornell_box.py"), "--", "--out", scene, "--grid", str(args.grid),
+                 "--path", str(args.path)])
+        run([launcher, scene, "sample", "--out", w("points.npy"), "--count", str(args.points)])
     frames = args.grid * args.grid + args.path
     train_span, path_span = "0-%d" % (args.grid * args.grid - 1), "%d-%d" % (args.grid * args.grid, frames - 1)
 
     def evaluator(samples, log, seed=0):
         return ("exec:PMSC_BLENDER_TIMING=%s %s %s serve --points %s --frames 1-%d --samples %d --seed %d"
-                % (log, launcher, w("cornell.blend"), w("points.npy"), frames, samples, seed))
+                % (log, launcher, scene, w("points.npy"), frames, samples, seed))
 
     for name in ("full", "seed", "run", "fixed") if reuse else ("train", "full", "seed", "run", "fixed"):
         if os.path.exists(w(name + ".log")):
@@ -155,6 +167,7 @@ def main():
     noise_rms = float(np.sqrt(((other - full) ** 2).sum() / (2 * (full ** 2).sum())))
     noise_point = np.sqrt(((other - full) ** 2).sum(axis=2) / 2)
     report = {
+        "scene": os.path.abspath(args.blend) if args.blend else "cornell box",
         "points": args.points, "keys": keys, "training_frames": args.grid * args.grid, "path_frames": args.path,
         "samples": args.samples, "tolerance": tolerance,
         "hit_rate": stats["hit_rate"], "hits": stats["hits"], "blends": stats["blends"], "misses": stats["misses"],
@@ -175,7 +188,7 @@ def main():
         "train_summary": [l for l in out.splitlines() if l.strip().startswith(("basis", "key points", "eps"))],
     }
     # The first path frame as Blender renders the values: full | pmsc | 10 x difference.
-    run([blender, "-b", w("cornell.blend"), "--python-exit-code", "2", "--python",
+    run([blender, "-b", scene, "--python-exit-code", "2", "--python",
          os.path.join(args.share, "show_values.py"), "--", "--points", w("points.npy"), "--full", w("full.npy"),
          "--pmsc", os.path.join(w("run"), "frame.%06d.npy" % first), "--index", "0", "--out", w("path000.png")])
     report["picture"] = w("path000.png")
@@ -183,7 +196,7 @@ def main():
         json.dump(report, f, indent=2)
     print(json.dumps(report, indent=2))
     if args.check and rms > args.check_rms:
-        print("blender_cornell: RMS error %.4f against Cycles' full result, over --check-rms %.4f"
+        print("blender_relight: RMS error %.4f against Cycles' full result, over --check-rms %.4f"
               % (rms, args.check_rms), file=sys.stderr)
         return 1
     return 0
