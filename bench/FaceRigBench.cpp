@@ -4,7 +4,8 @@
 //   BM_FaceFullPose  the rig posing all 26,719 points of a frame (FaceRig::evaluateAll)
 //   BM_FacePmsc      the rig posing the model's key points, the projection, the key error and the
 //                    reconstruction of all points (what a hit costs)
-//   BM_FaceKeyPose, BM_FaceReconstruct: the two big parts of BM_FacePmsc
+//   BM_FaceKeyPose, BM_FaceReconstruct: the two big parts of BM_FacePmsc (BM_FaceKeyPose's
+//                    counters: the dependency closure the keys pose, FaceRig::closureSize)
 //   BM_FaceKeyErrorPredictedVsRms: the key error of a frame in `pmsc train --tolerance`'s default
 //                    measure (the predicted point error: the key RMS and the leave-one-out error)
 //                    against the key RMS alone, timed alternately (counter predicted_over_rms)
@@ -89,6 +90,12 @@ void BM_FaceKeyPose(benchmark::State& state) {
         s.evaluator->evaluate(s.frames[i++ % s.frames.size()], s.model.keyPoints, keys.data());
         benchmark::DoNotOptimize(keys.data());
     }
+    // The dependency closure the keys pose: what a key costs beyond its own point.
+    const auto closure = s.evaluator->rig().closureSize(s.model.keyPoints);
+    state.counters["keys"] = static_cast<double>(s.model.keyCount());
+    state.counters["closure_blendshapes"] = static_cast<double>(closure.blendshapes);
+    state.counters["closure_relax"] = static_cast<double>(closure.relax);
+    state.counters["closure_contact"] = static_cast<double>(closure.contact);
 }
 
 void BM_FaceReconstruct(benchmark::State& state) {
