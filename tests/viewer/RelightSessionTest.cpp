@@ -97,6 +97,7 @@ std::vector<double> engineAnswer(const Model& model, const RelightScene& scene, 
     const auto e = scene.evaluator(scene.resolve(c));
     engine::EngineOptions o;
     o.localFailThrough = false;
+    o.basisPrecision = BasisPrecision::Single;  // what the session's engine reads: it sends half floats
     engine::Engine(model, *e, o).run({0, 1, 1}, sink);
     return sink.values;
 }
