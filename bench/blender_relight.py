@@ -18,7 +18,8 @@ Steps (each a command a lighting TD would type; docs/blender.md):
   4. `pmsc train --tolerance T` (T = --tolerance-share of the training frames' largest point value,
      as `pmsc demo cornell` sets it, and the --train options);
   5. `pmsc run` over the path frames, Cycles computing the keys (and what misses) in one Blender.
-Renders the first path frame with Blender (full | pmsc | 10 x difference, path000.png) and prints
+Renders the first path frame with Blender (full | pmsc | 10 x difference: the values at the points,
+path000.png, and the scene's meshes lit by them, path000-lit.png) and prints
 the speedup (Cycles' time for every point of a path frame over pmsc's per path frame,
 both measured inside the same child, one thread, same samples; and the same over the commands'
 wall times, Blender's start and pmsc's own work included), the RMS error against the full
@@ -192,6 +193,13 @@ def main():
          os.path.join(args.share, "show_values.py"), "--", "--points", w("points.npy"), "--full", w("full.npy"),
          "--pmsc", os.path.join(w("run"), "frame.%06d.npy" % first), "--index", "0", "--out", w("path000.png")])
     report["picture"] = w("path000.png")
+    # The same frame as the scene renders lit by the values: its meshes lit by Cycles' full result |
+    # by pmsc's | 10 x the difference (show_values.py --surfaces).
+    run([blender, "-b", scene, "--python-exit-code", "2", "--python",
+         os.path.join(args.share, "show_values.py"), "--", "--points", w("points.npy"), "--full", w("full.npy"),
+         "--pmsc", os.path.join(w("run"), "frame.%06d.npy" % first), "--index", "0", "--surfaces",
+         "--frame", str(first + 1), "--out", w("path000-lit.png")])
+    report["picture_lit"] = w("path000-lit.png")
     with open(w("report.json"), "w") as f:
         json.dump(report, f, indent=2)
     print(json.dumps(report, indent=2))

@@ -1,15 +1,25 @@
 """Renders values at points of a .blend with Blender: Cycles' full result | pmsc's | their difference.
 
     blender -b SCENE.blend --python-exit-code 2 --python show_values.py -- --points POINTS.npy \\
-        --full FULL.npy --pmsc PMSC.npy [--index 0] [--gain 10] [--size 256] --out IMAGE.png
+        --full FULL.npy --pmsc PMSC.npy [--index 0] [--gain 10] [--size 256] [--surfaces [--subdivide 4]] \\
+        [--frame F] --out IMAGE.png
 
 POINTS.npy is the N x 6 file of `pmsc-blender ... sample` (positions and normals); FULL.npy and
 PMSC.npy are frames of values at those points ((F, N, 3) or (N, 3); --index picks the frame of a
 file with more than one, so a frame of `pmsc export-frames`' file compares with `pmsc run`'s
-one-frame file of it). Each point is drawn through the scene's camera as a
-small square facing its normal, emitting its value (scaled so the full result's 99th percentile
-is white; the difference |pmsc - full| is scaled by --gain more); the scene's own objects are hidden.
-The three renders go side by side into one PNG.
+one-frame file of it). The three renders go side by side into one PNG, through the scene's camera
+(at scene frame --frame, default the current one), scaled so the full result's 99th percentile is
+white; the difference |pmsc - full| is scaled by --gain more.
+
+Two ways to draw the values:
+- by default each point is a small square facing its normal, emitting its value: the values
+  themselves, the scene's own objects hidden;
+- --surfaces renders the scene's own meshes lit by the values, as a renderer shows a light cache:
+  each visible mesh (subdivided --subdivide times, simple, so its vertices are about as dense as
+  the points) takes at each vertex the inverse-distance mean of its 8 nearest points that face
+  within 60 degrees of its normal (the nearest when none does), times its material's base colour,
+  as emission. The picture is the scene as it renders with pmsc's light; the value is the light a
+  white diffuse surface reflects (pmsc_blender.py), so the base colour is the surface's albedo.
 """
 import argparse
 import os
@@ -44,29 +54,99 @@ def load(path, index, count):
     return a.astype(np.float64)
 
 
-def splats(points, normals, radius):
-    square = radius * np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
-    mesh = facing_polygons("pmsc_show", points + 1e-4 * normals, normals, square)
-    mesh.color_attributes.new("value", "FLOAT_COLOR", "POINT")
-    mat = bpy.data.materials.new("pmsc_show")
+def emission_material(name, base_colour):
+    """Emission of the colour attribute "value" times base_colour."""
+    mat = bpy.data.materials.new(name)
     mat.use_nodes = True
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     nodes.remove(nodes["Principled BSDF"])
     attr = nodes.new("ShaderNodeVertexColor")
     attr.layer_name = "value"
+    albedo = nodes.new("ShaderNodeMixRGB")
+    albedo.blend_type = "MULTIPLY"
+    albedo.inputs["Fac"].default_value = 1.0
+    albedo.inputs["Color2"].default_value = tuple(base_colour[:3]) + (1.0,)
     emit = nodes.new("ShaderNodeEmission")
-    links.new(attr.outputs["Color"], emit.inputs["Color"])
+    links.new(attr.outputs["Color"], albedo.inputs["Color1"])
+    links.new(albedo.outputs["Color"], emit.inputs["Color"])
     links.new(emit.outputs["Emission"], nodes["Material Output"].inputs["Surface"])
-    mesh.materials.append(mat)
+    return mat
+
+
+def paint(mesh, colours):
+    rgba = np.concatenate([colours, np.ones((len(colours), 1))], axis=1)
+    mesh.color_attributes["value"].data.foreach_set("color", rgba.astype(np.float32).reshape(-1))
+    mesh.update()
+
+
+def splats(points, normals, radius):
+    """One emitting square per point; returns the painter of point values."""
+    square = radius * np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+    mesh = facing_polygons("pmsc_show", points + 1e-4 * normals, normals, square)
+    mesh.color_attributes.new("value", "FLOAT_COLOR", "POINT")
+    mesh.materials.append(emission_material("pmsc_show", (1.0, 1.0, 1.0)))
     obj = bpy.data.objects.new("pmsc_show", mesh)
     bpy.context.scene.collection.objects.link(obj)
-    return obj
+    return lambda values: paint(mesh, np.repeat(values, 4, axis=0))
 
 
-def render(obj, colours, path):
-    rgba = np.concatenate([np.repeat(colours, 4, axis=0), np.ones((4 * len(colours), 1))], axis=1)
-    obj.data.color_attributes["value"].data.foreach_set("color", rgba.astype(np.float32).reshape(-1))
-    obj.data.update()
+def base_colour(obj):
+    """The albedo of an object's first material: its Principled BSDF's base colour or its Diffuse
+    BSDF's colour (unconnected inputs), or its viewport diffuse colour; white without a material."""
+    mat = obj.active_material
+    if mat is None:
+        return (1.0, 1.0, 1.0)
+    if mat.use_nodes:
+        for node in mat.node_tree.nodes:
+            if node.type == "BSDF_PRINCIPLED":
+                return tuple(node.inputs["Base Color"].default_value)[:3]
+            if node.type == "BSDF_DIFFUSE":
+                return tuple(node.inputs["Color"].default_value)[:3]
+    return tuple(mat.diffuse_color)[:3]
+
+
+def surfaces(points, normals, subdivide):
+    """The scene's visible meshes lit by point values (module docstring); returns the painter."""
+    from mathutils import Vector
+    from mathutils.kdtree import KDTree
+    tree = KDTree(len(points))
+    for i, p in enumerate(points):
+        tree.insert(Vector(p), i)
+    tree.balance()
+    scene = bpy.context.scene
+    painters = []
+    for obj in [o for o in scene.objects if o.type == "MESH" and not o.hide_render]:
+        if subdivide > 0:
+            mod = obj.modifiers.new("pmsc_subdivide", "SUBSURF")
+            mod.subdivision_type = "SIMPLE"
+            mod.levels = mod.render_levels = subdivide
+        evaluated = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+        mesh = bpy.data.meshes.new_from_object(evaluated)
+        mesh.transform(obj.matrix_world)
+        mesh.color_attributes.new("value", "FLOAT_COLOR", "POINT")
+        mesh.materials.clear()
+        mesh.materials.append(emission_material("pmsc_lit_" + obj.name, base_colour(obj)))
+        lit = bpy.data.objects.new("pmsc_lit_" + obj.name, mesh)
+        scene.collection.objects.link(lit)
+        obj.hide_render = True
+        idx = np.zeros((len(mesh.vertices), 8), dtype=np.int64)
+        weight = np.zeros((len(mesh.vertices), 8))
+        for v in mesh.vertices:
+            found = tree.find_n(v.co, 8)
+            facing = [(i, d) for (_, i, d) in found if float(np.dot(normals[i], v.normal)) > 0.5]
+            chosen = facing or [(found[0][1], found[0][2])]
+            w = np.array([1.0 / max(d, 1e-6) for _, d in chosen])
+            idx[v.index, :len(chosen)] = [i for i, _ in chosen]
+            weight[v.index, :len(chosen)] = w / w.sum()
+        painters.append(lambda values, mesh=mesh, idx=idx, weight=weight:
+                        paint(mesh, (values[idx] * weight[:, :, None]).sum(axis=1)))
+    if not painters:
+        fail("the scene has no visible mesh to light")
+    return lambda values: [p(values) for p in painters]
+
+
+def render(painter, colours, path):
+    painter(colours)
     bpy.context.scene.render.filepath = path
     bpy.ops.render.render(write_still=True)
     image = bpy.data.images.load(path)
@@ -85,8 +165,13 @@ def main(argv):
     p.add_argument("--index", type=int, default=0)
     p.add_argument("--gain", type=float, default=10.0)
     p.add_argument("--size", type=int, default=256)
+    p.add_argument("--surfaces", action="store_true", help="the scene's meshes lit by the values")
+    p.add_argument("--subdivide", type=int, default=4, help="--surfaces: simple subdivisions of each mesh")
+    p.add_argument("--frame", type=int, default=None, help="the scene frame to render (default: the current)")
     p.add_argument("--out", required=True)
     args = p.parse_args(argv)
+    if not 0 <= args.subdivide <= 6:
+        fail("--subdivide must be 0 to 6")
     if not bpy.data.filepath:
         fail("Blender opened no .blend")
     scene = bpy.context.scene
@@ -97,11 +182,19 @@ def main(argv):
         fail(f"{args.points}: expected N x 6 (x y z nx ny nz)")
     full, pmsc = load(args.full, args.index, len(table)), load(args.pmsc, args.index, len(table))
     normals = table[:, 3:] / np.linalg.norm(table[:, 3:], axis=1, keepdims=True)
-    extent = float(np.linalg.norm(table[:, :3].max(0) - table[:, :3].min(0)))
-    for obj in scene.objects:
-        if obj.type != "CAMERA":
-            obj.hide_render = True
-    obj = splats(table[:, :3], normals, 1.2 * extent / np.sqrt(len(table)))
+    if args.frame is not None:
+        scene.frame_set(args.frame)
+    if args.surfaces:
+        painter = surfaces(table[:, :3], normals, args.subdivide)
+        for obj in scene.objects:
+            if obj.type not in ("CAMERA", "MESH"):
+                obj.hide_render = True
+    else:
+        extent = float(np.linalg.norm(table[:, :3].max(0) - table[:, :3].min(0)))
+        for obj in scene.objects:
+            if obj.type != "CAMERA":
+                obj.hide_render = True
+        painter = splats(table[:, :3], normals, 1.2 * extent / np.sqrt(len(table)))
     scene.render.engine = "CYCLES"
     scene.cycles.samples = 16
     scene.cycles.use_denoising = False
@@ -114,9 +207,9 @@ def main(argv):
     scene.render.image_settings.file_format = "PNG"
     white = float(np.percentile(np.linalg.norm(full, axis=1), 99)) / np.sqrt(3) or 1.0
     with tempfile.TemporaryDirectory() as tmp:
-        images = [render(obj, full / white, os.path.join(tmp, "full.png")),
-                  render(obj, pmsc / white, os.path.join(tmp, "pmsc.png")),
-                  render(obj, args.gain * np.abs(pmsc - full) / white, os.path.join(tmp, "difference.png"))]
+        images = [render(painter, full / white, os.path.join(tmp, "full.png")),
+                  render(painter, pmsc / white, os.path.join(tmp, "pmsc.png")),
+                  render(painter, args.gain * np.abs(pmsc - full) / white, os.path.join(tmp, "difference.png"))]
     side = np.concatenate(images, axis=1)
     out = bpy.data.images.new("pmsc_show", side.shape[1], side.shape[0], alpha=True)
     out.pixels.foreach_set(side.reshape(-1))

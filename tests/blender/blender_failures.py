@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Each way pmsc's Blender child fails gives one line naming what went wrong, exit code 3 from
-`pmsc export-frames`, and no output file; animate_light.py's bad requests exit 2 with one line and
-write no .blend (docs/blender.md, "Failures").
+`pmsc export-frames`, and no output file; animate_light.py's and show_values.py's bad requests exit
+2 with one line and write nothing (docs/blender.md, "Failures").
 
 Exit codes: 0 every case as expected, 1 a case was not, 77 no Blender and CI not set (a skip; under
 CI it is a failure, exit 2).
@@ -74,16 +74,22 @@ def main():
     # on stderr, and no .blend written.
     animate = lambda *rest: ["blender", "-b", w("box.blend"), "--python-exit-code", "2", "--python",
                              os.path.join(args.share, "animate_light.py"), "--", "--out", w("lit.blend")] + list(rest)
+    # show_values.py (values or the scene lit by them, rendered): the same.
+    show = lambda *rest: ["blender", "-b", w("box.blend"), "--python-exit-code", "2", "--python",
+                          os.path.join(args.share, "show_values.py"), "--", "--points", w("points.npy"), "--full",
+                          w("points.npy"), "--pmsc", w("points.npy"), "--out", w("lit.blend")] + list(rest)
     for name, cmd, expected in [
         ("no such light", animate("--light", "Nope"), "the scene has no light named 'Nope'"),
         ("bad lattice", animate("--grid", "1"), "--grid must be at least 2"),
+        ("bad subdivide", show("--surfaces", "--subdivide", "9"), "--subdivide must be 0 to 6"),
+        ("bad values", show("--surfaces"), "values of shape"),
     ]:
         done = subprocess.run(cmd, capture_output=True, text=True)
         lines = [l for l in done.stderr.splitlines() if l.strip()]
         ok = done.returncode == 2 and len(lines) == 1 and expected in lines[0] and not os.path.exists(w("lit.blend"))
         print("%-12s exit %d: %s" % (name, done.returncode, lines[-1] if lines else "(nothing)"))
         if not ok:
-            print("blender_failures: animate_light %s: expected exit 2, one line containing '%s', no lit.blend; got %s"
+            print("blender_failures: %s: expected exit 2, one line containing '%s', no lit.blend; got %s"
                   % (name, expected, done.stderr[-300:]), file=sys.stderr)
             bad += 1
     return 1 if bad else 0
