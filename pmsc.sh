@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # pmsc.sh — set up, build and run pmsc on Debian 12.
 #
-#   ./pmsc.sh demo       install missing Debian packages, build (Release), run the main demo
+#   ./pmsc.sh demo       install missing Debian packages, build the program (Release), run the main demo
 #   ./pmsc.sh test       same set-up, then the whole suite through ctest: the fast tiers (unit, cli)
 #                        first, so a broken change fails in minutes, then everything else (the
 #                        browser test of `pmsc view` among them: label browser)
@@ -89,9 +89,10 @@ configure() {
 # ccache keys on paths relative to the checkout, so a fresh clone elsewhere (CI) reuses the cache.
 export CCACHE_BASEDIR="$PWD" CCACHE_NOHASHDIR=true
 
+# build_release [TARGET...]: the Release build, of the targets given or of everything.
 build_release() {
   configure "$BUILD" -DCMAKE_BUILD_TYPE=Release
-  cmake --build "$BUILD" -j "$JOBS"
+  if [ $# -gt 0 ]; then cmake --build "$BUILD" -j "$JOBS" --target "$@"; else cmake --build "$BUILD" -j "$JOBS"; fi
 }
 
 # Every tracked .h/.cpp/.c against .clang-format; one line per file that differs.
@@ -146,7 +147,9 @@ run_sanitizers() {
 cmd=${1:-}
 case "$cmd" in
   demo)
-    ensure_packages; ensure_web; build_release
+    # The program and its demos only (141 of the 231 translation units, about 44% of the compile
+    # time): the tests, benchmarks, Python module and fuzz targets come with `test`.
+    ensure_packages; ensure_web; build_release pmsc
     shift; exec "$BUILD/bin/pmsc" demo "$@" ;;
   test)
     ensure_packages "${STYLE_PACKAGES[@]}" "${BROWSER_PACKAGES[@]}" "${BLENDER_PACKAGES[@]}"; ensure_web; check_format; build_release
