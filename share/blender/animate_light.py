@@ -11,7 +11,7 @@ covering their bounding box from above, --above times the box's largest side ove
 training frames); frames grid^2 + 1 .. grid^2 + path move it along a closed curve across 90% of the
 lattice, between its nodes and up to 1% of the lattice's width off its plane (positions training
 never saw), as the Cornell box's rig (cornell_box.py) does. The scene's other lights stay as they
-are: their light is the same in every frame. Keys are linear, so a frame is exactly its position.
+are: their light is the same in every frame. Keys are constant, so a frame is exactly its position.
 The scene's frame range becomes 1 .. grid^2 + path and its "pmsc_training_frames" and
 "pmsc_path_frames" properties say which is which.
 
@@ -22,8 +22,13 @@ import argparse
 import math
 import sys
 
+import os
+
 import bpy
 from mathutils import Vector
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from pmsc_blender import key_light_and_save, new_point_light  # noqa: E402  (beside this script)
 
 
 def fail(message):
@@ -85,27 +90,11 @@ def main(argv):
         if light.data.type != "POINT":
             fail(f"'{args.light}' is a {light.data.type.lower()} light, not a point light")
     else:
-        data = bpy.data.lights.new("pmsc_light", type="POINT")
-        data.energy = args.power
-        data.shadow_soft_size = 0.0
-        light = bpy.data.objects.new("pmsc_light", data)
-        scene.collection.objects.link(light)
-    light.animation_data_clear()
+        light = new_point_light("pmsc_light", args.power)
     lo, hi = mesh_bounds()
-    keyed = positions(lo, hi, args.grid, args.path, args.above)
-    for f, position in enumerate(keyed, start=1):
-        light.location = position
-        light.keyframe_insert("location", frame=f)
-    for fc in light.animation_data.action.fcurves:
-        for k in fc.keyframe_points:
-            k.interpolation = "LINEAR"
-    scene.frame_start, scene.frame_end = 1, len(keyed)
     scene.render.engine = "CYCLES"
-    scene["pmsc_training_frames"] = f"1-{args.grid * args.grid}"
-    scene["pmsc_path_frames"] = f"{args.grid * args.grid + 1}-{len(keyed)}"
-    bpy.ops.wm.save_as_mainfile(filepath=args.out)
-    print(f"animate_light.py: {args.out}: light '{light.name}', training frames {scene['pmsc_training_frames']}, "
-          f"path frames {scene['pmsc_path_frames']}")
+    key_light_and_save(light, positions(lo, hi, args.grid, args.path, args.above), args.grid * args.grid,
+                       args.out, "animate_light.py")
 
 
 if __name__ == "__main__":

@@ -16,9 +16,13 @@ The camera is the measured one, so a render of any frame shows the box as the da
 """
 import argparse
 import math
+import os
 import sys
 
 import bpy
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from pmsc_blender import key_light_and_save, new_point_light  # noqa: E402  (beside this script)
 
 QUADS = {
     "floor": ("white", [(552.8, 0, 0), (0, 0, 0), (0, 0, 559.2), (549.6, 0, 559.2)]),
@@ -111,19 +115,8 @@ def main(argv):
         mesh_object(name, [quad], mats[colour])
     for name, quads in BLOCKS.items():
         mesh_object(name + "_block", quads, mats["white"])
-    light_data = bpy.data.lights.new("Light", "POINT")
-    light_data.energy = args.power
-    light_data.shadow_soft_size = 0.0
-    light = bpy.data.objects.new("Light", light_data)
-    scene.collection.objects.link(light)
+    light = new_point_light("Light", args.power)
     positions = light_positions(args.grid, args.path)
-    for f, pos in enumerate(positions, start=1):
-        light.location = to_blender(pos)
-        light.keyframe_insert("location", frame=f)
-    for fc in light.animation_data.action.fcurves:
-        for k in fc.keyframe_points:
-            k.interpolation = "CONSTANT"
-    scene.frame_start, scene.frame_end = 1, len(positions)
     cam_data = bpy.data.cameras.new("Camera")
     cam_data.sensor_fit = "VERTICAL"
     cam_data.angle_y = math.radians(39.3077)
@@ -133,11 +126,7 @@ def main(argv):
     scene.collection.objects.link(cam)
     scene.camera = cam
     scene.render.resolution_x = scene.render.resolution_y = 256
-    scene["pmsc_training_frames"] = f"1-{args.grid * args.grid}"
-    scene["pmsc_path_frames"] = f"{args.grid * args.grid + 1}-{len(positions)}"
-    bpy.ops.wm.save_as_mainfile(filepath=args.out)
-    print(f"cornell_box.py: wrote {args.out}: training frames {scene['pmsc_training_frames']}, "
-          f"path frames {scene['pmsc_path_frames']}")
+    key_light_and_save(light, [to_blender(p) for p in positions], args.grid * args.grid, args.out, "cornell_box.py")
 
 
 if __name__ == "__main__":

@@ -186,6 +186,37 @@ class Probes:
         return colors.reshape(-1, 3, 4)[:, :, :3].mean(axis=1).astype(np.float64)
 
 
+def new_point_light(name, power):
+    """A point light of `power` W with hard shadows (no radius), linked into the scene."""
+    data = bpy.data.lights.new(name, type="POINT")
+    data.energy = power
+    data.shadow_soft_size = 0.0
+    light = bpy.data.objects.new(name, data)
+    bpy.context.scene.collection.objects.link(light)
+    return light
+
+
+def key_light_and_save(light, positions, training_frames, out, script):
+    """Keys `light` at positions[f - 1] on frames 1 .. len(positions) (constant between keys, so a
+    frame is exactly its position), makes that the scene's frame range, marks frames
+    1 .. training_frames as "pmsc_training_frames" and the rest as "pmsc_path_frames", and saves
+    the .blend to `out` (cornell_box.py, animate_light.py)."""
+    scene = bpy.context.scene
+    light.animation_data_clear()
+    for f, position in enumerate(positions, start=1):
+        light.location = position
+        light.keyframe_insert("location", frame=f)
+    for fc in light.animation_data.action.fcurves:
+        for k in fc.keyframe_points:
+            k.interpolation = "CONSTANT"
+    scene.frame_start, scene.frame_end = 1, len(positions)
+    scene["pmsc_training_frames"] = f"1-{training_frames}"
+    scene["pmsc_path_frames"] = f"{training_frames + 1}-{len(positions)}"
+    bpy.ops.wm.save_as_mainfile(filepath=out)
+    print(f"{script}: wrote {out}: light '{light.name}', training frames {scene['pmsc_training_frames']}, "
+          f"path frames {scene['pmsc_path_frames']}")
+
+
 def read_exactly(sock, size):
     data = bytearray()
     while len(data) < size:
