@@ -127,7 +127,7 @@ public:
             return row;
         }
         const std::vector<Index> checkPoints =
-            check ? check_.points(keyValues, coords.data()) : std::vector<Index>{};
+            check ? check_.points(keyValues, coords.data(), parts) : std::vector<Index>{};
         const Index given = static_cast<Index>(known_.answers().size());
         for (Index pass = 1;; ++pass) {
             std::vector<Index> needs;
@@ -146,7 +146,7 @@ public:
             } else if (check) {
                 needs = allUnknown(sources);
             } else {
-                needs = nextNeeds(frame, keyValues, sources);
+                needs = nextNeeds(frame, keyValues, coords.data(), sources);
             }
             if (needs.empty()) {
                 row.done = true;
@@ -202,9 +202,11 @@ private:
         return weights;
     }
 
-    /// A frame that did not hit: its region keys first, then the points its failing regions
-    /// evaluate, or every point when it fails through whole.
-    std::vector<Index> nextNeeds(Index frame, const double* keyValues, const Sources& s) const {
+    /// A frame that did not hit: its region keys first, then (as the error monitor) the sentinels
+    /// it would hand back as PM alone, then the points its failing regions evaluate, or every point
+    /// when it fails through whole (too many regions fail, or a sentinel is off).
+    std::vector<Index> nextNeeds(Index frame, const double* keyValues, const double* coords,
+                                 const Sources& s) const {
         if (regions_ == nullptr) return allUnknown(s);
         std::vector<Index> missing = unknownRegionKeys(s);
         if (!missing.empty()) return missing;
@@ -214,9 +216,20 @@ private:
         std::vector<Index> local(size_t(model_.points));
         const Index full = regions_->fullPoints(pointWeights, local.data());
         local.resize(size_t(full));
-        if (double(full) <= regions_->regions().maxLocalFraction * double(model_.points))
-            return unknown(s, local);
-        return allUnknown(s);
+        if (!(double(full) <= regions_->regions().maxLocalFraction * double(model_.points)))
+            return allUnknown(s);
+        std::vector<Index> sentinels;
+        for (const Index p : check_.sentinels()) {
+            if (pointWeights[size_t(p)] == 0.0) sentinels.push_back(p);
+        }
+        if (!sentinels.empty()) {
+            std::vector<Index> missingSentinels = unknown(s, sentinels);
+            if (!missingSentinels.empty()) return missingSentinels;
+            std::vector<double> values(sentinels.size() * size_t(model_.channels));
+            known_.read(s, frame, sentinels, values.data());
+            if (!check_.passes(coords, sentinels, values.data())) return allUnknown(s);
+        }
+        return unknown(s, local);
     }
 
     const Model& model_;

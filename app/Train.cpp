@@ -147,6 +147,9 @@ void validate(TrainOptions& o, Spelling spelling) {
     if (regions.ownKeys < 0)
         throw OptionError(optionName("region-keys", spelling) + ": must be >= 0 (0 = none), got " +
                           std::to_string(regions.ownKeys));
+    if (o.training.sentinels < 0)
+        throw OptionError(optionName("sentinels", spelling) + ": must be >= 0 (0 = none), got " +
+                          std::to_string(o.training.sentinels));
     if (regions.frameStride < 1)
         throw OptionError(optionName("region-stride", spelling) + ": must be >= 1, got " +
                           std::to_string(regions.frameStride));

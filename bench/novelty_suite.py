@@ -31,7 +31,9 @@ import sys
 
 # The sets: four controls training leaves still, and the seed of the training take. A, B and C are
 # the sets the defaults were chosen with (pmsc::kConfirmedShare among them); D and E were made after
-# the choice and kept apart, to check it.
+# the choice and kept apart, to check it; F, G and H after the key neighbours' check, to check it.
+# The sentinels (pmsc::kDefaultSentinels, pmsc::kSentinelShare) were chosen on A-H; I-L were made
+# before that choice and looked at only to check it, M and N after it.
 SETS = {
     "A": (1, ["mouthPucker", "cheekPuff_L", "jawLeft", "eyeWide_R"]),
     "B": (5, ["mouthFunnel", "jawForward", "noseSneer_L", "mouthRollLower"]),
@@ -41,6 +43,12 @@ SETS = {
     "F": (21, ["mouthUpperUp_L", "mouthFrown_R", "cheekRaiser_R", "mouthDimple_L"]),
     "G": (25, ["mouthLeft", "mouthShrugLower", "browInnerUp_R", "mouthSmile_R"]),
     "H": (29, ["mouthClose", "mouthStretch_R", "cheekPuff_R", "eyeBlink_L"]),
+    "I": (33, ["eyeBlink_R", "mouthRight", "browDown_L", "mouthDimple_R"]),
+    "J": (37, ["eyeSquint_L", "mouthUpperUp_R", "browOuterUp_R", "mouthPress_L"]),
+    "K": (41, ["eyeWide_L", "mouthLowerDown_R", "browInnerUp_L", "cheekRaiser_L"]),
+    "L": (45, ["eyeLookOut_L", "jawForward", "cheekPuff_L", "mouthSmile_R"]),
+    "M": (49, ["eyeLookUp_R", "mouthFrown_L", "noseSneer_L", "cheekSquint_R"]),
+    "N": (53, ["eyeLookDown_L", "mouthRollUpper", "cheekRaiser_R", "jawLeft"]),
 }
 AMPLITUDES = (0.33, 0.67, 1.0)
 

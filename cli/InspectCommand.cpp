@@ -95,6 +95,10 @@ void printModelJson(const Model& model, const ModelFileFacts& file) {
     if (model.keyNeighbours)
         j["key_neighbours"] = {{"per_key", model.keyNeighbours->perKey},
                                {"positions", model.keyNeighbours->fromMean ? "mean" : "given"}};
+    if (model.sentinels)
+        j["sentinels"] = {{"count", model.sentinels->points.size()},
+                          {"covering_radius", model.sentinels->coveringRadius},
+                          {"positions", model.sentinels->fromMean ? "mean" : "given"}};
     if (model.learning)
         j["learning"] = {{"rank", model.learning->maxRank},
                          {"stored_vectors", model.basisSize() + model.learning->extraBasis.cols()},
@@ -159,6 +163,12 @@ void printModelText(const Model& model, const ModelFileFacts& file) {
         std::cout << "  neighbours    " << model.keyNeighbours->perKey << " per key (from the "
                   << (model.keyNeighbours->fromMean ? "training mean" : "positions given to train")
                   << "): a hit one part of the key error alone certifies is checked near its worst keys\n";
+    if (model.sentinels)
+        std::cout << "  sentinels     " << model.sentinels->points.size() << " (from the "
+                  << (model.sentinels->fromMean ? "training mean" : "positions given to train")
+                  << "), every moving point within " << fmt("%.6g", model.sentinels->coveringRadius)
+                  << " of one: computed beside every hit, which stands where PM is within "
+                  << fmt("%g", kSentinelShare) << " T of each\n";
     if (model.regions) {
         const LocalRegions& lr = *model.regions;
         std::cout << "  regions       R = " << lr.regionCount() << " (local fail-through), feather width "

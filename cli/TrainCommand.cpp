@@ -149,6 +149,13 @@ void declareCalibrationOptions(ArgParser& parser, TrainArgs& a) {
                   "coverage of --calibration threshold or conformal, in (0, 1) (default " +
                       std::to_string(options.calibrationCoverage).substr(0, 4) + ")",
                   [&](const std::string& v) { a.request.coverage = parseDouble("--coverage", v, 0.0, 1.0); });
+    parser.option("--sentinels", "S",
+                  "points spread over what the training saw move, computed beside every hit of a model with "
+                  "the predicted key error and point positions: a hit stands where PM is within 0.8 of the "
+                  "tolerance at each (default " +
+                      std::to_string(options.sentinels) + ", at most 1 point in " +
+                      std::to_string(kSentinelSpacing) + "; 0 = none)",
+                  [&](const std::string& v) { options.sentinels = parseIndex("--sentinels", v, 0); });
     parser.option(
         "--learn-rank", "R",
         "store what `pmsc learn` needs: R singular vectors (>= M; 2M is a good start), the key "

@@ -18,7 +18,7 @@ Route ErrorMonitor::operator()(FrameSlot& slot) const {
     PredictedParts parts;
     slot.keyError = pm_.keyError(slot.keyValues.data(), slot.coords.data(), &parts);
     slot.decision = policy_.decide(slot.keyError);
-    if (evaluator_ != nullptr && check_.needed(slot.decision, parts)) return checkHit(slot);
+    if (evaluator_ != nullptr && check_.needed(slot.decision, parts)) return checkHit(slot, parts);
     if (slot.decision.state == CacheState::Hit) {
         slot.pointsEvaluated = 0;
         return Route::Reconstruct;
@@ -42,16 +42,36 @@ Route ErrorMonitor::operator()(FrameSlot& slot) const {
     regions_->pointWeights(slot.regionWeights, slot.pointWeights.data());
     const Index full = regions_->fullPoints(slot.pointWeights, slot.localPoints.data());
     if (double(full) <= regions_->regions().maxLocalFraction * double(slot.pointWeights.size())) {
+        Index checked = 0;
+        if (!checkLocal(slot, checked)) return slot.failed() ? Route::Done : whole(slot);
         slot.local = true;
         slot.localCount = full;
-        slot.pointsEvaluated = full;
+        slot.pointsEvaluated = full + checked;
         return Route::Local;
     }
     return whole(slot);
 }
 
-Route ErrorMonitor::checkHit(FrameSlot& slot) const {
-    const std::vector<Index> points = check_.points(slot.keyValues.data(), slot.coords.data());
+bool ErrorMonitor::checkLocal(FrameSlot& slot, Index& checked) const {
+    // The sentinels the local frame hands back as PM alone (weight 0 of the full result) are
+    // computed, as a hit's are: regions judged hits carry a motion their keys do not see as well.
+    if (evaluator_ == nullptr || check_.sentinels().empty()) return true;
+    std::vector<Index> points;
+    for (const Index p : check_.sentinels()) {
+        if (slot.pointWeights[size_t(p)] == 0.0) points.push_back(p);
+    }
+    checked = static_cast<Index>(points.size());
+    if (points.empty()) return true;
+    thread_local std::vector<double> values;
+    values.resize(points.size() * size_t(pm_.model().channels));
+    if (!evaluateInto(slot, points, values.data(), "sentinels")) return false;
+    // One off: the frame fails through whole with its own decision (a blend is kept within T of
+    // the full values wherever PM is further, pmsc::blendPoints).
+    return check_.passes(slot.coords.data(), points, values.data());
+}
+
+Route ErrorMonitor::checkHit(FrameSlot& slot, PredictedParts parts) const {
+    const std::vector<Index> points = check_.points(slot.keyValues.data(), slot.coords.data(), parts);
     thread_local std::vector<double> values;
     values.resize(points.size() * size_t(pm_.model().channels));
     if (!evaluateInto(slot, points, values.data(), "check points")) return Route::Done;

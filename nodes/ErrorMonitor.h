@@ -40,7 +40,8 @@ public:
     /// there fails the frame.
     /// With `evaluator`, a hit that one part of the predicted error alone certifies is checked
     /// (HitCheck): the check's points are computed through `evaluator`, and a hit that fails the
-    /// check is computed whole and blended with weight 0.
+    /// check is computed whole and blended with weight 0; every hit, and the points a local frame
+    /// hands back as PM alone, when the model has sentinels.
     ErrorMonitor(const PointMultiplier& pm, SoftCachePolicy policy, bool keepPm,
                  const RegionMultiplier* regions, const PointEvaluator* evaluator)
         : pm_(pm),
@@ -54,7 +55,10 @@ public:
 
 private:
     /// A hit HitCheck::needed: computes the check's points; a hit, or the whole frame.
-    Route checkHit(FrameSlot& slot) const;
+    Route checkHit(FrameSlot& slot, PredictedParts parts) const;
+    /// A local frame: computes the sentinels it would hand back as PM alone (`checked` of them);
+    /// false when one is off (the frame then fails through whole) or the evaluator failed.
+    bool checkLocal(FrameSlot& slot, Index& checked) const;
     /// The frame's whole-frame route when it does not hit (regions did not take it locally).
     Route whole(FrameSlot& slot) const;
     /// Evaluates `points` of the slot's frame into `out`; false (the frame failed) on an exception.

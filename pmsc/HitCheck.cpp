@@ -10,16 +10,23 @@ namespace pmsc {
 HitCheck::HitCheck(const Model& model, const PointMultiplier& pm) : model_(model), pm_(pm) {
     if (model.regions) regionKeys_ = model.regions->extraKeyPoints;
     std::sort(regionKeys_.begin(), regionKeys_.end());
+    if (model.sentinels) sentinels_ = model.sentinels->points;
+    std::sort(sentinels_.begin(), sentinels_.end());
+    sentinels_.erase(std::unique(sentinels_.begin(), sentinels_.end()), sentinels_.end());
     available_ = model.keyErrorNorm == KeyErrorNorm::Predicted && !model.sharedChannels &&
-                 (!regionKeys_.empty() || model.keyNeighbours.has_value());
+                 (!regionKeys_.empty() || model.keyNeighbours.has_value() || !sentinels_.empty());
 }
 
 bool HitCheck::needed(const CacheDecision& decision, PredictedParts parts) const {
-    return available_ && decision.state == CacheState::Hit && partsDisagree(parts, model_.partEps);
+    if (!available_ || decision.state != CacheState::Hit) return false;
+    return !sentinels_.empty() || partsDisagree(parts, model_.partEps);
 }
 
-std::vector<Index> HitCheck::points(const double* keyValues, const double* coords) const {
-    std::vector<Index> out = regionKeys_;
+std::vector<Index> HitCheck::points(const double* keyValues, const double* coords,
+                                    PredictedParts parts) const {
+    std::vector<Index> out = sentinels_;
+    if (!partsDisagree(parts, model_.partEps)) return out;  // ascending already
+    out.insert(out.end(), regionKeys_.begin(), regionKeys_.end());
     if (model_.keyNeighbours) {
         const Index k = model_.keyCount();
         std::vector<double> residual(static_cast<size_t>(k));
@@ -56,7 +63,8 @@ bool HitCheck::passes(const double* coords, std::span<const Index> points, const
             squared += d * d;
         }
         const bool regionKey = std::binary_search(regionKeys_.begin(), regionKeys_.end(), points[i]);
-        const double share = regionKey ? kConfirmedShare : kNeighbourShare;
+        const bool sentinel = std::binary_search(sentinels_.begin(), sentinels_.end(), points[i]);
+        const double share = regionKey ? kConfirmedShare : sentinel ? kSentinelShare : kNeighbourShare;
         if (!(std::sqrt(squared) <= share * model_.tolerance)) return false;  // NaN fails
     }
     return true;

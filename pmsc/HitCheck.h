@@ -3,6 +3,7 @@
 
 #include "pmsc/Model.h"
 #include "pmsc/PointMultiplier.h"
+#include "pmsc/Sentinels.h"
 #include "pmsc/SoftCache.h"
 
 #include <span>
@@ -27,18 +28,21 @@ constexpr Index kCheckedKeys = 4;
 constexpr double kConfirmedShare = 0.7;
 constexpr double kNeighbourShare = 0.9;
 
-/// The check of a hit that one part of the predicted error alone certifies (KeyErrorNorm::Predicted,
-/// partsDisagree): PM against the calculation at a few points it did not fit.
+/// The check of a hit: PM against the calculation at points it did not fit.
 ///
-/// Why: such a hit rests on one measure while the other says the frame is off what training saw;
-/// on the novelty suite every hit over the tolerance at the defaults was one. The points are
+/// Every hit of a model with sentinels (Sentinels.h) computes them: points spread over what the
+/// training saw move, so a motion the training never saw shows at one of them wherever its error
+/// patch is wider than their spacing. A hit that one part of the predicted error alone certifies
+/// (KeyErrorNorm::Predicted, partsDisagree) also computes
 ///  - the region keys (LocalRegions::extraKeyPoints), a few in every region of local fail-through;
 ///  - the key neighbours (KeyNeighbours) of the kCheckedKeys keys with the largest leave-one-out
 ///    residuals: a motion training never saw shows first at the keys nearest it, and the fit bends
 ///    PM towards those keys, so the points around them are where PM is furthest off (on the suite's
 ///    hits over T, the largest error of those 64 points was 0.95-1.2 T).
-/// Neither the region keys nor the neighbours are in the projection, so PM's error there is a
-/// prediction, not a fit.
+/// Why those: such a hit rests on one measure while the other says the frame is off what training
+/// saw; on the novelty suite's first sets every hit over the tolerance at the defaults was one.
+/// None of these points is in the projection, so PM's error there is a prediction, not a fit.
+/// The sentinels also check a local frame's points that regions judged hits (ErrorMonitor).
 ///
 /// Thread safety: all methods are const and may run concurrently.
 class HitCheck {
@@ -46,21 +50,27 @@ public:
     /// Keeps references to `model` and `pm` (PM of the same model), which must outlive it.
     HitCheck(const Model& model, const PointMultiplier& pm);
 
-    /// The model has a predicted key error and points to check at (region keys or key neighbours).
+    /// The model has a predicted key error and points to check at (sentinels, region keys or key
+    /// neighbours).
     bool available() const { return available_; }
-    /// A frame with this decision and these parts is checked: a hit whose parts disagree.
+    /// A frame with this decision and these parts is checked: a hit, when the model has sentinels;
+    /// a hit whose parts disagree, when it has region keys or key neighbours.
     bool needed(const CacheDecision& decision, PredictedParts parts) const;
-    /// The points the check of this frame computes, ascending, each once.
-    std::vector<Index> points(const double* keyValues, const double* coords) const;
+    /// The points the check of this frame computes, ascending, each once: the sentinels, and when
+    /// the parts disagree the region keys and key neighbours.
+    std::vector<Index> points(const double* keyValues, const double* coords, PredictedParts parts) const;
+    /// The sentinels, ascending (empty without them).
+    std::span<const Index> sentinels() const { return sentinels_; }
     /// The hit stands: PM's error at each of `points` against its computed value (`values`,
-    /// points.size()*C) is at most kConfirmedShare * T at a region key and kNeighbourShare * T at
-    /// any other point (NaN fails).
+    /// points.size()*C) is at most kConfirmedShare * T at a region key, kSentinelShare * T at a
+    /// sentinel and kNeighbourShare * T at any other point (NaN fails).
     bool passes(const double* coords, std::span<const Index> points, const double* values) const;
 
 private:
     const Model& model_;
     const PointMultiplier& pm_;
     std::vector<Index> regionKeys_;  ///< ascending
+    std::vector<Index> sentinels_;   ///< ascending
     bool available_ = false;
 };
 

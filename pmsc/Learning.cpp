@@ -5,6 +5,7 @@
 #include "pmsc/KeyPointSelector.h"
 #include "pmsc/LearningState.h"
 #include "pmsc/QDeim.h"
+#include "pmsc/Sentinels.h"
 #include "pmsc/Subspace.h"
 
 #include <algorithm>
@@ -253,6 +254,27 @@ void learnedKeyNeighbours(const Model& model, Model& out, LearnReport& report) {
         "keys change): the learned model has none, so nothing checks a hit one part of its key error alone "
         "certifies; "
         "train again to get them");
+}
+
+/// The learned model's sentinels (Sentinels.h): chosen again, as many as before, from the learned
+/// mean and basis when they came from the mean (the new frames may move what the old ones left
+/// still, and the sentinels must cover it); the old ones, less any that became keys, when they came
+/// from positions the user gave.
+void learnedSentinels(const Model& model, Model& out) {
+    if (!model.sentinels || out.keyErrorNorm != KeyErrorNorm::Predicted) return;
+    const Index count = static_cast<Index>(model.sentinels->points.size());
+    if (model.sentinels->fromMean && out.channels == 3 && !out.sharedChannels) {
+        const Eigen::MatrixXd mean =
+            Eigen::Map<const Eigen::MatrixXd>(out.mean.data(), 3, out.points).transpose();
+        Sentinels chosen = farthestPointSentinels(mean, basisMotion(out), out.keyPoints, count, true);
+        if (!chosen.points.empty()) out.sentinels = std::move(chosen);
+        return;
+    }
+    Sentinels kept = *model.sentinels;
+    std::erase_if(kept.points, [&](Index p) {
+        return std::find(out.keyPoints.begin(), out.keyPoints.end(), p) != out.keyPoints.end();
+    });
+    out.sentinels = std::move(kept);
 }
 
 /// Step 3, cross-fitting: each slice of the new frames is scored by a model that never saw it
@@ -515,6 +537,7 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
     }
     Model out = learnedCore(model, u, keys);
     learnedKeyNeighbours(model, out, report);
+    learnedSentinels(model, out);
     report.basisAfter = u.basisSize;
     report.largestAngle =
         largestPrincipalAngle(u.basis, model.basis.leftCols(std::min(u.basisSize, model.basisSize())));

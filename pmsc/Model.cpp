@@ -145,6 +145,7 @@ void Model::validate() const {
     if (!allFinite(projector)) invalid("projector contains NaN or Inf");
     if (regions) regions->validate(*this);
     if (keyNeighbours) keyNeighbours->validate(*this);
+    if (sentinels) sentinels->validate(*this);
     if (learning) learning->validate(rows, m, points);
     if (calibrationRecord) calibrationRecord->validate();
 }

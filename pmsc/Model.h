@@ -7,6 +7,7 @@
 #include "pmsc/KeyNeighbours.h"
 #include "pmsc/LearningState.h"
 #include "pmsc/Regions.h"
+#include "pmsc/Sentinels.h"
 
 #include <Eigen/Core>
 
@@ -68,6 +69,9 @@ struct Model {
     /// The points nearest each key, where a hit one part of the predicted error alone certifies
     /// is checked (HitCheck.h; section KEYNEAR).
     std::optional<KeyNeighbours> keyNeighbours;
+    /// Points spread over what training saw move, computed beside every hit (HitCheck.h;
+    /// Sentinels.h; section SENTINEL).
+    std::optional<Sentinels> sentinels;
     /// `pmsc learn`: the incremental-SVD state beyond the basis and the key-selection
     /// settings (section LEARNSVD; written by `pmsc train --learn-rank` and `pmsc learn`).
     std::optional<LearningState> learning;

@@ -5,6 +5,7 @@
 #include "pmsc/LearningSections.h"
 #include "pmsc/Model.h"
 #include "pmsc/Regions.h"
+#include "pmsc/Sentinels.h"
 
 #include <cstdio>
 
@@ -49,6 +50,7 @@ std::span<const ModelSectionCodec> modelSectionCodecs() {
         crossSectionCodec(),          // CROSSPM (cross point multiplication)
         keyErrorSectionCodec(),       // KEYERROR (the largest key as the soft cache's measure)
         keyNeighboursSectionCodec(),  // KEYNEAR (where a hit one part certifies is checked)
+        sentinelsSectionCodec(),      // SENTINEL (points computed beside every hit)
     };
     return codecs;
 }

@@ -8,6 +8,7 @@
 #include "pmsc/QDeim.h"
 #include "pmsc/RegionChoice.h"
 #include "pmsc/RowBlockOps.h"
+#include "pmsc/Sentinels.h"
 #include "pmsc/Subspace.h"
 
 #include <algorithm>
@@ -315,6 +316,8 @@ struct Trainer {
     /// The points nearest each key (KeyNeighbours), where a hit one part of the predicted error
     /// alone certifies is checked; rank 0, on the final core.
     void keyNeighbours();
+    /// The sentinels (Sentinels.h), computed beside every hit; rank 0, on the final core.
+    void sentinels();
 };
 
 void Trainer::progress(std::string_view stage, double done, double total) const {
@@ -633,6 +636,19 @@ void Trainer::keyNeighbours() {
     model.keyNeighbours = nearestToKeys(positions, model.keyPoints, kNeighboursPerKey, !given);
 }
 
+void Trainer::sentinels() {
+    // As the key neighbours: only the predicted error's check reads them, and they need positions.
+    if (options.sentinels <= 0 || model.keyErrorNorm != KeyErrorNorm::Predicted || model.sharedChannels)
+        return;
+    const bool given = options.regions.positions.size() > 0;
+    Eigen::MatrixXd positions = options.regions.positions;
+    if (!given) positions = meanShape(model, rmsMotion());
+    if (positions.rows() != model.points || positions.cols() != 3) return;
+    Sentinels chosen = farthestPointSentinels(positions, basisMotion(model), model.keyPoints,
+                                              sentinelCount(options.sentinels, model.points), !given);
+    if (!chosen.points.empty()) model.sentinels = std::move(chosen);
+}
+
 }  // namespace
 
 KeyErrorNorm resolvedKeyErrorNorm(const TrainingOptions& options) {
@@ -687,6 +703,7 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
     t.model.mean = gatherRowsTo(comm, q.mean(), t.rows, 0);
     if (options.regions.count > 0 || options.regions.automatic) t.regions();
     if (comm.rank() == 0) t.keyNeighbours();
+    if (comm.rank() == 0) t.sentinels();
     if (comm.rank() == 0) t.model.validate();
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return std::move(t.model);

@@ -64,6 +64,11 @@ struct TrainingOptions {
     double calibrationCoverage =
         0.9;  ///< 1 - alpha of CalibrationRule::Conformal (docs/learning-and-calibration.md: 0.9 measured)
 
+    /// Points spread over what training saw move, computed beside every hit of a model with the
+    /// predicted key error and point positions (Sentinels.h, HitCheck.h), at most one point in
+    /// kSentinelSpacing (sentinelCount); 0 = none.
+    Index sentinels = kDefaultSentinels;
+
     // --- learning from misses (`pmsc learn`) ---
     /// r > 0: store what `pmsc learn` needs in the model (Model::learning: the left singular
     /// vectors M+1 .. r and the key-selection settings; Model::calibrationRecord: the held-out

@@ -130,7 +130,7 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
                                     const std::string& keyError, Index learnRank, unsigned seed,
                                     int powerIterations, const py::object& regions, const py::object& feather,
                                     Index regionKeys, Index regionStride, bool sharedChannels,
-                                    py::object progress) {
+                                    Index sentinels, py::object progress) {
     // The keyword arguments into app::TrainOptions, checked by the rules `pmsc train` uses.
     constexpr app::Spelling kPython = app::Spelling::Python;
     app::TrainOptions request;
@@ -166,6 +166,7 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     o.regions.frameStride = regionStride;
     o.regions.ownKeys = regionKeys;
     o.sharedChannels = sharedChannels;
+    o.sentinels = sentinels;
     app::validate(request, kPython);
 
     TrainingFrames t = trainingFrames(frames);
@@ -257,7 +258,8 @@ void bindTraining(py::module_& m) {
         "selector"_a = "teleconnection", "tolerance"_a = 0.0, "slices"_a = 5, "calibration"_a = "",
         "coverage"_a = py::none(), "key_error"_a = "", "learn_rank"_a = 0, "seed"_a = 20070101u,
         "power_iterations"_a = 2, "regions"_a = "auto", "feather"_a = py::none(), "region_keys"_a = 4,
-        "region_stride"_a = 3, "shared_channels"_a = false, "progress"_a = py::none(),
+        "region_stride"_a = 3, "shared_channels"_a = false, "sentinels"_a = kDefaultSentinels,
+        "progress"_a = py::none(),
         "Trains a model as `pmsc train` does (same options, same model bytes). frames: an array (F, N, C), a "
         ".npy path, or a list of them (shots). progress(stage, done, total) may return False to cancel.");
     m.def(

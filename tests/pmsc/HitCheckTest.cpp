@@ -1,7 +1,9 @@
 // The check of a hit one part of the predicted error alone certifies (HitCheck.h) and the points
-// it reads near the keys (KeyNeighbours.h).
+// it reads near the keys (KeyNeighbours.h) and over what training saw move (Sentinels.h).
 #include "pmsc/HitCheck.h"
 #include "pmsc/KeyNeighbours.h"
+#include "pmsc/ModelIO.h"
+#include "pmsc/Sentinels.h"
 #include "pmsc/Training.h"
 
 #include <gtest/gtest.h>
@@ -39,9 +41,10 @@ pmsc::FrameSet sheetFrames(Index frames, bool light = false) {
     return set;
 }
 
-Model trainSheet(bool light = false, double tolerance = 0.01, Index regions = 0) {
+Model trainSheet(bool light = false, double tolerance = 0.01, Index regions = 0, Index sentinels = 0) {
     pmsc::TrainingOptions o;
     o.regions.count = regions;
+    o.sentinels = sentinels;
     o.basis = 3;
     o.maxKeys = 12;
     o.tolerance = tolerance;
@@ -133,7 +136,7 @@ TEST(HitCheck, ReadsTheNeighboursOfTheKeysWithTheLargestResidualsAndHoldsPmToThe
     // Key 5 off by far more than the fit can absorb: its neighbours are among the points checked.
     keys[size_t(5 * c + 2)] += 1.0;
     pm.project(keys.data(), coords.data());
-    const std::vector<Index> points = check.points(keys.data(), coords.data());
+    const std::vector<Index> points = check.points(keys.data(), coords.data(), {1, 1});
     EXPECT_TRUE(std::is_sorted(points.begin(), points.end()));
     EXPECT_EQ(std::adjacent_find(points.begin(), points.end()), points.end());
     EXPECT_LE(Index(points.size()), pmsc::kCheckedKeys * pmsc::kNeighboursPerKey);
@@ -166,7 +169,7 @@ TEST(HitCheck, HoldsPmCloserAtTheRegionKeysThanAtTheNeighbours) {
         for (Index ch = 0; ch < c; ++ch)
             keys[size_t(i * c + ch)] = frames.frame(60)[m.keyPoints[size_t(i)] * c + ch];
     pm.project(keys.data(), coords.data());
-    const std::vector<Index> points = check.points(keys.data(), coords.data());
+    const std::vector<Index> points = check.points(keys.data(), coords.data(), {1, 1});
     std::vector<double> values(points.size() * size_t(c));
     pm.reconstructPoints(coords.data(), points, values.data());
     const auto& regionKeys = m.regions->extraKeyPoints;
@@ -184,6 +187,92 @@ TEST(HitCheck, HoldsPmCloserAtTheRegionKeysThanAtTheNeighbours) {
     off = values;
     off[regionKey * size_t(c)] += (pmsc::kConfirmedShare + 0.05) * m.tolerance;
     EXPECT_FALSE(check.passes(coords.data(), points, off.data())) << "over kConfirmedShare at a region key";
+}
+
+TEST(Sentinels, FarthestPointSamplingOfTheMovingPointsThatAreNotKeys) {
+    // Points 0..9 on a line; 9 does not move, 4 is a key. The first is the point that moves most
+    // (7), then the farthest from the chosen ones, the lower index on ties.
+    Eigen::MatrixXd line = Eigen::MatrixXd::Zero(10, 3);
+    for (Index i = 0; i < 10; ++i) line(i, 0) = double(i);
+    Eigen::VectorXd motion = Eigen::VectorXd::Ones(10);
+    motion[7] = 2;
+    motion[9] = 0;
+    const std::vector<Index> keys = {4};
+    const pmsc::Sentinels s = pmsc::farthestPointSentinels(line, motion, keys, 3, true);
+    EXPECT_EQ(s.points, (std::vector<Index>{7, 0, 3}));
+    EXPECT_DOUBLE_EQ(s.coveringRadius, 2.0) << "point 5 is 2 from 3 and from 7";
+    EXPECT_TRUE(s.fromMean);
+    EXPECT_EQ(pmsc::farthestPointSentinels(line, motion, keys, 100, true).points.size(), 8u)
+        << "at most the moving points that are not keys";
+    EXPECT_TRUE(pmsc::farthestPointSentinels(line, Eigen::VectorXd::Zero(10), keys, 3, true).points.empty());
+    EXPECT_THROW(pmsc::farthestPointSentinels(line, Eigen::VectorXd::Ones(9), keys, 3, true),
+                 std::invalid_argument);
+    EXPECT_THROW(pmsc::farthestPointSentinels(line, motion, std::vector<Index>{10}, 3, true),
+                 std::invalid_argument);
+}
+
+TEST(Sentinels, TrainingSpreadsThemOverAShapeWithAPredictedKeyError) {
+    const Model m = trainSheet(false, 0.01, 0, 40);
+    ASSERT_TRUE(m.sentinels.has_value());
+    EXPECT_EQ(m.sentinels->points.size(), 40u);
+    EXPECT_EQ(trainSheet(false, 0.01, 0, 1000).sentinels->points.size(), size_t(900 / pmsc::kSentinelSpacing))
+        << "at most one point in kSentinelSpacing";
+    EXPECT_EQ(pmsc::sentinelCount(1024, 26719), 1024);
+    EXPECT_EQ(pmsc::sentinelCount(1024, 2592), 162);
+    EXPECT_GT(m.sentinels->coveringRadius, 0.0);
+    EXPECT_NO_THROW(m.validate());
+    const std::set<Index> keys(m.keyPoints.begin(), m.keyPoints.end());
+    for (const Index p : m.sentinels->points) EXPECT_EQ(keys.count(p), 0u) << "a key's error is a fit";
+    // Every point of the sheet's mean is within the covering radius of a sentinel.
+    const Eigen::MatrixXd mean = Eigen::Map<const Eigen::MatrixXd>(m.mean.data(), 3, m.points).transpose();
+    for (Index p = 0; p < m.points; ++p) {
+        double nearest = 1e300;
+        for (const Index s : m.sentinels->points)
+            nearest = std::min(nearest, (mean.row(p) - mean.row(s)).norm());
+        EXPECT_LE(nearest, m.sentinels->coveringRadius + 1e-12) << p;
+    }
+    // The model file keeps them.
+    const Model back = pmsc::decodeModel(pmsc::encodeModel(m), "sentinels");
+    ASSERT_TRUE(back.sentinels.has_value());
+    EXPECT_EQ(back.sentinels->points, m.sentinels->points);
+    EXPECT_DOUBLE_EQ(back.sentinels->coveringRadius, m.sentinels->coveringRadius);
+
+    EXPECT_FALSE(trainSheet(true, 0.01, 0, 40).sentinels.has_value()) << "light is not a shape";
+    EXPECT_FALSE(trainSheet(false, 0, 0, 40).sentinels.has_value()) << "no tolerance: nothing to check";
+    EXPECT_FALSE(trainSheet(false, 0.01, 0, 0).sentinels.has_value()) << "--sentinels 0";
+}
+
+TEST(Sentinels, EveryHitComputesThemAndTheyHoldPmWithinTheirShareOfTheTolerance) {
+    Model m = trainSheet(false, 0.01, 0, 40);
+    const pmsc::PointMultiplier pm(m);
+    const pmsc::HitCheck check(m, pm);
+    ASSERT_TRUE(check.available());
+    const pmsc::PredictedParts agree{0, 0};
+    ASSERT_FALSE(pmsc::partsDisagree(agree, m.partEps));
+    EXPECT_TRUE(check.needed({pmsc::CacheState::Hit, 0}, agree)) << "a hit both parts certify is checked too";
+    EXPECT_FALSE(check.needed({pmsc::CacheState::Blend, 0.5}, agree));
+    const Index c = m.channels;
+    std::vector<double> keys(size_t(m.keyCount() * c)), coords(size_t(m.coordCount()));
+    const pmsc::FrameSet frames = sheetFrames(61);
+    for (Index i = 0; i < m.keyCount(); ++i)
+        for (Index ch = 0; ch < c; ++ch)
+            keys[size_t(i * c + ch)] = frames.frame(60)[m.keyPoints[size_t(i)] * c + ch];
+    pm.project(keys.data(), coords.data());
+    const std::vector<Index> points = check.points(keys.data(), coords.data(), agree);
+    std::vector<Index> sorted = m.sentinels->points;
+    std::sort(sorted.begin(), sorted.end());
+    EXPECT_EQ(points, sorted) << "parts that agree: the sentinels alone";
+    const std::vector<Index> both = check.points(keys.data(), coords.data(), {1e9, 0});
+    EXPECT_GT(both.size(), points.size()) << "parts that disagree: the key neighbours too";
+    for (const Index p : points) EXPECT_TRUE(std::binary_search(both.begin(), both.end(), p));
+
+    std::vector<double> values(points.size() * size_t(c));
+    pm.reconstructPoints(coords.data(), points, values.data());
+    EXPECT_TRUE(check.passes(coords.data(), points, values.data()));
+    values[2] += (pmsc::kSentinelShare - 0.05) * m.tolerance;
+    EXPECT_TRUE(check.passes(coords.data(), points, values.data()));
+    values[2] += 0.1 * m.tolerance;
+    EXPECT_FALSE(check.passes(coords.data(), points, values.data())) << "over kSentinelShare at a sentinel";
 }
 
 }  // namespace

@@ -1,0 +1,123 @@
+#include "pmsc/Sentinels.h"
+
+#include "pmsc/ByteIO.h"
+#include "pmsc/Model.h"
+#include "pmsc/ModelSections.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+namespace pmsc {
+
+void Sentinels::validate(const Model& model) const {
+    if (!std::isfinite(coveringRadius) || coveringRadius < 0)
+        throw std::invalid_argument("sentinels: covering radius " + std::to_string(coveringRadius) +
+                                    " is not finite and >= 0");
+    if (static_cast<Index>(points.size()) > model.points)
+        throw std::invalid_argument("sentinels: " + std::to_string(points.size()) + " points, more than N");
+    for (const Index p : points) {
+        if (p < 0 || p >= model.points)
+            throw std::invalid_argument("sentinels: point " + std::to_string(p) + " is outside [0, N)");
+    }
+}
+
+Index sentinelCount(Index requested, Index points) {
+    return std::max<Index>(0, std::min(requested, points / kSentinelSpacing));
+}
+
+Eigen::VectorXd basisMotion(const Model& model) {
+    const Index n = model.points, rowsPerPoint = model.basisChannels();
+    Eigen::VectorXd motion = Eigen::VectorXd::Zero(n);
+    if (model.basisSize() == 0) return motion;
+    const Eigen::MatrixXd scaled = model.basis * model.singularValues.asDiagonal();
+    for (Index p = 0; p < n; ++p)
+        motion[p] = std::sqrt(scaled.middleRows(p * rowsPerPoint, rowsPerPoint).squaredNorm());
+    return motion;
+}
+
+Sentinels farthestPointSentinels(const Eigen::Ref<const Eigen::MatrixXd>& positions,
+                                 const Eigen::Ref<const Eigen::VectorXd>& motion, std::span<const Index> keys,
+                                 Index count, bool fromMean) {
+    const Index n = positions.rows();
+    if (positions.cols() != 3) throw std::invalid_argument("farthestPointSentinels: positions must be N x 3");
+    if (motion.size() != n)
+        throw std::invalid_argument("farthestPointSentinels: " + std::to_string(motion.size()) +
+                                    " motions for " + std::to_string(n) + " points");
+    std::vector<char> excluded(static_cast<size_t>(n), 0);
+    for (const Index k : keys) {
+        if (k < 0 || k >= n)
+            throw std::invalid_argument("farthestPointSentinels: key point " + std::to_string(k) +
+                                        " out of range");
+        excluded[size_t(k)] = 1;
+    }
+    Sentinels out;
+    out.fromMean = fromMean;
+    const double most = n > 0 ? motion.maxCoeff() : 0.0;
+    std::vector<Index> pool;
+    for (Index p = 0; p < n; ++p) {
+        if (!excluded[size_t(p)] && motion[p] > 0 && motion[p] >= kMovingShare * most) pool.push_back(p);
+    }
+    if (pool.empty() || count <= 0) return out;
+    // Start from the pool's point that moves most (lowest index on ties): where error is likeliest.
+    Index first = pool.front();
+    for (const Index p : pool) {
+        if (motion[p] > motion[first]) first = p;
+    }
+    std::vector<double> nearest(pool.size(), std::numeric_limits<double>::infinity());
+    Index next = first;
+    const Index want = std::min<Index>(count, static_cast<Index>(pool.size()));
+    out.points.reserve(static_cast<size_t>(want));
+    double farthest = 0;
+    for (Index s = 0; s < want; ++s) {
+        out.points.push_back(next);
+        const Eigen::RowVector3d at = positions.row(next);
+        farthest = -1;
+        Index argFarthest = next;
+        for (size_t i = 0; i < pool.size(); ++i) {
+            const double d = (positions.row(pool[i]) - at).squaredNorm();
+            if (d < nearest[i]) nearest[i] = d;
+            if (nearest[i] > farthest) {  // strict: the lowest index wins a tie
+                farthest = nearest[i];
+                argFarthest = pool[i];
+            }
+        }
+        next = argFarthest;
+    }
+    out.coveringRadius = std::sqrt(std::max(0.0, farthest));
+    return out;
+}
+
+// --- the "SENTINEL" section --------------------------------------------------------------------
+//
+//   u32 from mean (0 or 1), f64 covering radius, u64 count S, u64[S] points
+
+ModelSectionCodec sentinelsSectionCodec() {
+    return {{'S', 'E', 'N', 'T', 'I', 'N', 'E', 'L'},
+            [](const Model& m) { return m.sentinels.has_value(); },
+            [](const Model& m, ByteWriter& out) {
+                out.u32(m.sentinels->fromMean ? 1 : 0);
+                out.f64(m.sentinels->coveringRadius);
+                out.index(static_cast<Index>(m.sentinels->points.size()));
+                out.indices(m.sentinels->points);
+            },
+            [](ByteReader& in, Model& m) {
+                Sentinels s;
+                const std::uint32_t fromMean = in.u32("sentinels' source");
+                if (fromMean > 1) in.fail("sentinels' source " + std::to_string(fromMean) + " is not 0 or 1");
+                s.fromMean = fromMean == 1;
+                s.coveringRadius = in.finite("sentinels' covering radius");
+                if (s.coveringRadius < 0) in.fail("sentinels' covering radius is negative");
+                const auto n = static_cast<std::uint64_t>(m.points);
+                const std::uint64_t count = in.u64("sentinel count");
+                if (count > n) in.fail("sentinel count " + std::to_string(count) + " is more than N");
+                in.require(count, 8, "sentinel points");
+                s.points = in.indices(count, n, "sentinel point");
+                m.sentinels = std::move(s);
+            }};
+}
+
+}  // namespace pmsc
