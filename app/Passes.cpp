@@ -203,21 +203,20 @@ private:
     }
 
     /// A frame that did not hit: its region keys first, then (as the error monitor) the sentinels
-    /// it would hand back as PM alone, then the points its failing regions evaluate, or every point
-    /// when it fails through whole (too many regions fail, or a sentinel is off).
+    /// it would hand back as PM alone, then the points its failing regions evaluate (with the
+    /// regions of the sentinels PM misses), or every point when it fails through whole.
     std::vector<Index> nextNeeds(Index frame, const double* keyValues, const double* coords,
                                  const Sources& s) const {
         if (regions_ == nullptr) return allUnknown(s);
         std::vector<Index> missing = unknownRegionKeys(s);
         if (!missing.empty()) return missing;
-        const std::vector<double> weights = regionWeights(frame, keyValues, s);
+        std::vector<double> weights = regionWeights(frame, keyValues, s);
         std::vector<double> pointWeights(size_t(model_.points));
         regions_->pointWeights(weights, pointWeights.data());
         std::vector<Index> local(size_t(model_.points));
-        const Index full = regions_->fullPoints(pointWeights, local.data());
-        local.resize(size_t(full));
-        if (!(double(full) <= regions_->regions().maxLocalFraction * double(model_.points)))
-            return allUnknown(s);
+        Index full = regions_->fullPoints(pointWeights, local.data());
+        const double most = regions_->regions().maxLocalFraction * double(model_.points);
+        if (!(double(full) <= most)) return allUnknown(s);
         std::vector<Index> sentinels;
         for (const Index p : check_.sentinels()) {
             if (pointWeights[size_t(p)] == 0.0) sentinels.push_back(p);
@@ -227,8 +226,19 @@ private:
             if (!missingSentinels.empty()) return missingSentinels;
             std::vector<double> values(sentinels.size() * size_t(model_.channels));
             known_.read(s, frame, sentinels, values.data());
-            if (!check_.passes(coords, sentinels, values.data())) return allUnknown(s);
+            const std::vector<Index> off = check_.offPoints(coords, sentinels, values.data());
+            for (const Index p : off) {
+                const Index r = regions_->regionOf(p);
+                if (r < 0) return allUnknown(s);
+                weights[size_t(r)] = 1.0;
+            }
+            if (!off.empty()) {
+                regions_->pointWeights(weights, pointWeights.data());
+                full = regions_->fullPoints(pointWeights, local.data());
+                if (!(double(full) <= most)) return allUnknown(s);
+            }
         }
+        local.resize(size_t(full));
         return unknown(s, local);
     }
 

@@ -72,7 +72,7 @@ std::vector<std::string> changedOptions(const TrainOptions& o, std::initializer_
             (name == "feather" && !t.regions.automaticFeather) ||
             (name == "region-keys" && t.regions.ownKeys != defaults.regions.ownKeys) ||
             (name == "region-stride" && t.regions.frameStride != defaults.regions.frameStride) ||
-            (name == "learn-rank" && t.learnRank > 0) ||
+            (name == "learn-rank" && t.learnRank > 0) || (name == "positions" && !o.positions.empty()) ||
             (name == "calibration" && t.calibrationRule.has_value()) ||
             (name == "key-error" && t.keyErrorNorm.has_value()) ||
             (name == "memory-limit" && o.memoryLimit > 0) || (name == "out-of-core" && o.outOfCore) ||
@@ -84,8 +84,9 @@ std::vector<std::string> changedOptions(const TrainOptions& o, std::initializer_
 
 /// Shared-channel models are trained in memory on one process, without regions, learning or targets.
 void validateSharedChannels(TrainOptions& o, Spelling spelling) {
-    const auto changed = changedOptions(o, {"targets", "regions", "feather", "region-keys", "region-stride",
-                                            "learn-rank", "memory-limit", "out-of-core", "block-points"});
+    const auto changed =
+        changedOptions(o, {"targets", "positions", "regions", "feather", "region-keys", "region-stride",
+                           "learn-rank", "memory-limit", "out-of-core", "block-points"});
     if (!changed.empty())
         throw OptionError(optionName(changed.front(), spelling) + " does not combine with " +
                           optionName("shared-channels", spelling) +
@@ -100,8 +101,8 @@ void validateCross(TrainOptions& o, Spelling spelling) {
         throw OptionError(optionName("targets", spelling) + " takes exactly one " +
                           optionName("frames", spelling) + " file (the control)");
     const auto changed =
-        changedOptions(o, {"regions", "feather", "region-keys", "region-stride", "learn-rank", "calibration",
-                           "key-error", "memory-limit", "out-of-core", "block-points"});
+        changedOptions(o, {"positions", "regions", "feather", "region-keys", "region-stride", "learn-rank",
+                           "calibration", "key-error", "memory-limit", "out-of-core", "block-points"});
     if (!changed.empty())
         throw OptionError(optionName(changed.front(), spelling) + " does not apply to a cross model (" +
                           optionName("targets", spelling) +
@@ -273,6 +274,24 @@ MemoryPlan planMemory(const TrainOptions& o, const TrainSizes& sizes, Communicat
 
 }  // namespace
 
+namespace {
+
+/// The first three columns of a point table (TrainOptions::positions) of `points` rows.
+Eigen::MatrixXd readPositions(const std::string& path, Index points) {
+    const FrameFile table = readPointTable(path);
+    const FrameSet& t = table.frames;
+    if (t.points != points || t.channels < 3)
+        throw InputError("train: --positions " + path + " has " + std::to_string(t.points) + " rows of " +
+                         std::to_string(t.channels) + " values, expected " + std::to_string(points) +
+                         " rows (one per point) of at least 3 (x, y, z)");
+    Eigen::MatrixXd out(points, 3);
+    for (Index p = 0; p < points; ++p)
+        for (Index k = 0; k < 3; ++k) out(p, k) = t.frame(0)[p * t.channels + k];
+    return out;
+}
+
+}  // namespace
+
 TrainPlan planTraining(const TrainOptions& options, Communicator& comm) {
     // Fail on an unwritable destination now, not after a long training.
     if (comm.rank() == 0 && !options.out.empty()) AtomicFile(options.out).abandon();
@@ -282,6 +301,7 @@ TrainPlan planTraining(const TrainOptions& options, Communicator& comm) {
     plan.sizes.c = plan.shots.front().info.channels;
     for (const Shot& s : plan.shots) plan.sizes.f += s.info.frames;
     plan.memory = planMemory(options, plan.sizes, comm);
+    if (!options.positions.empty()) plan.positions = readPositions(options.positions, plan.sizes.n);
     return plan;
 }
 
@@ -289,6 +309,7 @@ TrainOutcome trainPlanned(const TrainOptions& options, TrainPlan& plan, Communic
                           ProgressFn progress) {
     const auto start = std::chrono::steady_clock::now();
     TrainingOptions training = options.training;
+    if (plan.positions.size() > 0) training.regions.positions = plan.positions;
     if (!training.sharedChannels) training.memoryLimit = plan.memory.limit;  // training caps M to it
     training.progress = std::move(progress);
     TrainOutcome outcome;

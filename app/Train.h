@@ -25,6 +25,9 @@ struct TrainOptions {
     std::vector<std::string> frames;  ///< training frames (.npy), one file per shot
     std::string out;                  ///< the model file, written atomically (empty: not written)
     std::string targets;              ///< cross PM's target frames (.npy); empty: a soft-cache model
+    /// Point positions (.npy, N x 3 or more columns: the first three are x, y, z), for values that
+    /// are not themselves positions (light): the regions, key neighbours and sentinels read them.
+    std::string positions;
     TrainingOptions training = defaultTrainingOptions();
     std::optional<double> coverage;  ///< the calibration coverage, when asked for
     std::uint64_t memoryLimit = 0;   ///< bytes training may use; 0: the environment's limit
@@ -66,6 +69,7 @@ struct TrainPlan {
     std::vector<Shot> shots;
     TrainSizes sizes;
     MemoryPlan memory;
+    Eigen::MatrixXd positions;  ///< N x 3 from TrainOptions::positions; empty without
 };
 
 /// Opens the shots and decides in memory or streamed (every rank plans with the tightest limit of

@@ -149,6 +149,11 @@ void declareCalibrationOptions(ArgParser& parser, TrainArgs& a) {
                   "coverage of --calibration threshold or conformal, in (0, 1) (default " +
                       std::to_string(options.calibrationCoverage).substr(0, 4) + ")",
                   [&](const std::string& v) { a.request.coverage = parseDouble("--coverage", v, 0.0, 1.0); });
+    parser.option(
+        "--positions", "POINTS.npy",
+        "point positions (N x 3, or more columns whose first three are x, y, z) for values that are "
+        "not positions themselves (light): the regions, key neighbours and sentinels read them",
+        a.request.positions);
     parser.option("--sentinels", "S",
                   "points spread over what the training saw move, computed beside every hit of a model with "
                   "the predicted key error and point positions: a hit stands where PM is within 0.8 of the "

@@ -40,21 +40,25 @@ Route ErrorMonitor::operator()(FrameSlot& slot) const {
     }
     slot.regionsEvaluated = true;
     regions_->pointWeights(slot.regionWeights, slot.pointWeights.data());
-    const Index full = regions_->fullPoints(slot.pointWeights, slot.localPoints.data());
-    if (double(full) <= regions_->regions().maxLocalFraction * double(slot.pointWeights.size())) {
+    Index full = regions_->fullPoints(slot.pointWeights, slot.localPoints.data());
+    const double most = regions_->regions().maxLocalFraction * double(slot.pointWeights.size());
+    if (double(full) <= most) {
         Index checked = 0;
-        if (!checkLocal(slot, checked)) return slot.failed() ? Route::Done : whole(slot);
-        slot.local = true;
-        slot.localCount = full;
-        slot.pointsEvaluated = full + checked;
-        return Route::Local;
+        if (!checkLocal(slot, full, checked)) return Route::Done;
+        if (double(full) <= most) {
+            slot.local = true;
+            slot.localCount = full;
+            slot.pointsEvaluated = full + checked;
+            return Route::Local;
+        }
     }
     return whole(slot);
 }
 
-bool ErrorMonitor::checkLocal(FrameSlot& slot, Index& checked) const {
-    // The sentinels the local frame hands back as PM alone (weight 0 of the full result) are
-    // computed, as a hit's are: regions judged hits carry a motion their keys do not see as well.
+bool ErrorMonitor::checkLocal(FrameSlot& slot, Index& full, Index& checked) const {
+    // The sentinels the local frame would hand back as PM alone (weight 0 of the full result) are
+    // computed, as a hit's are: a region judged a hit may carry a motion its keys do not see. Each
+    // region holding one that PM misses by more than its share of T fails through as well.
     if (evaluator_ == nullptr || check_.sentinels().empty()) return true;
     std::vector<Index> points;
     for (const Index p : check_.sentinels()) {
@@ -65,9 +69,20 @@ bool ErrorMonitor::checkLocal(FrameSlot& slot, Index& checked) const {
     thread_local std::vector<double> values;
     values.resize(points.size() * size_t(pm_.model().channels));
     if (!evaluateInto(slot, points, values.data(), "sentinels")) return false;
-    // One off: the frame fails through whole with its own decision (a blend is kept within T of
-    // the full values wherever PM is further, pmsc::blendPoints).
-    return check_.passes(slot.coords.data(), points, values.data());
+    const std::vector<Index> off = check_.offPoints(slot.coords.data(), points, values.data());
+    if (off.empty()) return true;
+    for (const Index p : off) {
+        const Index r = regions_->regionOf(p);
+        if (r < 0) {  // in no region: nothing local can take it, the frame fails through whole
+            full = Index(slot.pointWeights.size());
+            return true;
+        }
+        slot.regionWeights[size_t(r)] = 1.0;
+        slot.regionStates[size_t(r)] = CacheState::Miss;
+    }
+    regions_->pointWeights(slot.regionWeights, slot.pointWeights.data());
+    full = regions_->fullPoints(slot.pointWeights, slot.localPoints.data());
+    return true;
 }
 
 Route ErrorMonitor::checkHit(FrameSlot& slot, PredictedParts parts) const {

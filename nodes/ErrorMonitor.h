@@ -57,8 +57,9 @@ private:
     /// A hit HitCheck::needed: computes the check's points; a hit, or the whole frame.
     Route checkHit(FrameSlot& slot, PredictedParts parts) const;
     /// A local frame: computes the sentinels it would hand back as PM alone (`checked` of them);
-    /// false when one is off (the frame then fails through whole) or the evaluator failed.
-    bool checkLocal(FrameSlot& slot, Index& checked) const;
+    /// the regions of those PM misses fail through too (`full` becomes the new count of points
+    /// computed in full). False when the evaluator failed.
+    bool checkLocal(FrameSlot& slot, Index& full, Index& checked) const;
     /// The frame's whole-frame route when it does not hit (regions did not take it locally).
     Route whole(FrameSlot& slot) const;
     /// Evaluates `points` of the slot's frame into `out`; false (the frame failed) on an exception.

@@ -53,9 +53,15 @@ std::vector<Index> HitCheck::points(const double* keyValues, const double* coord
 }
 
 bool HitCheck::passes(const double* coords, std::span<const Index> points, const double* values) const {
+    return offPoints(coords, points, values).empty();
+}
+
+std::vector<Index> HitCheck::offPoints(const double* coords, std::span<const Index> points,
+                                       const double* values) const {
     const Index c = model_.channels;
     std::vector<double> pm(points.size() * size_t(c));
     pm_.reconstructPoints(coords, points, pm.data());
+    std::vector<Index> off;
     for (size_t i = 0; i < points.size(); ++i) {
         double squared = 0;
         for (Index ch = 0; ch < c; ++ch) {
@@ -65,9 +71,9 @@ bool HitCheck::passes(const double* coords, std::span<const Index> points, const
         const bool regionKey = std::binary_search(regionKeys_.begin(), regionKeys_.end(), points[i]);
         const bool sentinel = std::binary_search(sentinels_.begin(), sentinels_.end(), points[i]);
         const double share = regionKey ? kConfirmedShare : sentinel ? kSentinelShare : kNeighbourShare;
-        if (!(std::sqrt(squared) <= share * model_.tolerance)) return false;  // NaN fails
+        if (!(std::sqrt(squared) <= share * model_.tolerance)) off.push_back(points[i]);  // NaN is off
     }
-    return true;
+    return off;
 }
 
 }  // namespace pmsc

@@ -65,6 +65,9 @@ public:
     /// points.size()*C) is at most kConfirmedShare * T at a region key, kSentinelShare * T at a
     /// sentinel and kNeighbourShare * T at any other point (NaN fails).
     bool passes(const double* coords, std::span<const Index> points, const double* values) const;
+    /// The points of `points` where PM is further from `values` than passes() allows, ascending.
+    std::vector<Index> offPoints(const double* coords, std::span<const Index> points,
+                                 const double* values) const;
 
 private:
     const Model& model_;

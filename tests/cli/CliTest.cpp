@@ -160,6 +160,45 @@ TEST_F(Cli, TrainRegionsAreChosenUnlessToldAndBadValuesFail) {
     EXPECT_TRUE(outputs(bad).empty());
 }
 
+TEST_F(Cli, TrainTakesPositionsForItsSentinelsAndBadOnesFail) {
+    TempDir dir;
+    // Positions from a table of one frame (1, N, 3): the training's first frame.
+    const pmsc::FrameSet train = pmsc::readFrames(shot_->train).frames;
+    pmsc::FrameSet table(1, train.points, 3);
+    std::copy(train.frame(0), train.frame(0) + train.points * 3, table.frame(0));
+    const auto positions = dir.file("positions.npy");
+    pmsc::writeFrames(positions, table, pmsc::NpyDtype::Float64);
+    RunResult r =
+        runPmsc(dir, {"train", "--frames", shot_->train, "--out", dir.file("m.pmsc"), "--max-keys", "24",
+                      "--tolerance", "0.02", "--positions", positions, "--sentinels", "5", "--quiet"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const pmsc::Model m = pmsc::readModel(dir.file("m.pmsc"));
+    ASSERT_TRUE(m.sentinels.has_value());
+    EXPECT_EQ(m.sentinels->points.size(), 5u);
+    EXPECT_FALSE(m.sentinels->fromMean);
+    r = runPmsc(dir, {"inspect", dir.file("m.pmsc")});
+    EXPECT_NE(r.out.find("sentinels     5 (from the positions given to train)"), std::string::npos) << r.out;
+
+    TempDir bad;
+    pmsc::FrameSet shortTable(1, train.points - 1, 3);
+    const auto wrong = bad.file("wrong.npy");
+    pmsc::writeFrames(wrong, shortTable, pmsc::NpyDtype::Float64);
+    const auto fails = [&](std::initializer_list<std::string> more,
+                           std::initializer_list<std::string> fragments) {
+        std::vector<std::string> args{"train",       "--frames", shot_->train, "--out", bad.file("m.pmsc"),
+                                      "--tolerance", "0.02"};
+        args.insert(args.end(), more);
+        expectFailure(runPmsc(bad, args), 2, fragments);
+    };
+    fails({"--positions", wrong}, {"--positions", "expected " + std::to_string(train.points) + " rows"});
+    fails({"--positions", bad.file("none.npy")}, {"none.npy"});
+    fails({"--positions", positions, "--shared-channels"},
+          {"--positions does not combine with --shared-channels"});
+    fails({"--sentinels", "-1"}, {"--sentinels"});
+    std::filesystem::remove(wrong);
+    EXPECT_TRUE(outputs(bad).empty());
+}
+
 TEST_F(Cli, TrainSeedsFiducials) {
     TempDir dir;
     const auto model = dir.file("m.pmsc");

@@ -173,6 +173,35 @@ TEST_F(Nodes, ErrorMonitorChecksAHitOnePartAloneCertifies) {
     EXPECT_EQ((ErrorMonitor{pmChecked, SoftCachePolicy(1e-12, 2e-12), false}(slot)), Route::Reconstruct);
 }
 
+TEST_F(Nodes, ErrorMonitorChecksEveryHitAtItsSentinels) {
+    // Both parts of the predicted error certify every frame, so only the sentinels check a hit.
+    Model checked = model;
+    checked.keyErrorNorm = KeyErrorNorm::Predicted;
+    checked.partEps = {1e6, 1e6};
+    const std::set<Index> keys(checked.keyPoints.begin(), checked.keyPoints.end());
+    Sentinels sentinels;
+    for (Index p = 0; p < checked.points && sentinels.points.size() < 5; p += 3)
+        if (!keys.count(p)) sentinels.points.push_back(p);
+    checked.sentinels = sentinels;
+    const FramePlan plan = FramePlan::make(checked, {}, 16, false);
+    FrameSlot slot(plan, checked.keyCount(), checked.basisSize(), false);
+    const auto route = [&](double tolerance) {
+        checked.tolerance = tolerance;
+        const PointMultiplier pmChecked(checked);
+        const SoftCachePolicy hitsAll(1e6, 2e6);
+        slot.reset(0, 1);
+        KeyPointEvaluator{checked, evaluator}(slot);
+        Projector{pmChecked}(slot);
+        return ErrorMonitor{pmChecked, hitsAll, false, nullptr, &evaluator}(slot);
+    };
+    EXPECT_EQ(route(1e6), Route::Reconstruct) << "PM within 0.8 T at every sentinel";
+    EXPECT_EQ(slot.pointsEvaluated, 5) << "a hit pays for its sentinels";
+    EXPECT_EQ(route(1e-12), Route::FailThrough) << "PM off at a sentinel: the whole frame";
+    EXPECT_EQ(slot.decision.state, CacheState::Blend);
+    EXPECT_EQ(slot.decision.weight, 0.0);
+    EXPECT_EQ(slot.pointsEvaluated, checked.points);
+}
+
 TEST_F(Nodes, BlenderIsTheLinearInterpolationOfSectionFive) {
     const FramePlan plan = FramePlan::make(model, {}, 100, false);
     FrameSlot slot(plan, model.keyCount(), model.basisSize(), false);

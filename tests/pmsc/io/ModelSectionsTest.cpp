@@ -276,4 +276,38 @@ TEST(ModelSections, BadKeyNeighboursAreRejectedWithTheField) {
     expectMessage(bytes, {"key neighbour point"});
 }
 
+TEST(ModelSections, SentinelsRoundTripBitExactAndBadOnesAreRejectedWithTheField) {
+    Model m = smallModel();  // 7 points, keys {4, 0, 6}
+    pmsc::Sentinels s;
+    s.points = {2, 5};
+    s.coveringRadius = 1.5;
+    s.fromMean = false;
+    m.sentinels = s;
+    const std::string good = pmsc::encodeModel(m);
+    EXPECT_EQ(std::string(good.data() + kTagAt, 8), std::string("SENTINEL", 8));
+    const Model r = pmsc::decodeModel(good, "m.pmsc");
+    ASSERT_TRUE(r.sentinels.has_value());
+    EXPECT_EQ(r.sentinels->points, s.points);
+    EXPECT_EQ(r.sentinels->coveringRadius, 1.5);
+    EXPECT_FALSE(r.sentinels->fromMean);
+    EXPECT_EQ(pmsc::encodeModel(r), good);
+    // Payload: u32 source, f64 covering radius, u64 count, u64[count] points.
+    std::string bytes = good;
+    poke<std::uint32_t>(bytes, kPayloadAt, 2);
+    reseal(bytes);
+    expectMessage(bytes, {"sentinels' source 2"});
+    bytes = good;
+    poke<double>(bytes, kPayloadAt + 4, -1.0);
+    reseal(bytes);
+    expectMessage(bytes, {"covering radius"});
+    bytes = good;
+    poke<std::uint64_t>(bytes, kPayloadAt + 12, 8);  // more than N = 7
+    reseal(bytes);
+    expectMessage(bytes, {"sentinel count 8"});
+    bytes = good;
+    poke<std::uint64_t>(bytes, kPayloadAt + 20, 7);  // a point outside [0, N)
+    reseal(bytes);
+    expectMessage(bytes, {"sentinel point"});
+}
+
 }  // namespace
