@@ -15,7 +15,7 @@
 // too (keys_plus_bytes_ms). Each limit is the fastest of its runs (the keys: per frame, averaged
 // over the frames). Benchmarks, in order:
 //   BM_StreamRead      the bandwidth: T threads reading a buffer at least the double basis's size
-//   BM_KeysAlone       the key points of one frame, one evaluate() call
+//   BM_KeysAlone       what a hit computes of one frame: its key points, then its sentinels
 //   BM_Full            the full calculation of one frame (evaluateAll): the speedup's numerator
 //   BM_Engine/0 and /1 the engine over the frames, double and float basis: frame_ms,
 //                      roofline_ms, of_roofline (roofline / frame time: 1 is the limit), speedup
@@ -138,16 +138,30 @@ double measureBandwidth() {
     return bw;
 }
 
+/// The points a hit computes after its keys: the model's sentinels (pmsc::HitCheck), ascending.
+std::vector<Index> sentinelPoints(const pmsc::Model& model) {
+    std::vector<Index> points;
+    if (model.sentinels) points = model.sentinels->points;
+    std::sort(points.begin(), points.end());
+    return points;
+}
+
+/// What a hit must compute: its keys, then its sentinels (a second call, as the error monitor
+/// makes it).
 double measureKeys() {
     static const double seconds = [] {
         const Setup& s = setup();
         const Index k = s.model.keyCount(), c = s.model.channels;
-        std::vector<double> out(static_cast<size_t>(k * c));
+        const std::vector<Index> sentinels = sentinelPoints(s.model);
+        std::vector<double> out(static_cast<size_t>(std::max<Index>(k, Index(sentinels.size())) * c));
         // Frames differ (a light far from the medium marches longer rays): the mean over the run's
         // frames of each frame's fastest of three calls.
         double total = 0;
-        for (Index frame = s.first; frame <= s.last; ++frame)
+        for (Index frame = s.first; frame <= s.last; ++frame) {
             total += fastestSeconds(3, [&] { s.evaluator->evaluate(frame, s.model.keyPoints, out.data()); });
+            if (!sentinels.empty())
+                total += fastestSeconds(3, [&] { s.evaluator->evaluate(frame, sentinels, out.data()); });
+        }
         return total / static_cast<double>(s.last - s.first + 1);
     }();
     return seconds;
@@ -186,13 +200,17 @@ void BM_StreamRead(benchmark::State& state) {
 
 void BM_KeysAlone(benchmark::State& state) {
     const Setup& s = setup();
-    std::vector<double> out(static_cast<size_t>(s.model.keyCount() * s.model.channels));
+    const std::vector<Index> sentinels = sentinelPoints(s.model);
+    std::vector<double> out(
+        static_cast<size_t>(std::max<Index>(s.model.keyCount(), Index(sentinels.size())) * s.model.channels));
     Index frame = s.first;
     for (auto _ : state) {
         s.evaluator->evaluate(frame, s.model.keyPoints, out.data());
+        if (!sentinels.empty()) s.evaluator->evaluate(frame, sentinels, out.data());
         frame = frame == s.last ? s.first : frame + 1;
     }
     state.counters["keys"] = static_cast<double>(s.model.keyCount());
+    state.counters["sentinels"] = static_cast<double>(sentinels.size());
 }
 
 void BM_Full(benchmark::State& state) {

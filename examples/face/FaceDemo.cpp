@@ -6,6 +6,7 @@
 #include "evaluators/face/FaceEvaluator.h"
 #include "pmsc/AtomicFile.h"
 #include "pmsc/Errors.h"
+#include "pmsc/HitCheck.h"
 #include "pmsc/Metrics.h"
 #include "pmsc/PointMultiplier.h"
 #include "pmsc/SoftCache.h"
@@ -328,6 +329,8 @@ PoseTimings timeFullPoseAgainstPmsc(const DemoRun& run, const FaceScene& scene, 
     std::vector<double> keys(static_cast<size_t>(3 * model.keyCount())),
         coords(static_cast<size_t>(model.coordCount()));
     evaluator.evaluate(validation.front()->frame, model.keyPoints, keys.data());  // warm the key plan cache
+    const HitCheck check(model, pm);
+    std::vector<double> checkValues;
     for (Index i = 0; i < timed; ++i) {
         const Index frame =
             validation[static_cast<size_t>(i * static_cast<Index>(validation.size()) / timed)]->frame;
@@ -344,10 +347,25 @@ PoseTimings timeFullPoseAgainstPmsc(const DemoRun& run, const FaceScene& scene, 
         c0 = threadCpuSeconds();
         w0 = DemoClock::now();
         pm.project(keys.data(), coords.data());
-        volatile double e = pm.keyError(keys.data(), coords.data());
+        PredictedParts parts;
+        volatile double e = pm.keyError(keys.data(), coords.data(), &parts);
         (void)e;
         pt.cpuProject += threadCpuSeconds() - c0;
         pt.wallProject += secondsSince(w0);
+        // A hit's check (pmsc::HitCheck): its sentinels, and near its worst keys when one part of
+        // the key error alone certifies it, posed and compared with PM.
+        c0 = threadCpuSeconds();
+        w0 = DemoClock::now();
+        if (check.needed({CacheState::Hit, 0.0}, parts)) {
+            const std::vector<Index> points = check.points(keys.data(), coords.data(), parts);
+            checkValues.resize(points.size() * 3);
+            evaluator.evaluate(frame, points, checkValues.data());
+            volatile bool passes = check.passes(coords.data(), points, checkValues.data());
+            (void)passes;
+            pt.checkPoints += static_cast<double>(points.size());
+        }
+        pt.cpuCheck += threadCpuSeconds() - c0;
+        pt.wallCheck += secondsSince(w0);
         c0 = threadCpuSeconds();
         w0 = DemoClock::now();
         pm.reconstruct(coords.data(), rec.data());

@@ -212,12 +212,15 @@ void reportTiming(nlohmann::json& report, const PoseTimings& pt) {
         {"full_pose", fullSeconds},
         {"key_posing", pt.cpuKeys / static_cast<double>(timed)},
         {"projection", pt.cpuProject / static_cast<double>(timed)},
+        {"hit_check", pt.cpuCheck / static_cast<double>(timed)},
+        {"hit_check_points", pt.checkPoints / static_cast<double>(timed)},
         {"reconstruction", pt.cpuReconstruct / static_cast<double>(timed)},
         {"key_cost_fraction", pt.cpuKeys / pt.cpuFull},
+        {"speedup_without_check", pt.cpuFull / (pt.cpuKeys + pt.cpuProject + pt.cpuReconstruct)},
         {"wall",
          {{"full_pose", pt.wallFull / static_cast<double>(timed)},
-          {"pmsc", (pt.wallKeys + pt.wallProject + pt.wallReconstruct) / static_cast<double>(timed)},
-          {"speedup", pt.wallFull / (pt.wallKeys + pt.wallProject + pt.wallReconstruct)}}}};
+          {"pmsc", pt.pmscWallSeconds()},
+          {"speedup", pt.wallFull / (pt.pmscWallSeconds() * static_cast<double>(timed))}}}};
 }
 
 // Where the selector put the key points (upstream region table, face split by the mouth box), and

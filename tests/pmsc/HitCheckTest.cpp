@@ -2,6 +2,7 @@
 // it reads near the keys (KeyNeighbours.h) and over what training saw move (Sentinels.h).
 #include "pmsc/HitCheck.h"
 #include "pmsc/KeyNeighbours.h"
+#include "pmsc/Learning.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/Sentinels.h"
 #include "pmsc/Training.h"
@@ -240,6 +241,25 @@ TEST(Sentinels, TrainingSpreadsThemOverAShapeWithAPredictedKeyError) {
     EXPECT_FALSE(trainSheet(true, 0.01, 0, 40).sentinels.has_value()) << "light is not a shape";
     EXPECT_FALSE(trainSheet(false, 0, 0, 40).sentinels.has_value()) << "no tolerance: nothing to check";
     EXPECT_FALSE(trainSheet(false, 0.01, 0, 0).sentinels.has_value()) << "--sentinels 0";
+}
+
+TEST(Sentinels, LearnChoosesThemAgainFromTheLearnedMeanAndBasis) {
+    pmsc::TrainingOptions o;
+    o.basis = 3;
+    o.maxKeys = 12;
+    o.tolerance = 0.01;
+    o.regions.count = 0;
+    o.sentinels = 40;
+    o.learnable = true;
+    const Model m = pmsc::train(sheetFrames(60), o);
+    ASSERT_TRUE(m.sentinels.has_value());
+    const Model learned = pmsc::learn(m, sheetFrames(90));
+    ASSERT_TRUE(learned.sentinels.has_value());
+    EXPECT_EQ(learned.sentinels->points.size(), m.sentinels->points.size());
+    EXPECT_TRUE(learned.sentinels->fromMean);
+    const std::set<Index> keys(learned.keyPoints.begin(), learned.keyPoints.end());
+    for (const Index p : learned.sentinels->points) EXPECT_EQ(keys.count(p), 0u) << p;
+    EXPECT_NO_THROW(learned.validate());
 }
 
 TEST(Sentinels, EveryHitComputesThemAndTheyHoldPmWithinTheirShareOfTheTolerance) {
