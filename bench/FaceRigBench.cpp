@@ -6,6 +6,8 @@
 //                    reconstruction of all points (what a hit costs)
 //   BM_FaceKeyPose, BM_FaceReconstruct: the two big parts of BM_FacePmsc (BM_FaceKeyPose's
 //                    counters: the dependency closure the keys pose, FaceRig::closureSize)
+//   BM_FaceSentinelPose: a hit's sentinels posed alone (with a model that has them), and the keys
+//                    and sentinels in one call against two (counter one_call_over_two)
 //   BM_FaceKeyErrorPredictedVsRms: the key error of a frame in `pmsc train --tolerance`'s default
 //                    measure (the predicted point error: the key RMS and the leave-one-out error)
 //                    against the key RMS alone, timed alternately (counter predicted_over_rms)
@@ -24,6 +26,8 @@
 #include <benchmark/benchmark.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <map>
@@ -109,20 +113,69 @@ void BM_FaceReconstruct(benchmark::State& state) {
     }
 }
 
+/// The model's sentinels (pmsc::HitCheck), ascending; empty without them.
+std::vector<Index> sentinels(const Model& model) {
+    std::vector<Index> points;
+    if (model.sentinels) points = model.sentinels->points;
+    std::sort(points.begin(), points.end());
+    return points;
+}
+
 void BM_FacePmsc(benchmark::State& state) {
     const Setup& s = setup();
     const PointMultiplier pm(s.model);
+    const std::vector<Index> check = sentinels(s.model);
     std::vector<double> keys(static_cast<size_t>(3 * s.model.keyCount())),
-        coords(static_cast<size_t>(s.model.coordCount()));
+        coords(static_cast<size_t>(s.model.coordCount())), checked(3 * check.size());
     std::vector<double> out(static_cast<size_t>(3 * s.model.points));
     size_t i = 0;
     for (auto _ : state) {
-        s.evaluator->evaluate(s.frames[i++ % s.frames.size()], s.model.keyPoints, keys.data());
+        const Index frame = s.frames[i++ % s.frames.size()];
+        s.evaluator->evaluate(frame, s.model.keyPoints, keys.data());
         pm.project(keys.data(), coords.data());
         benchmark::DoNotOptimize(pm.keyError(keys.data(), coords.data()));
+        if (!check.empty()) s.evaluator->evaluate(frame, check, checked.data());  // a hit's sentinels
         pm.reconstruct(coords.data(), out.data());
         benchmark::DoNotOptimize(out.data());
     }
+    state.counters["sentinels"] = static_cast<double>(check.size());
+}
+
+/// A hit's sentinels posed alone (the error monitor's second call), and the keys and sentinels in
+/// one call for comparison (counter one_call_over_two: what merging the calls would save).
+void BM_FaceSentinelPose(benchmark::State& state) {
+    const Setup& s = setup();
+    const std::vector<Index> check = sentinels(s.model);
+    if (check.empty()) {
+        state.SkipWithError("the model has no sentinels (PMSC_FACE_MODEL: a model of pmsc demo face)");
+        return;
+    }
+    std::vector<Index> both = check;
+    both.insert(both.end(), s.model.keyPoints.begin(), s.model.keyPoints.end());
+    std::sort(both.begin(), both.end());
+    std::vector<double> out(3 * both.size());
+    double two = 0, one = 0;
+    size_t i = 0;
+    for (auto _ : state) {
+        const Index frame = s.frames[i++ % s.frames.size()];
+        s.evaluator->evaluate(frame, check, out.data());
+        benchmark::DoNotOptimize(out.data());
+        state.PauseTiming();
+        const auto t0 = std::chrono::steady_clock::now();
+        s.evaluator->evaluate(frame, s.model.keyPoints, out.data());
+        s.evaluator->evaluate(frame, check, out.data());
+        const auto t1 = std::chrono::steady_clock::now();
+        s.evaluator->evaluate(frame, both, out.data());
+        const auto t2 = std::chrono::steady_clock::now();
+        two += std::chrono::duration<double>(t1 - t0).count();
+        one += std::chrono::duration<double>(t2 - t1).count();
+        state.ResumeTiming();
+    }
+    const auto closure = s.evaluator->rig().closureSize(check);
+    state.counters["sentinels"] = static_cast<double>(check.size());
+    state.counters["closure_relax"] = static_cast<double>(closure.relax);
+    state.counters["closure_contact"] = static_cast<double>(closure.contact);
+    state.counters["one_call_over_two"] = two > 0 ? one / two : 0.0;
 }
 
 void BM_FaceKeyErrorPredictedVsRms(benchmark::State& state) {
@@ -146,6 +199,7 @@ void BM_FaceKeyErrorPredictedVsRms(benchmark::State& state) {
 BENCHMARK(BM_FaceFullPose)->Unit(benchmark::kMillisecond)->MinTime(2.0);
 BENCHMARK(BM_FacePmsc)->Unit(benchmark::kMillisecond)->MinTime(2.0);
 BENCHMARK(BM_FaceKeyPose)->Unit(benchmark::kMillisecond)->MinTime(1.0);
+BENCHMARK(BM_FaceSentinelPose)->Unit(benchmark::kMillisecond)->MinTime(1.0);
 BENCHMARK(BM_FaceReconstruct)->Unit(benchmark::kMillisecond)->MinTime(1.0);
 BENCHMARK(BM_FaceKeyErrorPredictedVsRms)->Unit(benchmark::kMicrosecond)->MinTime(1.0);
 
