@@ -217,21 +217,14 @@ private:
         Index full = regions_->fullPoints(pointWeights, local.data());
         const double most = regions_->regions().maxLocalFraction * double(model_.points);
         if (!(double(full) <= most)) return allUnknown(s);
-        std::vector<Index> sentinels;
-        for (const Index p : check_.sentinels()) {
-            if (pointWeights[size_t(p)] == 0.0) sentinels.push_back(p);
-        }
+        const std::vector<Index> sentinels = check_.unblendedSentinels(pointWeights);
         if (!sentinels.empty()) {
             std::vector<Index> missingSentinels = unknown(s, sentinels);
             if (!missingSentinels.empty()) return missingSentinels;
             std::vector<double> values(sentinels.size() * size_t(model_.channels));
             known_.read(s, frame, sentinels, values.data());
             const std::vector<Index> off = check_.offPoints(coords, sentinels, values.data());
-            for (const Index p : off) {
-                const Index r = regions_->regionOf(p);
-                if (r < 0) return allUnknown(s);
-                weights[size_t(r)] = 1.0;
-            }
+            if (!regions_->failRegionsOf(off, weights)) return allUnknown(s);
             if (!off.empty()) {
                 regions_->pointWeights(weights, pointWeights.data());
                 full = regions_->fullPoints(pointWeights, local.data());

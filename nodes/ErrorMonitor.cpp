@@ -60,10 +60,7 @@ bool ErrorMonitor::checkLocal(FrameSlot& slot, Index& full, Index& checked) cons
     // computed, as a hit's are: a region judged a hit may carry a motion its keys do not see. Each
     // region holding one that PM misses by more than its share of T fails through as well.
     if (evaluator_ == nullptr || check_.sentinels().empty()) return true;
-    std::vector<Index> points;
-    for (const Index p : check_.sentinels()) {
-        if (slot.pointWeights[size_t(p)] == 0.0) points.push_back(p);
-    }
+    const std::vector<Index> points = check_.unblendedSentinels(slot.pointWeights);
     checked = static_cast<Index>(points.size());
     if (points.empty()) return true;
     thread_local std::vector<double> values;
@@ -71,14 +68,12 @@ bool ErrorMonitor::checkLocal(FrameSlot& slot, Index& full, Index& checked) cons
     if (!evaluateInto(slot, points, values.data(), "sentinels")) return false;
     const std::vector<Index> off = check_.offPoints(slot.coords.data(), points, values.data());
     if (off.empty()) return true;
-    for (const Index p : off) {
-        const Index r = regions_->regionOf(p);
-        if (r < 0) {  // in no region: nothing local can take it, the frame fails through whole
-            full = Index(slot.pointWeights.size());
-            return true;
-        }
-        slot.regionWeights[size_t(r)] = 1.0;
-        slot.regionStates[size_t(r)] = CacheState::Miss;
+    if (!regions_->failRegionsOf(off, slot.regionWeights)) {  // the frame fails through whole
+        full = Index(slot.pointWeights.size());
+        return true;
+    }
+    for (size_t r = 0; r < slot.regionWeights.size(); ++r) {
+        if (slot.regionWeights[r] == 1.0) slot.regionStates[r] = CacheState::Miss;
     }
     regions_->pointWeights(slot.regionWeights, slot.pointWeights.data());
     full = regions_->fullPoints(slot.pointWeights, slot.localPoints.data());

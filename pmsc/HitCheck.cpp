@@ -52,6 +52,14 @@ std::vector<Index> HitCheck::points(const double* keyValues, const double* coord
     return out;
 }
 
+std::vector<Index> HitCheck::unblendedSentinels(std::span<const double> pointWeights) const {
+    std::vector<Index> out;
+    for (const Index p : sentinels_) {
+        if (pointWeights[size_t(p)] == 0.0) out.push_back(p);
+    }
+    return out;
+}
+
 bool HitCheck::passes(const double* coords, std::span<const Index> points, const double* values) const {
     return offPoints(coords, points, values).empty();
 }

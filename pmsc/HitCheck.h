@@ -61,6 +61,9 @@ public:
     std::vector<Index> points(const double* keyValues, const double* coords, PredictedParts parts) const;
     /// The sentinels, ascending (empty without them).
     std::span<const Index> sentinels() const { return sentinels_; }
+    /// The sentinels a local frame hands back as PM alone (weight 0 of the full result in
+    /// `pointWeights`, N values), ascending: the ones its check computes.
+    std::vector<Index> unblendedSentinels(std::span<const double> pointWeights) const;
     /// The hit stands: PM's error at each of `points` against its computed value (`values`,
     /// points.size()*C) is at most kConfirmedShare * T at a region key, kSentinelShare * T at a
     /// sentinel and kNeighbourShare * T at any other point (NaN fails).

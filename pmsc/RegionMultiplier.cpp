@@ -81,6 +81,15 @@ void RegionMultiplier::pointWeights(std::span<const double> regionWeights, doubl
     }
 }
 
+bool RegionMultiplier::failRegionsOf(std::span<const Index> points, std::span<double> regionWeights) const {
+    for (const Index p : points) {
+        const Index r = regionOf_[size_t(p)];
+        if (r < 0) return false;
+        regionWeights[size_t(r)] = 1.0;
+    }
+    return true;
+}
+
 Index RegionMultiplier::fullPoints(std::span<const double> pointWeights, Index* points) const {
     Index count = 0;
     for (size_t p = 0; p < pointWeights.size(); ++p)

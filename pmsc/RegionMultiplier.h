@@ -32,8 +32,9 @@ public:
     /// of the region is not finite. `regionKeyValues`: the values of LocalRegions::extraKeyPoints
     /// (E*C; may be null when the model has none).
     double project(Index r, const double* keyValues, const double* regionKeyValues, double* coords) const;
-    /// The region point p belongs to (-1 for none).
-    Index regionOf(Index p) const { return regionOf_[size_t(p)]; }
+    /// Sets the full-result weight of each region holding one of `points` to 1 (it fails
+    /// through). False when a point is in no region (nothing local can take it).
+    bool failRegionsOf(std::span<const Index> points, std::span<double> regionWeights) const;
     /// Points of the region keys (LocalRegions::extraKeyPoints), evaluated for frames that do not
     /// hit as a whole.
     const std::vector<Index>& regionKeyPoints() const { return regions_.extraKeyPoints; }

@@ -313,6 +313,9 @@ struct Trainer {
         const double cells = static_cast<double>(std::max<Index>(1, model.points * model.trainFrames));
         return std::sqrt(model.totalEnergy / cells);
     }
+    /// The positions of the points the hit check reads (key neighbours, sentinels), N x 3; empty
+    /// when the model has no such check or no positions. `given`: they are the user's.
+    Eigen::MatrixXd checkPositions(bool& given) const;
     /// The points nearest each key (KeyNeighbours), where a hit one part of the predicted error
     /// alone certifies is checked; rank 0, on the final core.
     void keyNeighbours();
@@ -623,27 +626,29 @@ void Trainer::regions() {
     progress("regions", 1, 1);
 }
 
+Eigen::MatrixXd Trainer::checkPositions(bool& given) const {
+    // Only the predicted error's check reads its points (HitCheck), and only point positions give
+    // them a meaning: the positions the regions take, or the training mean when it is a shape.
+    given = options.regions.positions.size() > 0;
+    if (model.keyErrorNorm != KeyErrorNorm::Predicted || model.sharedChannels) return {};
+    Eigen::MatrixXd positions = given ? options.regions.positions : meanShape(model, rmsMotion());
+    if (positions.rows() != model.points || positions.cols() != 3) return {};
+    return positions;
+}
+
 void Trainer::keyNeighbours() {
-    // Only the predicted error's check reads them (HitCheck), and only point positions give them a
-    // meaning: the positions the regions take, or the training mean when it is a shape.
-    if (model.keyErrorNorm != KeyErrorNorm::Predicted || model.sharedChannels) return;
-    const Index k = model.keyCount();
-    if (model.points - k < kNeighboursPerKey) return;
-    const bool given = options.regions.positions.size() > 0;
-    Eigen::MatrixXd positions = options.regions.positions;
-    if (!given) positions = meanShape(model, rmsMotion());
-    if (positions.rows() != model.points || positions.cols() != 3) return;
+    if (model.points - model.keyCount() < kNeighboursPerKey) return;
+    bool given = false;
+    const Eigen::MatrixXd positions = checkPositions(given);
+    if (positions.size() == 0) return;
     model.keyNeighbours = nearestToKeys(positions, model.keyPoints, kNeighboursPerKey, !given);
 }
 
 void Trainer::sentinels() {
-    // As the key neighbours: only the predicted error's check reads them, and they need positions.
-    if (options.sentinels <= 0 || model.keyErrorNorm != KeyErrorNorm::Predicted || model.sharedChannels)
-        return;
-    const bool given = options.regions.positions.size() > 0;
-    Eigen::MatrixXd positions = options.regions.positions;
-    if (!given) positions = meanShape(model, rmsMotion());
-    if (positions.rows() != model.points || positions.cols() != 3) return;
+    if (options.sentinels <= 0) return;
+    bool given = false;
+    const Eigen::MatrixXd positions = checkPositions(given);
+    if (positions.size() == 0) return;
     Sentinels chosen = farthestPointSentinels(positions, basisMotion(model), model.keyPoints,
                                               sentinelCount(options.sentinels, model.points), !given);
     if (!chosen.points.empty()) model.sentinels = std::move(chosen);

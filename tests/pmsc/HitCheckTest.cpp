@@ -52,6 +52,17 @@ Model trainSheet(bool light = false, double tolerance = 0.01, Index regions = 0,
     return pmsc::train(sheetFrames(60, light), o);
 }
 
+/// The key values of frame 60 of the sheet, a frame no model here trained on (K*C values).
+std::vector<double> unseenKeys(const Model& m) {
+    const pmsc::FrameSet frames = sheetFrames(61);
+    const Index c = m.channels;
+    std::vector<double> keys(size_t(m.keyCount() * c));
+    for (Index i = 0; i < m.keyCount(); ++i)
+        for (Index ch = 0; ch < c; ++ch)
+            keys[size_t(i * c + ch)] = frames.frame(60)[m.keyPoints[size_t(i)] * c + ch];
+    return keys;
+}
+
 TEST(KeyNeighbours, AreTheNearestPointsThatAreNotKeysNearestFirst) {
     Eigen::MatrixXd line = Eigen::MatrixXd::Zero(10, 3);
     for (Index i = 0; i < 10; ++i) line(i, 0) = double(i);
@@ -128,12 +139,8 @@ TEST(HitCheck, ReadsTheNeighboursOfTheKeysWithTheLargestResidualsAndHoldsPmToThe
     const Model m = disagreeing();
     const pmsc::PointMultiplier pm(m);
     const pmsc::HitCheck check(m, pm);
-    const pmsc::FrameSet frames = sheetFrames(61);
-    const Index c = m.channels, k = m.keyCount();
-    std::vector<double> keys(size_t(k * c)), coords(size_t(m.coordCount()));
-    for (Index i = 0; i < k; ++i)
-        for (Index ch = 0; ch < c; ++ch)
-            keys[size_t(i * c + ch)] = frames.frame(60)[m.keyPoints[size_t(i)] * c + ch];
+    const Index c = m.channels;
+    std::vector<double> keys = unseenKeys(m), coords(size_t(m.coordCount()));
     // Key 5 off by far more than the fit can absorb: its neighbours are among the points checked.
     keys[size_t(5 * c + 2)] += 1.0;
     pm.project(keys.data(), coords.data());
@@ -164,11 +171,7 @@ TEST(HitCheck, HoldsPmCloserAtTheRegionKeysThanAtTheNeighbours) {
     const pmsc::PointMultiplier pm(m);
     const pmsc::HitCheck check(m, pm);
     const Index c = m.channels;
-    std::vector<double> keys(size_t(m.keyCount() * c)), coords(size_t(m.coordCount()));
-    const pmsc::FrameSet frames = sheetFrames(61);
-    for (Index i = 0; i < m.keyCount(); ++i)
-        for (Index ch = 0; ch < c; ++ch)
-            keys[size_t(i * c + ch)] = frames.frame(60)[m.keyPoints[size_t(i)] * c + ch];
+    std::vector<double> keys = unseenKeys(m), coords(size_t(m.coordCount()));
     pm.project(keys.data(), coords.data());
     const std::vector<Index> points = check.points(keys.data(), coords.data(), {1, 1});
     std::vector<double> values(points.size() * size_t(c));
@@ -272,11 +275,7 @@ TEST(Sentinels, EveryHitComputesThemAndTheyHoldPmWithinTheirShareOfTheTolerance)
     EXPECT_TRUE(check.needed({pmsc::CacheState::Hit, 0}, agree)) << "a hit both parts certify is checked too";
     EXPECT_FALSE(check.needed({pmsc::CacheState::Blend, 0.5}, agree));
     const Index c = m.channels;
-    std::vector<double> keys(size_t(m.keyCount() * c)), coords(size_t(m.coordCount()));
-    const pmsc::FrameSet frames = sheetFrames(61);
-    for (Index i = 0; i < m.keyCount(); ++i)
-        for (Index ch = 0; ch < c; ++ch)
-            keys[size_t(i * c + ch)] = frames.frame(60)[m.keyPoints[size_t(i)] * c + ch];
+    std::vector<double> keys = unseenKeys(m), coords(size_t(m.coordCount()));
     pm.project(keys.data(), coords.data());
     const std::vector<Index> points = check.points(keys.data(), coords.data(), agree);
     std::vector<Index> sorted = m.sentinels->points;
