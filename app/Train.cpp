@@ -84,9 +84,8 @@ std::vector<std::string> changedOptions(const TrainOptions& o, std::initializer_
 
 /// Shared-channel models are trained in memory on one process, without regions, learning or targets.
 void validateSharedChannels(TrainOptions& o, Spelling spelling) {
-    const auto changed =
-        changedOptions(o, {"targets", "positions", "regions", "feather", "region-keys", "region-stride",
-                           "learn-rank", "memory-limit", "out-of-core", "block-points"});
+    const auto changed = changedOptions(o, {"targets", "regions", "feather", "region-keys", "region-stride",
+                                            "learn-rank", "memory-limit", "out-of-core", "block-points"});
     if (!changed.empty())
         throw OptionError(optionName(changed.front(), spelling) + " does not combine with " +
                           optionName("shared-channels", spelling) +
@@ -274,20 +273,22 @@ MemoryPlan planMemory(const TrainOptions& o, const TrainSizes& sizes, Communicat
 
 }  // namespace
 
-namespace {
-
-/// The first three columns of a point table (TrainOptions::positions) of `points` rows.
-Eigen::MatrixXd readPositions(const std::string& path, Index points) {
-    const FrameFile table = readPointTable(path);
-    const FrameSet& t = table.frames;
-    if (t.points != points || t.channels < 3)
-        throw InputError("train: --positions " + path + " has " + std::to_string(t.points) + " rows of " +
+Eigen::MatrixXd positionsFromTable(const FrameSet& t, Index points, const std::string& what) {
+    if (t.frames != 1 || t.points != points || t.channels < 3)
+        throw InputError("train: " + what + " has " + std::to_string(t.points) + " rows of " +
                          std::to_string(t.channels) + " values, expected " + std::to_string(points) +
                          " rows (one per point) of at least 3 (x, y, z)");
     Eigen::MatrixXd out(points, 3);
     for (Index p = 0; p < points; ++p)
         for (Index k = 0; k < 3; ++k) out(p, k) = t.frame(0)[p * t.channels + k];
     return out;
+}
+
+namespace {
+
+/// The first three columns of a point table (TrainOptions::positions) of `points` rows.
+Eigen::MatrixXd readPositions(const std::string& path, Index points) {
+    return positionsFromTable(readPointTable(path).frames, points, "--positions " + path);
 }
 
 }  // namespace

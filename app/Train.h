@@ -77,6 +77,11 @@ struct TrainPlan {
 /// not writable, the shots do not match or the limit cannot be met.
 TrainPlan planTraining(const TrainOptions& options, Communicator& comm);
 
+/// The first three columns of a point table (one frame of `points` rows of at least 3 values: x, y,
+/// z, ...) as the N x 3 positions TrainingOptions::regions takes. @throws InputError naming `what`
+/// for another shape.
+Eigen::MatrixXd positionsFromTable(const FrameSet& table, Index points, const std::string& what);
+
 /// A model trained from files, and what training said about it.
 struct TrainOutcome {
     Model model;

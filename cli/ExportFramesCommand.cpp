@@ -9,6 +9,7 @@
 #include "evaluators/EvaluatorRegistry.h"
 #include "pmsc/Errors.h"
 #include "pmsc/NpyIO.h"
+#include "pmsc/PointPositions.h"
 #include "pmsc/Training.h"  // pmsc::Cancelled
 
 #include <tbb/blocked_range.h>
@@ -35,7 +36,7 @@ std::string specOrAsset(const std::string& text) {
 }  // namespace
 
 int runExportFrames(const std::vector<std::string>& args) {
-    std::string spec, outPath, framesText, dtype = "float64";
+    std::string spec, outPath, framesText, positionsPath, dtype = "float64";
     int threads = 0;
     bool quiet = false;
     ArgParser parser("export-frames", "SPEC|ASSET --out FRAMES.npy [--frames A-B[:STEP]] [options]",
@@ -48,6 +49,10 @@ int runExportFrames(const std::vector<std::string>& args) {
     parser.option("--out", "FRAMES.npy", "frames file to write", outPath, true);
     parser.option("--frames", "A-B[:STEP]", "frames to export (default: all)", framesText);
     parser.option("--dtype", "float64|float32", "element type (default float64)", dtype);
+    parser.option("--positions", "POINTS.npy",
+                  "also write the points' positions, (1, points, 3) float64, for `pmsc train --positions` "
+                  "(evaluators whose values are not positions: cornell, volume)",
+                  positionsPath);
     parser.option(
         "--threads", "T", "worker threads (default: every core; the file does not depend on it)",
         [&](const std::string& v) { threads = static_cast<int>(parseIndex("--threads", v, 1, 4096)); });
@@ -71,6 +76,11 @@ int runExportFrames(const std::vector<std::string>& args) {
         }
     }
     app::checkFramesInside(span, *evaluator, spec);
+    const auto* placed = dynamic_cast<const PointPositionsProvider*>(evaluator.get());
+    if (!positionsPath.empty() && placed == nullptr)
+        throw InputError("export-frames: --positions: evaluator '" + evaluator->name() +
+                         "' has no point positions of its own (values that are positions give theirs by "
+                         "their mean: train needs no --positions)");
     const Index n = evaluator->pointCount(), c = evaluator->channelCount(), count = span.count();
 
     NpyFrameWriter writer(outPath, count, n, c, type);  // a temporary file until commit()
@@ -106,6 +116,10 @@ int runExportFrames(const std::vector<std::string>& args) {
     writer.commit();
     std::cout << "pmsc export-frames: " << outPath << ": " << count << " frames x " << n << " points x " << c
               << " channels of " << spec << " (frames " << span.text() << ")\n";
+    if (placed != nullptr && !positionsPath.empty()) {
+        writeFrames(positionsPath, placed->pointPositions(), NpyDtype::Float64);
+        std::cout << "pmsc export-frames: " << positionsPath << ": positions of the " << n << " points\n";
+    }
     return kExitOk;
 }
 

@@ -98,7 +98,9 @@ void printModelJson(const Model& model, const ModelFileFacts& file) {
     if (model.sentinels)
         j["sentinels"] = {{"count", model.sentinels->points.size()},
                           {"covering_radius", model.sentinels->coveringRadius},
-                          {"positions", model.sentinels->fromMean ? "mean" : "given"}};
+                          {"positions", model.sentinels->source == SentinelSource::Mean    ? "mean"
+                                        : model.sentinels->source == SentinelSource::Given ? "given"
+                                                                                           : "point order"}};
     if (model.learning)
         j["learning"] = {{"rank", model.learning->maxRank},
                          {"stored_vectors", model.basisSize() + model.learning->extraBasis.cols()},
@@ -165,9 +167,13 @@ void printModelText(const Model& model, const ModelFileFacts& file) {
                   << "): a hit one part of the key error alone certifies is checked near its worst keys\n";
     if (model.sentinels)
         std::cout << "  sentinels     " << model.sentinels->points.size() << " (from the "
-                  << (model.sentinels->fromMean ? "training mean" : "positions given to train")
-                  << "), every moving point within " << fmt("%.6g", model.sentinels->coveringRadius)
-                  << " of one: computed beside every hit, which stands where PM is within "
+                  << describe(model.sentinels->source) << "), "
+                  << (model.sentinels->source == SentinelSource::PointOrder
+                          ? "one in each run of " + fmt("%.0f", model.sentinels->coveringRadius) +
+                                " moving points (train with --positions for a covering radius)"
+                          : "every moving point within " + fmt("%.6g", model.sentinels->coveringRadius) +
+                                " of one")
+                  << ": computed beside every hit, which stands where PM is within "
                   << fmt("%g", kSentinelShare) << " T of each\n";
     if (model.regions) {
         const LocalRegions& lr = *model.regions;

@@ -156,8 +156,9 @@ void declareCalibrationOptions(ArgParser& parser, TrainArgs& a) {
         a.request.positions);
     parser.option("--sentinels", "S",
                   "points spread over what the training saw move, computed beside every hit of a model with "
-                  "the predicted key error and point positions: a hit stands where PM is within 0.8 of the "
-                  "tolerance at each (default " +
+                  "a tolerance: a hit stands where PM is within 0.8 of the tolerance at each; spread over "
+                  "--positions or the training mean when it is a shape, else drawn in point order, " +
+                      std::to_string(kPointOrderFactor) + "x as many (default " +
                       std::to_string(options.sentinels) + ", at most 1 point in " +
                       std::to_string(kSentinelSpacing) + "; 0 = none)",
                   [&](const std::string& v) { options.sentinels = parseIndex("--sentinels", v, 0); });

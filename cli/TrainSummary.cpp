@@ -1,5 +1,6 @@
 #include "cli/TrainSummary.h"
 #include "cli/Format.h"
+#include "pmsc/Sentinels.h"
 
 #include <cstdio>
 
@@ -67,6 +68,16 @@ void printTrainSummary(std::ostream& out, const std::string& modelPath, const Fr
     } else {
         out << "  eps         [" << fmt("%.6g", model.epsMin) << ", " << fmt("%.6g", model.epsMax) << "] "
             << measure << ", from the training frames (no --tolerance: not calibrated)\n";
+    }
+    if (model.sentinels) {
+        const Sentinels& s = *model.sentinels;
+        out << "  sentinels   " << s.points.size() << ", computed beside every hit: ";
+        if (s.source == SentinelSource::PointOrder)
+            out << "drawn in point order (no positions given, and the training mean is not a shape; "
+                   "--positions POINTS.npy spreads them over space)\n";
+        else
+            out << "spread over the " << describe(s.source) << ", every moving point within "
+                << fmt("%.6g", s.coveringRadius) << " of one\n";
     }
     if (!report.regions.empty()) out << "  regions     " << report.regions << "\n";
     for (const auto& w : report.warnings) out << "  warning: " << w << "\n";

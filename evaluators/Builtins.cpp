@@ -27,7 +27,7 @@ EvaluatorRegistry EvaluatorRegistry::withBuiltins() {
            "a procedural deforming surface (G x G points, 3 channels); novel=N ramps in motion no other take "
            "has",
            [](const std::string& a) -> Made { return synthetic::makeSyntheticSurface(a); }});
-    r.add({"cornell", "[points=N,samples=S,lights=all|training|scattered|path]",
+    r.add({"cornell", "[points=N,samples=S,lights=all|training|scattered|path|outside]",
            "indirect light in the measured Cornell box at the voxels of an OpenVDB lighting cache (paper "
            "section 8)",
            [](const std::string& a) -> Made { return cornell::makeCornellEvaluator(a); }});
@@ -42,7 +42,7 @@ EvaluatorRegistry EvaluatorRegistry::withBuiltins() {
            [](const std::string& a) -> Made {
                return face::makeFaceControlEvaluator(requireArgs("face-control", "DIR", a));
            }});
-    r.add({"volume", "FILE.vdb[:grid=NAME][:samples=S][:lights=all|training|between|path]",
+    r.add({"volume", "FILE.vdb[:grid=NAME][:samples=S][:lights=all|training|between|path|outside]",
            "light scattered at the active voxels of any OpenVDB density grid",
            [](const std::string& a) -> Made {
                return volume::makeVolumeEvaluator(requireArgs("volume", "FILE.vdb", a));

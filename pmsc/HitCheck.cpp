@@ -13,19 +13,24 @@ HitCheck::HitCheck(const Model& model, const PointMultiplier& pm) : model_(model
     if (model.sentinels) sentinels_ = model.sentinels->points;
     std::sort(sentinels_.begin(), sentinels_.end());
     sentinels_.erase(std::unique(sentinels_.begin(), sentinels_.end()), sentinels_.end());
-    available_ = model.keyErrorNorm == KeyErrorNorm::Predicted && !model.sharedChannels &&
-                 (!regionKeys_.empty() || model.keyNeighbours.has_value() || !sentinels_.empty());
+    predicted_ = model.keyErrorNorm == KeyErrorNorm::Predicted && !model.sharedChannels;
+    available_ =
+        !sentinels_.empty() || (predicted_ && (!regionKeys_.empty() || model.keyNeighbours.has_value()));
+}
+
+bool HitCheck::disagree(PredictedParts parts) const {
+    return predicted_ && partsDisagree(parts, model_.partEps);
 }
 
 bool HitCheck::needed(const CacheDecision& decision, PredictedParts parts) const {
     if (!available_ || decision.state != CacheState::Hit) return false;
-    return !sentinels_.empty() || partsDisagree(parts, model_.partEps);
+    return !sentinels_.empty() || disagree(parts);
 }
 
 std::vector<Index> HitCheck::points(const double* keyValues, const double* coords,
                                     PredictedParts parts) const {
     std::vector<Index> out = sentinels_;
-    if (!partsDisagree(parts, model_.partEps)) return out;  // ascending already
+    if (!disagree(parts)) return out;  // ascending already
     out.insert(out.end(), regionKeys_.begin(), regionKeys_.end());
     if (model_.keyNeighbours) {
         const Index k = model_.keyCount();

@@ -30,7 +30,8 @@ constexpr double kNeighbourShare = 0.9;
 
 /// The check of a hit: PM against the calculation at points it did not fit.
 ///
-/// Every hit of a model with sentinels (Sentinels.h) computes them: points spread over what the
+/// Every hit of a model with sentinels (Sentinels.h; any key error, shared channels or not) computes
+/// them: points spread over what the
 /// training saw move, so a motion the training never saw shows at one of them wherever its error
 /// patch is wider than their spacing. A hit that one part of the predicted error alone certifies
 /// (KeyErrorNorm::Predicted, partsDisagree) also computes
@@ -50,8 +51,8 @@ public:
     /// Keeps references to `model` and `pm` (PM of the same model), which must outlive it.
     HitCheck(const Model& model, const PointMultiplier& pm);
 
-    /// The model has a predicted key error and points to check at (sentinels, region keys or key
-    /// neighbours).
+    /// The model has points to check at: sentinels (any key error), or region keys or key
+    /// neighbours (a predicted key error).
     bool available() const { return available_; }
     /// A frame with this decision and these parts is checked: a hit, when the model has sentinels;
     /// a hit whose parts disagree, when it has region keys or key neighbours.
@@ -77,7 +78,10 @@ private:
     const PointMultiplier& pm_;
     std::vector<Index> regionKeys_;  ///< ascending
     std::vector<Index> sentinels_;   ///< ascending
+    bool predicted_ = false;         ///< the key error has two parts that can disagree
     bool available_ = false;
+
+    bool disagree(PredictedParts parts) const;
 };
 
 }  // namespace pmsc

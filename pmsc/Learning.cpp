@@ -257,16 +257,22 @@ void learnedKeyNeighbours(const Model& model, Model& out, LearnReport& report) {
 }
 
 /// The learned model's sentinels (Sentinels.h): chosen again, as many as before, from the learned
-/// mean and basis when they came from the mean (the new frames may move what the old ones left
-/// still, and the sentinels must cover it); the old ones, less any that became keys, when they came
-/// from positions the user gave.
-void learnedSentinels(const Model& model, Model& out) {
-    if (!model.sentinels || out.keyErrorNorm != KeyErrorNorm::Predicted) return;
+/// mean and basis when they came from the mean or the point order (the new frames may move what
+/// the old ones left still, and the sentinels must cover it); the old ones, less any that became
+/// keys, when they came from positions the user gave.
+void learnedSentinels(const Model& model, Model& out, std::uint64_t seed) {
+    if (!model.sentinels) return;
     const Index count = static_cast<Index>(model.sentinels->points.size());
-    if (model.sentinels->fromMean && out.channels == 3 && !out.sharedChannels) {
+    if (model.sentinels->source == SentinelSource::Mean && out.channels == 3 && !out.sharedChannels) {
         const Eigen::MatrixXd mean =
             Eigen::Map<const Eigen::MatrixXd>(out.mean.data(), 3, out.points).transpose();
-        Sentinels chosen = farthestPointSentinels(mean, basisMotion(out), out.keyPoints, count, true);
+        Sentinels chosen =
+            farthestPointSentinels(mean, basisMotion(out), out.keyPoints, count, SentinelSource::Mean);
+        if (!chosen.points.empty()) out.sentinels = std::move(chosen);
+        return;
+    }
+    if (model.sentinels->source == SentinelSource::PointOrder) {
+        Sentinels chosen = pointOrderSentinels(basisMotion(out), out.keyPoints, count, seed);
         if (!chosen.points.empty()) out.sentinels = std::move(chosen);
         return;
     }
@@ -537,7 +543,9 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
     }
     Model out = learnedCore(model, u, keys);
     learnedKeyNeighbours(model, out, report);
-    learnedSentinels(model, out);
+    // The draw's seed: the frames seen, so a learn of other frames draws afresh and the same learn
+    // draws the same points.
+    learnedSentinels(model, out, static_cast<std::uint64_t>(out.trainFrames));
     report.basisAfter = u.basisSize;
     report.largestAngle =
         largestPrincipalAngle(u.basis, model.basis.leftCols(std::min(u.basisSize, model.basisSize())));

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <random>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -39,28 +40,40 @@ Eigen::VectorXd basisMotion(const Model& model) {
     return motion;
 }
 
-Sentinels farthestPointSentinels(const Eigen::Ref<const Eigen::MatrixXd>& positions,
-                                 const Eigen::Ref<const Eigen::VectorXd>& motion, std::span<const Index> keys,
-                                 Index count, bool fromMean) {
-    const Index n = positions.rows();
-    if (positions.cols() != 3) throw std::invalid_argument("farthestPointSentinels: positions must be N x 3");
-    if (motion.size() != n)
-        throw std::invalid_argument("farthestPointSentinels: " + std::to_string(motion.size()) +
-                                    " motions for " + std::to_string(n) + " points");
+namespace {
+
+/// The points that are not keys and move at least kMovingShare of the most (ascending).
+std::vector<Index> movingPool(const Eigen::Ref<const Eigen::VectorXd>& motion, std::span<const Index> keys,
+                              const char* caller) {
+    const Index n = motion.size();
     std::vector<char> excluded(static_cast<size_t>(n), 0);
     for (const Index k : keys) {
         if (k < 0 || k >= n)
-            throw std::invalid_argument("farthestPointSentinels: key point " + std::to_string(k) +
+            throw std::invalid_argument(std::string(caller) + ": key point " + std::to_string(k) +
                                         " out of range");
         excluded[size_t(k)] = 1;
     }
-    Sentinels out;
-    out.fromMean = fromMean;
     const double most = n > 0 ? motion.maxCoeff() : 0.0;
     std::vector<Index> pool;
     for (Index p = 0; p < n; ++p) {
         if (!excluded[size_t(p)] && motion[p] > 0 && motion[p] >= kMovingShare * most) pool.push_back(p);
     }
+    return pool;
+}
+
+}  // namespace
+
+Sentinels farthestPointSentinels(const Eigen::Ref<const Eigen::MatrixXd>& positions,
+                                 const Eigen::Ref<const Eigen::VectorXd>& motion, std::span<const Index> keys,
+                                 Index count, SentinelSource source) {
+    const Index n = positions.rows();
+    if (positions.cols() != 3) throw std::invalid_argument("farthestPointSentinels: positions must be N x 3");
+    if (motion.size() != n)
+        throw std::invalid_argument("farthestPointSentinels: " + std::to_string(motion.size()) +
+                                    " motions for " + std::to_string(n) + " points");
+    const std::vector<Index> pool = movingPool(motion, keys, "farthestPointSentinels");
+    Sentinels out;
+    out.source = source;
     if (pool.empty() || count <= 0) return out;
     // Start from the pool's point that moves most (lowest index on ties): where error is likeliest.
     Index first = pool.front();
@@ -91,24 +104,58 @@ Sentinels farthestPointSentinels(const Eigen::Ref<const Eigen::MatrixXd>& positi
     return out;
 }
 
+Sentinels pointOrderSentinels(const Eigen::Ref<const Eigen::VectorXd>& motion, std::span<const Index> keys,
+                              Index count, std::uint64_t seed) {
+    const std::vector<Index> pool = movingPool(motion, keys, "pointOrderSentinels");
+    Sentinels out;
+    out.source = SentinelSource::PointOrder;
+    const auto moving = static_cast<Index>(pool.size());
+    const Index want = std::min(count, moving);
+    if (want <= 0) return out;
+    std::mt19937_64 rng(seed);
+    out.points.reserve(static_cast<size_t>(want));
+    for (Index s = 0; s < want; ++s) {
+        const Index begin = s * moving / want, end = (s + 1) * moving / want;  // end > begin: want <= moving
+        // rng() % length: the engine's output is fixed by the standard, the distributions' are not.
+        const auto length = static_cast<std::uint64_t>(end - begin);
+        out.points.push_back(pool[size_t(begin + static_cast<Index>(rng() % length))]);
+    }
+    const Index longestRun = (moving + want - 1) / want;  // ceiling: the runs' lengths differ by one at most
+    out.coveringRadius = static_cast<double>(longestRun);
+    return out;
+}
+
+const char* describe(SentinelSource source) {
+    switch (source) {
+        case SentinelSource::Given:
+            return "positions given to train";
+        case SentinelSource::Mean:
+            return "training mean";
+        case SentinelSource::PointOrder:
+            return "point order: no positions";
+    }
+    return "?";
+}
+
 // --- the "SENTINEL" section --------------------------------------------------------------------
 //
-//   u32 from mean (0 or 1), f64 covering radius, u64 count S, u64[S] points
+//   u32 source (SentinelSource: 0 given, 1 mean, 2 point order), f64 covering radius, u64 count S,
+//   u64[S] points
 
 ModelSectionCodec sentinelsSectionCodec() {
     return {{'S', 'E', 'N', 'T', 'I', 'N', 'E', 'L'},
             [](const Model& m) { return m.sentinels.has_value(); },
             [](const Model& m, ByteWriter& out) {
-                out.u32(m.sentinels->fromMean ? 1 : 0);
+                out.u32(static_cast<std::uint32_t>(m.sentinels->source));
                 out.f64(m.sentinels->coveringRadius);
                 out.index(static_cast<Index>(m.sentinels->points.size()));
                 out.indices(m.sentinels->points);
             },
             [](ByteReader& in, Model& m) {
                 Sentinels s;
-                const std::uint32_t fromMean = in.u32("sentinels' source");
-                if (fromMean > 1) in.fail("sentinels' source " + std::to_string(fromMean) + " is not 0 or 1");
-                s.fromMean = fromMean == 1;
+                const std::uint32_t source = in.u32("sentinels' source");
+                if (source > 2) in.fail("sentinels' source " + std::to_string(source) + " is not 0, 1 or 2");
+                s.source = static_cast<SentinelSource>(source);
                 s.coveringRadius = in.finite("sentinels' covering radius");
                 if (s.coveringRadius < 0) in.fail("sentinels' covering radius is negative");
                 const auto n = static_cast<std::uint64_t>(m.points);

@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 
+#include <cstdint>
 #include <span>
 #include <vector>
 
@@ -25,13 +26,26 @@ struct ModelSectionCodec;
 /// reaches over kSentinelShare * T across a disc of that radius anywhere on the moving part is seen.
 /// That is the promise, and its limit: a patch over T narrower than the spacing can slip between
 /// sentinels.
+///
+/// Points without positions (light values trained without `--positions`) get sentinels drawn in
+/// point order instead (pointOrderSentinels): one at random in each of S equal runs of the moving
+/// points. A patch of n adjacent points that are all over kSentinelShare * T is then seen when it
+/// covers a whole run, and otherwise with probability n / (run length) per run it touches. Renderers'
+/// and volumes' point orders follow space (voxels, surfaces), so that is close to spatial coverage;
+/// in an arbitrary order it is a random sample, whose chance of missing a share f of the moving
+/// points is (1 - f)^S. Positions are always better: `pmsc export-frames --positions` writes them.
+enum class SentinelSource : std::uint32_t {
+    Given = 0,       ///< farthest-point samples of positions the user gave (learn keeps them)
+    Mean = 1,        ///< farthest-point samples of the training mean, a shape (learn chooses again)
+    PointOrder = 2,  ///< one at random in each equal run of moving points (learn chooses again)
+};
+
 struct Sentinels {
-    std::vector<Index> points;  ///< in the order farthest-point sampling chose them, no keys, no duplicates
-    /// The largest distance from a moving point to its nearest sentinel, in the positions' units.
+    std::vector<Index> points;  ///< in the order they were chosen, no keys, no duplicates
+    /// Given or Mean: the largest distance from a moving point to its nearest sentinel, in the
+    /// positions' units. PointOrder: the length of a run, in points.
     double coveringRadius = 0;
-    /// The positions were the training mean (a shape): `pmsc learn` chooses them again from the
-    /// learned mean and basis. False: positions the user gave, which learn keeps.
-    bool fromMean = true;
+    SentinelSource source = SentinelSource::Mean;
 
     /// Checks ranges against the model (N): throws std::invalid_argument naming the first problem.
     void validate(const Model& model) const;
@@ -50,9 +64,19 @@ constexpr Index kDefaultSentinels = 1024;
 constexpr Index kSentinelSpacing = 16;
 
 /// A hit stands only where PM is within kSentinelShare * T of every sentinel's computed value.
+/// Any model trained with a tolerance has them, whatever its key error and whether its channels
+/// share the basis.
 /// Why 0.8: on sets A-H, 0.9 let 10 frames over T through and 0.7 refused 4.5% of the validation
 /// hits against 1.3% at 0.8.
 constexpr double kSentinelShare = 0.8;
+
+/// Sentinels drawn in point order (no positions) are kPointOrderFactor times as many as asked
+/// (still at most one point in kSentinelSpacing). Why: their detection is a draw, not a covering.
+/// On the light novelty suite (bench/light_novelty.py: the Cornell box and the smoke, lights outside
+/// the trained range) 1024 in point order let one frame of each scene through (1.01 T and 1.115 T),
+/// which farthest-point samples of the positions refused; 2048 refused both in every draw the
+/// replica tried (six seeds).
+constexpr Index kPointOrderFactor = 2;
 
 /// A point moves when its RMS motion in the basis is at least this share of the largest point's.
 constexpr double kMovingShare = 1e-3;
@@ -72,7 +96,19 @@ Index sentinelCount(Index requested, Index points);
 /// @throws std::invalid_argument when the sizes disagree or a key is out of range.
 Sentinels farthestPointSentinels(const Eigen::Ref<const Eigen::MatrixXd>& positions,
                                  const Eigen::Ref<const Eigen::VectorXd>& motion, std::span<const Index> keys,
-                                 Index count, bool fromMean);
+                                 Index count, SentinelSource source);
+
+/// `count` sentinels for points without positions: the moving points that are not keys, in point
+/// order, cut into `count` runs of equal length (as near as integers allow), one point from each,
+/// drawn with std::mt19937_64 seeded by `seed` (the same on every machine). Why one at random in
+/// each run, not the middle: a fixed stride can fall in step with a periodic point order (the
+/// rows of a voxel grid) and see one column only.
+/// @throws std::invalid_argument when a key is out of range.
+Sentinels pointOrderSentinels(const Eigen::Ref<const Eigen::VectorXd>& motion, std::span<const Index> keys,
+                              Index count, std::uint64_t seed);
+
+/// How a model's sentinels were chosen, for `pmsc inspect` ("positions given to train", ...).
+const char* describe(SentinelSource source);
 
 /// Codec of the "SENTINEL" model-file section (ModelSections.h).
 ModelSectionCodec sentinelsSectionCodec();

@@ -167,6 +167,9 @@ Model trainSharedChannels(const FrameSet& frames, const TrainingOptions& options
     TrainingOptions one = options;
     one.learnable = false;  // `pmsc learn` does not take shared-channel models
     one.sharedChannels = false;
+    // Positions serve the sentinels alone here (the C = 1 model of the channels has no regions).
+    one.regions.automatic = false;
+    one.regions.count = 0;
     if (options.keyErrorNorm && *options.keyErrorNorm != KeyErrorNorm::Rms)
         throw InputError(std::string("train: the ") + toString(*options.keyErrorNorm) +
                          " key error needs channels of their own (not --shared-channels)");
@@ -645,12 +648,23 @@ void Trainer::keyNeighbours() {
 }
 
 void Trainer::sentinels() {
-    if (options.sentinels <= 0) return;
-    bool given = false;
-    const Eigen::MatrixXd positions = checkPositions(given);
-    if (positions.size() == 0) return;
-    Sentinels chosen = farthestPointSentinels(positions, basisMotion(model), model.keyPoints,
-                                              sentinelCount(options.sentinels, model.points), !given);
+    // Whatever the key error: the check needs only the tolerance and the computed points. Spread
+    // over positions when there are any (given, or the mean when it is a shape), else over the
+    // point order (Sentinels.h says what each promises).
+    if (options.sentinels <= 0 || !(options.tolerance > 0)) return;
+    const Index count = sentinelCount(options.sentinels, model.points);
+    const bool given = options.regions.positions.size() > 0;
+    Eigen::MatrixXd positions =
+        given ? options.regions.positions
+              : (model.sharedChannels ? Eigen::MatrixXd() : meanShape(model, rmsMotion()));
+    if (positions.rows() != model.points || positions.cols() != 3) positions.resize(0, 0);
+    Sentinels chosen =
+        positions.size() > 0
+            ? farthestPointSentinels(positions, basisMotion(model), model.keyPoints, count,
+                                     given ? SentinelSource::Given : SentinelSource::Mean)
+            : pointOrderSentinels(basisMotion(model), model.keyPoints,
+                                  sentinelCount(kPointOrderFactor * options.sentinels, model.points),
+                                  options.seed);
     if (!chosen.points.empty()) model.sentinels = std::move(chosen);
 }
 

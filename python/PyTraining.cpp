@@ -8,6 +8,7 @@
 
 #include "pmsc/Communicator.h"
 #include "pmsc/Errors.h"
+#include "pmsc/NpyIO.h"
 #include "pmsc/RowBlocks.h"
 #include "pmsc/Training.h"
 
@@ -15,6 +16,7 @@
 #include <pybind11/stl.h>
 
 #include <algorithm>
+#include <cmath>
 #include <optional>
 #include <vector>
 
@@ -130,7 +132,7 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
                                     const std::string& keyError, Index learnRank, unsigned seed,
                                     int powerIterations, const py::object& regions, const py::object& feather,
                                     Index regionKeys, Index regionStride, bool sharedChannels,
-                                    Index sentinels, py::object progress) {
+                                    Index sentinels, const py::object& positions, py::object progress) {
     // The keyword arguments into app::TrainOptions, checked by the rules `pmsc train` uses.
     constexpr app::Spelling kPython = app::Spelling::Python;
     app::TrainOptions request;
@@ -167,9 +169,30 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     o.regions.ownKeys = regionKeys;
     o.sharedChannels = sharedChannels;
     o.sentinels = sentinels;
+    // Positions: a .npy path, or an array (N, 3+) or (1, N, 3+); checked against N once the frames are.
+    FrameSet positionTable;
+    std::string positionsName;
+    if (py::isinstance<py::str>(positions)) {
+        positionsName = "positions " + positions.cast<std::string>();
+        positionTable = readPointTable(positions.cast<std::string>()).frames;
+    } else if (!positions.is_none()) {
+        const auto a = doubleArray(positions);
+        if (a.ndim() != 2 && !(a.ndim() == 3 && a.shape(0) == 1))
+            throw InputError("train: positions must be an array (N, 3) or (1, N, 3), got " + shapeText(a));
+        const Index rows = a.shape(a.ndim() - 2), cols = a.shape(a.ndim() - 1);
+        positionTable = FrameSet(1, rows, cols);
+        std::copy(a.data(), a.data() + rows * cols, positionTable.values.begin());
+        for (const double v : positionTable.values)
+            if (!std::isfinite(v)) throw InputError("train: positions has a value that is not finite");
+        positionsName = "positions";
+    }
+    request.positions = positionsName;  // validate() refuses them with a cross target
     app::validate(request, kPython);
 
     TrainingFrames t = trainingFrames(frames);
+    if (!positionsName.empty())
+        o.regions.positions =
+            app::positionsFromTable(positionTable, t.view ? t.view->points() : t.copy.points, positionsName);
     PythonProgress hook(progress);
     o.progress = hook.function();
     TrainingReport report;
@@ -259,9 +282,12 @@ void bindTraining(py::module_& m) {
         "coverage"_a = py::none(), "key_error"_a = "", "learn_rank"_a = 0, "seed"_a = 20070101u,
         "power_iterations"_a = 2, "regions"_a = "auto", "feather"_a = py::none(), "region_keys"_a = 4,
         "region_stride"_a = 3, "shared_channels"_a = false, "sentinels"_a = kDefaultSentinels,
-        "progress"_a = py::none(),
+        "positions"_a = py::none(), "progress"_a = py::none(),
         "Trains a model as `pmsc train` does (same options, same model bytes). frames: an array (F, N, C), a "
-        ".npy path, or a list of them (shots). progress(stage, done, total) may return False to cancel.");
+        ".npy path, or a list of them (shots). positions: the points' positions for values that are not "
+        "positions (light), an array (N, 3) or (1, N, 3) or a .npy path, as --positions. progress(stage, "
+        "done, "
+        "total) may return False to cancel.");
     m.def(
         "learn", &learnModel, "model"_a, "frames"_a, py::kw_only(), "basis"_a = 0, "energy"_a = 0.0,
         "rank"_a = 0, "calibration"_a = "", "coverage"_a = py::none(), "slices"_a = 0,

@@ -33,7 +33,9 @@
  *
  * Models with regions (local fail-through) and cross models load and run here as whole-frame
  * models: their regions and cross state are not used, so a frame that does not hit fails through
- * whole, as `pmsc replay --whole-frame-fail-through` does.
+ * whole, as `pmsc replay --whole-frame-fail-through` does. The hit check of the engine (a model's
+ * sentinels and key neighbours, computed beside every hit) is not part of this API: a hit here
+ * rests on the key error alone, as a model trained with `pmsc train --sentinels 0` decides.
  */
 #ifndef PMSC_PMSC_H
 #define PMSC_PMSC_H

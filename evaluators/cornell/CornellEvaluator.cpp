@@ -284,6 +284,17 @@ void CornellEvaluator::evaluateAll(Index frame, double* out) const {
 
 // One frame of the cache as a .vdb file. Its state is "soft-cached": `pmsc run` hands the writer the
 // soft-cached values without the decision, so the file says what it knows.
+FrameSet CornellEvaluator::pointPositions() const {
+    const std::vector<Vec3>& at = world_->voxels.position;
+    FrameSet out(1, static_cast<Index>(at.size()), 3);
+    for (std::size_t p = 0; p < at.size(); ++p) {
+        out.values[3 * p] = at[p].x;
+        out.values[3 * p + 1] = at[p].y;
+        out.values[3 * p + 2] = at[p].z;
+    }
+    return out;
+}
+
 std::vector<std::shared_ptr<const FrameWriter>> CornellEvaluator::frameWriters() const {
     const SurfaceVoxels& voxels = world().voxels;
     auto write = [this, &voxels](const std::string& path, Index frame, const double* values) {
@@ -313,9 +324,10 @@ CornellSpec parseCornellSpec(const std::string& options) {
         } else if (key == "samples") {
             spec.samples = static_cast<int>(number(2, 65536));
         } else if (key == "lights") {
-            if (value != "all" && value != "training" && value != "scattered" && value != "path")
+            if (value != "all" && value != "training" && value != "scattered" && value != "path" &&
+                value != "outside")
                 throw InputError("evaluator 'cornell': lights='" + value +
-                                 "' is not all, training, scattered or path");
+                                 "' is not all, training, scattered, path or outside");
             spec.lights = value;
         } else {
             throw InputError("evaluator 'cornell': unknown option '" + key +
@@ -334,6 +346,7 @@ std::unique_ptr<CornellEvaluator> makeCornellEvaluator(const std::string& option
     if (lights == "all" || lights == "training") add(rig.trainingLights());
     if (lights == "all" || lights == "scattered") add(rig.scatteredLights(16));
     if (lights == "all" || lights == "path") add(rig.animationPath(60));
+    if (lights == "outside") add(rig.outsideLights());
     return std::make_unique<CornellEvaluator>(CornellWorld::create(spec.points), std::move(set), spec.samples,
                                               "cornell");
 }

@@ -6,6 +6,7 @@
 #include "evaluators/cornell/SurfaceVoxels.h"
 #include "pmsc/FrameWriter.h"
 #include "pmsc/PointEvaluator.h"
+#include "pmsc/PointPositions.h"
 
 #include <memory>
 #include <mutex>
@@ -65,7 +66,7 @@ void directIrradiance(const RayTracer& tracer, const PointLight& light, std::spa
 ///
 /// Also a FrameWriterProvider: `pmsc run` can write each frame as a lighting-cache .vdb
 /// (LightingCacheGrid, grid "indirect" + "normal" + "surface_point").
-class CornellEvaluator : public PointEvaluator, public FrameWriterProvider {
+class CornellEvaluator : public PointEvaluator, public FrameWriterProvider, public PointPositionsProvider {
 public:
     /// @param lights one frame per light. @param samplesPerPoint S >= 1.
     CornellEvaluator(std::shared_ptr<const CornellWorld> world, std::vector<PointLight> lights,
@@ -80,6 +81,8 @@ public:
     void evaluateAll(Index frame, double* out) const override;
 
     std::vector<std::shared_ptr<const FrameWriter>> frameWriters() const override;
+    /// The gather points: each voxel's nearest surface point, in millimetres.
+    FrameSet pointPositions() const override;
 
     const CornellWorld& world() const { return *world_; }
     const std::vector<PointLight>& lights() const { return lights_; }
@@ -103,7 +106,7 @@ private:
 struct CornellSpec {
     std::size_t points = 160000;
     int samples = 160;
-    std::string lights = "all";  ///< all, training, scattered or path
+    std::string lights = "all";  ///< all, training, scattered, path or outside
 };
 CornellSpec parseCornellSpec(const std::string& options);
 
@@ -111,7 +114,8 @@ CornellSpec parseCornellSpec(const std::string& options);
 /// list of points=N (default 160000), samples=S (default 160) and lights=SET, SET one of
 ///   all (default): the 144 training lights, then 16 scattered validation lights, then the 60-frame
 ///                  path (frames 0-143, 144-159, 160-219), so one spec serves export-frames and run;
-///   training | scattered | path: only that set, from frame 0.
+///   training | scattered | path: only that set, from frame 0;
+///   outside: 24 lights outside the trained range (LightRig::outsideLights), not part of all.
 /// @throws pmsc::InputError naming the bad option.
 std::unique_ptr<CornellEvaluator> makeCornellEvaluator(const std::string& options);
 

@@ -194,6 +194,26 @@ std::vector<PointLight> LightRig::animationPath(int frames) const {
     return lights;
 }
 
+std::vector<PointLight> LightRig::outsideLights() const {
+    std::vector<PointLight> lights;
+    const double y = 548.8 - belowCeilingMm;
+    // Lower: four places clear of both blocks in x and z (the short block spans x 82-240,
+    // z 65-225; the tall one x 265-430, z 247-406).
+    const double places[4][2] = {{150, 420}, {450, 120}, {278, 150}, {278, 480}};
+    for (const double below : {120.0, 220.0, 320.0})
+        for (const auto& xz : places) lights.push_back({v(xz[0], y - below, xz[1]), intensity});
+    // Beyond the grid (x and z within 80-478 mm), 30 mm from the walls.
+    const double lo = 30, hiX = 556 - 30, hiZ = 559.2 - 30, midX = 278, midZ = 279.6;
+    const double rim[8][2] = {{lo, lo},   {hiX, lo},   {lo, hiZ},  {hiX, hiZ},
+                              {lo, midZ}, {hiX, midZ}, {midX, lo}, {midX, hiZ}};
+    for (const auto& xz : rim) lights.push_back({v(xz[0], y, xz[1]), intensity});
+    // Cool white on the training plane: the same power, another colour.
+    const Rgb cool{1.0e5, 1.3e5, 1.8e5};
+    const double onPlane[4][2] = {{150, 150}, {400, 400}, {278, 279.6}, {200, 420}};
+    for (const auto& xz : onPlane) lights.push_back({v(xz[0], y, xz[1]), cool});
+    return lights;
+}
+
 std::vector<Camera> demoCameras(double t) {
     std::vector<Camera> cams;
     // The measured view, dollying in a little so the standard camera moves too.

@@ -87,6 +87,12 @@ struct LightRig {
     std::vector<PointLight> scatteredLights(int count, unsigned seed = 7) const;
     /// A smooth closed `frames`-frame path (a Lissajous figure) across the grid's extent.
     std::vector<PointLight> animationPath(int frames) const;
+    /// 24 lights outside the trained range, for testing what the soft cache does with light it
+    /// never saw: 12 lower in the box (120, 220 and 320 mm under the training plane, at four
+    /// places clear of the blocks), 8 beyond the grid's extent at its height (the four corners
+    /// and four wall midpoints, 30 mm from the walls), and 4 on the grid's plane in a cool white
+    /// (another RGB ratio than the training's).
+    std::vector<PointLight> outsideLights() const;
 };
 
 /// Cameras of the moving-camera renders: the standard view, an orbit outside the opening

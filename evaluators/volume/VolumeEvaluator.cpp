@@ -179,6 +179,20 @@ std::vector<VolumeLight> VolumeRig::path(const VolumeWorld& world, int frames) c
     return out;
 }
 
+std::vector<VolumeLight> VolumeRig::outside(const VolumeWorld& world) const {
+    std::vector<VolumeLight> out;
+    const double eLo = elevations.front(), eMid = 0.5 * (elevations.front() + elevations.back());
+    const double kMid = 0.5 * (kelvinLow + kelvinHigh);
+    for (const double below : {20.0, 45.0})
+        for (int a = 0; a < 6; ++a) out.push_back(light(world, 15.0 + 60.0 * a, eLo - below, kMid));
+    for (const double kelvin : {2700.0, 12000.0})
+        for (int a = 0; a < 4; ++a) out.push_back(light(world, 40.0 + 90.0 * a, eMid, kelvin));
+    VolumeRig near = *this;
+    near.distance = 1.3;
+    for (int a = 0; a < 4; ++a) out.push_back(near.light(world, 70.0 + 90.0 * a, eMid, kMid));
+    return out;
+}
+
 namespace {
 
 /// n elevations evenly over [lo, hi] degrees.
@@ -344,6 +358,17 @@ ScatterCacheInfo VolumeEvaluator::info(Index frame, std::string state) const {
 }
 
 // One frame as a .vdb: the "inscatter" grid (ScatterCache) with the density's topology.
+FrameSet VolumeEvaluator::pointPositions() const {
+    const std::vector<Vec3>& at = world_->density.voxelPositions();
+    FrameSet out(1, static_cast<Index>(at.size()), 3);
+    for (std::size_t p = 0; p < at.size(); ++p) {
+        out.values[3 * p] = at[p].x;
+        out.values[3 * p + 1] = at[p].y;
+        out.values[3 * p + 2] = at[p].z;
+    }
+    return out;
+}
+
 std::vector<std::shared_ptr<const FrameWriter>> VolumeEvaluator::frameWriters() const {
     const std::size_t n = world().density.voxelCount();
     auto write = [this, n](const std::string& path, Index frame, const double* values) {
@@ -376,9 +401,10 @@ VolumeSpec parseVolumeSpec(const std::string& args) {
             const long v = scene::integerOption("volume", key, value, 1, 4096);
             spec.medium.lightSamples = static_cast<int>(v);
         } else if (key == "lights") {
-            if (value != "all" && value != "training" && value != "between" && value != "path")
+            if (value != "all" && value != "training" && value != "between" && value != "path" &&
+                value != "outside")
                 throw InputError("evaluator 'volume': lights='" + value +
-                                 "' is not all, training, between or path");
+                                 "' is not all, training, between, path or outside");
             spec.lights = value;
         } else {
             throw InputError("evaluator 'volume': unknown option '" + key +
@@ -399,6 +425,7 @@ std::unique_ptr<VolumeEvaluator> makeVolumeEvaluator(const std::string& args) {
     if (lights == "all" || lights == "training") add(rig.training(*world));
     if (lights == "all" || lights == "between") add(rig.between(*world, 16));
     if (lights == "all" || lights == "path") add(rig.path(*world, 48));
+    if (lights == "outside") add(rig.outside(*world));
     return std::make_unique<VolumeEvaluator>(std::move(world), std::move(set), "volume");
 }
 

@@ -4,6 +4,7 @@
 #include "evaluators/volume/DensityVolume.h"
 #include "pmsc/FrameWriter.h"
 #include "pmsc/PointEvaluator.h"
+#include "pmsc/PointPositions.h"
 
 #include <memory>
 #include <string>
@@ -104,6 +105,12 @@ struct VolumeRig {
     /// An animation: one turn around the medium while rising and sinking between the lowest and
     /// highest training elevation, the colour temperature swinging between the training ones.
     std::vector<VolumeLight> path(const VolumeWorld& world, int frames) const;
+    /// 24 lights outside the trained range, for testing what the soft cache does with light it
+    /// never saw: 12 below the band of training elevations (20 and 45 degrees under its lowest,
+    /// six azimuths each), 8 in colours outside [kelvinLow, kelvinHigh] (2700 K and 12000 K at the
+    /// band's middle, four azimuths each), and 4 closer to the medium (1.3 x its radius instead of
+    /// `distance`, so nearer voxels brighten faster than far ones).
+    std::vector<VolumeLight> outside(const VolumeWorld& world) const;
 
     /// How far the light at the centre of a training grid cell is from the mean of the cell's four
     /// corner lights (relative RMS over a sample of voxels and cells, full calculation, one colour):
@@ -152,7 +159,7 @@ void recolour(const VolumeLight& from, const VolumeLight& to, double* values, In
 /// call); evaluateAll() runs tbb::parallel_for in the caller's arena.
 ///
 /// A FrameWriterProvider: `pmsc run --format vdb` writes each frame as a ScatterCache .vdb.
-class VolumeEvaluator : public PointEvaluator, public FrameWriterProvider {
+class VolumeEvaluator : public PointEvaluator, public FrameWriterProvider, public PointPositionsProvider {
 public:
     VolumeEvaluator(std::shared_ptr<const VolumeWorld> world, std::vector<VolumeLight> lights,
                     std::string name = "volume");
@@ -164,6 +171,8 @@ public:
     void evaluate(Index frame, std::span<const Index> points, double* out) const override;
     void evaluateAll(Index frame, double* out) const override;
     std::vector<std::shared_ptr<const FrameWriter>> frameWriters() const override;
+    /// The active voxels' centres in world units.
+    FrameSet pointPositions() const override;
 
     const VolumeWorld& world() const { return *world_; }
     const std::vector<VolumeLight>& lights() const { return lights_; }
@@ -183,16 +192,17 @@ private:
 struct VolumeSpec {
     std::string path;
     std::string grid;            ///< empty: the file's density grid (DensityVolume::read)
-    std::string lights = "all";  ///< all, training, between or path
+    std::string lights = "all";  ///< all, training, between, path or outside
     MediumSettings medium;
 };
 VolumeSpec parseVolumeSpec(const std::string& args);
 
 /// The `volume` evaluator of the command line: ARGS = "FILE.vdb[:grid=NAME][:samples=S]
-/// [:lights=all|training|between|path]". lights=all (default): the training lights of
+/// [:lights=all|training|between|path|outside]". lights=all (default): the training lights of
 /// VolumeRig::forMedium (96 for the demo's smoke, more for a medium whose lighting changes faster
 /// with the light's direction), then 16 lights between them, then a 48-frame path (the demo's
-/// frames, so export-frames and run share one spec). @throws pmsc::InputError for a bad option or
+/// frames, so export-frames and run share one spec); outside: VolumeRig::outside's 24 lights, not
+/// part of all. @throws pmsc::InputError for a bad option or
 /// file (one line).
 std::unique_ptr<VolumeEvaluator> makeVolumeEvaluator(const std::string& args);
 

@@ -233,14 +233,17 @@ Trained trainModel(DemoSetup& run, const VolumeDemoOptions& o, const VolumeWorld
     topt.maxKeys = trained.size.keys;
     topt.sharedChannels = o.sharedChannels;
     topt.tolerance = o.toleranceFraction * trained.peak;
-    if (trained.size.gridKeys > 0) {
-        Eigen::MatrixXd positions(n, 3);
-        for (Index i = 0; i < n; ++i) {
-            const Vec3 p = world.density.voxelPositions()[static_cast<std::size_t>(i)];
-            positions.row(i) << p.x, p.y, p.z;
-        }
-        topt.gridPoints = sparseGridPointsByCount(positions, trained.size.gridKeys);
+    Eigen::MatrixXd positions(n, 3);
+    for (Index i = 0; i < n; ++i) {
+        const Vec3 p = world.density.voxelPositions()[static_cast<std::size_t>(i)];
+        positions.row(i) << p.x, p.y, p.z;
     }
+    if (trained.size.gridKeys > 0)
+        topt.gridPoints = sparseGridPointsByCount(positions, trained.size.gridKeys);
+    // The voxels' positions spread the sentinels over the medium (Sentinels.h); no regions: the
+    // demo's cache fails through whole frames.
+    topt.regions.positions = std::move(positions);
+    topt.regions.automatic = false;
     topt.progress = [&run](std::string_view stage, double done, double total) {
         run.progress(std::string("train: ") + std::string(stage), done, total);
         return true;

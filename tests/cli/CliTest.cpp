@@ -175,9 +175,18 @@ TEST_F(Cli, TrainTakesPositionsForItsSentinelsAndBadOnesFail) {
     const pmsc::Model m = pmsc::readModel(dir.file("m.pmsc"));
     ASSERT_TRUE(m.sentinels.has_value());
     EXPECT_EQ(m.sentinels->points.size(), 5u);
-    EXPECT_FALSE(m.sentinels->fromMean);
+    EXPECT_EQ(m.sentinels->source, pmsc::SentinelSource::Given);
     r = runPmsc(dir, {"inspect", dir.file("m.pmsc")});
     EXPECT_NE(r.out.find("sentinels     5 (from the positions given to train)"), std::string::npos) << r.out;
+    // Channels that share the basis take positions for their sentinels too.
+    r = runPmsc(dir, {"train", "--frames", shot_->train, "--out", dir.file("shared.pmsc"), "--max-keys", "24",
+                      "--tolerance", "0.02", "--positions", positions, "--sentinels", "5",
+                      "--shared-channels", "--quiet"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const pmsc::Model shared = pmsc::readModel(dir.file("shared.pmsc"));
+    ASSERT_TRUE(shared.sentinels.has_value());
+    EXPECT_EQ(shared.sentinels->points.size(), 5u);
+    EXPECT_EQ(shared.sentinels->source, pmsc::SentinelSource::Given);
 
     TempDir bad;
     pmsc::FrameSet shortTable(1, train.points - 1, 3);
@@ -192,8 +201,8 @@ TEST_F(Cli, TrainTakesPositionsForItsSentinelsAndBadOnesFail) {
     };
     fails({"--positions", wrong}, {"--positions", "expected " + std::to_string(train.points) + " rows"});
     fails({"--positions", bad.file("none.npy")}, {"none.npy"});
-    fails({"--positions", positions, "--shared-channels"},
-          {"--positions does not combine with --shared-channels"});
+    fails({"--positions", positions, "--targets", shot_->train},
+          {"--positions does not apply to a cross model"});
     fails({"--sentinels", "-1"}, {"--sentinels"});
     std::filesystem::remove(wrong);
     EXPECT_TRUE(outputs(bad).empty());

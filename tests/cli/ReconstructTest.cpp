@@ -67,10 +67,12 @@ protected:
              {std::pair{shot_->plain, std::vector<std::string>{}},
               std::pair{shot_->regions, std::vector<std::string>{"--regions", "4"}}}) {
             // The paper's key RMS and the largest-ratio rule: on this shot they send novel frames to
-            // the full calculation whole, so the region model has frames that go local.
-            std::vector<std::string> args = {
-                "train",       "--frames", shot_->train,    "--out", model,         "--max-keys", "24",
-                "--tolerance", "0.1",      "--calibration", "max",   "--key-error", "rms"};
+            // the full calculation whole, so the region model has frames that go local. No sentinels:
+            // a hit takes its keys' pass alone.
+            std::vector<std::string> args = {"train", "--frames",      shot_->train, "--out",
+                                             model,   "--max-keys",    "24",         "--tolerance",
+                                             "0.1",   "--calibration", "max",        "--key-error",
+                                             "rms",   "--sentinels",   "0"};
             args.insert(args.end(), extra.begin(), extra.end());
             const RunResult r = runPmsc(shot_->dir, args);
             ASSERT_EQ(r.exitCode, 0) << r.err;

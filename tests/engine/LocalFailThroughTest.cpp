@@ -81,6 +81,7 @@ const Model& trainedModel() {
         o.energy = 0.999999;
         o.maxKeys = 90;
         o.tolerance = kTolerance;
+        o.sentinels = 0;  // the regions' own decisions, not the sentinels' (HitCheckTest)
         o.regions.count = 9;
         // A sparse grid among the keys (the paper's remedy for rendering, section 4), so that no
         // part of the sheet is unwatched: the novel bump lands where training saw no motion.

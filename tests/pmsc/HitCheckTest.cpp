@@ -202,17 +202,45 @@ TEST(Sentinels, FarthestPointSamplingOfTheMovingPointsThatAreNotKeys) {
     motion[7] = 2;
     motion[9] = 0;
     const std::vector<Index> keys = {4};
-    const pmsc::Sentinels s = pmsc::farthestPointSentinels(line, motion, keys, 3, true);
+    constexpr auto mean = pmsc::SentinelSource::Mean;
+    const pmsc::Sentinels s = pmsc::farthestPointSentinels(line, motion, keys, 3, mean);
     EXPECT_EQ(s.points, (std::vector<Index>{7, 0, 3}));
     EXPECT_DOUBLE_EQ(s.coveringRadius, 2.0) << "point 5 is 2 from 3 and from 7";
-    EXPECT_TRUE(s.fromMean);
-    EXPECT_EQ(pmsc::farthestPointSentinels(line, motion, keys, 100, true).points.size(), 8u)
+    EXPECT_EQ(s.source, mean);
+    EXPECT_EQ(pmsc::farthestPointSentinels(line, motion, keys, 100, mean).points.size(), 8u)
         << "at most the moving points that are not keys";
-    EXPECT_TRUE(pmsc::farthestPointSentinels(line, Eigen::VectorXd::Zero(10), keys, 3, true).points.empty());
-    EXPECT_THROW(pmsc::farthestPointSentinels(line, Eigen::VectorXd::Ones(9), keys, 3, true),
+    EXPECT_TRUE(pmsc::farthestPointSentinels(line, Eigen::VectorXd::Zero(10), keys, 3, mean).points.empty());
+    EXPECT_THROW(pmsc::farthestPointSentinels(line, Eigen::VectorXd::Ones(9), keys, 3, mean),
                  std::invalid_argument);
-    EXPECT_THROW(pmsc::farthestPointSentinels(line, motion, std::vector<Index>{10}, 3, true),
+    EXPECT_THROW(pmsc::farthestPointSentinels(line, motion, std::vector<Index>{10}, 3, mean),
                  std::invalid_argument);
+}
+
+TEST(Sentinels, WithoutPositionsOneIsDrawnInEachEqualRunOfTheMovingPoints) {
+    // 100 points; 0-9 do not move, 50 is a key: 89 moving points, 10 runs of 8 or 9.
+    Eigen::VectorXd motion = Eigen::VectorXd::Ones(100);
+    motion.head(10).setZero();
+    const std::vector<Index> keys = {50};
+    const pmsc::Sentinels s = pmsc::pointOrderSentinels(motion, keys, 10, 7);
+    EXPECT_EQ(s.source, pmsc::SentinelSource::PointOrder);
+    ASSERT_EQ(s.points.size(), 10u);
+    std::vector<Index> pool;
+    for (Index p = 10; p < 100; ++p)
+        if (p != 50) pool.push_back(p);
+    for (Index r = 0; r < 10; ++r) {
+        const Index p = s.points[size_t(r)];
+        const Index begin = pool[size_t(r * 89 / 10)], last = pool[size_t((r + 1) * 89 / 10 - 1)];
+        EXPECT_GE(p, begin) << "run " << r;
+        EXPECT_LE(p, last) << "run " << r;
+        EXPECT_NE(p, 50) << "a key's error is a fit";
+    }
+    EXPECT_DOUBLE_EQ(s.coveringRadius, 9.0) << "the longest run";
+    EXPECT_EQ(pmsc::pointOrderSentinels(motion, keys, 10, 7).points, s.points)
+        << "the same seed, the same draw";
+    EXPECT_NE(pmsc::pointOrderSentinels(motion, keys, 10, 8).points, s.points);
+    EXPECT_EQ(pmsc::pointOrderSentinels(motion, keys, 1000, 7).points.size(), 89u)
+        << "at most the moving points";
+    EXPECT_THROW(pmsc::pointOrderSentinels(motion, std::vector<Index>{100}, 3, 7), std::invalid_argument);
 }
 
 TEST(Sentinels, TrainingSpreadsThemOverAShapeWithAPredictedKeyError) {
@@ -241,7 +269,10 @@ TEST(Sentinels, TrainingSpreadsThemOverAShapeWithAPredictedKeyError) {
     EXPECT_EQ(back.sentinels->points, m.sentinels->points);
     EXPECT_DOUBLE_EQ(back.sentinels->coveringRadius, m.sentinels->coveringRadius);
 
-    EXPECT_FALSE(trainSheet(true, 0.01, 0, 40).sentinels.has_value()) << "light is not a shape";
+    const Model light = trainSheet(true, 0.01, 0, 20);
+    ASSERT_TRUE(light.sentinels.has_value()) << "light without positions: drawn in point order";
+    EXPECT_EQ(light.sentinels->source, pmsc::SentinelSource::PointOrder);
+    EXPECT_EQ(light.sentinels->points.size(), size_t(pmsc::kPointOrderFactor * 20)) << "a draw: more of them";
     EXPECT_FALSE(trainSheet(false, 0, 0, 40).sentinels.has_value()) << "no tolerance: nothing to check";
     EXPECT_FALSE(trainSheet(false, 0.01, 0, 0).sentinels.has_value()) << "--sentinels 0";
 }
@@ -259,7 +290,7 @@ TEST(Sentinels, LearnChoosesThemAgainFromTheLearnedMeanAndBasis) {
     const Model learned = pmsc::learn(m, sheetFrames(90));
     ASSERT_TRUE(learned.sentinels.has_value());
     EXPECT_EQ(learned.sentinels->points.size(), m.sentinels->points.size());
-    EXPECT_TRUE(learned.sentinels->fromMean);
+    EXPECT_EQ(learned.sentinels->source, pmsc::SentinelSource::Mean);
     const std::set<Index> keys(learned.keyPoints.begin(), learned.keyPoints.end());
     for (const Index p : learned.sentinels->points) EXPECT_EQ(keys.count(p), 0u) << p;
     EXPECT_NO_THROW(learned.validate());
@@ -292,6 +323,38 @@ TEST(Sentinels, EveryHitComputesThemAndTheyHoldPmWithinTheirShareOfTheTolerance)
     EXPECT_TRUE(check.passes(coords.data(), points, values.data()));
     values[2] += 0.1 * m.tolerance;
     EXPECT_FALSE(check.passes(coords.data(), points, values.data())) << "over kSentinelShare at a sentinel";
+}
+
+TEST(Sentinels, ModelsWhoseKeyErrorHasOnePartOrWhoseChannelsShareTheBasisCheckEveryHitAtThem) {
+    pmsc::TrainingOptions o;
+    o.regions.count = 0;
+    o.sentinels = 40;
+    o.basis = 3;
+    o.maxKeys = 12;
+    o.tolerance = 0.01;
+    o.keyErrorNorm = pmsc::KeyErrorNorm::Rms;
+    const Model rms = pmsc::train(sheetFrames(60), o);
+    ASSERT_TRUE(rms.sentinels.has_value());
+    EXPECT_EQ(rms.sentinels->source, pmsc::SentinelSource::Mean);
+    o.sharedChannels = true;
+    const Model shared = pmsc::train(sheetFrames(60, true), o);
+    ASSERT_TRUE(shared.sentinels.has_value());
+    EXPECT_EQ(shared.sentinels->source, pmsc::SentinelSource::PointOrder) << "shared channels: no mean shape";
+    for (const Model* m : {&rms, &shared}) {
+        const pmsc::PointMultiplier pm(*m);
+        const pmsc::HitCheck check(*m, pm);
+        ASSERT_TRUE(check.available());
+        EXPECT_TRUE(check.needed({pmsc::CacheState::Hit, 0}, {1e9, 0}));
+        std::vector<double> keys = unseenKeys(*m), coords(size_t(m->coordCount()));
+        pm.project(keys.data(), coords.data());
+        const std::vector<Index> points = check.points(keys.data(), coords.data(), {1e9, 0});
+        EXPECT_EQ(points.size(), m->sentinels->points.size()) << "one part: the sentinels alone";
+        std::vector<double> values(points.size() * size_t(m->channels));
+        pm.reconstructPoints(coords.data(), points, values.data());
+        EXPECT_TRUE(check.passes(coords.data(), points, values.data()));
+        values[1] += 0.9 * m->tolerance;
+        EXPECT_FALSE(check.passes(coords.data(), points, values.data()));
+    }
 }
 
 }  // namespace

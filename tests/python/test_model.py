@@ -130,6 +130,26 @@ class ModelTest(TempDirTest):
         self.assertEqual(self.model.to_bytes(), cli)
         self.assertEqual(pmsc.train(npy, max_keys=30, tolerance=0.05, seed=3).to_bytes(), cli)
 
+    def test_positions_give_the_command_lines_sentinels(self):
+        # positions= is --positions: an array or a .npy path, the same model bytes as `pmsc train`.
+        self.require_cli()
+        npy, table = self.path("train.npy"), self.path("positions.npy")
+        np.save(npy, self.frames)
+        positions = np.random.default_rng(5).random((300, 3))
+        np.save(table, positions)
+        run_cli("train", "--frames", npy, "--out", self.path("cli.pmsc"), "--max-keys", 30, "--tolerance", 0.05,
+                "--seed", 3, "--positions", table, "--quiet")
+        with open(self.path("cli.pmsc"), "rb") as f:
+            cli = f.read()
+        from_array = pmsc.train(self.frames, max_keys=30, tolerance=0.05, seed=3, positions=positions)
+        self.assertEqual(from_array.to_bytes(), cli)
+        self.assertEqual(pmsc.train(npy, max_keys=30, tolerance=0.05, seed=3, positions=table).to_bytes(), cli)
+        self.assertGreater(from_array.info["sentinels"], 0)
+        with self.assertRaisesRegex(pmsc.InputError, "expected 300 rows"):
+            pmsc.train(self.frames, max_keys=30, tolerance=0.05, positions=positions[:299])
+        with self.assertRaisesRegex(pmsc.InputError, r"positions must be an array \(N, 3\)"):
+            pmsc.train(self.frames, max_keys=30, tolerance=0.05, positions=positions.reshape(-1))
+
     def test_learn_gives_the_command_lines_model_bytes(self):
         # pmsc.learn is `pmsc learn` (app/Learn.h): the same update, the same bytes, from an array or a path.
         self.require_cli()

@@ -281,7 +281,7 @@ TEST(ModelSections, SentinelsRoundTripBitExactAndBadOnesAreRejectedWithTheField)
     pmsc::Sentinels s;
     s.points = {2, 5};
     s.coveringRadius = 1.5;
-    s.fromMean = false;
+    s.source = pmsc::SentinelSource::Given;
     m.sentinels = s;
     const std::string good = pmsc::encodeModel(m);
     EXPECT_EQ(std::string(good.data() + kTagAt, 8), std::string("SENTINEL", 8));
@@ -289,13 +289,13 @@ TEST(ModelSections, SentinelsRoundTripBitExactAndBadOnesAreRejectedWithTheField)
     ASSERT_TRUE(r.sentinels.has_value());
     EXPECT_EQ(r.sentinels->points, s.points);
     EXPECT_EQ(r.sentinels->coveringRadius, 1.5);
-    EXPECT_FALSE(r.sentinels->fromMean);
+    EXPECT_EQ(r.sentinels->source, pmsc::SentinelSource::Given);
     EXPECT_EQ(pmsc::encodeModel(r), good);
     // Payload: u32 source, f64 covering radius, u64 count, u64[count] points.
     std::string bytes = good;
-    poke<std::uint32_t>(bytes, kPayloadAt, 2);
+    poke<std::uint32_t>(bytes, kPayloadAt, 3);
     reseal(bytes);
-    expectMessage(bytes, {"sentinels' source 2"});
+    expectMessage(bytes, {"sentinels' source 3"});
     bytes = good;
     poke<double>(bytes, kPayloadAt + 4, -1.0);
     reseal(bytes);
