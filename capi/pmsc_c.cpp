@@ -4,6 +4,7 @@
 #include "pmsc/pmsc.h"
 
 #include "pmsc/Errors.h"
+#include "pmsc/HitCheck.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/PointMultiplier.h"
 #include "pmsc/SoftCache.h"
@@ -33,11 +34,12 @@ struct pmsc_model {
 
 struct pmsc_multiplier {
     pmsc_multiplier(std::shared_ptr<const pmsc::Model> shared, const pmsc::SoftCachePolicy& p)
-        : model{std::move(shared)}, multiplier(*model.model), policy(p) {}
+        : model{std::move(shared)}, multiplier(*model.model), policy(p), check(*model.model, multiplier) {}
 
     pmsc_model model;                  // declared first: the multiplier refers to *model.model
     pmsc::PointMultiplier multiplier;  // const methods, safe to call concurrently
     pmsc::SoftCachePolicy policy;
+    pmsc::HitCheck check;  // after the multiplier it refers to; const methods
 };
 
 namespace {
@@ -243,6 +245,23 @@ pmsc_status pmsc_model_key_points(const pmsc_model* model, int64_t* key_points,
     });
 }
 
+pmsc_status pmsc_model_sentinel_count(const pmsc_model* model, size_t* count) noexcept {
+    return guarded(__func__, [&] {
+        const pmsc::Model& m = modelOf(model);
+        notNull(count, "count") = m.sentinels ? m.sentinels->points.size() : 0;
+    });
+}
+
+pmsc_status pmsc_model_sentinels(const pmsc_model* model, int64_t* sentinels, size_t count) noexcept {
+    return guarded(__func__, [&] {
+        const pmsc::Model& m = modelOf(model);
+        const std::size_t s = m.sentinels ? m.sentinels->points.size() : 0;
+        if (s == 0 && count == 0) return;
+        requireBuffer(sentinels, "sentinels", count, s, "S");
+        for (std::size_t i = 0; i < count; ++i) sentinels[i] = static_cast<int64_t>(m.sentinels->points[i]);
+    });
+}
+
 pmsc_status pmsc_model_eps(const pmsc_model* model, double* eps_min, double* eps_max) noexcept {
     return guarded(__func__, [&] {
         const pmsc::Model& m = modelOf(model);
@@ -347,6 +366,23 @@ pmsc_status pmsc_multiplier_reconstruct_points(const pmsc_multiplier* multiplier
             const std::vector<pmsc::Index> copy(points, points + point_count);
             m.multiplier.reconstructPoints(coords, copy, out);
         }
+    });
+}
+
+pmsc_status pmsc_multiplier_check_sentinels(const pmsc_multiplier* multiplier, const double* coords,
+                                            size_t coord_count, const double* values, size_t value_count,
+                                            int* stands) noexcept {
+    return guarded(__func__, [&] {
+        const pmsc_multiplier& m = notNull(multiplier, "multiplier");
+        const pmsc::Model& model = modelOf(m);
+        int& result = notNull(stands, "stands");
+        requireBuffer(coords, "coords", coord_count, size(model.coordCount()), "the coordinate count");
+        const std::size_t s = model.sentinels ? model.sentinels->points.size() : 0;
+        result = 1;
+        if (s == 0 && value_count == 0) return;
+        requireBuffer(values, "values", value_count, s * size(model.channels), "S*C");
+        requireApart(coords, coord_count, values, value_count, "coords", "values");
+        result = m.check.passes(coords, model.sentinels->points, values) ? 1 : 0;
     });
 }
 

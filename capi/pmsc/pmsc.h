@@ -33,9 +33,11 @@
  *
  * Models with regions (local fail-through) and cross models load and run here as whole-frame
  * models: their regions and cross state are not used, so a frame that does not hit fails through
- * whole, as `pmsc replay --whole-frame-fail-through` does. The hit check of the engine (a model's
- * sentinels and key neighbours, computed beside every hit) is not part of this API: a hit here
- * rests on the key error alone, as a model trained with `pmsc train --sentinels 0` decides.
+ * whole, as `pmsc replay --whole-frame-fail-through` does. A hit is checked as the engine checks
+ * it with pmsc_model_sentinels and pmsc_multiplier_check_sentinels (since API 1.2): compute the
+ * sentinels beside the keys, and a hit that fails the check is computed whole and blended with
+ * weight 0. The engine's further check of a hit only one part of the predicted key error certifies
+ * (region keys, key neighbours) is not part of this API.
  */
 #ifndef PMSC_PMSC_H
 #define PMSC_PMSC_H
@@ -47,7 +49,7 @@
  * removes some. A program built against this header runs with a library of the same major
  * version and a minor version at least this one's (compare with pmsc_api_version()). */
 #define PMSC_C_API_VERSION_MAJOR 1
-#define PMSC_C_API_VERSION_MINOR 1
+#define PMSC_C_API_VERSION_MINOR 2
 #define PMSC_C_API_VERSION (PMSC_C_API_VERSION_MAJOR * 1000 + PMSC_C_API_VERSION_MINOR)
 
 #if defined(_WIN32)
@@ -142,6 +144,16 @@ PMSC_C_API pmsc_status pmsc_model_key_points(const pmsc_model* model, int64_t* k
 PMSC_C_API pmsc_status pmsc_model_eps(const pmsc_model* model, double* eps_min,
                                       double* eps_max) PMSC_C_NOEXCEPT;
 
+/** S, the sentinels of the model: points `pmsc train --tolerance` spread over what the training saw
+ *  move, to be computed beside every hit's keys (docs/calibration.md). 0 for a model without.
+ *  Since API 1.2. */
+PMSC_C_API pmsc_status pmsc_model_sentinel_count(const pmsc_model* model, size_t* count) PMSC_C_NOEXCEPT;
+
+/** Copies the S sentinel indices into sentinels[0 .. S), the order pmsc_multiplier_check_sentinels
+ *  takes their values in. count must be S (0 with NULL for a model without). Since API 1.2. */
+PMSC_C_API pmsc_status pmsc_model_sentinels(const pmsc_model* model, int64_t* sentinels,
+                                            size_t count) PMSC_C_NOEXCEPT;
+
 /* ---- the runtime ------------------------------------------------------------------------- */
 
 /** The runtime of one model: projection, key error, soft-cache decision, reconstruction. Holds
@@ -225,6 +237,17 @@ PMSC_C_API pmsc_status pmsc_multiplier_reconstruct_points(const pmsc_multiplier*
                                                           const double* coords, size_t coord_count,
                                                           const int64_t* points, size_t point_count,
                                                           double* out, size_t out_count) PMSC_C_NOEXCEPT;
+
+/** Whether a hit stands at its sentinels, as the engine decides it: *stands is 1 when point
+ *  multiplication (coords) is within 0.8 of the model's tolerance of every sentinel's computed
+ *  value, else 0, and then the frame is to be computed whole and blended with weight 0
+ *  (pmsc_multiplier_blend), which keeps every point within the tolerance. A NaN value fails.
+ *  1 for a model without sentinels (values NULL, value_count 0). Since API 1.2.
+ *  @param[in] values  S*C values computed at the sentinels, in pmsc_model_sentinels' order */
+PMSC_C_API pmsc_status pmsc_multiplier_check_sentinels(const pmsc_multiplier* multiplier,
+                                                       const double* coords, size_t coord_count,
+                                                       const double* values, size_t value_count,
+                                                       int* stands) PMSC_C_NOEXCEPT;
 
 /** A blended frame or set of points as `pmsc replay` and the engine blend them: point by point,
  *  out = (1 - w) * pm + w * full with w = max(weight, 1 - T / e), e the Euclidean distance (over

@@ -36,10 +36,10 @@ elseif(NOT MODE STREQUAL "plain")
   message(FATAL_ERROR "unknown MODE '${MODE}'")
 endif()
 # The paper's key RMS and the largest-ratio rule: the tolerance below gives this shot hits, blends and
-# misses under them. No sentinels: the C API decides by the key error alone (pmsc.h), and replay must
-# decide the same.
+# misses under them. The models have sentinels (drawn in point order: the shot's values are no
+# shape), which the C replay checks through pmsc_multiplier_check_sentinels as the engine does.
 run("${PMSC}" train --frames train.npy --out model.pmsc --tolerance 0.05 --calibration max --key-error rms
-  --sentinels 0 --quiet ${train_options})
+  --quiet ${train_options})
 run("${PMSC}" replay --model model.pmsc --frames test.npy --report report.json --out pmsc_out.npy
     --quiet ${replay_options})
 run("${REPLAY_C}" model.pmsc test.npy c_out.npy ${c_options})

@@ -144,6 +144,15 @@ static void check_model(const pmsc_model* model, size_t* n, size_t* c, size_t* k
     EXPECT_STATUS(pmsc_model_eps(model, &eps_min, &eps_max), PMSC_OK);
     EXPECT(eps_min >= 0 && eps_max >= eps_min);
     EXPECT_STATUS(pmsc_model_eps(model, &eps_min, NULL), PMSC_ERROR_INVALID_ARGUMENT);
+
+    /* This model has no tolerance, so no sentinels (replay_c checks a model's real ones). */
+    size_t sentinels = 7;
+    EXPECT_STATUS(pmsc_model_sentinel_count(model, &sentinels), PMSC_OK);
+    EXPECT(sentinels == 0);
+    EXPECT_STATUS(pmsc_model_sentinel_count(model, NULL), PMSC_ERROR_INVALID_ARGUMENT);
+    EXPECT_STATUS(pmsc_model_sentinels(model, NULL, 0), PMSC_OK);
+    EXPECT_STATUS(pmsc_model_sentinels(model, keys, 1), PMSC_ERROR_INVALID_ARGUMENT);
+    EXPECT_STATUS(pmsc_model_sentinels(NULL, NULL, 0), PMSC_ERROR_INVALID_ARGUMENT);
 }
 
 /* Thresholds: bad ones are refused, good ones are used; the model's own otherwise. */
@@ -218,6 +227,18 @@ static void check_runtime(const pmsc_multiplier* m, size_t n, size_t c, size_t k
     EXPECT_STATUS(pmsc_multiplier_reconstruct_points(m, coords, nc, NULL, 3, some, 9),
                   PMSC_ERROR_INVALID_ARGUMENT);
     EXPECT_STATUS(pmsc_multiplier_reconstruct_points(m, coords, nc, NULL, 0, NULL, 0), PMSC_OK);
+
+    int stands = 0;
+    EXPECT_STATUS(pmsc_multiplier_check_sentinels(m, coords, nc, NULL, 0, &stands), PMSC_OK);
+    EXPECT(stands == 1);
+    EXPECT_STATUS(pmsc_multiplier_check_sentinels(m, coords, nc, some, 3, &stands),
+                  PMSC_ERROR_INVALID_ARGUMENT);
+    EXPECT(strstr(pmsc_last_error(), "pmsc_multiplier_check_sentinels") != NULL);
+    EXPECT_STATUS(pmsc_multiplier_check_sentinels(m, coords, nc - 1, NULL, 0, &stands),
+                  PMSC_ERROR_INVALID_ARGUMENT);
+    EXPECT_STATUS(pmsc_multiplier_check_sentinels(m, coords, nc, NULL, 0, NULL), PMSC_ERROR_INVALID_ARGUMENT);
+    EXPECT_STATUS(pmsc_multiplier_check_sentinels(NULL, coords, nc, NULL, 0, &stands),
+                  PMSC_ERROR_INVALID_ARGUMENT);
 }
 
 /* pmsc_blend: the weight's range, NULL buffers, in place, overlap. */

@@ -3,8 +3,10 @@
  *   pmsc_capi_replay MODEL.pmsc FRAMES.npy OUT.npy [EPS_MIN EPS_MAX]
  *
  * For every frame: the key points' recorded values, their projection, the key error, the
- * soft-cache decision and the reconstruction of every point; the output is the reconstruction for
- * a hit, the recorded frame for a miss and their blend (pmsc_multiplier_blend) otherwise. Prints the state of
+ * soft-cache decision and the reconstruction of every point; a hit is checked at the model's
+ * sentinels (their recorded values), and one that fails the check is a blend of weight 0. The
+ * output is the reconstruction for a hit, the recorded frame for a miss and their blend
+ * (pmsc_multiplier_blend) otherwise. Prints the state of
  * each frame, one per line ("hit", "blend", "miss"). Exit code 0, or 1 with one line on stderr. */
 #include <pmsc/pmsc.h>
 
@@ -35,9 +37,9 @@ static void* allocate(size_t count, size_t size) {
 
 /* What one frame needs: the model's sizes and per-frame buffers. */
 typedef struct replay_buffers {
-    size_t n, c, k, coord_count;
-    int64_t* key_points;
-    double *keys, *coords, *pm, *out;
+    size_t n, c, k, s, coord_count;
+    int64_t *key_points, *sentinels;
+    double *keys, *sentinel_values, *coords, *pm, *out;
 } replay_buffers;
 
 static replay_buffers make_buffers(const pmsc_multiplier* multiplier) {
@@ -50,6 +52,10 @@ static replay_buffers make_buffers(const pmsc_multiplier* multiplier) {
     CHECK(pmsc_model_coord_count(model, &b.coord_count));
     b.key_points = allocate(b.k, sizeof *b.key_points);
     CHECK(pmsc_model_key_points(model, b.key_points, b.k));
+    CHECK(pmsc_model_sentinel_count(model, &b.s));
+    b.sentinels = allocate(b.s, sizeof *b.sentinels);
+    if (b.s > 0) CHECK(pmsc_model_sentinels(model, b.sentinels, b.s));
+    b.sentinel_values = allocate(b.s * b.c, sizeof(double));
     b.keys = allocate(b.k * b.c, sizeof(double));
     b.coords = allocate(b.coord_count, sizeof(double));
     b.pm = allocate(b.n * b.c, sizeof(double));
@@ -59,6 +65,8 @@ static replay_buffers make_buffers(const pmsc_multiplier* multiplier) {
 
 static void free_buffers(replay_buffers* b) {
     free(b->key_points);
+    free(b->sentinels);
+    free(b->sentinel_values);
     free(b->keys);
     free(b->coords);
     free(b->pm);
@@ -78,6 +86,18 @@ static pmsc_cache_state replay_frame(const pmsc_multiplier* multiplier, replay_b
     CHECK(pmsc_multiplier_key_error(multiplier, b->keys, b->k * b->c, b->coords, b->coord_count, &key_error));
     CHECK(pmsc_multiplier_decide(multiplier, key_error, &decision));
     CHECK(pmsc_multiplier_reconstruct(multiplier, b->coords, b->coord_count, b->pm, values));
+    if (decision.state == PMSC_HIT && b->s > 0) {
+        for (size_t i = 0; i < b->s; ++i)
+            for (size_t ch = 0; ch < b->c; ++ch)
+                b->sentinel_values[i * b->c + ch] = recorded[(size_t)b->sentinels[i] * b->c + ch];
+        int stands = 0;
+        CHECK(pmsc_multiplier_check_sentinels(multiplier, b->coords, b->coord_count, b->sentinel_values,
+                                              b->s * b->c, &stands));
+        if (!stands) {
+            decision.state = PMSC_BLEND;
+            decision.weight = 0.0;
+        }
+    }
     switch (decision.state) {
         case PMSC_HIT:
             memcpy(b->out, b->pm, values * sizeof(double));
