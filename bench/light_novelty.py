@@ -33,8 +33,9 @@ it is exit 2), and 1 when any frame of any set comes back over T.
 import argparse
 import json
 import os
-import subprocess
 import sys
+
+from suite_common import fail, run, summarise
 
 MESH = "/usr/share/assimp/models/OBJ/WusonOBJ.obj"
 VARIANTS = ["POSITIONS", "", "--shared-channels POSITIONS", "--shared-channels", "--energy 0.99999 POSITIONS",
@@ -43,16 +44,8 @@ SETS = {"cornell": ("training", ["scattered", "path", "outside"]),
         "volume": ("training", ["between", "path", "outside"])}
 
 
-def fail(message):
-    print("light_novelty: " + message, file=sys.stderr)
-    sys.exit(2)
 
 
-def run(cmd):
-    done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    if done.returncode != 0:
-        fail("'" + " ".join(cmd) + "' exited " + str(done.returncode) + ": " + done.stdout.strip()[-400:])
-    return done.stdout
 
 
 def scene_spec(args, scene, work):
@@ -85,19 +78,6 @@ def export_sets(args, scene, work):
     return paths
 
 
-def summarise(report_path, tolerance):
-    with open(report_path) as f:
-        frames = json.load(f)["frames"]
-    over = [f for f in frames if f["soft_max_point_error"] > tolerance]
-    return {
-        "frames": len(frames),
-        "hits": sum(1 for f in frames if f["state"] == "hit"),
-        "over": len(over),
-        "over_hits": sum(1 for f in over if f["state"] == "hit"),
-        "worst": max(f["soft_max_point_error"] for f in frames) / tolerance,
-        "evaluated": sum(f.get("points_evaluated_fraction", 0.0 if f["state"] == "hit" else 1.0)
-                         for f in frames) / len(frames),
-    }
 
 
 def main():

@@ -24,10 +24,10 @@ frame of any set comes back over T (so it can gate a release).
 """
 import argparse
 import itertools
-import json
 import os
-import subprocess
 import sys
+
+from suite_common import fail, run, summarise
 
 # The sets: four controls training leaves still, and the seed of the training take. A, B and C are
 # the sets the defaults were chosen with (pmsc::kConfirmedShare among them); D and E were made after
@@ -53,16 +53,8 @@ SETS = {
 AMPLITUDES = (0.33, 0.67, 1.0)
 
 
-def fail(message):
-    print("novelty_suite: " + message, file=sys.stderr)
-    sys.exit(2)
 
 
-def run(cmd):
-    done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    if done.returncode != 0:
-        fail("'" + " ".join(cmd) + "' exited " + str(done.returncode) + ": " + done.stdout.strip()[-400:])
-    return done.stdout
 
 
 def ict(args, out, frames, seed, without, hold=()):
@@ -95,20 +87,6 @@ def make_set(args, np, name):
     return paths
 
 
-def summarise(report_path, tolerance):
-    with open(report_path) as f:
-        frames = json.load(f)["frames"]
-    over = [f for f in frames if f["soft_max_point_error"] > tolerance]
-    return {
-        "frames": len(frames),
-        "hits": sum(1 for f in frames if f["state"] == "hit"),
-        "over": len(over),
-        "over_hits": sum(1 for f in over if f["state"] == "hit"),
-        "over_local": sum(1 for f in over if f.get("local")),
-        "worst": max(f["soft_max_point_error"] for f in frames) / tolerance,
-        "evaluated": sum(f.get("points_evaluated_fraction", 1.0 if f["state"] != "hit" else 0.0)
-                         for f in frames) / len(frames),
-    }
 
 
 def main():

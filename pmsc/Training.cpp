@@ -318,7 +318,7 @@ struct Trainer {
     }
     /// The positions of the points the hit check reads (key neighbours, sentinels), N x 3; empty
     /// when the model has no such check or no positions. `given`: they are the user's.
-    Eigen::MatrixXd checkPositions(bool& given) const;
+    Eigen::MatrixXd knownPositions(bool& given) const;
     /// The points nearest each key (KeyNeighbours), where a hit one part of the predicted error
     /// alone certifies is checked; rank 0, on the final core.
     void keyNeighbours();
@@ -629,20 +629,23 @@ void Trainer::regions() {
     progress("regions", 1, 1);
 }
 
-Eigen::MatrixXd Trainer::checkPositions(bool& given) const {
-    // Only the predicted error's check reads its points (HitCheck), and only point positions give
-    // them a meaning: the positions the regions take, or the training mean when it is a shape.
+Eigen::MatrixXd Trainer::knownPositions(bool& given) const {
+    // The positions the regions take, or the training mean when it is a shape (channels of their
+    // own); empty when there are none.
     given = options.regions.positions.size() > 0;
-    if (model.keyErrorNorm != KeyErrorNorm::Predicted || model.sharedChannels) return {};
-    Eigen::MatrixXd positions = given ? options.regions.positions : meanShape(model, rmsMotion());
+    Eigen::MatrixXd positions =
+        given ? options.regions.positions
+              : (model.sharedChannels ? Eigen::MatrixXd() : meanShape(model, rmsMotion()));
     if (positions.rows() != model.points || positions.cols() != 3) return {};
     return positions;
 }
 
 void Trainer::keyNeighbours() {
+    // Only the predicted error's partial check reads them (HitCheck).
     if (model.points - model.keyCount() < kNeighboursPerKey) return;
+    if (model.keyErrorNorm != KeyErrorNorm::Predicted || model.sharedChannels) return;
     bool given = false;
-    const Eigen::MatrixXd positions = checkPositions(given);
+    const Eigen::MatrixXd positions = knownPositions(given);
     if (positions.size() == 0) return;
     model.keyNeighbours = nearestToKeys(positions, model.keyPoints, kNeighboursPerKey, !given);
 }
@@ -653,11 +656,8 @@ void Trainer::sentinels() {
     // point order (Sentinels.h says what each promises).
     if (options.sentinels <= 0 || !(options.tolerance > 0)) return;
     const Index count = sentinelCount(options.sentinels, model.points);
-    const bool given = options.regions.positions.size() > 0;
-    Eigen::MatrixXd positions =
-        given ? options.regions.positions
-              : (model.sharedChannels ? Eigen::MatrixXd() : meanShape(model, rmsMotion()));
-    if (positions.rows() != model.points || positions.cols() != 3) positions.resize(0, 0);
+    bool given = false;
+    const Eigen::MatrixXd positions = knownPositions(given);
     Sentinels chosen =
         positions.size() > 0
             ? farthestPointSentinels(positions, basisMotion(model), model.keyPoints, count,

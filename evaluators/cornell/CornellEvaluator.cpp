@@ -284,16 +284,7 @@ void CornellEvaluator::evaluateAll(Index frame, double* out) const {
 
 // One frame of the cache as a .vdb file. Its state is "soft-cached": `pmsc run` hands the writer the
 // soft-cached values without the decision, so the file says what it knows.
-FrameSet CornellEvaluator::pointPositions() const {
-    const std::vector<Vec3>& at = world_->voxels.position;
-    FrameSet out(1, static_cast<Index>(at.size()), 3);
-    for (std::size_t p = 0; p < at.size(); ++p) {
-        out.values[3 * p] = at[p].x;
-        out.values[3 * p + 1] = at[p].y;
-        out.values[3 * p + 2] = at[p].z;
-    }
-    return out;
-}
+FrameSet CornellEvaluator::pointPositions() const { return scene::positionsFrame(world_->voxels.position); }
 
 std::vector<std::shared_ptr<const FrameWriter>> CornellEvaluator::frameWriters() const {
     const SurfaceVoxels& voxels = world().voxels;

@@ -3,7 +3,10 @@
 
 // What the scenes share of geometry: a small vector type, colours and a pinhole camera.
 
+#include "pmsc/FrameSet.h"
+
 #include <array>
+#include <span>
 #include <string>
 
 namespace pmsc::scene {
@@ -23,6 +26,10 @@ inline Vec3 cross(Vec3 a, Vec3 b) {
 }
 double length(Vec3 a);
 Vec3 normalize(Vec3 a);
+
+/// Positions as one frame of points.size() points x 3 channels (x, y, z): what
+/// pmsc::PointPositionsProvider::pointPositions returns.
+FrameSet positionsFrame(std::span<const Vec3> points);
 
 /// RGB triple (reflectance, irradiance or radiance, linear).
 using Rgb = std::array<double, 3>;

@@ -359,14 +359,7 @@ ScatterCacheInfo VolumeEvaluator::info(Index frame, std::string state) const {
 
 // One frame as a .vdb: the "inscatter" grid (ScatterCache) with the density's topology.
 FrameSet VolumeEvaluator::pointPositions() const {
-    const std::vector<Vec3>& at = world_->density.voxelPositions();
-    FrameSet out(1, static_cast<Index>(at.size()), 3);
-    for (std::size_t p = 0; p < at.size(); ++p) {
-        out.values[3 * p] = at[p].x;
-        out.values[3 * p + 1] = at[p].y;
-        out.values[3 * p + 2] = at[p].z;
-    }
-    return out;
+    return scene::positionsFrame(world_->density.voxelPositions());
 }
 
 std::vector<std::shared_ptr<const FrameWriter>> VolumeEvaluator::frameWriters() const {

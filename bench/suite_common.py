@@ -1,0 +1,38 @@
+"""What the novelty suites share (bench/novelty_suite.py, bench/light_novelty.py): one-line failures,
+running pmsc's commands, and a replay report's summary against the tolerance."""
+import json
+import os
+import subprocess
+import sys
+
+
+def fail(message):
+    """One line naming the suite, exit 2."""
+    print(os.path.splitext(os.path.basename(sys.argv[0]))[0] + ": " + message, file=sys.stderr)
+    sys.exit(2)
+
+
+def run(cmd):
+    """A command's output; fail() with its last lines when it exits non-zero."""
+    done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    if done.returncode != 0:
+        fail("'" + " ".join(cmd) + "' exited " + str(done.returncode) + ": " + done.stdout.strip()[-400:])
+    return done.stdout
+
+
+def summarise(report_path, tolerance):
+    """A `pmsc replay --report` against T: hits, frames over T (whatever their route; whole-frame hits
+    and local frames among them), the worst frame over T, the share of points computed in full."""
+    with open(report_path) as f:
+        frames = json.load(f)["frames"]
+    over = [f for f in frames if f["soft_max_point_error"] > tolerance]
+    return {
+        "frames": len(frames),
+        "hits": sum(1 for f in frames if f["state"] == "hit"),
+        "over": len(over),
+        "over_hits": sum(1 for f in over if f["state"] == "hit"),
+        "over_local": sum(1 for f in over if f.get("local")),
+        "worst": max(f["soft_max_point_error"] for f in frames) / tolerance,
+        "evaluated": sum(f.get("points_evaluated_fraction", 1.0 if f["state"] != "hit" else 0.0)
+                         for f in frames) / len(frames),
+    }
