@@ -239,6 +239,37 @@ def load_points(path):
     return table
 
 
+def serve_loop(channels, count, frames, compute):
+    """The exec protocol on standard input (docs/exec-protocol.md): hello, then one answer per
+    request, `compute(frame, ids)` giving the values (len(ids) x channels); an exception answers
+    with one line and pmsc fails the frame."""
+    sock = socket.socket(fileno=os.dup(0))
+    sock.sendall(HELLO.pack(b"PMSCEXEC", 1, channels, count, frames))
+    timing = os.environ.get("PMSC_BLENDER_TIMING")
+    while True:
+        try:
+            kind, _, frame, asked, start = REQUEST.unpack(read_exactly(sock, REQUEST.size))
+            ids = (np.frombuffer(read_exactly(sock, 8 * asked), dtype="<u8").astype(np.int64) if kind == LIST
+                   else np.arange(start, start + asked, dtype=np.int64))
+        except EOFError:
+            return
+        try:
+            if not 0 <= frame < frames:
+                raise ValueError(f"frame {frame} outside [0, {frames - 1}]")
+            if asked and (ids.min() < 0 or ids.max() >= count):
+                raise ValueError(f"a point outside [0, {count})")
+            began = time.perf_counter()
+            values = np.ascontiguousarray(compute(frame, ids), dtype="<f8")
+            if timing:
+                with open(timing, "a") as log:
+                    log.write(f"{frame} {asked} {time.perf_counter() - began:.6f}\n")
+        except Exception as error:  # one line; pmsc fails the frame
+            text = f"{type(error).__name__}: {error}".replace("\n", " ").encode()
+            sock.sendall(RESPONSE.pack(1, 0, len(text)) + text)
+        else:
+            sock.sendall(RESPONSE.pack(0, 0, values.size) + values.tobytes())
+
+
 def serve(args):
     table = load_points(args.points)
     normals = table[:, 3:] / np.linalg.norm(table[:, 3:], axis=1, keepdims=True)
@@ -261,32 +292,31 @@ def serve(args):
     scene.render.threads = args.threads
     first, last = args.frames
     probes = Probes(table[:, :3], normals, passes)
-    sock = socket.socket(fileno=os.dup(0))
-    sock.sendall(HELLO.pack(b"PMSCEXEC", 1, 3, len(table), last - first + 1))
-    timing = os.environ.get("PMSC_BLENDER_TIMING")
-    while True:
-        try:
-            kind, _, frame, count, start = REQUEST.unpack(read_exactly(sock, REQUEST.size))
-            ids = (np.frombuffer(read_exactly(sock, 8 * count), dtype="<u8").astype(np.int64) if kind == LIST
-                   else np.arange(start, start + count, dtype=np.int64))
-        except EOFError:
-            return
-        try:
-            if not 0 <= frame <= last - first:
-                raise ValueError(f"frame {frame} outside [0, {last - first}]")
-            if count and (ids.min() < 0 or ids.max() >= len(table)):
-                raise ValueError(f"a point outside [0, {len(table)})")
-            began = time.perf_counter()
-            scene.frame_set(first + frame)
-            values = np.ascontiguousarray(probes.bake(ids), dtype="<f8")
-            if timing:
-                with open(timing, "a") as log:
-                    log.write(f"{frame} {count} {time.perf_counter() - began:.6f}\n")
-        except Exception as error:  # one line; pmsc fails the frame
-            text = f"{type(error).__name__}: {error}".replace("\n", " ").encode()
-            sock.sendall(RESPONSE.pack(1, 0, len(text)) + text)
-        else:
-            sock.sendall(RESPONSE.pack(0, 0, values.size) + values.tobytes())
+
+    def compute(frame, ids):
+        scene.frame_set(first + frame)
+        return probes.bake(ids)
+
+    serve_loop(3, len(table), last - first + 1, compute)
+
+
+def pose(args):
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from pmsc_blender_pose import Pose, PoseError  # beside this script
+
+    first, last = args.frames
+    try:
+        posed = Pose(args.object, args.action, args.space, first, last - first + 1,
+                     lambda text: print("pmsc_blender.py: pose: " + text, file=sys.stderr, flush=True))
+    except PoseError as error:
+        fail(str(error))
+    if args.rest:
+        tmp = args.rest + ".partial.npy"
+        np.save(tmp, posed.rest())
+        os.replace(tmp, args.rest)
+        print(f"pmsc_blender.py: wrote {args.rest}: {posed.count} points at the rest pose", file=sys.stderr)
+        return
+    serve_loop(3, posed.count, last - first + 1, posed.compute)
 
 
 class Parser(argparse.ArgumentParser):
@@ -311,6 +341,14 @@ def main(argv):
     v.add_argument("--light", default="direct,indirect", help="passes: direct, indirect or both")
     v.add_argument("--threads", type=int, default=1)
     v.add_argument("--seed", type=int, default=0, help="Cycles' seed (another seed: another draw of the noise)")
+    o = sub.add_parser("pose", help="an exec-protocol child: a mesh's evaluated vertices, posed by its rig")
+    o.add_argument("--object", required=True, help="the mesh object whose evaluated vertices are the points")
+    o.add_argument("--action", default="", help="the action its armature plays (default: the one it has)")
+    o.add_argument("--frames", required=True, type=frame_range, help="the scene's frames FIRST-LAST")
+    o.add_argument("--space", choices=("root", "world"), default="root",
+                   help="the points in the armature's root bone's space (default) or in world space")
+    o.add_argument("--rest", default="", metavar="POINTS.npy",
+                   help="write the points at the rest pose (N x 3, for `pmsc train --positions`) and exit")
     args = p.parse_args(argv)
     # Blender goes on with its default scene when the .blend it was given does not open.
     if not bpy.data.filepath:
@@ -319,6 +357,8 @@ def main(argv):
         if args.count < 1:
             fail("--count must be at least 1")
         sample(args)
+    elif args.command == "pose":
+        pose(args)
     else:
         if args.samples < 1 or args.threads < 1:
             fail("--samples and --threads must be at least 1")

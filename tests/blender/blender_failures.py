@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Each way pmsc's Blender child fails gives one line naming what went wrong, exit code 3 from
-`pmsc export-frames`, and no output file; animate_light.py's and show_values.py's bad requests exit
-2 with one line and write nothing (docs/blender.md, "Failures").
+`pmsc export-frames`, and no output file; animate_light.py's, show_values.py's and
+bvh_character.py's bad requests exit 2 with one line and write nothing (docs/blender.md, "Failures").
 
 Exit codes: 0 every case as expected, 1 a case was not, 77 no Blender and CI not set (a skip; under
 CI it is a failure, exit 2).
@@ -52,6 +52,13 @@ def main():
         ("bad light", serve(w("box.blend"), "--light sun"), "'sun' is not direct or indirect"),
         ("no blender", serve(w("box.blend")), "no 'no-such-blender' on PATH"),
         ("crash", "exec:blender -b %s --python %s 1>&2" % (w("box.blend"), w("crash.py")), "signal"),
+        # pose: the evaluated vertices of a mesh posed by its rig
+        ("no object", "exec:%s %s pose --object Nope --frames 1-5" % (launcher, w("box.blend")),
+         "the scene has no mesh object named 'Nope'"),
+        ("no action", "exec:%s %s pose --object floor --action walk --frames 1-5" % (launcher, w("box.blend")),
+         "the .blend has no action named 'walk'"),
+        ("no rig", "exec:%s %s pose --object floor --frames 1-5" % (launcher, w("box.blend")),
+         "'floor' has no Armature modifier whose root bone --space root could follow"),
     ]
     bad = 0
     for name, spec, expected in cases:
@@ -83,6 +90,10 @@ def main():
         ("bad lattice", animate("--grid", "1"), "--grid must be at least 2"),
         ("bad subdivide", show("--surfaces", "--subdivide", "9"), "--subdivide must be 0 to 6"),
         ("bad values", show("--surfaces"), "values of shape"),
+        # bvh_character.py (a character from motion capture): a take that is not a BVH file
+        ("bad take", ["blender", "-b", "--factory-startup", "--python-exit-code", "2", "--python",
+                      os.path.join(args.share, "bvh_character.py"), "--", "--bvh", w("bad.npy"),
+                      "--out", w("lit.blend")], "not a BVH file"),
     ]:
         done = subprocess.run(cmd, capture_output=True, text=True)
         lines = [l for l in done.stderr.splitlines() if l.strip()]
