@@ -6,13 +6,16 @@ Run by Blender (Debian's: its Python is the system Python 3, with numpy):
       --count N [--seed S] [--skip NAME,...]
   blender -b SCENE.blend --python-exit-code 2 --python pmsc_blender.py -- serve --points POINTS.npy \\
       --frames FIRST-LAST [--samples 64] [--light direct,indirect] [--threads 1] [--seed 0] 1>&2
+  blender -b CHARACTER.blend --python-exit-code 2 --python pmsc_blender.py -- pose --object NAME \\
+      --frames FIRST-LAST [--action NAME] [--space root|world] [--rest POINTS.npy] 1>&2
 
 `sample` draws N points on the scene's mesh surfaces, by area, with the surface normal at each
 (an N x 6 float64 .npy: x y z nx ny nz, world space), deterministically for a seed. `serve` is an
 exec-protocol child (docs/exec-protocol.md): pmsc's frame f is the scene's frame FIRST + f (its
 animated lights, objects and materials), and the values of a point are the RGB irradiance Cycles
 computes there (a diffuse bake without colour: the light arriving, as a white diffuse surface
-facing the normal would reflect it). `1>&2` keeps Blender's own messages off the protocol: the
+facing the normal would reflect it). `pose` is an exec-protocol child too: the points are a mesh
+object's evaluated vertices, posed by its armature (pmsc_blender_pose.py). `1>&2` keeps Blender's own messages off the protocol: the
 child answers on its standard input, which is the socket pmsc gives it.
 
 How a point is computed: one small triangle (a probe) per asked point, at the point and facing its
