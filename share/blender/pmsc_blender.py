@@ -242,6 +242,58 @@ def load_points(path):
     return table
 
 
+class Controls:
+    """Named properties set from a table every frame: `--set PATH` (repeated) names each, as
+    Blender's Python writes it from bpy.data (`objects["Light"].data.energy`,
+    `objects["Light"].location`, `materials["Red"].node_tree.nodes["Diffuse BSDF"].inputs[0].default_value`),
+    and row f of `--controls TABLE.npy` holds pmsc frame f's values: one column per number, a vector
+    property taking as many columns as it has components, in the order of the --set options. The
+    values are set after the scene's frame (so they override what is animated there)."""
+
+    def __init__(self, paths, table_path, frames):
+        self.targets, width = [], 0
+        for path in paths:
+            owner, name, size = self._resolve(path)
+            self.targets.append((owner, name, size, width))
+            width += size
+        try:
+            self.table = np.load(table_path)
+        except (OSError, ValueError) as error:
+            fail(f"{table_path}: {error}")
+        if self.table.ndim == 1:
+            self.table = self.table[:, None]
+        if self.table.ndim != 2 or self.table.shape != (frames, width) or not np.isfinite(self.table).all():
+            fail(f"{table_path}: expected {frames} x {width} finite values (a row per frame of --frames, "
+                 f"a column per number of the --set properties), got shape {self.table.shape}")
+
+    @staticmethod
+    def _resolve(path):
+        """(the struct holding the property, its name, its length) of bpy.data's `path`."""
+        head, _, rest = path.partition(".")
+        collection, bracket, key = head.partition("[")
+        holder = getattr(bpy.data, collection, None) if bracket else None
+        if not isinstance(holder, bpy.types.bpy_prop_collection) or not key.endswith("]"):
+            fail(f"--set '{path}': not COLLECTION[\"NAME\"].PROPERTY (objects[\"Light\"].data.energy)")
+        name = key[:-1].strip("\"'")
+        if name not in holder:
+            fail(f"--set '{path}': bpy.data.{collection} has no '{name}'")
+        owner, _, prop = rest.rpartition(".")
+        try:
+            struct = holder[name].path_resolve(owner) if owner else holder[name]
+            value = getattr(struct, prop)
+        except (ValueError, AttributeError):
+            fail(f"--set '{path}': '{holder[name].name}' has no property '{rest}'")
+        if isinstance(value, (bool, str)) or not (isinstance(value, (int, float)) or hasattr(value, "__len__")):
+            fail(f"--set '{path}': '{rest}' is not a number or a vector of numbers")
+        return struct, prop, (1 if isinstance(value, (int, float)) else len(value))
+
+    def apply(self, frame):
+        row = self.table[frame]
+        for struct, name, size, column in self.targets:
+            setattr(struct, name, row[column] if size == 1 else tuple(row[column:column + size]))
+        bpy.context.view_layer.update()
+
+
 def serve_loop(channels, count, frames, compute):
     """The exec protocol on standard input (docs/exec-protocol.md): hello, then one answer per
     request, `compute(frame, ids)` giving the values (len(ids) x channels); an exception answers
@@ -295,9 +347,12 @@ def serve(args):
     scene.render.threads = args.threads
     first, last = args.frames
     probes = Probes(table[:, :3], normals, passes)
+    controls = Controls(args.set, args.controls, last - first + 1) if args.set else None
 
     def compute(frame, ids):
         scene.frame_set(first + frame)
+        if controls:
+            controls.apply(frame)
         return probes.bake(ids)
 
     serve_loop(3, len(table), last - first + 1, compute)
@@ -344,6 +399,10 @@ def main(argv):
     v.add_argument("--light", default="direct,indirect", help="passes: direct, indirect or both")
     v.add_argument("--threads", type=int, default=1)
     v.add_argument("--seed", type=int, default=0, help="Cycles' seed (another seed: another draw of the noise)")
+    v.add_argument("--set", action="append", default=[], metavar="PATH",
+                   help="a property set every frame from --controls, as bpy.data's path (repeat for more)")
+    v.add_argument("--controls", default="", metavar="TABLE.npy",
+                   help="the --set properties' values: a row per frame, a column per number")
     o = sub.add_parser("pose", help="an exec-protocol child: a mesh's evaluated vertices, posed by its rig")
     o.add_argument("--object", required=True, help="the mesh object whose evaluated vertices are the points")
     o.add_argument("--action", default="", help="the action its armature plays (default: the one it has)")
@@ -365,6 +424,8 @@ def main(argv):
     else:
         if args.samples < 1 or args.threads < 1:
             fail("--samples and --threads must be at least 1")
+        if bool(args.set) != bool(args.controls):
+            fail("--set and --controls go together")
         serve(args)
 
 

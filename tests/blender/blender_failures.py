@@ -39,6 +39,9 @@ def main():
         return 1
     with open(w("bad.npy"), "wb") as f:
         f.write(b"not a numpy file")
+    # Controls by data path: the light's power and place, a row per frame (5 x 4).
+    import numpy as np
+    np.save(w("controls.npy"), np.array([[100.0, 2, 2, 4], [200, 2, 2, 4], [100, 2, 2, 4], [400, 2, 2, 4], [50, 2, 2, 4]]))
     with open(w("crash.py"), "w") as f:  # a Blender that dies in the middle of a frame
         f.write("import os, signal\nos.kill(os.getpid(), signal.SIGSEGV)\n")
     serve = lambda blend, *rest: "exec:%s %s serve --points %s --frames 1-5 --samples 4 %s" % (
@@ -50,6 +53,12 @@ def main():
         ("bad frames", "exec:%s %s serve --points %s --frames 5-1" % (launcher, w("box.blend"), w("points.npy")),
          "LAST is before FIRST"),
         ("bad light", serve(w("box.blend"), "--light sun"), "'sun' is not direct or indirect"),
+        ("no light", serve(w("box.blend"), "--set 'objects[\"Nope\"].data.energy' --controls " + w("controls.npy")),
+         "bpy.data.objects has no 'Nope'"),
+        ("no property", serve(w("box.blend"), "--set 'objects[\"Light\"].data.nope' --controls " + w("controls.npy")),
+         "'Light' has no property 'data.nope'"),
+        ("bad controls", serve(w("box.blend"), "--set 'objects[\"Light\"].data.energy' --controls " + w("controls.npy")),
+         "expected 5 x 1 finite values"),
         ("no blender", serve(w("box.blend")), "no 'no-such-blender' on PATH"),
         ("crash", "exec:blender -b %s --python %s 1>&2" % (w("box.blend"), w("crash.py")), "signal"),
         # pose: the evaluated vertices of a mesh posed by its rig
@@ -76,6 +85,22 @@ def main():
         if not ok:
             print("blender_failures: %s: expected exit 3, one line containing '%s', no %s" % (name, expected, out),
                   file=sys.stderr)
+            bad += 1
+    # The light a point receives is linear in the light's power: frames whose --set power doubles,
+    # at the same place (the same samples), give twice the values.
+    out = w("controls-out.npy")
+    done = subprocess.run([pmsc, "export-frames", serve(w("box.blend"), "--set 'objects[\"Light\"].data.energy' "
+                           "--set 'objects[\"Light\"].location' --controls " + w("controls.npy")),
+                           "--out", out, "--quiet"], capture_output=True, text=True)
+    if done.returncode != 0:
+        print("blender_failures: controls: " + done.stderr[-300:], file=sys.stderr)
+        bad += 1
+    else:
+        e = np.load(out)
+        ratios = [float(np.abs(e[i] - k * e[0]).max() / e[0].max()) for i, k in ((1, 2), (2, 1), (3, 4))]
+        print("controls     frames at power 200, 100, 400 against 100: largest relative differences %s" % ratios)
+        if max(ratios) > 1e-5:
+            print("blender_failures: controls: the values do not follow the --set power", file=sys.stderr)
             bad += 1
     # animate_light.py (a light keyed on a .blend): bad requests end Blender with exit 2, one line
     # on stderr, and no .blend written.
