@@ -11,11 +11,11 @@ Steps (each a command a rigger or a TD would type; docs/blender.md):
   1. `blender -b --python bvh_character.py` builds the character: the skeleton, a body skinned to
      it, Armature + Corrective Smooth + Subdivision Surface, an action per take (default Debian's
      assimp-testmodels CMU clips 01_01 and 01_03, one subject) and the range of motion's;
-  2. `pmsc export-frames exec:pmsc-blender character.blend pose --action rom ...` evaluates every
+  2. `pmsc export-frames exec:pmsc-blender character.blend pose --action rom ... --positions` evaluates every
      frame of the range of motion (every vertex, in the root bone's space), and, as the reference,
      every --stride-th frame of each take;
-  3. `pmsc-blender ... pose --rest` writes the points at the rest pose, and `pmsc train --tolerance T
-     --positions` them (T = --tolerance-share of the body's size: the median of the training
+  3. `pmsc train --tolerance T --positions` the points at the rest pose (the child's positions,
+     written by step 2's `pmsc export-frames --positions`) (T = --tolerance-share of the body's size: the median of the training
      frames' bounding-box diagonals) and the --train options;
   4. `pmsc run` over each take, Blender evaluating the keys, the sentinels and what misses.
 Prints, per take, the speedup (Blender's time to evaluate every vertex of a replay frame over the child's time
@@ -114,12 +114,10 @@ def main():
 
     for log in glob.glob(w("*.log")):
         os.remove(log)
+    # The frames, and where the points are (the rest pose, the child's positions answer).
     run([pmsc, "export-frames", evaluator("rom", w("train.log")), "--out", w("train.npy"), "--frames",
-         f"0-{lengths['rom'] - 1}", "--threads", "1", "--quiet"])
-    positions = []
-    if not args.no_positions:  # where the points are: the rest pose, as a rigger has it
-        run([launcher, character, "pose", "--object", "Body", "--frames", "1-1", "--rest", w("rest.npy")])
-        positions = ["--positions", w("rest.npy")]
+         f"0-{lengths['rom'] - 1}", "--threads", "1", "--quiet", "--positions", w("rest.npy")])
+    positions = [] if args.no_positions else ["--positions", w("rest.npy")]
     train = np.load(w("train.npy"))
     size = float(np.median(np.linalg.norm(train.max(axis=1) - train.min(axis=1), axis=1)))
     tolerance = args.tolerance_share * size

@@ -49,10 +49,11 @@ int runExportFrames(const std::vector<std::string>& args) {
     parser.option("--out", "FRAMES.npy", "frames file to write", outPath, true);
     parser.option("--frames", "A-B[:STEP]", "frames to export (default: all)", framesText);
     parser.option("--dtype", "float64|float32", "element type (default float64)", dtype);
-    parser.option("--positions", "POINTS.npy",
-                  "also write the points' positions, (1, points, 3) float64, for `pmsc train --positions` "
-                  "(evaluators whose values are not positions: cornell, volume)",
-                  positionsPath);
+    parser.option(
+        "--positions", "POINTS.npy",
+        "also write the points' positions, (1, points, 3) float64, for `pmsc train --positions` "
+        "(evaluators whose values are not positions: cornell, volume, exec children of protocol version 2)",
+        positionsPath);
     parser.option(
         "--threads", "T", "worker threads (default: every core; the file does not depend on it)",
         [&](const std::string& v) { threads = static_cast<int>(parseIndex("--threads", v, 1, 4096)); });
@@ -81,6 +82,9 @@ int runExportFrames(const std::vector<std::string>& args) {
         throw InputError("export-frames: --positions: evaluator '" + evaluator->name() +
                          "' has no point positions of its own (values that are positions give theirs by "
                          "their mean: train needs no --positions)");
+    // The positions first: an evaluator that cannot give them (an exec child of protocol version 1)
+    // fails before any frame is computed or written.
+    const FrameSet positions = positionsPath.empty() ? FrameSet() : placed->pointPositions();
     const Index n = evaluator->pointCount(), c = evaluator->channelCount(), count = span.count();
 
     NpyFrameWriter writer(outPath, count, n, c, type);  // a temporary file until commit()
@@ -116,8 +120,8 @@ int runExportFrames(const std::vector<std::string>& args) {
     writer.commit();
     std::cout << "pmsc export-frames: " << outPath << ": " << count << " frames x " << n << " points x " << c
               << " channels of " << spec << " (frames " << span.text() << ")\n";
-    if (placed != nullptr && !positionsPath.empty()) {
-        writeFrames(positionsPath, placed->pointPositions(), NpyDtype::Float64);
+    if (!positionsPath.empty()) {
+        writeFrames(positionsPath, positions, NpyDtype::Float64);
         std::cout << "pmsc export-frames: " << positionsPath << ": positions of the " << n << " points\n";
     }
     return kExitOk;

@@ -57,6 +57,7 @@ ExecOptions parseExecArgs(const std::string& args) {
 
 struct ExecEvaluator::Hello {
     Index points = 0, channels = 0, frames = 0;
+    std::uint32_t version = 1;
 };
 
 ExecEvaluator::ExecEvaluator(ExecOptions options) : options_(std::move(options)) {
@@ -65,6 +66,7 @@ ExecEvaluator::ExecEvaluator(ExecOptions options) : options_(std::move(options))
     points_ = hello.points;
     channels_ = hello.channels;
     frames_ = hello.frames;
+    version_ = hello.version;
     idle_.push_back(std::move(child));
 }
 
@@ -92,8 +94,8 @@ std::unique_ptr<ChildProcess> ExecEvaluator::start(Hello& hello) const {
     if (!complete) fail(*child, child->reap(kExitGrace) + " before its hello");
     if (std::memcmp(wire.magic, kMagic, sizeof kMagic) != 0)
         fail(*child, "did not start with the hello 'PMSCEXEC' (is it an exec-protocol program?)");
-    if (wire.version != kProtocolVersion)
-        fail(*child, "speaks protocol version " + std::to_string(wire.version) + ", pmsc speaks " +
+    if (wire.version < 1 || wire.version > kProtocolVersion)
+        fail(*child, "speaks protocol version " + std::to_string(wire.version) + ", pmsc speaks 1 to " +
                          std::to_string(kProtocolVersion));
     constexpr std::uint64_t kMaxPoints = std::uint64_t{1} << 40;
     if (wire.points == 0 || wire.points > kMaxPoints || wire.channels == 0 || wire.channels > 4096 ||
@@ -104,6 +106,7 @@ std::unique_ptr<ChildProcess> ExecEvaluator::start(Hello& hello) const {
     hello.points = static_cast<Index>(wire.points);
     hello.channels = static_cast<Index>(wire.channels);
     hello.frames = static_cast<Index>(wire.frames);
+    hello.version = wire.version;
     return child;
 }
 
@@ -158,46 +161,16 @@ void ExecEvaluator::request(Index frame, std::span<const Index> points, bool who
     }
     const auto count = wholeFrame ? static_cast<std::size_t>(points_) : points.size();
     const Index first = wholeFrame ? 0 : points.front();
+    Request req{};
+    req.kind = consecutive ? kRequestRange : kRequestList;
+    req.frame = frame;
+    req.count = count;
+    req.first = consecutive ? static_cast<std::uint64_t>(first) : 0;
     std::unique_ptr<ChildProcess> child = acquire();
-    const auto deadline = Clock::now() + options_.timeout;
     const std::size_t values = count * static_cast<std::size_t>(channels_);
     const std::string during = " during frame " + std::to_string(frame);
-    std::string reported;  // an error the child answered with; it serves on
-    try {
-        Request req{};
-        req.kind = consecutive ? kRequestRange : kRequestList;
-        req.frame = frame;
-        req.count = count;
-        req.first = consecutive ? static_cast<std::uint64_t>(first) : 0;
-        bool open = child->writeAll(&req, sizeof req, deadline);
-        if (open && !consecutive) {
-            static_assert(sizeof(Index) == sizeof(std::uint64_t));
-            open = child->writeAll(points.data(), points.size_bytes(), deadline);
-        }
-        Response resp{};
-        if (!open || !child->readAll(&resp, sizeof resp, deadline))
-            fail(*child, child->reap(kExitGrace) + during);
-        if (resp.status == kResponseError) {
-            if (resp.length > kMaxErrorBytes)
-                fail(*child, "answered an error of " + std::to_string(resp.length) + " bytes" + during);
-            reported.assign(resp.length, '\0');
-            if (!child->readAll(reported.data(), reported.size(), deadline))
-                fail(*child, child->reap(kExitGrace) + during);
-            if (const auto nl = reported.find('\n'); nl != std::string::npos) reported.resize(nl);
-            if (reported.empty()) reported = "(an empty error message)";
-        } else {
-            if (resp.status != kResponseValues || resp.reserved != 0)
-                fail(*child, "answered garbage (status " + std::to_string(resp.status) + ")" + during);
-            if (resp.length != values)
-                fail(*child, "answered " + std::to_string(resp.length) + " values for " +
-                                 std::to_string(count) + " points x " + std::to_string(channels_) +
-                                 " channels" + during);
-            if (!child->readAll(out, values * sizeof(double), deadline))
-                fail(*child, "wrote too few bytes and " + child->reap(kExitGrace) + during);
-        }
-    } catch (const TimedOut&) {
-        fail(*child, "did not answer within " + seconds(options_.timeout) + during);
-    }
+    const std::string reported =
+        exchange(*child, req, consecutive ? std::span<const Index>{} : points, values, out, during);
     if (!reported.empty()) {
         release(std::move(child));
         throw EvaluatorError("exec '" + shortCommand(options_.command) + "': frame " + std::to_string(frame) +
@@ -211,6 +184,66 @@ void ExecEvaluator::request(Index frame, std::span<const Index> points, bool who
                              std::to_string(point) + " channel " + std::to_string(i % channels_) + during);
         }
     release(std::move(child));
+}
+
+std::string ExecEvaluator::exchange(ChildProcess& child, const Request& req, std::span<const Index> list,
+                                    std::size_t values, double* out, const std::string& during) const {
+    const auto deadline = Clock::now() + options_.timeout;
+    std::string reported;  // an error the child answered with; it serves on
+    try {
+        bool open = child.writeAll(&req, sizeof req, deadline);
+        if (open && !list.empty()) {
+            static_assert(sizeof(Index) == sizeof(std::uint64_t));
+            open = child.writeAll(list.data(), list.size_bytes(), deadline);
+        }
+        Response resp{};
+        if (!open || !child.readAll(&resp, sizeof resp, deadline))
+            fail(child, child.reap(kExitGrace) + during);
+        if (resp.status == kResponseError) {
+            if (resp.length > kMaxErrorBytes)
+                fail(child, "answered an error of " + std::to_string(resp.length) + " bytes" + during);
+            reported.assign(resp.length, '\0');
+            if (!child.readAll(reported.data(), reported.size(), deadline))
+                fail(child, child.reap(kExitGrace) + during);
+            if (const auto nl = reported.find('\n'); nl != std::string::npos) reported.resize(nl);
+            if (reported.empty()) reported = "(an empty error message)";
+            return reported;
+        }
+        if (resp.status != kResponseValues || resp.reserved != 0)
+            fail(child, "answered garbage (status " + std::to_string(resp.status) + ")" + during);
+        if (resp.length != values)
+            fail(child, "answered " + std::to_string(resp.length) + " values for " +
+                            std::to_string(req.count) + " points x " +
+                            std::to_string(values / std::max<std::uint64_t>(req.count, 1)) + " channels" +
+                            during);
+        if (!child.readAll(out, values * sizeof(double), deadline))
+            fail(child, "wrote too few bytes and " + child.reap(kExitGrace) + during);
+    } catch (const TimedOut&) {
+        fail(child, "did not answer within " + seconds(options_.timeout) + during);
+    }
+    return reported;
+}
+
+FrameSet ExecEvaluator::pointPositions() const {
+    if (version_ < kPositionsVersion)
+        throw InputError("exec '" + shortCommand(options_.command) + "': the child speaks protocol version " +
+                         std::to_string(version_) + ", which has no positions request (version " +
+                         std::to_string(kPositionsVersion) + " children say where their points are)");
+    Request req{};
+    req.kind = kRequestPositions;
+    req.count = static_cast<std::uint64_t>(points_);
+    FrameSet positions(1, points_, 3);
+    std::unique_ptr<ChildProcess> child = acquire();
+    const std::string reported =
+        exchange(*child, req, {}, positions.values.size(), positions.values.data(), " asked for positions");
+    release(std::move(child));
+    if (!reported.empty())
+        throw InputError("exec '" + shortCommand(options_.command) + "': no positions: " + reported);
+    for (const double v : positions.values)
+        if (!std::isfinite(v))
+            throw EvaluatorError("exec '" + shortCommand(options_.command) +
+                                 "': the child answered a non-finite position");
+    return positions;
 }
 
 void ExecEvaluator::evaluate(Index frame, std::span<const Index> points, double* out) const {

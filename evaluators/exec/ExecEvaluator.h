@@ -2,8 +2,10 @@
 #pragma once
 
 #include "pmsc/PointEvaluator.h"
+#include "pmsc/PointPositions.h"
 
 #include <chrono>
+#include <cstdint>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -12,6 +14,7 @@
 namespace pmsc::evaluators::exec {
 
 class ChildProcess;
+struct Request;
 
 /// How to run a calculation in a child process.
 struct ExecOptions {
@@ -41,11 +44,15 @@ ExecOptions parseExecArgs(const std::string& args);
 /// So the engine's FailurePolicy decides: StopRun ends the run (exit code 3), MarkFailedAndContinue
 /// fails that frame and later frames are served by new children.
 ///
+/// Positions: a child of protocol version 2 says where its points are (a positions request), so
+/// `pmsc export-frames --positions` writes them for `pmsc train --positions`; asking a version-1
+/// child, or one that answers that its points have no places, throws pmsc::InputError.
+///
 /// Thread-safe; deterministic as far as the child is (values go through unchanged).
-class ExecEvaluator final : public PointEvaluator {
+class ExecEvaluator final : public PointEvaluator, public PointPositionsProvider {
 public:
     /// Starts the first child and reads its hello. @throws EvaluatorError when it cannot start,
-    /// exits, hangs or says something that is not a version-1 hello.
+    /// exits, hangs or says something that is not a version-1 or version-2 hello.
     explicit ExecEvaluator(ExecOptions options);
     ~ExecEvaluator() override;
 
@@ -55,6 +62,9 @@ public:
     Index frameCount() const override { return frames_; }
     void evaluate(Index frame, std::span<const Index> points, double* out) const override;
     void evaluateAll(Index frame, double* out) const override;
+    FrameSet pointPositions() const override;
+    /// The protocol version the first child's hello gave (1 or 2).
+    std::uint32_t protocolVersion() const { return version_; }
 
     /// Children alive now (idle ones; a busy child is counted by the call using it).
     std::size_t idleChildren() const;
@@ -69,10 +79,15 @@ private:
     void release(std::unique_ptr<ChildProcess> child) const;
     /// One request: `points`, or every point when `wholeFrame` (then `points` is not read).
     void request(Index frame, std::span<const Index> points, bool wholeFrame, double* out) const;
+    /// Sends `req` (and `list`, for a list request) and reads `values` doubles into `out`.
+    /// @return the error the child answered with (it serves on), or empty.
+    std::string exchange(ChildProcess& child, const Request& req, std::span<const Index> list,
+                         std::size_t values, double* out, const std::string& during) const;
     [[noreturn]] void fail(ChildProcess& child, const std::string& what) const;
 
     ExecOptions options_;
     Index points_ = 0, channels_ = 0, frames_ = 0;
+    std::uint32_t version_ = 1;
     mutable std::mutex mutex_;
     mutable std::vector<std::unique_ptr<ChildProcess>> idle_;
     mutable std::size_t started_ = 0;

@@ -2,6 +2,7 @@
 #include "evaluators/exec/ExecProtocol.h"
 
 #include "evaluators/exec/ChildProcess.h"
+#include "pmsc/PointPositions.h"
 
 #include <unistd.h>
 #include <algorithm>
@@ -212,6 +213,34 @@ void answer(const PointEvaluator& evaluator, const Request& request, const Asked
     writer.drain();
 }
 
+/// Answers a positions request: the evaluator's PointPositionsProvider, or an error response.
+void answerPositions(const PointEvaluator& evaluator, const Request& request, int out) {
+    if (request.count != static_cast<std::uint64_t>(evaluator.pointCount()) || request.first != 0)
+        throw std::runtime_error("a positions request must ask for all " +
+                                 std::to_string(evaluator.pointCount()) + " points from 0");
+    const auto* placed = dynamic_cast<const PointPositionsProvider*>(&evaluator);
+    if (placed == nullptr) {
+        sendError(out, "evaluator '" + evaluator.name() + "' has no point positions of its own");
+        return;
+    }
+    FrameSet positions;
+    try {
+        positions = placed->pointPositions();
+    } catch (const std::exception& e) {
+        sendError(out, e.what());
+        return;
+    }
+    if (positions.values.size() != static_cast<std::size_t>(evaluator.pointCount()) * 3) {
+        sendError(out, "evaluator '" + evaluator.name() + "' gave " +
+                           std::to_string(positions.values.size()) + " position values for " +
+                           std::to_string(evaluator.pointCount()) + " points");
+        return;
+    }
+    const Response response{kResponseValues, 0, positions.values.size()};
+    writeExactly(out, &response, sizeof response);
+    writeExactly(out, positions.values.data(), positions.values.size() * sizeof(double));
+}
+
 }  // namespace
 
 int serve(const PointEvaluator& evaluator, int in, int out) {
@@ -226,7 +255,10 @@ int serve(const PointEvaluator& evaluator, int in, int out) {
 
         BlockWriter writer(out);
         for (Request request{}; readExactly(in, &request, sizeof request);) {
-            answer(evaluator, request, requestPoints(in, request, evaluator.pointCount()), out, writer);
+            if (request.kind == kRequestPositions)
+                answerPositions(evaluator, request, out);
+            else
+                answer(evaluator, request, requestPoints(in, request, evaluator.pointCount()), out, writer);
         }
         return 0;
     } catch (const std::exception& e) {

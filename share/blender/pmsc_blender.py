@@ -7,7 +7,7 @@ Run by Blender (Debian's: its Python is the system Python 3, with numpy):
   blender -b SCENE.blend --python-exit-code 2 --python pmsc_blender.py -- serve --points POINTS.npy \\
       --frames FIRST-LAST [--samples 64] [--light direct,indirect] [--threads 1] [--seed 0] 1>&2
   blender -b CHARACTER.blend --python-exit-code 2 --python pmsc_blender.py -- pose --object NAME \\
-      --frames FIRST-LAST [--action NAME] [--space root|world] [--rest POINTS.npy] 1>&2
+      --frames FIRST-LAST [--action NAME] [--space root|world] 1>&2
 
 `sample` draws N points on the scene's mesh surfaces, by area, with the surface normal at each
 (an N x 6 float64 .npy: x y z nx ny nz, world space), deterministically for a seed. `serve` is an
@@ -41,9 +41,9 @@ import bpy
 import numpy as np
 
 HELLO = struct.Struct("<8sIIQQ")   # magic, version, channels, points, frames
-REQUEST = struct.Struct("<IIqQQ")  # kind (1 list, 2 range), 0, frame, count, first
+REQUEST = struct.Struct("<IIqQQ")  # kind (1 list, 2 range, 3 positions), 0, frame, count, first
 RESPONSE = struct.Struct("<IIQ")   # status (0 values, 1 error), 0, length
-LIST, RANGE = 1, 2
+LIST, RANGE, POSITIONS = 1, 2, 3
 PASSES = {"direct": "DIRECT", "indirect": "INDIRECT"}
 
 
@@ -294,16 +294,20 @@ class Controls:
         bpy.context.view_layer.update()
 
 
-def serve_loop(channels, count, frames, compute):
-    """The exec protocol on standard input (docs/exec-protocol.md): hello, then one answer per
-    request, `compute(frame, ids)` giving the values (len(ids) x channels); an exception answers
-    with one line and pmsc fails the frame."""
+def serve_loop(channels, count, frames, compute, positions):
+    """The exec protocol, version 2, on standard input (docs/exec-protocol.md): hello, then one
+    answer per request, `compute(frame, ids)` giving the values (len(ids) x channels) and
+    `positions()` where the points are (N x 3); an exception answers with one line and pmsc fails
+    the frame."""
     sock = socket.socket(fileno=os.dup(0))
-    sock.sendall(HELLO.pack(b"PMSCEXEC", 1, channels, count, frames))
+    sock.sendall(HELLO.pack(b"PMSCEXEC", 2, channels, count, frames))
     timing = os.environ.get("PMSC_BLENDER_TIMING")
     while True:
         try:
             kind, _, frame, asked, start = REQUEST.unpack(read_exactly(sock, REQUEST.size))
+            if kind == POSITIONS:
+                answer(sock, lambda: positions().reshape(-1))
+                continue
             ids = (np.frombuffer(read_exactly(sock, 8 * asked), dtype="<u8").astype(np.int64) if kind == LIST
                    else np.arange(start, start + asked, dtype=np.int64))
         except EOFError:
@@ -319,10 +323,23 @@ def serve_loop(channels, count, frames, compute):
                 with open(timing, "a") as log:
                     log.write(f"{frame} {asked} {time.perf_counter() - began:.6f}\n")
         except Exception as error:  # one line; pmsc fails the frame
-            text = f"{type(error).__name__}: {error}".replace("\n", " ").encode()
-            sock.sendall(RESPONSE.pack(1, 0, len(text)) + text)
+            answer(sock, None, error)
         else:
-            sock.sendall(RESPONSE.pack(0, 0, values.size) + values.tobytes())
+            answer(sock, lambda: values)
+
+
+def answer(sock, values, error=None):
+    """Sends values() (float64), or one line for an error (raised by values() or given)."""
+    if error is None:
+        try:
+            data = np.ascontiguousarray(values(), dtype="<f8")
+        except Exception as raised:  # noqa: BLE001 (any failure is one line to pmsc)
+            error = raised
+    if error is not None:
+        text = f"{type(error).__name__}: {error}".replace("\n", " ").encode()
+        sock.sendall(RESPONSE.pack(1, 0, len(text)) + text)
+    else:
+        sock.sendall(RESPONSE.pack(0, 0, data.size) + data.tobytes())
 
 
 def serve(args):
@@ -355,7 +372,7 @@ def serve(args):
             controls.apply(frame)
         return probes.bake(ids)
 
-    serve_loop(3, len(table), last - first + 1, compute)
+    serve_loop(3, len(table), last - first + 1, compute, lambda: table[:, :3])
 
 
 def pose(args):
@@ -368,13 +385,7 @@ def pose(args):
                      lambda text: print("pmsc_blender.py: pose: " + text, file=sys.stderr, flush=True))
     except PoseError as error:
         fail(str(error))
-    if args.rest:
-        tmp = args.rest + ".partial.npy"
-        np.save(tmp, posed.rest())
-        os.replace(tmp, args.rest)
-        print(f"pmsc_blender.py: wrote {args.rest}: {posed.count} points at the rest pose", file=sys.stderr)
-        return
-    serve_loop(3, posed.count, last - first + 1, posed.compute)
+    serve_loop(3, posed.count, last - first + 1, posed.compute, posed.rest)
 
 
 class Parser(argparse.ArgumentParser):
@@ -409,8 +420,6 @@ def main(argv):
     o.add_argument("--frames", required=True, type=frame_range, help="the scene's frames FIRST-LAST")
     o.add_argument("--space", choices=("root", "world"), default="root",
                    help="the points in the armature's root bone's space (default) or in world space")
-    o.add_argument("--rest", default="", metavar="POINTS.npy",
-                   help="write the points at the rest pose (N x 3, for `pmsc train --positions`) and exit")
     args = p.parse_args(argv)
     # Blender goes on with its default scene when the .blend it was given does not open.
     if not bpy.data.filepath:

@@ -39,7 +39,10 @@ inline std::string shellQuote(const std::string& s) {
 inline RunResult runPmsc(const TempDir& scratch, const std::vector<std::string>& args,
                          const std::string& prefix = "") {
     std::string command = prefix + (prefix.empty() ? "" : " ") + shellQuote(PMSC_BINARY);
-    for (const auto& a : args) command += " " + shellQuote(a);
+    for (const auto& a : args) {  // appended in steps: GCC 12 warns falsely (-Wrestrict) on " " + string&&
+        command += ' ';
+        command += shellQuote(a);
+    }
     const std::string out = scratch.file("stdout.txt"), err = scratch.file("stderr.txt");
     command += " >" + shellQuote(out) + " 2>" + shellQuote(err) + " </dev/null";
     const int status = std::system(command.c_str());

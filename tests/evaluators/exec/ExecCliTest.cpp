@@ -108,6 +108,28 @@ TEST(ExecCli, EveryChildFaultIsExitCode3AndOneLine) {
     }
 }
 
+TEST(ExecCli, ExportFramesPositionsThroughAChildAreTheEvaluatorsOwnAndAVersion1ChildWritesNothing) {
+    TempDir dir;
+    const std::string spec = "cornell:points=3000,samples=8";
+    RunResult r = runPmsc(dir, {"export-frames", spec, "--out", dir.file("a.npy"), "--frames", "0-1",
+                                "--positions", dir.file("a-positions.npy"), "--quiet"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    r = runPmsc(
+        dir, {"export-frames", "exec:" + std::string(PMSC_BINARY) + " serve " + spec, "--out",
+              dir.file("b.npy"), "--frames", "0-1", "--positions", dir.file("b-positions.npy"), "--quiet"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_EQ(bytes(dir.file("a-positions.npy")), bytes(dir.file("b-positions.npy")));
+    EXPECT_EQ(bytes(dir.file("a.npy")), bytes(dir.file("b.npy")));
+    // A child of protocol version 1 has no positions request: exit 2, one line, no frames written.
+    r = runPmsc(dir,
+                {"export-frames",
+                 "exec:" + kPython + " " + kSource + "/examples/exec/replay_child.py " + dir.file("a.npy"),
+                 "--out", dir.file("c.npy"), "--positions", dir.file("c-positions.npy"), "--quiet"});
+    expectOneLine(r, 2, "protocol version 1, which has no positions request");
+    EXPECT_FALSE(std::filesystem::exists(dir.file("c.npy")));
+    EXPECT_FALSE(std::filesystem::exists(dir.file("c-positions.npy")));
+}
+
 }  // namespace
 
 namespace {

@@ -12,6 +12,7 @@
 #include "evaluators/exec/Isolated.h"
 #include "pmsc/Errors.h"
 #include "pmsc/NpyIO.h"
+#include "pmsc/PointPositions.h"
 #include "pmsc/Training.h"
 
 #include <gtest/gtest.h>
@@ -92,6 +93,53 @@ TEST(ExecEvaluator, ServedSyntheticEqualsInProcessBitForBit) {
     child.evaluateAll(29, b.data());
     EXPECT_EQ(a, b);
     EXPECT_EQ(child.childrenStarted(), 1u);
+}
+
+TEST(ExecEvaluator, AVersion2ChildSaysWhereItsPointsAreAndOthersSayInOneLineThatTheyCannot) {
+    // pmsc serve (version 2) of an evaluator with positions answers them bit for bit.
+    const std::string spec = "cornell:points=3000,samples=8";
+    const auto local = makeEvaluator(spec);
+    ExecEvaluator child(options(kPmsc + " serve " + spec));
+    EXPECT_EQ(child.protocolVersion(), 2u);
+    const FrameSet got = child.pointPositions();
+    const FrameSet want = dynamic_cast<const PointPositionsProvider&>(*local).pointPositions();
+    ASSERT_EQ(got.points, local->pointCount());
+    EXPECT_EQ(got.channels, 3);
+    EXPECT_EQ(got.values, want.values);
+    // The child serves on after a positions request.
+    std::vector<double> a(3 * 3), b(a.size());
+    const std::vector<Index> points = {0, 1000, 2999};
+    local->evaluate(4, points, a.data());
+    child.evaluate(4, points, b.data());
+    EXPECT_EQ(a, b);
+
+    // An evaluator whose points have no places, served: one line naming it, and the child serves on.
+    ExecEvaluator synthetic(options(kPmsc + " serve synthetic:grid=12:frames=30:seed=4"));
+    try {
+        (void)synthetic.pointPositions();
+        ADD_FAILURE() << "no InputError";
+    } catch (const InputError& e) {
+        expectContains(e.what(), {"no positions", "'synthetic' has no point positions"});
+    }
+    std::vector<double> one(3);
+    EXPECT_NO_THROW(synthetic.evaluate(0, std::vector<Index>{5}, one.data()));
+    EXPECT_EQ(synthetic.childrenStarted(), 1u);
+
+    // A version-1 child (examples/exec/replay_child.py) is never asked.
+    const auto dir = std::filesystem::temp_directory_path() / ("pmsc-exec-v1-" + std::to_string(::getpid()));
+    std::filesystem::create_directories(dir);
+    FrameSet frames(2, 5, 3);
+    writeFrames((dir / "f.npy").string(), frames, NpyDtype::Float64);
+    ExecEvaluator v1(
+        options(kPython + " " + kSource + "/examples/exec/replay_child.py " + (dir / "f.npy").string()));
+    EXPECT_EQ(v1.protocolVersion(), 1u);
+    try {
+        (void)v1.pointPositions();
+        ADD_FAILURE() << "no InputError";
+    } catch (const InputError& e) {
+        expectContains(e.what(), {"protocol version 1", "no positions request"});
+    }
+    std::filesystem::remove_all(dir);
 }
 
 TEST(ExecEvaluator, AnAnswerStreamedInBlocksEqualsInProcessBitForBit) {
