@@ -115,9 +115,9 @@ def main():
     for log in glob.glob(w("*.log")):
         os.remove(log)
     # The frames, and where the points are (the rest pose, the child's positions answer).
-    run([pmsc, "export-frames", evaluator("rom", w("train.log")), "--out", w("train.npy"), "--frames",
-         f"0-{lengths['rom'] - 1}", "--threads", "1", "--quiet", "--positions", w("rest.npy")])
     positions = [] if args.no_positions else ["--positions", w("rest.npy")]
+    run([pmsc, "export-frames", evaluator("rom", w("train.log")), "--out", w("train.npy"), "--frames",
+         f"0-{lengths['rom'] - 1}", "--threads", "1", "--quiet"] + positions)
     train = np.load(w("train.npy"))
     size = float(np.median(np.linalg.norm(train.max(axis=1) - train.min(axis=1), axis=1)))
     tolerance = args.tolerance_share * size

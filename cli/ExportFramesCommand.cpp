@@ -19,6 +19,7 @@
 #include <atomic>
 #include <iostream>
 #include <mutex>
+#include <optional>
 
 namespace pmsc::cli {
 
@@ -82,10 +83,19 @@ int runExportFrames(const std::vector<std::string>& args) {
         throw InputError("export-frames: --positions: evaluator '" + evaluator->name() +
                          "' has no point positions of its own (values that are positions give theirs by "
                          "their mean: train needs no --positions)");
-    // The positions first: an evaluator that cannot give them (an exec child of protocol version 1)
-    // fails before any frame is computed or written.
-    const FrameSet positions = positionsPath.empty() ? FrameSet() : placed->pointPositions();
     const Index n = evaluator->pointCount(), c = evaluator->channelCount(), count = span.count();
+    // The positions first: an evaluator that cannot give them (an exec child of protocol version 1)
+    // fails before any frame is computed or written. Both files are renamed into place at the end.
+    std::optional<NpyFrameWriter> positionsWriter;
+    if (!positionsPath.empty()) {
+        const FrameSet positions = placed->pointPositions();
+        if (positions.values.size() != static_cast<std::size_t>(n) * 3)
+            throw EvaluatorError("export-frames: --positions: evaluator '" + evaluator->name() + "' gave " +
+                                 std::to_string(positions.values.size()) + " position values for " +
+                                 std::to_string(n) + " points");
+        positionsWriter.emplace(positionsPath, 1, n, 3, NpyDtype::Float64);
+        positionsWriter->writeFrame(0, positions.values.data());
+    }
 
     NpyFrameWriter writer(outPath, count, n, c, type);  // a temporary file until commit()
     Progress progress("export-frames", !quiet);
@@ -120,8 +130,8 @@ int runExportFrames(const std::vector<std::string>& args) {
     writer.commit();
     std::cout << "pmsc export-frames: " << outPath << ": " << count << " frames x " << n << " points x " << c
               << " channels of " << spec << " (frames " << span.text() << ")\n";
-    if (!positionsPath.empty()) {
-        writeFrames(positionsPath, positions, NpyDtype::Float64);
+    if (positionsWriter) {
+        positionsWriter->commit();
         std::cout << "pmsc export-frames: " << positionsPath << ": positions of the " << n << " points\n";
     }
     return kExitOk;

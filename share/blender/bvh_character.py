@@ -180,6 +180,9 @@ def main(argv):
     for path in takes:
         if not os.path.isfile(path):
             fail(f"cannot read '{path}'")
+    stems = [os.path.splitext(os.path.basename(path))[0] for path in takes]
+    if len(set(stems)) != len(stems):
+        fail("two takes have the same name (an action is named by its file's stem): " + ", ".join(stems))
     bpy.ops.wm.read_factory_settings(use_empty=True)
     arm = import_take(takes[0], args.scale)
     arm.name = arm.data.name = "Rig"
@@ -203,8 +206,13 @@ def main(argv):
     points = len(evaluated.to_mesh().vertices)
     evaluated.to_mesh_clear()
     tmp = args.out + ".partial.blend"
-    bpy.ops.wm.save_as_mainfile(filepath=tmp)
-    os.replace(tmp, args.out)
+    try:
+        bpy.ops.wm.save_as_mainfile(filepath=tmp)
+        os.replace(tmp, args.out)
+    except (RuntimeError, OSError) as error:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        fail(f"cannot write '{args.out}': {str(error).strip().splitlines()[-1] if str(error).strip() else error}")
     actions = ", ".join(f"{a.name} ({int(a.frame_range[1])} frames)" for a in bpy.data.actions)
     print(f"bvh_character.py: wrote {args.out}: 'Body' ({len(body.data.vertices)} cage vertices, "
           f"{points} evaluated points) on 'Rig' ({len(bones)} bones); actions {actions}")

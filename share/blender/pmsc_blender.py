@@ -32,6 +32,7 @@ with exit code 2 before the hello, which pmsc reports with the child's last stde
 """
 import argparse
 import os
+import re
 import socket
 import struct
 import sys
@@ -253,13 +254,15 @@ class Controls:
     def __init__(self, paths, table_path, frames):
         self.targets, width = [], 0
         for path in paths:
-            owner, name, size = self._resolve(path)
-            self.targets.append((owner, name, size, width))
+            owner, name, kind, size = self._resolve(path)
+            self.targets.append((owner, name, kind, size, width))
             width += size
         try:
             self.table = np.load(table_path)
         except (OSError, ValueError) as error:
             fail(f"{table_path}: {error}")
+        if not isinstance(self.table, np.ndarray) or self.table.dtype.kind not in "iuf":
+            fail(f"{table_path}: expected one array of numbers (an .npy, not an .npz or text)")
         if self.table.ndim == 1:
             self.table = self.table[:, None]
         if self.table.ndim != 2 or self.table.shape != (frames, width) or not np.isfinite(self.table).all():
@@ -268,13 +271,15 @@ class Controls:
 
     @staticmethod
     def _resolve(path):
-        """(the struct holding the property, its name, its length) of bpy.data's `path`."""
-        head, _, rest = path.partition(".")
-        collection, bracket, key = head.partition("[")
-        holder = getattr(bpy.data, collection, None) if bracket else None
-        if not isinstance(holder, bpy.types.bpy_prop_collection) or not key.endswith("]"):
+        """(the struct holding the property, its name, its kind: a float, an int or a length) of
+        bpy.data's `path`."""
+        # COLLECTION["NAME"].REST, the name quoted (it may hold dots: "Light.001") or bare.
+        match = re.fullmatch(r"""(\w+)\[(?:"([^"]*)"|'([^']*)'|([^\]"']*))\]\.(.+)""", path)
+        holder = getattr(bpy.data, match.group(1), None) if match else None
+        if not isinstance(holder, bpy.types.bpy_prop_collection):
             fail(f"--set '{path}': not COLLECTION[\"NAME\"].PROPERTY (objects[\"Light\"].data.energy)")
-        name = key[:-1].strip("\"'")
+        collection, rest = match.group(1), match.group(5)
+        name = next(g for g in match.groups()[1:4] if g is not None)
         if name not in holder:
             fail(f"--set '{path}': bpy.data.{collection} has no '{name}'")
         owner, _, prop = rest.rpartition(".")
@@ -283,14 +288,19 @@ class Controls:
             value = getattr(struct, prop)
         except (ValueError, AttributeError):
             fail(f"--set '{path}': '{holder[name].name}' has no property '{rest}'")
-        if isinstance(value, (bool, str)) or not (isinstance(value, (int, float)) or hasattr(value, "__len__")):
+        scalar = isinstance(value, (int, float)) and not isinstance(value, bool)
+        vector = hasattr(value, "__len__") and not isinstance(value, str) and len(value) > 0 and \
+            all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+        if not (scalar or vector):
             fail(f"--set '{path}': '{rest}' is not a number or a vector of numbers")
-        return struct, prop, (1 if isinstance(value, (int, float)) else len(value))
+        kind = int if isinstance(value if scalar else value[0], int) else float
+        return struct, prop, kind, (1 if scalar else len(value))
 
     def apply(self, frame):
         row = self.table[frame]
-        for struct, name, size, column in self.targets:
-            setattr(struct, name, row[column] if size == 1 else tuple(row[column:column + size]))
+        for struct, name, kind, size, column in self.targets:
+            values = [kind(v) for v in row[column:column + size]]
+            setattr(struct, name, values[0] if size == 1 else tuple(values))
         bpy.context.view_layer.update()
 
 
@@ -308,9 +318,12 @@ def serve_loop(channels, count, frames, compute, positions):
             if kind == POSITIONS:
                 answer(sock, lambda: positions().reshape(-1))
                 continue
+            if kind not in (LIST, RANGE):
+                answer(sock, None, ValueError(f"unknown request kind {kind}"))
+                continue
             ids = (np.frombuffer(read_exactly(sock, 8 * asked), dtype="<u8").astype(np.int64) if kind == LIST
                    else np.arange(start, start + asked, dtype=np.int64))
-        except EOFError:
+        except (EOFError, ConnectionError):  # pmsc closed the socket, or went away
             return
         try:
             if not 0 <= frame < frames:
@@ -335,11 +348,14 @@ def answer(sock, values, error=None):
             data = np.ascontiguousarray(values(), dtype="<f8")
         except Exception as raised:  # noqa: BLE001 (any failure is one line to pmsc)
             error = raised
-    if error is not None:
-        text = f"{type(error).__name__}: {error}".replace("\n", " ").encode()
-        sock.sendall(RESPONSE.pack(1, 0, len(text)) + text)
-    else:
-        sock.sendall(RESPONSE.pack(0, 0, data.size) + data.tobytes())
+    try:
+        if error is not None:
+            text = f"{type(error).__name__}: {error}".replace("\n", " ").encode()
+            sock.sendall(RESPONSE.pack(1, 0, len(text)) + text)
+        else:
+            sock.sendall(RESPONSE.pack(0, 0, data.size) + data.tobytes())
+    except ConnectionError:  # pmsc went away (it was killed, or gave up on this child): end quietly
+        sys.exit(0)
 
 
 def serve(args):
@@ -385,6 +401,8 @@ def pose(args):
                      lambda text: print("pmsc_blender.py: pose: " + text, file=sys.stderr, flush=True))
     except PoseError as error:
         fail(str(error))
+    except Exception as error:  # noqa: BLE001 (whatever the .blend makes Blender raise: one line)
+        fail(f"pose: {type(error).__name__}: {str(error).strip().splitlines()[-1] if str(error).strip() else ''}")
     serve_loop(3, posed.count, last - first + 1, posed.compute, posed.rest)
 
 

@@ -1,8 +1,9 @@
 """pmsc_blender.py's `pose`: the evaluated vertices of a mesh posed by the scene's own rig.
 
 The points are the vertices of the object's evaluated mesh (its whole modifier stack, as Blender
-evaluates it for a render), in world space; pmsc's frame f is the scene's frame FIRST + f, with the
-armature playing --action. A call for every point is Blender's own evaluation of the object.
+evaluates it in the scene's view layer: the modifiers' viewport settings, which bvh_character.py
+sets equal to the render's), in the root bone's space or world space; pmsc's frame f is the
+scene's frame FIRST + f, with the armature playing --action. A call for every point is Blender's own evaluation of the object.
 
 A call for some points (the key points, the sentinels, what a miss needs) evaluates only what they
 depend on. Decision: when the stack ends in Subdivision Surface modifiers, the child evaluates the
@@ -76,8 +77,14 @@ class Pose:
         if tail:
             began = time.perf_counter()
             self._cage_scene(tail)
-            self._measure_stencils(tail)
-            self._check([0, frames // 2, frames - 1], began)
+            # The stencils index the cage's vertices: a modifier before the subdivisions that
+            # changes the topology (mirror, solidify, weld) leaves the whole stack to every call.
+            cage_count = len(world_vertices(self.cage, self._depsgraph(self.cage_scene)))
+            if cage_count != len(self.body.data.vertices) or not self._measure_stencils(tail):
+                self.log("the modifiers before the subdivisions change the mesh's topology: "
+                         "every call evaluates the whole stack")
+            else:
+                self._check([0, frames // 2, frames - 1], began)
 
     def _play(self, action):
         if action not in bpy.data.actions:
@@ -113,7 +120,8 @@ class Pose:
 
     def _measure_stencils(self, tail):
         """Each subdivided vertex's weights over the cage's vertices, from Blender's own modifiers
-        on one-hot cage coordinates (x, y and z carry three cage vertices per evaluation)."""
+        on one-hot cage coordinates (x, y and z carry three cage vertices per evaluation). False
+        when the subdivisions of the cage alone do not make the object's points."""
         cage_count = len(self.cage.data.vertices)
         probe = bpy.data.objects.new("pmsc_stencil", self.body.data.copy())
         for modifier in list(self.body.modifiers)[-tail:]:
@@ -132,7 +140,8 @@ class Pose:
             depsgraph.update()
             out = world_vertices(probe, depsgraph) - np.array(probe.matrix_world)[:3, 3]
             if len(out) != self.count:
-                raise PoseError("the trailing subdivisions make another vertex count on the cage alone")
+                self._remove(scene, probe)
+                return False
             for c in range(min(3, cage_count - j)):
                 hit = np.flatnonzero(np.abs(out[:, c]) > 1e-9)
                 rows.append(hit)
@@ -148,6 +157,11 @@ class Pose:
         self.stencil_index[rows, slot] = columns
         self.stencil_weight[rows, slot] = weights
         self.stencil = width
+        self._remove(scene, probe)
+        return True
+
+    @staticmethod
+    def _remove(scene, probe):
         bpy.data.scenes.remove(scene)
         mesh = probe.data
         bpy.data.objects.remove(probe)
@@ -205,8 +219,9 @@ class Pose:
         for `pmsc train --positions`."""
         for rig in self.rigs:
             rig.data.pose_position = "REST"
-        self.scene.frame_set(self.first)
-        values = self._to_space(world_vertices(self.body, self._depsgraph(self.scene)), self.scene)
-        for rig in self.rigs:
-            rig.data.pose_position = "POSE"
-        return values
+        try:
+            self.scene.frame_set(self.first)
+            return self._to_space(world_vertices(self.body, self._depsgraph(self.scene)), self.scene)
+        finally:  # the next frame is posed whatever happened here
+            for rig in self.rigs:
+                rig.data.pose_position = "POSE"

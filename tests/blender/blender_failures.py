@@ -41,6 +41,8 @@ def main():
         f.write(b"not a numpy file")
     # Controls by data path: the light's power and place, a row per frame (5 x 4).
     import numpy as np
+    np.savez(w("controls.npz"), a=np.ones(5))
+    np.save(w("samples.npy"), np.full(5, 4.0))  # an int property set from floats
     np.save(w("controls.npy"), np.array([[100.0, 2, 2, 4], [200, 2, 2, 4], [100, 2, 2, 4], [400, 2, 2, 4], [50, 2, 2, 4]]))
     with open(w("crash.py"), "w") as f:  # a Blender that dies in the middle of a frame
         f.write("import os, signal\nos.kill(os.getpid(), signal.SIGSEGV)\n")
@@ -59,6 +61,8 @@ def main():
          "'Light' has no property 'data.nope'"),
         ("bad controls", serve(w("box.blend"), "--set 'objects[\"Light\"].data.energy' --controls " + w("controls.npy")),
          "expected 5 x 1 finite values"),
+        ("npz controls", serve(w("box.blend"), "--set 'objects[\"Light\"].data.energy' --controls " + w("controls.npz")),
+         "expected one array of numbers"),
         ("no blender", serve(w("box.blend")), "no 'no-such-blender' on PATH"),
         ("crash", "exec:blender -b %s --python %s 1>&2" % (w("box.blend"), w("crash.py")), "signal"),
         # pose: the evaluated vertices of a mesh posed by its rig
@@ -97,6 +101,12 @@ def main():
         bad += 1
     else:
         e = np.load(out)
+        done = subprocess.run([pmsc, "export-frames", serve(w("box.blend"), "--set 'scenes[Scene].cycles.samples' "
+                               "--controls " + w("samples.npy")), "--out", w("samples-out.npy"), "--frames", "0",
+                               "--quiet"], capture_output=True, text=True)
+        if done.returncode != 0:
+            print("blender_failures: an int property from a float table: " + done.stderr[-300:], file=sys.stderr)
+            bad += 1
         ratios = [float(np.abs(e[i] - k * e[0]).max() / e[0].max()) for i, k in ((1, 2), (2, 1), (3, 4))]
         print("controls     frames at power 200, 100, 400 against 100: largest relative differences %s" % ratios)
         if max(ratios) > 1e-5:
