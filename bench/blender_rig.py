@@ -159,12 +159,14 @@ def replay(np, run, pmsc, w, evaluator, take, span, size, tolerance, report_keys
     out = w(take + ".run")
     shutil.rmtree(out, ignore_errors=True)
     began = time.perf_counter()
+    # float32 frames, as Blender holds vertex positions: the run reconstructs from the basis in single
+    # precision (pmsc run --basis-precision's default for float32 frames), half the bytes of double.
     run([pmsc, "run", "--model", w("model.pmsc"), "--evaluator", evaluator(take, w(take + ".run.log")), "--frames",
-         span, "--out", out, "--threads", "1", "--quiet"])
+         span, "--out", out, "--threads", "1", "--quiet", "--dtype", "float32"])
     wall = time.perf_counter() - began
     full = np.load(w(take + ".npy"))
     frames = sorted(glob.glob(os.path.join(out, "frame.*.npy")))
-    got = np.stack([np.load(f)[0] for f in frames])
+    got = np.stack([np.load(f)[0].astype(np.float64) for f in frames])
     with open(glob.glob(os.path.join(out, "pmsc-run.*.json"))[0]) as f:
         stats = json.load(f)
     point_error = np.linalg.norm(got - full, axis=2)
