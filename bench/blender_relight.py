@@ -41,8 +41,11 @@ import sys
 import time
 
 
+PROG = os.path.splitext(os.path.basename(sys.argv[0]))[0]  # this bench, or blender_rig.py importing it
+
+
 def fail(message):
-    print("blender_relight: " + message, file=sys.stderr)
+    print(PROG + ": " + message, file=sys.stderr)
     sys.exit(2)
 
 
@@ -64,6 +67,21 @@ def timings(path):
     return rows
 
 
+def numpy_and_blender():
+    """numpy and the path of Blender; without Blender a skip (exit 77), except under CI (exit 2)."""
+    try:
+        import numpy
+    except ImportError:
+        fail("needs numpy (run it with the system python3)")
+    blender = shutil.which("blender")
+    if blender is None:
+        if os.environ.get("CI", "") in ("", "false", "0"):
+            print(PROG + ": no blender on PATH: skipped (apt-get install blender)", file=sys.stderr)
+            sys.exit(77)
+        fail("no blender on PATH (apt-get install blender)")
+    return numpy, blender
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--bin", default="build/bin", help="folder of pmsc")
@@ -81,16 +99,7 @@ def main():
     p.add_argument("--check", action="store_true", help="exit 1 when the RMS error is over --check-rms")
     p.add_argument("--check-rms", type=float, default=0.05, help="the largest RMS error --check accepts")
     args = p.parse_args()
-    try:
-        import numpy as np
-    except ImportError:
-        fail("needs numpy (run it with the system python3)")
-    blender = shutil.which("blender")
-    if blender is None:
-        if os.environ.get("CI", "") in ("", "false", "0"):
-            print("blender_relight: no blender on PATH: skipped (apt-get install blender)", file=sys.stderr)
-            sys.exit(77)
-        fail("no blender on PATH (apt-get install blender)")
+    np, blender = numpy_and_blender()
     if args.points < 100 or args.grid < 2 or args.path < 1 or args.samples < 1 or not args.tolerance_share > 0:
         fail("--points >= 100, --grid >= 2, --path >= 1, --samples >= 1 and --tolerance-share > 0")
     os.makedirs(args.work, exist_ok=True)

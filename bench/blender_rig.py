@@ -32,29 +32,12 @@ import glob
 import json
 import os
 import shutil
-import subprocess
 import sys
 import time
 
+from blender_relight import fail, numpy_and_blender, run, timings  # beside this script
+
 ASSIMP_BVH = "/usr/share/assimp/models/BVH"
-
-
-def fail(message):
-    print("blender_rig: " + message, file=sys.stderr)
-    sys.exit(2)
-
-
-def run(cmd):
-    done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    if done.returncode != 0:
-        fail("'" + " ".join(cmd)[:300] + "' exited " + str(done.returncode) + ": " + done.stdout.strip()[-600:])
-    return done.stdout
-
-
-def seconds_logged(path):
-    """(points, seconds) of every call the child logged."""
-    with open(path) as f:
-        return [(int(line.split()[1]), float(line.split()[2])) for line in f]
 
 
 def main():
@@ -74,16 +57,7 @@ def main():
     p.add_argument("--check", action="store_true")
     p.add_argument("--check-p995", type=float, default=0.005, help="the largest p99.5 point error --check accepts")
     args = p.parse_args()
-    try:
-        import numpy as np
-    except ImportError:
-        fail("needs numpy (run it with the system python3)")
-    blender = shutil.which("blender")
-    if blender is None:
-        if os.environ.get("CI", "") in ("", "false", "0"):
-            print("blender_rig: no blender on PATH: skipped (apt-get install blender)", file=sys.stderr)
-            sys.exit(77)
-        fail("no blender on PATH (apt-get install blender)")
+    np, blender = numpy_and_blender()
     takes = args.bvh.split(",")
     if args.stride < 1 or not args.tolerance_share > 0:
         fail("--stride >= 1 and --tolerance-share > 0")
@@ -131,8 +105,8 @@ def main():
         "body_size": size, "tolerance": tolerance, "train_wall_seconds": time.perf_counter() - began,
         "train_summary": [l.strip() for l in out.splitlines()
                           if l.strip().startswith(("basis", "key points", "sentinels"))],
-        "takes": {name: replay(np, run, pmsc, w, evaluator, name, f"0-{lengths[name] - 1}:{args.stride}", size,
-                               tolerance, report_keys=len(inspect["key_indices"]))
+        "takes": {name: replay(np, pmsc, w, evaluator, name, f"0-{lengths[name] - 1}:{args.stride}", size,
+                               tolerance, len(inspect["key_indices"]))
                   for name in names[1:]},
     }
     with open(w("report.json"), "w") as f:
@@ -150,7 +124,7 @@ def main():
     return 0
 
 
-def replay(np, run, pmsc, w, evaluator, take, span, size, tolerance, report_keys):
+def replay(np, pmsc, w, evaluator, take, span, size, tolerance, keys):
     """Blender's full evaluation of the take's frames, then `pmsc run` over them: the figures."""
     began = time.perf_counter()
     run([pmsc, "export-frames", evaluator(take, w(take + ".full.log")), "--out", w(take + ".npy"), "--frames", span,
@@ -170,10 +144,11 @@ def replay(np, run, pmsc, w, evaluator, take, span, size, tolerance, report_keys
     with open(glob.glob(os.path.join(out, "pmsc-run.*.json"))[0]) as f:
         stats = json.load(f)
     point_error = np.linalg.norm(got - full, axis=2)
-    full_calls, run_calls = seconds_logged(w(take + ".full.log")), seconds_logged(w(take + ".run.log"))
+    full_calls = [(n, s) for _, n, s in timings(w(take + ".full.log"))]
+    run_calls = [(n, s) for _, n, s in timings(w(take + ".run.log"))]
     full_per_frame = sum(s for _, s in full_calls) / len(full_calls)
     pmsc_per_frame = sum(s for _, s in run_calls) / len(full)
-    key_calls = [s for n, s in run_calls if n == report_keys]
+    key_calls = [s for n, s in run_calls if n == keys]
     return {
         "frames": len(full),
         "hit_rate": stats["hit_rate"], "hits": stats["hits"], "blends": stats["blends"], "misses": stats["misses"],
