@@ -1,6 +1,7 @@
 #include "pmsc/RegionLearning.h"
 
 #include "pmsc/Calibration.h"
+#include "pmsc/Parallel.h"
 #include "pmsc/Varimax.h"
 
 #include <Eigen/QR>
@@ -9,14 +10,11 @@
 #include <atomic>
 #include <cmath>
 #include <cstdint>
-#include <exception>
 #include <functional>
 #include <limits>
-#include <mutex>
 #include <numeric>
 #include <stdexcept>
 #include <string>
-#include <thread>
 
 namespace pmsc {
 
@@ -323,28 +321,6 @@ bool fitRegion(Region& g, Index ri, const Eigen::MatrixXd& qr, const std::vector
     }
     setRegionThresholds(g, cal, tolerance, options);
     return capped;
-}
-
-/// Runs `work` on min(cores, jobs) threads (this one included) and waits for all of them; the
-/// first exception thrown on any of them is rethrown here.
-void runOnEveryCore(const std::function<void()>& work, Index jobs) {
-    const Index threads =
-        std::clamp<Index>(Index(std::thread::hardware_concurrency()), 1, std::max<Index>(1, jobs));
-    std::exception_ptr failed;
-    std::mutex failedLock;
-    auto guarded = [&] {
-        try {
-            work();
-        } catch (...) {
-            const std::lock_guard<std::mutex> hold(failedLock);
-            if (!failed) failed = std::current_exception();
-        }
-    };
-    std::vector<std::thread> pool;
-    for (Index t = 1; t < threads; ++t) pool.emplace_back(guarded);
-    guarded();
-    for (std::thread& t : pool) t.join();
-    if (failed) std::rethrow_exception(failed);
 }
 
 }  // namespace

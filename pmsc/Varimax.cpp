@@ -1,10 +1,14 @@
 #include "pmsc/Varimax.h"
 
+#include "pmsc/Parallel.h"
+
 #include <Eigen/SVD>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <stdexcept>
+#include <vector>
 
 namespace pmsc {
 
@@ -49,18 +53,23 @@ double unrotatedCriterion(const Eigen::Ref<const Eigen::MatrixXd>& loadings, Ind
 /// ~16 columns), so memory passes, not flops, set the cost of an iteration: each evaluation streams
 /// X once, in row chunks small enough to stay in cache, making Z, Z.^3, the column moments
 /// (criterion) and X^T Z.^3 from the chunk while it is hot; Z itself is never stored.
+///
+/// Decision: the rows are cut into fixed blocks of kBlockRows, each summed alone on whichever core
+/// takes it, and the blocks' sums are added in block order. The rotation is the largest single cost
+/// of training (200 iterations over the basis), so it uses every core; fixed blocks keep the sums,
+/// and so the keys, the same whatever the number of cores.
 class VarimaxGradient {
 public:
+    static constexpr Index kBlockRows = 16384;
+    static constexpr Index kChunkRows = 512;
+
     VarimaxGradient(const Eigen::MatrixXd& x, Index p, Communicator& comm)
         : x_(x),
           comm_(comm),
           rows_(x.rows()),
           k_(x.cols()),
-          chunk_(std::max<Index>(1, std::min<Index>(rows_, 512))),
-          zc_(chunk_, k_),
-          cubes_(chunk_, k_),
-          colSquares_(k_),
-          colQuartics_(k_),
+          blocks_(std::max<Index>(1, (rows_ + kBlockRows - 1) / kBlockRows)),
+          partial_(static_cast<std::size_t>(blocks_)),
           inverseRows_(1.0 / static_cast<double>(p)) {
         xtx_ = x.transpose() * x;
         comm.sum(xtx_.data(), static_cast<std::size_t>(xtx_.size()));
@@ -68,13 +77,53 @@ public:
 
     /// Fills `g` for `rotation` and returns the criterion there (== varimaxCriterion(X T)).
     double evaluate(const Eigen::MatrixXd& rotation, Eigen::MatrixXd& g) {
-        g.setZero();
-        colSquares_.setZero();
-        colQuartics_.setZero();
-        for (Index r0 = 0; r0 < rows_; r0 += chunk_) {
-            const Index h = std::min(chunk_, rows_ - r0);
-            auto z = zc_.topRows(h);
-            auto c = cubes_.topRows(h);
+        std::atomic<Index> next{0};
+        runOnEveryCore(
+            [&] {
+                Eigen::MatrixXd z(kChunkRows, k_), cubes(kChunkRows, k_);
+                for (Index b = next++; b < blocks_; b = next++) sumBlock(b, rotation, z, cubes);
+            },
+            blocks_);
+        g.setZero(k_, k_);
+        Eigen::VectorXd colSquares = Eigen::VectorXd::Zero(k_), colQuartics = Eigen::VectorXd::Zero(k_);
+        for (const BlockSums& s : partial_) {
+            g += s.g;
+            colSquares += s.squares;
+            colQuartics += s.quartics;
+        }
+        if (comm_.size() > 1) {
+            // One reduction per step: G's partial sums and both column moments.
+            Eigen::VectorXd sums(k_ * k_ + 2 * k_);
+            sums.head(k_ * k_) = Eigen::Map<const Eigen::VectorXd>(g.data(), k_ * k_);
+            sums.segment(k_ * k_, k_) = colSquares;
+            sums.tail(k_) = colQuartics;
+            comm_.sum(sums.data(), static_cast<std::size_t>(sums.size()));
+            g = Eigen::Map<const Eigen::MatrixXd>(sums.data(), k_, k_);
+            colSquares = sums.segment(k_ * k_, k_);
+            colQuartics = sums.tail(k_);
+        }
+        g.noalias() -= xtx_ * rotation * (colSquares * inverseRows_).asDiagonal();
+        const Eigen::ArrayXd m2 = colSquares.array() * inverseRows_;
+        return (colQuartics.array() * inverseRows_ - m2 * m2).sum();
+    }
+
+private:
+    struct BlockSums {
+        Eigen::MatrixXd g;
+        Eigen::VectorXd squares, quartics;
+    };
+
+    /// Block b's part of X^T Z.^3 and of the column moments, in chunks of kChunkRows rows.
+    void sumBlock(Index b, const Eigen::MatrixXd& rotation, Eigen::MatrixXd& zc, Eigen::MatrixXd& cubes) {
+        BlockSums& s = partial_[static_cast<std::size_t>(b)];
+        s.g.setZero(k_, k_);
+        s.squares.setZero(k_);
+        s.quartics.setZero(k_);
+        const Index end = std::min(rows_, (b + 1) * kBlockRows);
+        for (Index r0 = b * kBlockRows; r0 < end; r0 += kChunkRows) {
+            const Index h = std::min(kChunkRows, end - r0);
+            auto z = zc.topRows(h);
+            auto c = cubes.topRows(h);
             z.noalias() = x_.middleRows(r0, h) * rotation;
             for (Index j = 0; j < k_; ++j) {
                 double s2 = 0, s4 = 0;
@@ -85,33 +134,18 @@ public:
                     s2 += v2;
                     s4 += v2 * v2;
                 }
-                colSquares_[j] += s2;
-                colQuartics_[j] += s4;
+                s.squares[j] += s2;
+                s.quartics[j] += s4;
             }
-            g.noalias() += x_.middleRows(r0, h).transpose() * c;
+            s.g.noalias() += x_.middleRows(r0, h).transpose() * c;
         }
-        if (comm_.size() > 1) {
-            // One reduction per step: G's partial sums and both column moments.
-            Eigen::VectorXd sums(k_ * k_ + 2 * k_);
-            sums.head(k_ * k_) = Eigen::Map<const Eigen::VectorXd>(g.data(), k_ * k_);
-            sums.segment(k_ * k_, k_) = colSquares_;
-            sums.tail(k_) = colQuartics_;
-            comm_.sum(sums.data(), static_cast<std::size_t>(sums.size()));
-            g = Eigen::Map<const Eigen::MatrixXd>(sums.data(), k_, k_);
-            colSquares_ = sums.segment(k_ * k_, k_);
-            colQuartics_ = sums.tail(k_);
-        }
-        g.noalias() -= xtx_ * rotation * (colSquares_ * inverseRows_).asDiagonal();
-        const Eigen::ArrayXd m2 = colSquares_.array() * inverseRows_;
-        return (colQuartics_.array() * inverseRows_ - m2 * m2).sum();
     }
 
-private:
     const Eigen::MatrixXd& x_;
     Communicator& comm_;
-    Index rows_, k_, chunk_;
-    Eigen::MatrixXd xtx_, zc_, cubes_;
-    Eigen::VectorXd colSquares_, colQuartics_;
+    Index rows_, k_, blocks_;
+    std::vector<BlockSums> partial_;
+    Eigen::MatrixXd xtx_;
     double inverseRows_;
 };
 

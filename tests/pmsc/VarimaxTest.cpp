@@ -150,6 +150,22 @@ TEST(Varimax, RotationIsOrthogonalAndObjectiveNeverDecreases) {
     }
 }
 
+TEST(Varimax, TallBlocksSumOnEveryCoreToTheSameRotationEveryRun) {
+    // 50,000 rows: four blocks of the gradient's row split, summed on whichever core takes them.
+    Eigen::HouseholderQR<Eigen::MatrixXd> qr(pmsc::test::gaussian(50000, 8, 23));
+    const Eigen::MatrixXd block = qr.householderQ() * Eigen::MatrixXd::Identity(50000, 8);
+    const pmsc::VarimaxResult a = pmsc::varimax(block, tight(false));
+    const pmsc::VarimaxResult b = pmsc::varimax(block, tight(false));
+    ASSERT_GE(a.iterations, 2);
+    EXPECT_EQ(a.iterations, b.iterations);
+    EXPECT_TRUE(a.rotation == b.rotation) << "the block sums must not depend on which core took a block";
+    // Every block counted once: the criterion the gradient reports is the rotated block's.
+    EXPECT_NEAR(a.objective.back(), pmsc::varimaxCriterion(a.rotated), 1e-12 * std::abs(a.objective.back()));
+    // The rows reversed fall into other blocks and sum in another order: the same rotation.
+    const pmsc::VarimaxResult r = pmsc::varimax(block.colwise().reverse(), tight(false));
+    EXPECT_LT((r.rotation - a.rotation).cwiseAbs().maxCoeff(), 1e-8);
+}
+
 TEST(Varimax, RecoversLocalizedVectorsHiddenByARotation) {
     // Three vectors with disjoint supports (the "local" basis the paper wants), mixed by a rotation.
     Eigen::MatrixXd local = Eigen::MatrixXd::Zero(30, 3);
