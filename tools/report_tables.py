@@ -100,7 +100,10 @@ class Rows:
 
 
 def _quick(report):
-    return " --quick" if field(report, "quick") is True else ""
+    """The size flags a demo ran with: --quick, or --full (the whole experiment at the default size)."""
+    if field(report, "quick") is True:
+        return " --quick"
+    return " --full" if field(report, "full") is True else ""
 
 
 def _folder(file):

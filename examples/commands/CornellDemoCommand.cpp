@@ -54,11 +54,11 @@ int runDemoCornell(const std::vector<std::string>& args) {
     std::string out;
     std::optional<Index> points, samples, threads, regions;
     std::optional<double> feather, localChange;
-    bool quick = false, quiet = false;
+    bool quick = false, full = false, quiet = false;
     ArgParser parser(
         "demo cornell",
-        "--out DIR [--points N] [--samples S] [--regions R] [--feather PCT] [--local-change MM] [--quick] "
-        "[--threads T] [--quiet]",
+        "--out DIR [--points N] [--samples S] [--regions R] [--feather PCT] [--full] [--local-change MM] "
+        "[--quick] [--threads T] [--quiet]",
         "Section 8 of the paper on the measured Cornell box: 144 training frames lit by a point\n"
         "light on a 12 x 12 grid below the ceiling, one-bounce indirect irradiance by a final\n"
         "gather (Embree) at the active voxels of a sparse OpenVDB grid, 32 basis vectors and 200\n"
@@ -77,11 +77,16 @@ int runDemoCornell(const std::vector<std::string>& args) {
     parser.option("--feather", "PCT",
                   "feather width of the regions' borders, % of the box's diagonal (default 3)",
                   [&](const std::string& v) { feather = parseDouble("--feather", v, 0, 50); });
-    parser.option("--local-change", "MM",
-                  "edge of a cube on the floor by a wall, where key points see it, that training never saw;\n"
-                  "                     the scattered lights in that box, measured both ways (default 100; 0 "
-                  "= none; else 10-150)",
-                  [&](const std::string& v) { localChange = parseDouble("--local-change", v, 0, 150); });
+    parser.flag("--full",
+                "the whole experiment: also local fail-through against whole-frame fail-through on the\n"
+                "                     scattered lights and a local change (about a minute more)",
+                full);
+    parser.option(
+        "--local-change", "MM",
+        "edge of a cube on the floor by a wall, where key points see it, that training never saw;\n"
+        "                     the scattered lights in that box, measured both ways (implies --full;\n"
+        "                     default 100; 0 = none; else 10-150)",
+        [&](const std::string& v) { localChange = parseDouble("--local-change", v, 0, 150); });
     parser.flag("--quick", "small settings, a smoke test of the whole pipeline (under 30 s)", quick);
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
@@ -95,6 +100,7 @@ int runDemoCornell(const std::vector<std::string>& args) {
     if (regions) options.regions = static_cast<int>(*regions);
     if (feather) options.featherPercent = *feather;
     if (localChange) options.localChangeMm = *localChange;
+    if (full || (localChange && *localChange > 0)) options.localFailThroughReport = true;
     if (regions && *regions == 0 && !localChange)
         options.localChangeMm = 0;  // no regions: nothing to route locally
 

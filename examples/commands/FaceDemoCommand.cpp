@@ -89,10 +89,11 @@ int runDemoFace(const std::vector<std::string>& args) {
     std::optional<Index> threads, basis, regions, seed;
     std::optional<double> tolerance;
     std::string keyError, calibration;
-    bool quick = false, quiet = false;
+    bool quick = false, full = false, quiet = false;
     ArgParser parser(
         "demo face",
-        "--data DIR --out DIR2 [--quick] [--threads T] [--tolerance PCT] [--basis M] [--regions R] [--seed "
+        "--data DIR --out DIR2 [--quick] [--full] [--threads T] [--tolerance PCT] [--basis M] [--regions R] "
+        "[--seed "
         "S] [--key-error NORM] [--calibration RULE] [--quiet]",
         "Section 7 of the paper on the ICT face (26,719 points): a rig with a jaw rotating about its\n"
         "hinge, eyelids rotating over the eyeballs, eyes that aim, correctives, relax, muscle flesh\n"
@@ -126,6 +127,10 @@ int runDemoFace(const std::vector<std::string>& args) {
                   "others) or conformal",
                   calibration);
     parser.flag("--quick", "9 + 2 short sequences: a smoke test of the whole pipeline (about 20 s)", quick);
+    parser.flag("--full",
+                "the whole experiment: also local fail-through against whole-frame fail-through on\n"
+                "                     validation, novel and mixed sequences (about 6 minutes more)",
+                full);
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
 
@@ -137,6 +142,7 @@ int runDemoFace(const std::vector<std::string>& args) {
     if (basis) options.basis = static_cast<long>(*basis);
     if (regions) options.regions = static_cast<long>(*regions);
     if (seed) options.seed = static_cast<unsigned>(*seed);
+    if (full) options.localFailThroughReport = true;
     try {
         options.keyErrorNorm = app::keyErrorNamed(keyError, app::Spelling::CommandLine);
         options.calibrationRule = app::calibrationNamed(calibration, app::Spelling::CommandLine);

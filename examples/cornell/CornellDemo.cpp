@@ -410,6 +410,7 @@ void reportModelAndSetUp(nlohmann::json& report, const DemoSetup& run, const Cor
     report["threads"] = run.threads;
     report["light_below_ceiling_mm"] = rig.belowCeilingMm;
     report["quick"] = o.quick;
+    report["full"] = o.localFailThroughReport;
 }
 
 }  // namespace
@@ -425,6 +426,7 @@ CornellDemoOptions CornellDemoOptions::quickOptions() {
     o.referenceFrames = 4;
     o.imageSize = 128;
     o.renderFrames = 1;
+    o.localFailThroughReport = true;
     o.quick = true;
     return o;
 }
@@ -454,7 +456,7 @@ nlohmann::json runCornellDemo(const CornellDemoOptions& o) {
     const ReferenceErrors refErrors =
         measureAgainstConvergedReference(run, o, world, rig, reference, gathers.full, sink);
     const WrittenFiles written = writeGridsAndRenders(run, o, *world, frames, gathers.full, sink);
-    if (trained.model.regions) {
+    if (trained.model.regions && o.localFailThroughReport) {
         const auto t = DemoClock::now();
         const LocalFailThroughInputs in{
             .model = trained.model,

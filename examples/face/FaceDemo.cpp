@@ -38,6 +38,7 @@ FaceDemoOptions FaceDemoOptions::quickOptions() {
     o.regions = 8;
     o.featherPercent = 3;
     o.mixedSequences = 1;
+    o.localFailThroughReport = true;
     return o;
 }
 
@@ -407,7 +408,8 @@ nlohmann::json runFaceDemo(const FaceDemoOptions& options) {
     const TestFrames sets = pickShownFrames(records);
 
     const EngineTotals engine = runTestSequencesThroughEngine(run, scene, model, split, records, sets);
-    if (model.regions) report["local_fail_through"] = measureLocalFailThrough(run, scene, model, split);
+    if (model.regions && options.localFailThroughReport)
+        report["local_fail_through"] = measureLocalFailThrough(run, scene, model, split);
     const PoseTimings poseTimings = timeFullPoseAgainstPmsc(run, scene, model, pm, sets.validation);
     const WrittenFiles written = writeFiles(run, scene, model, pm, records, sets, engine);
 

@@ -184,6 +184,7 @@ void reportSetUp(nlohmann::json& report, const FaceDemoOptions& options, const F
     report["experiment"] =
         "paper section 7: facial articulation, point multiplication and soft caching of a face rig";
     report["quick"] = options.quick;
+    report["full"] = options.localFailThroughReport;
     report["data"] = options.dataDir;
     report["points"] = scene.n;
     report["key_points"] = model.keyCount();

@@ -27,6 +27,14 @@ run("${prefix}/bin/pmsc" evaluators)
 if(NOT last_output MATCHES "\nvolume ")
   message(FATAL_ERROR "the installed pmsc does not list the volume evaluator:\n${last_output}")
 endif()
+# Blender as a calculation: the launcher, its scripts, and the range of motion its rig trains on.
+foreach(file bin/pmsc-blender share/pmsc/blender/pmsc_blender.py share/pmsc/blender/pmsc_blender_pose.py
+        share/pmsc/blender/bvh_character.py share/pmsc/blender/bvh_range_of_motion.py)
+  if(NOT EXISTS "${prefix}/${file}")
+    message(FATAL_ERROR "install did not put ${file} under ${prefix}")
+  endif()
+endforeach()
+run(python3 "${prefix}/share/pmsc/blender/bvh_range_of_motion.py" --help)
 run(${CMAKE_COMMAND} -S "${CONSUMER_DIR}" -B "${WORK_DIR}/consumer" -G "${GENERATOR}"
     -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_COMPILER=${CXX} -DCMAKE_PREFIX_PATH=${prefix})
 run(${CMAKE_COMMAND} --build "${WORK_DIR}/consumer")

@@ -154,6 +154,30 @@ TEST(CornellDemoQuick, LocalChangeMissesAsAWholeFrameIsRoutedLocallyAndStaysUnde
     std::filesystem::remove_all(dir);
 }
 
+// The default size leaves the local fail-through experiment to --full (or --local-change MM), so
+// the demo's first result comes in minutes; the model still has its regions either way. At 1,000
+// points and 4 samples the default settings run in about a second.
+TEST(CornellDemoQuick, TheLocalFailThroughExperimentRunsWithFullOrALocalChangeOnly) {
+    const std::string dir = tempDir("full");
+    for (const std::string flags : {"", "--full", "--local-change 50"}) {
+        std::filesystem::remove_all(dir);
+        int status = -1;
+        const std::string out =
+            run(std::string(PMSC_BINARY) + " demo cornell --points 1000 --samples 4 --quiet --out " + dir +
+                    " " + flags,
+                status);
+        ASSERT_EQ(status, 0) << flags << ": " << out;
+        std::ifstream f(dir + "/report.json");
+        const nlohmann::json r = nlohmann::json::parse(f);
+        const bool full = !flags.empty();
+        EXPECT_EQ(r.at("full").get<bool>(), full) << flags;
+        EXPECT_EQ(r.contains("local_fail_through"), full) << flags;
+        if (full) EXPECT_TRUE(r["local_fail_through"].contains("local_change")) << flags;  // 100 mm or 50 mm
+        EXPECT_EQ(out.find("local fail-through") != std::string::npos, full) << flags << ": " << out;
+    }
+    std::filesystem::remove_all(dir);
+}
+
 // Each bad value of the local fail-through options is one line and exit code 2, before any work.
 TEST(CornellDemoQuick, BadLocalFailThroughOptionsAreOneLineAndExitCode2) {
     const std::string dir = tempDir("badlocal");
