@@ -320,8 +320,8 @@ TrainOutcome trainPlanned(const TrainOptions& options, TrainPlan& plan, Communic
         outcome.model = train(blocks, comm, training, &outcome.report);
         plan.memory.streamBytes = outcome.report.memoryBound;  // at the basis training settled on
     } else {
-        const FrameSet frames = readShots(plan.shots);
-        outcome.model = train(frames, training, &outcome.report);
+        // Consumed: training centres the frames where they were read, no copy of them.
+        outcome.model = train(readShots(plan.shots), training, &outcome.report);
     }
     if (comm.rank() == 0 && !options.out.empty()) writeModel(options.out, outcome.model);
     outcome.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

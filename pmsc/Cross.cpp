@@ -21,7 +21,8 @@ namespace {
 /// held-out scoring measures E on.
 class TargetRows final : public RowBlocks {
 public:
-    TargetRows(const Eigen::MatrixXd& joint, Index channels, Index controlPoints)
+    /// A view on `joint`'s target rows (a Map: no copy whose lifetime would end with the call).
+    TargetRows(Eigen::Map<const Eigen::MatrixXd> joint, Index channels, Index controlPoints)
         : RowBlocks(joint.rows() / channels - controlPoints, channels, joint.cols(), 0,
                     joint.rows() / channels - controlPoints, joint.rows() / channels - controlPoints),
           q_(joint.bottomRows(joint.rows() - controlPoints * channels)) {}

@@ -21,7 +21,10 @@ struct FrameSet {
     Index frames = 0;
     Index points = 0;
     Index channels = 0;
-    std::vector<double> values;
+    /// Aligned as an Eigen matrix's own storage (EIGEN_MAX_ALIGN_BYTES), so the training matrix can
+    /// be centred and trained where the frames lie (MatrixBlocks(FrameSet&&)) and computes to the
+    /// bit what it computes on a copy.
+    std::vector<double, Eigen::aligned_allocator<double>> values;
 
     FrameSet() = default;
     /// Allocates F*N*C zeros. @throws std::invalid_argument on a non-positive size.

@@ -9,6 +9,7 @@
 #include <cstring>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include <fcntl.h>
 #include <unistd.h>
@@ -39,31 +40,50 @@ PointRange pointShare(Index points, int rank, int ranks) {
 
 MatrixBlocks::MatrixBlocks(const FrameSet& frames, Index blockPoints)
     : RowBlocks(frames.points, frames.channels, frames.frames, 0, frames.points,
-                blockPoints > 0 ? blockPoints : frames.points) {
-    mean_ = frames.matrix().rowwise().mean();
-    q_ = frames.matrix().colwise() - mean_;
+                blockPoints > 0 ? blockPoints : frames.points),
+      values_(frames.values),
+      rows_(frames.rows()),
+      cols_(frames.frames) {
+    centre();
+}
+
+MatrixBlocks::MatrixBlocks(FrameSet&& frames, Index blockPoints)
+    : RowBlocks(frames.points, frames.channels, frames.frames, 0, frames.points,
+                blockPoints > 0 ? blockPoints : frames.points),
+      values_(std::move(frames.values)),
+      rows_(frames.rows()),
+      cols_(frames.frames) {
+    frames = FrameSet();  // its values are ours now
+    centre();
 }
 
 MatrixBlocks::MatrixBlocks(const Eigen::Ref<const Eigen::MatrixXd>& q, Index channels, bool centre,
                            Index blockPoints)
     : RowBlocks(q.rows() / std::max<Index>(channels, 1), channels, q.cols(), 0,
                 q.rows() / std::max<Index>(channels, 1),
-                blockPoints > 0 ? blockPoints : q.rows() / std::max<Index>(channels, 1)) {
-    if (centre) {
-        mean_ = q.rowwise().mean();
-        q_ = q.colwise() - mean_;
-    } else {
+                blockPoints > 0 ? blockPoints : q.rows() / std::max<Index>(channels, 1)),
+      values_(static_cast<std::size_t>(q.rows() * q.cols())),
+      rows_(q.rows()),
+      cols_(q.cols()) {
+    mutableMatrix() = q;
+    if (centre)
+        this->centre();
+    else
         mean_ = Eigen::VectorXd::Zero(q.rows());
-        q_ = q;
-    }
+}
+
+void MatrixBlocks::centre() {
+    Eigen::Map<Eigen::MatrixXd> q = mutableMatrix();
+    mean_ = q.rowwise().mean();
+    q.colwise() -= mean_;
 }
 
 Eigen::Ref<const Eigen::MatrixXd> MatrixBlocks::block(Index b) {
-    return q_.middleRows(blockFirstRow(b), blockRows(b));
+    return matrix().middleRows(blockFirstRow(b), blockRows(b));
 }
 
 void MatrixBlocks::pointRows(Index point, Eigen::Ref<Eigen::MatrixXd> out) {
-    out = q_.middleRows(point * channels(), channels());
+    out = matrix().middleRows(point * channels(), channels());
 }
 
 // --- on disk -------------------------------------------------------------------------------------
@@ -220,7 +240,7 @@ std::uint64_t trainingMemoryBound(Index points, Index channels, Index frames, In
     const double blockRows = inMemory ? 0.0 : static_cast<double>(std::min(blockPoints, points)) * channels;
     double doubles = 5 * f * f + 3 * r * f + 2 * owned * r + 4 * owned * b +
                      static_cast<double>(maxKeys) * channels * (f + r) + 3 * blockRows * f;
-    if (inMemory) doubles += 2 * nc * f;
+    if (inMemory) doubles += nc * f;  // the frames, centred where they were read (MatrixBlocks(FrameSet&&))
     if (rootRank) doubles += 3 * nc * (r + 1);
     return static_cast<std::uint64_t>(8 * doubles) + static_cast<std::uint64_t>(points);
 }

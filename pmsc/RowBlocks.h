@@ -72,8 +72,11 @@ PointRange pointShare(Index points, int rank, int ranks);
 /// block of every point (or blocks of `blockPoints`, for tests).
 class MatrixBlocks final : public RowBlocks {
 public:
-    /// Centres `frames` (all points, one process).
+    /// Centres a copy of `frames` (all points, one process).
     explicit MatrixBlocks(const FrameSet& frames, Index blockPoints = 0);
+    /// Takes `frames`' values and centres them where they lie: the training matrix is not copied
+    /// (a caller done with its frames saves their size in memory).
+    explicit MatrixBlocks(FrameSet&& frames, Index blockPoints = 0);
     /// An already prepared matrix (rows x = p*C + c); with `centre` false it is used as it is
     /// (mean() is then zero), which is what the per-function entry points (Calibration,
     /// KeyPointSelector) need.
@@ -84,10 +87,16 @@ public:
     void pointRows(Index point, Eigen::Ref<Eigen::MatrixXd> out) override;
     Eigen::VectorXd mean() override { return mean_; }
     /// The whole centred matrix (in-memory callers use it directly).
-    const Eigen::MatrixXd& matrix() const { return q_; }
+    Eigen::Map<const Eigen::MatrixXd> matrix() const { return {values_.data(), rows_, cols_}; }
 
 private:
-    Eigen::MatrixXd q_;
+    Eigen::Map<Eigen::MatrixXd> mutableMatrix() { return {values_.data(), rows_, cols_}; }
+    /// Subtracts each row's mean from the matrix in values_, keeping the means.
+    void centre();
+
+    /// The (N*C) x F matrix, column-major, aligned as Eigen's own (FrameSet's storage, taken or copied).
+    decltype(FrameSet::values) values_;
+    Index rows_ = 0, cols_ = 0;
     Eigen::VectorXd mean_;
 };
 

@@ -17,6 +17,7 @@
 #include <cstdio>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace pmsc {
 
@@ -180,8 +181,7 @@ Model trainSharedChannels(const FrameSet& frames, const TrainingOptions& options
     one.calibrationGroup = c;
     TrainingReport localReport;
     TrainingReport& report = reportOut ? *reportOut : localReport;
-    Model model = train(split, one, &report);
-    split = FrameSet();
+    Model model = train(std::move(split), one, &report);
     for (Index p = 0; p < n; ++p)
         for (Index ch = 0; ch < c; ++ch) mean[p * c + ch] += model.mean[p];
     model.mean = std::move(mean);
@@ -685,6 +685,20 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
     validateFrames(frames);
     if (options.sharedChannels && frames.channels > 1) return trainSharedChannels(frames, options, reportOut);
     MatrixBlocks q(frames);
+    SingleProcess one;
+    return train(q, one, options, reportOut);
+}
+
+Model train(FrameSet&& frames, const TrainingOptions& options, TrainingReport* reportOut) {
+    validateFrames(frames);
+    // Shared channels read the frames again after training (the Euclidean residual over the
+    // channels); they give up their channel frames instead.
+    if (options.sharedChannels && frames.channels > 1) {
+        Model model = trainSharedChannels(frames, options, reportOut);
+        frames = FrameSet();
+        return model;
+    }
+    MatrixBlocks q(std::move(frames));
     SingleProcess one;
     return train(q, one, options, reportOut);
 }

@@ -151,6 +151,10 @@ CalibrationRule resolvedCalibrationRule(const TrainingOptions& options);
 ///         that cannot be used: a NaN or Inf (message names frame, point and channel), fewer than
 ///         2 frames, or frames that do not vary.
 Model train(const FrameSet& frames, const TrainingOptions& options, TrainingReport* report = nullptr);
+/// The same, consuming `frames` (left empty): the training matrix is centred where the frames
+/// lie, so training holds one copy of them fewer (a frame set of many points is most of the
+/// memory training needs). Channels sharing the basis still make their channel frames.
+Model train(FrameSet&& frames, const TrainingOptions& options, TrainingReport* report = nullptr);
 
 /// Training over the rows of Q this process owns: the one implementation, which the
 /// overload above runs on one in-memory block. Out of core (NpyBlocks) every product with Q is a
@@ -165,8 +169,9 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
 ///   + 2 R r (U and the basis) + 4 R B (Varimax block, its rotation, the next block)
 ///   + K C (F + r) (key rows of Q and of the basis) + 3 b F (the block read, a residual block)
 ///   + on rank 0: 3 N C (r + 1) (the gathered basis and mean, the model written)
-/// plus N bytes of key flags. Nothing is of size N*C*F: a training set far larger than memory
-/// trains as long as this fits.
+/// plus N bytes of key flags; in memory (one block of every row) also N C F, the frames themselves.
+/// Streaming, nothing is of size N*C*F: a training set far larger than memory trains as long as
+/// this fits.
 ///
 /// The returned model is complete on rank 0 only: the other ranks' model has no mean and basis
 /// (they are gathered to rank 0).

@@ -145,8 +145,8 @@ struct TrainedModel {
     Index trainFrames = 0;
 };
 
-// 3. Train: basis, key points (seeded with a sparse spatial grid), calibrated eps. Releases the
-// training frames (144 x N x 3 doubles) when done.
+// 3. Train: basis, key points (seeded with a sparse spatial grid), calibrated eps. Training
+// consumes the frames (144 x N x 3 doubles), centred where they lie.
 TrainedModel trainModel(DemoSetup& run, const CornellDemoOptions& o, const CornellWorld& world, FrameSet q) {
     const auto t = DemoClock::now();
     TrainedModel trained;
@@ -173,8 +173,8 @@ TrainedModel trainModel(DemoSetup& run, const CornellDemoOptions& o, const Corne
         run.progress(std::string("train: ") + std::string(stage), done, total);
         return true;
     };
-    run.arena.execute([&] { trained.model = train(q, topt, &trained.report); });
-    q = FrameSet();  // 144 x N x 3 doubles: not needed any more
+    // Consumed: training centres the 144 x N x 3 doubles where they lie.
+    run.arena.execute([&] { trained.model = train(std::move(q), topt, &trained.report); });
     run.lap("train", t);
     trained.tolerance = topt.tolerance;
     trained.gridKeyPoints = topt.gridPoints.size();

@@ -203,8 +203,8 @@ CrossTrained trainCrossModel(DemoSetup& run, const CrossDemoOptions& options, co
     CrossTrained trained;
     run.arena.execute([&] { trained.model = trainCross(control, target, co, &trained.report); });
     run.lap("train", t);
-    std::vector<double>().swap(control.values);
-    std::vector<double>().swap(target.values);
+    decltype(control.values)().swap(control.values);
+    decltype(target.values)().swap(target.values);
     writeModel(out + "cross.pmsc", trained.model);
     return trained;
 }

@@ -359,12 +359,12 @@ NightModels learnAtNight(DemoSetup& run, const LearnScene& scene, const Model& d
     std::copy(training.values.begin(), training.values.end(), all.values.begin());
     std::copy(misses.values.begin(), misses.values.end(),
               all.values.begin() + static_cast<std::ptrdiff_t>(training.values.size()));
-    std::vector<double>().swap(training.values);
+    decltype(training.values)().swap(training.values);
     t = DemoClock::now();
     TrainingReport scratchReport;
     run.arena.execute([&] { night.scratch = train(all, to, &scratchReport); });
     night.scratchSeconds = secondsSince(t);
-    std::vector<double>().swap(all.values);
+    decltype(all.values)().swap(all.values);
     writeModel(out + "scratch.pmsc", night.scratch);
     run.progress("train from scratch", 1, 1);
     return night;

@@ -34,7 +34,7 @@ pmsc::Model tinyModel(double epsMin, double epsMax) {
 
 pmsc::evaluators::ReplayEvaluator recording(std::vector<double> values, Index frames) {
     pmsc::FrameFile file{pmsc::FrameSet(frames, 3, 1), pmsc::NpyDtype::Float64};
-    file.frames.values = std::move(values);
+    file.frames.values.assign(values.begin(), values.end());
     return pmsc::evaluators::ReplayEvaluator(std::move(file), "test");
 }
 
@@ -133,7 +133,7 @@ TEST(Replay, ModelWithRegionsReportsLocalFramesAndWholeFrameFlagRestoresTheOldRo
         values[120 + x] = values[x] + (x < 30 ? 0.1 * std::cos(double(x)) : 0.0);
     }
     pmsc::FrameFile file{pmsc::FrameSet(2, 40, 3), pmsc::NpyDtype::Float64};
-    file.frames.values = values;
+    file.frames.values.assign(values.begin(), values.end());
     const pmsc::evaluators::ReplayEvaluator rec(std::move(file), "test");
     pmsc::app::ReplayOptions options;
     options.threads = 2;

@@ -167,7 +167,10 @@ TEST(OutOfCore, BoundGrowsWithTheBlockNotWithTheFrameMatrix) {
     const auto small = trainingMemoryBound(10000, 3, 1000, 16, 16, 40, 100, 1, false);
     const auto large = trainingMemoryBound(100000, 3, 1000, 16, 16, 40, 100, 1, false);
     EXPECT_LT(static_cast<double>(large - small), 0.1 * 90000.0 * 3 * 1000 * 8);
-    EXPECT_GT(trainingMemoryBound(10000, 3, 1000, 16, 16, 40, 0, 1, true), 2u * 10000 * 3 * 1000 * 8);
+    // In memory the frames are held once (centred where they were read), and counted.
+    const auto inMemory = trainingMemoryBound(10000, 3, 1000, 16, 16, 40, 0, 1, true);
+    EXPECT_GT(inMemory, 1u * 10000 * 3 * 1000 * 8);
+    EXPECT_LT(inMemory, 2u * 10000 * 3 * 1000 * 8);
 }
 
 // --- the program: several shots, bad inputs ----------------------------------------------------
@@ -212,8 +215,8 @@ TEST(TrainCli, BadInputsAreOneLineAndExitCode2) {
         {{"--frames", a, "--frames", other}, "same N and C"},
         {{"--frames", a, "--memory-limit", "1M"}, "cannot be met"},
         {{"--frames", a, "--memory-limit", "lots"}, "is not a size"},
-        // In memory needs ~3.8 MB here, streaming ~3.1 MB plus 2.9 kB a point of block.
-        {{"--frames", a, "--memory-limit", "3.5M", "--block-points", "1000"}, "does not fit"},
+        // In memory needs ~3.4 MB here, streaming ~3.1 MB plus 2.9 kB a point of block.
+        {{"--frames", a, "--memory-limit", "3.2M", "--block-points", "1000"}, "does not fit"},
         {{"--frames", a, "--frames", nan, "--out-of-core"}, "frame 17, point 123, channel 1 is nan"},
         {{"--frames", a, "--frames", dir.file("missing.npy")}, "no such file"},
     };
