@@ -153,7 +153,8 @@ CalibrationRule resolvedCalibrationRule(const TrainingOptions& options);
 Model train(const FrameSet& frames, const TrainingOptions& options, TrainingReport* report = nullptr);
 /// The same, consuming `frames` (left empty): the training matrix is centred where the frames
 /// lie, so training holds one copy of them fewer (a frame set of many points is most of the
-/// memory training needs). Channels sharing the basis still make their channel frames.
+/// memory training needs). Channels sharing the basis make their channel frames where the
+/// frames lie too.
 Model train(FrameSet&& frames, const TrainingOptions& options, TrainingReport* report = nullptr);
 
 /// Training over the rows of Q this process owns: the one implementation, which the

@@ -217,17 +217,23 @@ struct Trained {
     ModelSize size;       // M, K, grid keys chosen for the medium
 };
 
-/// 3. Train: basis, key voxels (seeded with a sparse spatial grid), calibrated eps; frees `q`.
-Trained trainModel(DemoSetup& run, const VolumeDemoOptions& o, const VolumeWorld& world, FrameSet& q,
+/// 3. Train: basis, key voxels (seeded with a sparse spatial grid), calibrated eps; hands `q` to
+/// training, which takes its values (the frames are held once: at a million voxels they are
+/// 2.25 GB).
+Trained trainModel(DemoSetup& run, const VolumeDemoOptions& o, const VolumeWorld& world, FrameSet&& q,
                    Index n) {
     const auto t = DemoClock::now();
     Trained trained;
-    const Index trainFrames = q.frames;
     for (Index i = 0; i < q.frames * n; ++i) {
         const double* v = q.values.data() + 3 * i;
         trained.peak = std::max(trained.peak, std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]));
+        trained.projection.ref2 += v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
     }
     trained.size = chooseModelSize(o, q);
+    // The training frames' own distance from the basis (truncation to M vectors): the energy the
+    // M principal directions leave out, which is what the model's mean and basis leave out of the
+    // frames (training keeps the same M principal directions, rotated within their span).
+    trained.projection.err2 = trained.size.discardedEnergy;
     TrainingOptions& topt = trained.options;
     topt.basis = trained.size.basis;
     topt.maxKeys = trained.size.keys;
@@ -248,10 +254,7 @@ Trained trainModel(DemoSetup& run, const VolumeDemoOptions& o, const VolumeWorld
         run.progress(std::string("train: ") + std::string(stage), done, total);
         return true;
     };
-    run.arena.execute([&] { trained.model = train(q, topt, &trained.report); });
-    // The training frames' own distance from the basis (truncation to M vectors).
-    for (Index f = 0; f < trainFrames; ++f) addProjectionError(trained.model, q.frame(f), trained.projection);
-    q = FrameSet();
+    run.arena.execute([&] { trained.model = train(std::move(q), topt, &trained.report); });
     run.lap("train", t);
     return trained;
 }
@@ -664,7 +667,9 @@ ModelSize chooseModelSize(const VolumeDemoOptions& o, const FrameSet& q) {
         while (s.basis < available && sum < o.basisEnergy * total) sum += e(s.basis++);
         s.basis = std::max(s.basis, 1);
     }
-    s.energy = total > 0 ? e.head(std::min<Index>(s.basis, e.size())).sum() / total : 1.0;
+    const Index kept = std::min<Index>(s.basis, e.size());
+    s.energy = total > 0 ? e.head(kept).sum() / total : 1.0;
+    s.discardedEnergy = e.tail(e.size() - kept).sum();
     const int maxKeys = static_cast<int>(std::max<Index>(1, q.points / 10));
     s.keys = o.keys > 0 ? o.keys : std::min(maxKeys, static_cast<int>(std::lround(o.keysPerBasis * s.basis)));
     s.gridKeys = std::min(s.keys, o.gridKeys >= 0 ? o.gridKeys : s.keys / 5);
@@ -684,7 +689,7 @@ nlohmann::json runVolumeDemo(const VolumeDemoOptions& options) {
     const VolumeEvaluator trainEval(world, o.rig.training(*world), "volume-train");
     const Index trainFrames = trainEval.frameCount();
     TrainingFrames training = makeTrainingFrames(run, trainEval, n);
-    const Trained trained = trainModel(run, o, *world, training.q, n);
+    const Trained trained = trainModel(run, o, *world, std::move(training.q), n);
 
     const ValidationFrames frames = chooseValidationFrames(o, *world);
     const VolumeEvaluator valEval(world, frames.lights, "volume");

@@ -70,6 +70,9 @@ struct VolumeDemoOptions {
 struct ModelSize {
     int basis = 0, keys = 0, gridKeys = 0;
     double energy = 0;  ///< fraction of the training frames' energy the basis captures
+    /// The energy the basis leaves out: the squared distance of the training frames from the
+    /// mean plus the span of the M principal directions, summed over frames.
+    double discardedEnergy = 0;
 };
 
 /// M, K and the grid keys for these training frames (the options' explicit basis, keys and
