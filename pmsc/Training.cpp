@@ -219,7 +219,8 @@ Model trainSharedChannels(FrameSet&& frames, const TrainingOptions& options, Tra
     for (Index t = 0; t < f; ++t) {
         for (Index i = 0; i < k; ++i)
             for (Index ch = 0; ch < c; ++ch)
-                keys[static_cast<std::size_t>(i * c + ch)] = at(t, model.keyPoints[static_cast<std::size_t>(i)], ch);
+                keys[static_cast<std::size_t>(i * c + ch)] =
+                    at(t, model.keyPoints[static_cast<std::size_t>(i)], ch);
         pm.project(keys.data(), coords.data());
         pm.reconstruct(coords.data(), values.data());
         for (Index p = 0; p < n; ++p) {
@@ -714,7 +715,8 @@ Model train(const FrameSet& frames, const TrainingOptions& options, TrainingRepo
 
 Model train(FrameSet&& frames, const TrainingOptions& options, TrainingReport* reportOut) {
     validateFrames(frames);
-    if (options.sharedChannels && frames.channels > 1) return trainSharedChannels(std::move(frames), options, reportOut);
+    if (options.sharedChannels && frames.channels > 1)
+        return trainSharedChannels(std::move(frames), options, reportOut);
     MatrixBlocks q(std::move(frames));
     SingleProcess one;
     return train(q, one, options, reportOut);
