@@ -8,7 +8,10 @@ target_compile_options(pmsc_warnings INTERFACE $<$<CXX_COMPILER_ID:GNU>:-Wno-may
 
 add_library(pmsc_sanitize INTERFACE)
 if(PMSC_SANITIZE)
-  target_compile_options(pmsc_sanitize INTERFACE -fsanitize=${PMSC_SANITIZE} -fno-omit-frame-pointer -g)
+  # Line tables for the reports' stacks (-g1) where the build type carries no debug information of
+  # its own; Debug and RelWithDebInfo keep theirs.
+  target_compile_options(pmsc_sanitize INTERFACE -fsanitize=${PMSC_SANITIZE} -fno-omit-frame-pointer
+                                                 $<$<NOT:$<CONFIG:Debug,RelWithDebInfo>>:-g1>)
   # With sanitizers GCC 12 turns the AVX-512 intrinsics' self-initialised placeholder
   # (`__m512d __Y = __Y;` in _mm512_undefined_pd) into dozens of "'__Y' is used uninitialized"
   # warnings per Eigen TU. The Release build keeps -Wuninitialized and is clean.
