@@ -98,6 +98,7 @@ void printModelJson(const Model& model, const ModelFileFacts& file) {
     if (model.sentinels)
         j["sentinels"] = {{"count", model.sentinels->points.size()},
                           {"covering_radius", model.sentinels->coveringRadius},
+                          {"neighbours", model.sentinels->perSentinel},
                           {"positions", model.sentinels->source == SentinelSource::Mean    ? "mean"
                                         : model.sentinels->source == SentinelSource::Given ? "given"
                                                                                            : "point order"}};
@@ -174,7 +175,13 @@ void printModelText(const Model& model, const ModelFileFacts& file) {
                           : "every moving point within " + fmt("%.6g", model.sentinels->coveringRadius) +
                                 " of one")
                   << ": computed beside every hit, which stands where PM is within "
-                  << fmt("%g", kSentinelShare) << " T of each\n";
+                  << fmt("%g", kSentinelShare) << " T of each"
+                  << (model.sentinels->perSentinel > 0
+                          ? " and the slope to each one's " + std::to_string(model.sentinels->perSentinel) +
+                                " nearest, carried " + fmt("%g", kSentinelSlopeShare) +
+                                " of the covering radius, stays within T"
+                          : std::string())
+                  << "\n";
     if (model.regions) {
         const LocalRegions& lr = *model.regions;
         std::cout << "  regions       R = " << lr.regionCount() << " (local fail-through), feather width "

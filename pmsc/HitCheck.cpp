@@ -10,9 +10,19 @@ namespace pmsc {
 HitCheck::HitCheck(const Model& model, const PointMultiplier& pm) : model_(model), pm_(pm) {
     if (model.regions) regionKeys_ = model.regions->extraKeyPoints;
     std::sort(regionKeys_.begin(), regionKeys_.end());
-    if (model.sentinels) sentinels_ = model.sentinels->points;
-    std::sort(sentinels_.begin(), sentinels_.end());
-    sentinels_.erase(std::unique(sentinels_.begin(), sentinels_.end()), sentinels_.end());
+    if (model.sentinels) {
+        const std::vector<Index>& chosen = model.sentinels->points;
+        std::vector<std::pair<Index, Index>> byPoint;  // (point, its position in the model's list)
+        for (size_t i = 0; i < chosen.size(); ++i) byPoint.emplace_back(chosen[i], static_cast<Index>(i));
+        std::sort(byPoint.begin(), byPoint.end());
+        byPoint.erase(std::unique(byPoint.begin(), byPoint.end(),
+                                  [](const auto& a, const auto& b) { return a.first == b.first; }),
+                      byPoint.end());
+        for (const auto& [point, at] : byPoint) {
+            sentinels_.push_back(point);
+            sentinelAt_.push_back(at);
+        }
+    }
     predicted_ = model.keyErrorNorm == KeyErrorNorm::Predicted && !model.sharedChannels;
     available_ =
         !sentinels_.empty() || (predicted_ && (!regionKeys_.empty() || model.keyNeighbours.has_value()));
@@ -75,18 +85,47 @@ std::vector<Index> HitCheck::offPoints(const double* coords, std::span<const Ind
     std::vector<double> pm(points.size() * size_t(c));
     pm_.reconstructPoints(coords, points, pm.data());
     std::vector<Index> off;
+    // PM's error at each computed sentinel, by its position in the model's list (NaN: not computed).
+    std::vector<double> atSentinel;
+    if (!sentinels_.empty()) atSentinel.assign(model_.sentinels->points.size(), std::nan(""));
     for (size_t i = 0; i < points.size(); ++i) {
         double squared = 0;
         for (Index ch = 0; ch < c; ++ch) {
             const double d = pm[i * size_t(c) + size_t(ch)] - values[i * size_t(c) + size_t(ch)];
             squared += d * d;
         }
+        const double error = std::sqrt(squared);
         const bool regionKey = std::binary_search(regionKeys_.begin(), regionKeys_.end(), points[i]);
-        const bool sentinel = std::binary_search(sentinels_.begin(), sentinels_.end(), points[i]);
+        const auto s = std::lower_bound(sentinels_.begin(), sentinels_.end(), points[i]);
+        const bool sentinel = s != sentinels_.end() && *s == points[i];
+        if (sentinel) atSentinel[size_t(sentinelAt_[size_t(s - sentinels_.begin())])] = error;
         const double share = regionKey ? kConfirmedShare : sentinel ? kSentinelShare : kNeighbourShare;
-        if (!(std::sqrt(squared) <= share * model_.tolerance)) off.push_back(points[i]);  // NaN is off
+        if (!(error <= share * model_.tolerance)) off.push_back(points[i]);  // NaN is off
+    }
+    const size_t before = off.size();
+    slopeCheck(atSentinel, off);
+    if (off.size() != before) {
+        std::sort(off.begin(), off.end());
+        off.erase(std::unique(off.begin(), off.end()), off.end());
     }
     return off;
+}
+
+void HitCheck::slopeCheck(const std::vector<double>& atSentinel, std::vector<Index>& off) const {
+    if (atSentinel.empty() || model_.sentinels->perSentinel <= 0) return;
+    const Sentinels& s = *model_.sentinels;
+    const size_t k = size_t(s.perSentinel);
+    const double reach = kSentinelSlopeShare * s.coveringRadius;
+    for (size_t i = 0; i < atSentinel.size(); ++i) {
+        const double e = atSentinel[i];
+        if (std::isnan(e)) continue;  // not computed, or off already (a NaN error)
+        double slope = 0;
+        for (size_t n = i * k; n < (i + 1) * k; ++n) {
+            const double other = atSentinel[size_t(s.neighbours[n])];
+            if (!std::isnan(other)) slope = std::max(slope, std::abs(e - other) / s.neighbourDistances[n]);
+        }
+        if (!(e + reach * slope <= model_.tolerance)) off.push_back(s.points[i]);
+    }
 }
 
 }  // namespace pmsc

@@ -67,7 +67,8 @@ public:
     std::vector<Index> unblendedSentinels(std::span<const double> pointWeights) const;
     /// The hit stands: PM's error at each of `points` against its computed value (`values`,
     /// points.size()*C) is at most kConfirmedShare * T at a region key, kSentinelShare * T at a
-    /// sentinel and kNeighbourShare * T at any other point (NaN fails).
+    /// sentinel and kNeighbourShare * T at any other point (NaN fails), and every computed
+    /// sentinel passes the slope check with its computed neighbours (kSentinelSlopeShare).
     bool passes(const double* coords, std::span<const Index> points, const double* values) const;
     /// The points of `points` where PM is further from `values` than passes() allows, ascending.
     std::vector<Index> offPoints(const double* coords, std::span<const Index> points,
@@ -78,10 +79,15 @@ private:
     const PointMultiplier& pm_;
     std::vector<Index> regionKeys_;  ///< ascending
     std::vector<Index> sentinels_;   ///< ascending
+    std::vector<Index> sentinelAt_;  ///< sentinels_[i]'s position in the model's list
     bool predicted_ = false;         ///< the key error has two parts that can disagree
     bool available_ = false;
 
     bool disagree(PredictedParts parts) const;
+    /// Appends to `off` the sentinels the slope check refuses (kSentinelSlopeShare), from PM's
+    /// error at each computed sentinel (`atSentinel`, by position in the model's list, NaN where
+    /// not computed).
+    void slopeCheck(const std::vector<double>& atSentinel, std::vector<Index>& off) const;
 };
 
 }  // namespace pmsc

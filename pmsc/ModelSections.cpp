@@ -45,12 +45,13 @@ std::span<const ModelSectionCodec> modelSectionCodecs() {
     // One line per feature. The order is the order of the sections in a written file.
     static const ModelSectionCodec codecs[] = {
         regionsSectionCodec(),
-        learningSectionCodec(),       // LEARNSVD (`pmsc learn`)
-        calibrationSectionCodec(),    // CALIBRAT (`pmsc learn`)
-        crossSectionCodec(),          // CROSSPM (cross point multiplication)
-        keyErrorSectionCodec(),       // KEYERROR (the largest key as the soft cache's measure)
-        keyNeighboursSectionCodec(),  // KEYNEAR (where a hit one part certifies is checked)
-        sentinelsSectionCodec(),      // SENTINEL (points computed beside every hit)
+        learningSectionCodec(),            // LEARNSVD (`pmsc learn`)
+        calibrationSectionCodec(),         // CALIBRAT (`pmsc learn`)
+        crossSectionCodec(),               // CROSSPM (cross point multiplication)
+        keyErrorSectionCodec(),            // KEYERROR (the largest key as the soft cache's measure)
+        keyNeighboursSectionCodec(),       // KEYNEAR (where a hit one part certifies is checked)
+        sentinelsSectionCodec(),           // SENTINEL (points computed beside every hit)
+        sentinelNeighboursSectionCodec(),  // SENTNBRS (their neighbours: the slope check)
     };
     return codecs;
 }

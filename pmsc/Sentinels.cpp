@@ -24,6 +24,22 @@ void Sentinels::validate(const Model& model) const {
         if (p < 0 || p >= model.points)
             throw std::invalid_argument("sentinels: point " + std::to_string(p) + " is outside [0, N)");
     }
+    const auto count = static_cast<Index>(points.size());
+    if (perSentinel < 0 || perSentinel >= std::max<Index>(count, 1) ||
+        neighbours.size() != size_t(count * perSentinel) || neighbourDistances.size() != neighbours.size())
+        throw std::invalid_argument("sentinels: " + std::to_string(neighbours.size()) + " neighbours and " +
+                                    std::to_string(neighbourDistances.size()) + " distances for " +
+                                    std::to_string(count) + " sentinels of " + std::to_string(perSentinel) +
+                                    " each");
+    for (size_t i = 0; i < neighbours.size(); ++i) {
+        const Index self = static_cast<Index>(i) / std::max<Index>(perSentinel, 1);
+        if (neighbours[i] < 0 || neighbours[i] >= count || neighbours[i] == self)
+            throw std::invalid_argument("sentinels: sentinel " + std::to_string(self) + "'s neighbour " +
+                                        std::to_string(neighbours[i]) + " is not another sentinel");
+        if (!(neighbourDistances[i] > 0) || !std::isfinite(neighbourDistances[i]))
+            throw std::invalid_argument("sentinels: sentinel " + std::to_string(self) +
+                                        "'s neighbour distance is not finite and > 0");
+    }
 }
 
 Index sentinelCount(Index requested, Index points) {
@@ -59,6 +75,31 @@ std::vector<Index> movingPool(const Eigen::Ref<const Eigen::VectorXd>& motion, s
         if (!excluded[size_t(p)] && motion[p] > 0 && motion[p] >= kMovingShare * most) pool.push_back(p);
     }
     return pool;
+}
+
+/// Fills s.neighbours and s.neighbourDistances: each sentinel's kSentinelNeighbours nearest others
+/// (ties by position in s.points). Every pair once: S^2 / 2 distances, a few milliseconds at 1024.
+void nearestSentinels(const Eigen::Ref<const Eigen::MatrixXd>& positions, Sentinels& s) {
+    const auto count = static_cast<Index>(s.points.size());
+    s.perSentinel = std::min<Index>(kSentinelNeighbours, count - 1);
+    s.neighbours.clear();
+    s.neighbourDistances.clear();
+    if (s.perSentinel <= 0) {
+        s.perSentinel = 0;
+        return;
+    }
+    std::vector<std::pair<double, Index>> others(static_cast<size_t>(count - 1));
+    for (Index i = 0; i < count; ++i) {
+        const Eigen::RowVector3d at = positions.row(s.points[size_t(i)]);
+        size_t o = 0;
+        for (Index j = 0; j < count; ++j)
+            if (j != i) others[o++] = {(positions.row(s.points[size_t(j)]) - at).norm(), j};
+        std::partial_sort(others.begin(), others.begin() + s.perSentinel, others.end());
+        for (Index k = 0; k < s.perSentinel; ++k) {
+            s.neighbours.push_back(others[size_t(k)].second);
+            s.neighbourDistances.push_back(others[size_t(k)].first);
+        }
+    }
 }
 
 }  // namespace
@@ -101,6 +142,7 @@ Sentinels farthestPointSentinels(const Eigen::Ref<const Eigen::MatrixXd>& positi
         next = argFarthest;
     }
     out.coveringRadius = std::sqrt(std::max(0.0, farthest));
+    nearestSentinels(positions, out);
     return out;
 }
 
@@ -141,6 +183,47 @@ const char* describe(SentinelSource source) {
 //
 //   u32 source (SentinelSource: 0 given, 1 mean, 2 point order), f64 covering radius, u64 count S,
 //   u64[S] points
+
+// --- the "SENTNBRS" section (after "SENTINEL") ---------------------------------------------------
+//
+//   u64 per sentinel k, then for each of the S sentinels k u64 neighbours (positions in the
+//   sentinel list) and k f64 distances. Absent: no slope check (point order, or a model file
+//   written without it).
+
+ModelSectionCodec sentinelNeighboursSectionCodec() {
+    return {{'S', 'E', 'N', 'T', 'N', 'B', 'R', 'S'},
+            [](const Model& m) { return m.sentinels.has_value() && m.sentinels->perSentinel > 0; },
+            [](const Model& m, ByteWriter& out) {
+                const Sentinels& s = *m.sentinels;
+                out.index(s.perSentinel);
+                for (size_t i = 0; i < s.points.size(); ++i) {
+                    const size_t at = i * size_t(s.perSentinel);
+                    out.indices(std::span<const Index>(s.neighbours).subspan(at, size_t(s.perSentinel)));
+                    for (Index k = 0; k < s.perSentinel; ++k) out.f64(s.neighbourDistances[at + size_t(k)]);
+                }
+            },
+            [](ByteReader& in, Model& m) {
+                if (!m.sentinels) in.fail("sentinel neighbours without sentinels");
+                Sentinels& s = *m.sentinels;
+                const auto count = static_cast<std::uint64_t>(s.points.size());
+                const std::uint64_t k = in.u64("neighbours per sentinel");
+                if (k == 0 || k >= std::max<std::uint64_t>(count, 1))
+                    in.fail("neighbours per sentinel " + std::to_string(k) + " is not in [1, S)");
+                in.require(count * k, 16, "sentinel neighbours");
+                s.perSentinel = static_cast<Index>(k);
+                for (std::uint64_t i = 0; i < count; ++i) {
+                    const std::vector<Index> near = in.indices(k, count, "sentinel neighbour");
+                    for (const Index j : near)
+                        if (j == static_cast<Index>(i)) in.fail("a sentinel is its own neighbour");
+                    s.neighbours.insert(s.neighbours.end(), near.begin(), near.end());
+                    for (std::uint64_t j = 0; j < k; ++j) {
+                        const double d = in.finite("sentinel neighbour distance");
+                        if (!(d > 0)) in.fail("a sentinel neighbour distance is not > 0");
+                        s.neighbourDistances.push_back(d);
+                    }
+                }
+            }};
+}
 
 ModelSectionCodec sentinelsSectionCodec() {
     return {{'S', 'E', 'N', 'T', 'I', 'N', 'E', 'L'},

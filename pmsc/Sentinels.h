@@ -46,6 +46,13 @@ struct Sentinels {
     /// positions' units. PointOrder: the length of a run, in points.
     double coveringRadius = 0;
     SentinelSource source = SentinelSource::Mean;
+    /// Given or Mean: each sentinel's kSentinelNeighbours nearest other sentinels (their positions
+    /// in `points`), nearest first, `perSentinel` of them (fewer sentinels: all the others), and
+    /// their distances; what the slope check reads (HitCheck). Empty in point order: a run's
+    /// neighbour in point order is not a neighbour in space.
+    Index perSentinel = 0;
+    std::vector<Index> neighbours;           ///< points.size() x perSentinel
+    std::vector<double> neighbourDistances;  ///< the same shape, > 0
 
     /// Checks ranges against the model (N): throws std::invalid_argument naming the first problem.
     void validate(const Model& model) const;
@@ -77,6 +84,25 @@ constexpr double kSentinelShare = 0.8;
 /// which farthest-point samples of the positions refused; 2048 refused both in every draw the
 /// replica tried (six seeds).
 constexpr Index kPointOrderFactor = 2;
+
+/// The slope check (HitCheck) reads each sentinel's kSentinelNeighbours nearest sentinels.
+constexpr Index kSentinelNeighbours = 6;
+
+/// The slope check: a hit stands only where, at every sentinel i,
+///     e_i + kSentinelSlopeShare * r * max_j |e_i - e_j| / d_ij <= T
+/// (e PM's error at a sentinel, j its computed neighbours at distance d_ij, r the covering radius).
+/// Why: a sentinel's own error bounds the error around it only where the error field is flat at
+/// the scale of the spacing. Where neighbouring sentinels disagree the field changes at that scale,
+/// and a patch between them can peak over both; the check extrapolates the steepest neighbouring
+/// slope half the covering radius beyond the sentinel. Farthest-point sentinels are at least r
+/// apart, so the term is at most half the difference: only a sentinel over 2/3 T whose neighbours
+/// see much less can fail it. Why 0.5: in a replica of the check on the novelty suite's frames
+/// (bench/sentinel_slope.py) it refused the two frames of the quick Cornell box at --energy
+/// 0.99999 that pass at kSentinelShare (up to 1.034 T, a patch of 12-15 points between
+/// sentinels) and one of the three of the four cubes in Cycles, at a cost of 16 more of the
+/// face's 5,500 validation hits and local frames on sets A-N, both bases (49 to 65); 0.75 refused
+/// 96 more.
+constexpr double kSentinelSlopeShare = 0.5;
 
 /// A point moves when its RMS motion in the basis is at least this share of the largest point's.
 constexpr double kMovingShare = 1e-3;
@@ -112,5 +138,7 @@ const char* describe(SentinelSource source);
 
 /// Codec of the "SENTINEL" model-file section (ModelSections.h).
 ModelSectionCodec sentinelsSectionCodec();
+/// Codec of the "SENTNBRS" section: the sentinels' neighbours (written after "SENTINEL").
+ModelSectionCodec sentinelNeighboursSectionCodec();
 
 }  // namespace pmsc

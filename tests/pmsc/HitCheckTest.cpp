@@ -322,10 +322,95 @@ TEST(Sentinels, EveryHitComputesThemAndTheyHoldPmWithinTheirShareOfTheTolerance)
     std::vector<double> values(points.size() * size_t(c));
     pm.reconstructPoints(coords.data(), points, values.data());
     EXPECT_TRUE(check.passes(coords.data(), points, values.data()));
-    values[2] += (pmsc::kSentinelShare - 0.05) * m.tolerance;
+    // The same error at every sentinel: no slope, so the share alone decides.
+    for (size_t i = 0; i < points.size(); ++i)
+        values[i * size_t(c)] += (pmsc::kSentinelShare - 0.05) * m.tolerance;
     EXPECT_TRUE(check.passes(coords.data(), points, values.data()));
-    values[2] += 0.1 * m.tolerance;
+    values[2 * size_t(c)] += 0.1 * m.tolerance;
     EXPECT_FALSE(check.passes(coords.data(), points, values.data())) << "over kSentinelShare at a sentinel";
+}
+
+TEST(Sentinels, EachKeepsItsNearestSentinelsInTheModelFile) {
+    Model m = trainSheet(false, 0.01, 0, 40);
+    const pmsc::Sentinels& s = *m.sentinels;
+    ASSERT_EQ(s.perSentinel, pmsc::kSentinelNeighbours);
+    ASSERT_EQ(s.neighbours.size(), s.points.size() * size_t(s.perSentinel));
+    const Eigen::MatrixXd mean = Eigen::Map<const Eigen::MatrixXd>(m.mean.data(), 3, m.points).transpose();
+    auto distance = [&](Index a, Index b) {
+        return (mean.row(s.points[size_t(a)]) - mean.row(s.points[size_t(b)])).norm();
+    };
+    const auto count = static_cast<Index>(s.points.size());
+    for (Index i = 0; i < count; ++i) {
+        std::vector<double> all;
+        for (Index j = 0; j < count; ++j)
+            if (j != i) all.push_back(distance(i, j));
+        std::sort(all.begin(), all.end());
+        for (Index k = 0; k < s.perSentinel; ++k) {
+            const size_t at = size_t(i * s.perSentinel + k);
+            EXPECT_NE(s.neighbours[at], i);
+            EXPECT_NEAR(s.neighbourDistances[at], distance(i, s.neighbours[at]), 1e-12);
+            EXPECT_NEAR(s.neighbourDistances[at], all[size_t(k)], 1e-12) << "the k-th nearest, nearest first";
+            EXPECT_GE(s.neighbourDistances[at], s.coveringRadius - 1e-12)
+                << "farthest-point samples are at least the covering radius apart";
+        }
+    }
+    const Model back = pmsc::decodeModel(pmsc::encodeModel(m), "neighbours");
+    EXPECT_EQ(back.sentinels->perSentinel, s.perSentinel);
+    EXPECT_EQ(back.sentinels->neighbours, s.neighbours);
+    EXPECT_EQ(back.sentinels->neighbourDistances, s.neighbourDistances);
+
+    Model self = m;
+    self.sentinels->neighbours[0] = 0;
+    EXPECT_THROW(self.validate(), std::invalid_argument) << "a sentinel is not its own neighbour";
+    Model shorter = m;
+    shorter.sentinels->neighbourDistances.pop_back();
+    EXPECT_THROW(shorter.validate(), std::invalid_argument);
+
+    const Model light = trainSheet(true, 0.01, 0, 20);
+    EXPECT_EQ(light.sentinels->perSentinel, 0) << "point order: no neighbours in space";
+    EXPECT_TRUE(light.sentinels->neighbours.empty());
+}
+
+TEST(Sentinels, TheSlopeCheckRefusesASentinelWellOverItsNeighbours) {
+    Model m = trainSheet(false, 0.01, 0, 40);
+    const pmsc::PointMultiplier pm(m);
+    const pmsc::HitCheck check(m, pm);
+    const pmsc::Sentinels& s = *m.sentinels;
+    const Index c = m.channels;
+    std::vector<double> keys = unseenKeys(m), coords(size_t(m.coordCount()));
+    pm.project(keys.data(), coords.data());
+    const std::vector<Index> points = check.points(keys.data(), coords.data(), {0, 0});
+    std::vector<double> exact(points.size() * size_t(c));
+    pm.reconstructPoints(coords.data(), points, exact.data());
+    // The sentinel whose nearest sentinel is nearest: the steepest slope an error of its own makes.
+    Index steep = 0;
+    for (Index i = 1; i < static_cast<Index>(s.points.size()); ++i)
+        if (s.neighbourDistances[size_t(i * s.perSentinel)] <
+            s.neighbourDistances[size_t(steep * s.perSentinel)])
+            steep = i;
+    const double ratio = s.coveringRadius / s.neighbourDistances[size_t(steep * s.perSentinel)];
+    ASSERT_GT(ratio, 0.7) << "the test needs a sentinel whose nearest is within 1/0.7 of the covering radius";
+    const size_t row =
+        size_t(std::lower_bound(points.begin(), points.end(), s.points[size_t(steep)]) - points.begin());
+    auto withError = [&](double share) {
+        std::vector<double> v = exact;
+        v[row * size_t(c)] += share * m.tolerance;
+        return v;
+    };
+    // e + 0.5 r e / d with e = 0.75 T and r / d > 0.7: over T.
+    std::vector<double> v = withError(0.75);
+    EXPECT_FALSE(check.passes(coords.data(), points, v.data()));
+    EXPECT_EQ(check.offPoints(coords.data(), points, v.data()), std::vector<Index>{s.points[size_t(steep)]});
+    // e = 0.6 T: at most 0.6 + 0.3 T.
+    v = withError(0.6);
+    EXPECT_TRUE(check.passes(coords.data(), points, v.data()))
+        << "under 2/3 T a sentinel passes whatever its slope";
+    // A check of this sentinel alone (a local frame's): no computed neighbour, no slope.
+    const std::vector<Index> alone{s.points[size_t(steep)]};
+    std::vector<double> one(static_cast<size_t>(c), 0.0);
+    pm.reconstructPoints(coords.data(), alone, one.data());
+    one[0] += 0.75 * m.tolerance;
+    EXPECT_TRUE(check.passes(coords.data(), alone, one.data()));
 }
 
 TEST(Sentinels, ModelsWhoseKeyErrorHasOnePartOrWhoseChannelsShareTheBasisCheckEveryHitAtThem) {
