@@ -102,6 +102,32 @@ void nearestSentinels(const Eigen::Ref<const Eigen::MatrixXd>& positions, Sentin
     }
 }
 
+/// The same for sentinels drawn in point order (ascending): each one's kSentinelNeighbours nearest
+/// others by point index, the distance in points, so the slope check reads the runs beside it in
+/// the units of the covering radius (a run's length).
+void nearestInPointOrder(Sentinels& s) {
+    const auto count = static_cast<Index>(s.points.size());
+    s.perSentinel = std::max<Index>(0, std::min<Index>(kSentinelNeighbours, count - 1));
+    s.neighbours.clear();
+    s.neighbourDistances.clear();
+    if (s.perSentinel == 0) return;
+    std::vector<std::pair<double, Index>> near;
+    for (Index i = 0; i < count; ++i) {
+        near.clear();
+        // The nearest by index are among the kSentinelNeighbours on each side (the points ascend).
+        for (Index j = std::max<Index>(0, i - s.perSentinel); j <= std::min(count - 1, i + s.perSentinel);
+             ++j)
+            if (j != i)
+                near.emplace_back(static_cast<double>(std::abs(s.points[size_t(j)] - s.points[size_t(i)])),
+                                  j);
+        std::partial_sort(near.begin(), near.begin() + s.perSentinel, near.end());
+        for (Index k = 0; k < s.perSentinel; ++k) {
+            s.neighbours.push_back(near[size_t(k)].second);
+            s.neighbourDistances.push_back(near[size_t(k)].first);
+        }
+    }
+}
+
 }  // namespace
 
 Sentinels farthestPointSentinels(const Eigen::Ref<const Eigen::MatrixXd>& positions,
@@ -164,6 +190,7 @@ Sentinels pointOrderSentinels(const Eigen::Ref<const Eigen::VectorXd>& motion, s
     }
     const Index longestRun = (moving + want - 1) / want;  // ceiling: the runs' lengths differ by one at most
     out.coveringRadius = static_cast<double>(longestRun);
+    nearestInPointOrder(out);
     return out;
 }
 
@@ -187,8 +214,8 @@ const char* describe(SentinelSource source) {
 // --- the "SENTNBRS" section (after "SENTINEL") ---------------------------------------------------
 //
 //   u64 per sentinel k, then for each of the S sentinels k u64 neighbours (positions in the
-//   sentinel list) and k f64 distances. Absent: no slope check (point order, or a model file
-//   written without it).
+//   sentinel list) and k f64 distances. Absent: no slope check (a model file written without
+//   it).
 
 ModelSectionCodec sentinelNeighboursSectionCodec() {
     return {{'S', 'E', 'N', 'T', 'N', 'B', 'R', 'S'},

@@ -46,10 +46,11 @@ struct Sentinels {
     /// positions' units. PointOrder: the length of a run, in points.
     double coveringRadius = 0;
     SentinelSource source = SentinelSource::Mean;
-    /// Given or Mean: each sentinel's kSentinelNeighbours nearest other sentinels (their positions
-    /// in `points`), nearest first, `perSentinel` of them (fewer sentinels: all the others), and
-    /// their distances; what the slope check reads (HitCheck). Empty in point order: a run's
-    /// neighbour in point order is not a neighbour in space.
+    /// Each sentinel's kSentinelNeighbours nearest other sentinels (their positions in `points`),
+    /// nearest first, `perSentinel` of them (fewer sentinels: all the others), and their distances;
+    /// what the slope check reads (HitCheck). Given or Mean: in space; PointOrder: by point index,
+    /// in points (the covering radius's units), the runs beside it, which are near in space as far
+    /// as the point order follows space.
     Index perSentinel = 0;
     std::vector<Index> neighbours;           ///< points.size() x perSentinel
     std::vector<double> neighbourDistances;  ///< the same shape, > 0
@@ -96,7 +97,9 @@ constexpr Index kSentinelNeighbours = 6;
 /// and a patch between them can peak over both; the check extrapolates the steepest neighbouring
 /// slope half the covering radius beyond the sentinel. Farthest-point sentinels are at least r
 /// apart, so the term is at most half the difference: only a sentinel over 2/3 T whose neighbours
-/// see much less can fail it. Why 0.5: in a replica of the check on the novelty suite's frames
+/// see much less can fail it. Sentinels drawn in point order read the runs beside them (a run's
+/// length is their covering radius): on the quick light suite that refused the Cornell box's hit
+/// at 1.031 T at --energy 0.99999 without positions, and no hit between the training lights. Why 0.5: in a replica of the check on the novelty suite's frames
 /// (bench/sentinel_slope.py) it refused the two frames of the quick Cornell box at --energy
 /// 0.99999 that pass at kSentinelShare (up to 1.034 T, a patch of 12-15 points between
 /// sentinels) and one of the three of the four cubes in Cycles, at a cost of 16 more of the

@@ -366,9 +366,24 @@ TEST(Sentinels, EachKeepsItsNearestSentinelsInTheModelFile) {
     shorter.sentinels->neighbourDistances.pop_back();
     EXPECT_THROW(shorter.validate(), std::invalid_argument);
 
+    // Point order: the nearest by index, the distance in points.
     const Model light = trainSheet(true, 0.01, 0, 20);
-    EXPECT_EQ(light.sentinels->perSentinel, 0) << "point order: no neighbours in space";
-    EXPECT_TRUE(light.sentinels->neighbours.empty());
+    const pmsc::Sentinels& o = *light.sentinels;
+    ASSERT_EQ(o.perSentinel, pmsc::kSentinelNeighbours);
+    ASSERT_EQ(o.neighbours.size(), o.points.size() * size_t(o.perSentinel));
+    for (size_t i = 0; i < o.points.size(); ++i) {
+        std::vector<double> all;
+        for (size_t j = 0; j < o.points.size(); ++j)
+            if (j != i) all.push_back(double(std::abs(o.points[j] - o.points[i])));
+        std::sort(all.begin(), all.end());
+        for (Index k = 0; k < o.perSentinel; ++k) {
+            const size_t at = i * size_t(o.perSentinel) + size_t(k);
+            EXPECT_DOUBLE_EQ(o.neighbourDistances[at],
+                             double(std::abs(o.points[size_t(o.neighbours[at])] - o.points[i])));
+            EXPECT_DOUBLE_EQ(o.neighbourDistances[at], all[size_t(k)]);
+        }
+    }
+    EXPECT_NO_THROW(light.validate());
 }
 
 TEST(Sentinels, TheSlopeCheckRefusesASentinelWellOverItsNeighbours) {
