@@ -99,10 +99,10 @@ constexpr Index kSentinelNeighbours = 6;
 /// apart, so the term is at most half the difference: only a sentinel over 2/3 T whose neighbours
 /// see much less can fail it. Sentinels drawn in point order read the runs beside them (a run's
 /// length is their covering radius): on the quick light suite that refused the Cornell box's hit
-/// at 1.031 T at --energy 0.99999 without positions, and no hit between the training lights. Why 0.5: in a replica of the check on the novelty suite's frames
-/// (bench/sentinel_slope.py) it refused the two frames of the quick Cornell box at --energy
-/// 0.99999 that pass at kSentinelShare (up to 1.034 T, a patch of 12-15 points between
-/// sentinels) and one of the three of the four cubes in Cycles, at a cost of 16 more of the
+/// at 1.031 T at --energy 0.99999 without positions, and no hit between the training lights. Why 0.5: in a
+/// replica of the check on the novelty suite's frames (bench/sentinel_slope.py) it refused the two frames of
+/// the quick Cornell box at --energy 0.99999 that pass at kSentinelShare (up to 1.034 T, a patch of 12-15
+/// points between sentinels) and one of the three of the four cubes in Cycles, at a cost of 16 more of the
 /// face's 5,500 validation hits and local frames on sets A-N, both bases (49 to 65); 0.75 refused
 /// 96 more.
 constexpr double kSentinelSlopeShare = 0.5;
