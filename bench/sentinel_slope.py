@@ -25,10 +25,10 @@ Without --positions the positions are the model's mean (a shape). Needs numpy an
 module (build/python). Exits 2 with one line on a bad argument or a failed command.
 """
 import argparse
-import json
 import os
-import subprocess
 import sys
+
+from sentinel_choice import soft_errors  # the replay's soft-cached errors, cached beside the model
 
 
 def fail(message):
@@ -46,27 +46,6 @@ def farthest_points(np, positions, count, start):
         chosen.append(i)
         nearest = np.minimum(nearest, ((positions - positions[i]) ** 2).sum(1))
     return np.array(chosen), float(np.sqrt(nearest.max()))
-
-
-def soft_errors(np, args, frames_path):
-    """Each frame's soft-cached error per point and its route, from `pmsc replay --out`."""
-    cache = args.model + "." + os.path.basename(frames_path) + ".soft.npz"
-    if os.path.exists(cache):
-        z = np.load(cache)
-        return z["errors"], z["routes"]
-    out, report = cache + ".npy", cache + ".json"
-    done = subprocess.run([os.path.join(args.bin, "pmsc"), "replay", "--model", args.model, "--frames",
-                           frames_path, "--report", report, "--out", out, "--quiet"],
-                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    if done.returncode != 0:
-        fail("pmsc replay exited %d: %s" % (done.returncode, done.stdout.strip()[-300:]))
-    truth = np.load(frames_path).astype(np.float64)
-    errors = np.sqrt(((np.load(out).astype(np.float64) - truth) ** 2).sum(2))
-    with open(report) as f:
-        routes = np.array([("local" if r.get("local") else r["state"]) for r in json.load(f)["frames"]])
-    np.savez(cache, errors=errors, routes=routes)
-    os.remove(out)
-    return errors, routes
 
 
 def main():
@@ -111,7 +90,7 @@ def main():
     distance = np.sqrt(((at[:, None] - at[None]) ** 2).sum(2))
     near = np.argsort(distance, 1)[:, 1:7]
     near_distance = np.take_along_axis(distance, near, 1)
-    cases = [(path, *soft_errors(np, args, path)) for path in args.sets.split(",")]
+    cases = [(path, *soft_errors(np, args, args.model, path)) for path in args.sets.split(",")]
     print("%s: %d sentinels, covering radius %.4g, T %.4g" % (args.model, len(sentinels), radius, tolerance))
     print("| c | " + " | ".join("%s: over T left (of), within T refused (of)" % os.path.basename(c[0])
                                for c in cases) + " |")

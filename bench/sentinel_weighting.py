@@ -16,8 +16,10 @@ the frames within T it refuses.
 
 Needs numpy and the pmsc Python module (--python, default build/python).
 """
-import argparse, json, os, subprocess, sys
+import argparse, os, sys
 import numpy as np
+
+from sentinel_choice import soft_errors  # the replay's soft-cached errors, cached beside the model
 
 
 def fps(positions, count, weight=None, start=None, chosen=None):
@@ -61,21 +63,6 @@ def heldout_error(q, keys, m, folds=5):
     return h
 
 
-def soft(bin_dir, model, frames):
-    cache = model + "." + os.path.basename(frames) + ".soft.npz"
-    if os.path.exists(cache):
-        z = np.load(cache)
-        return z["errors"], z["routes"]
-    out, report = cache + ".npy", cache + ".json"
-    subprocess.run([bin_dir + "/pmsc", "replay", "--model", model, "--frames", frames, "--report", report,
-                    "--out", out, "--quiet"], check=True)
-    truth = np.load(frames).astype(np.float64)
-    errors = np.sqrt(((np.load(out).astype(np.float64) - truth) ** 2).sum(2))
-    routes = np.array([("local" if r.get("local") else r["state"]) for r in json.load(open(report))["frames"]])
-    np.savez(cache, errors=errors, routes=routes)
-    return errors, routes
-
-
 def main():
     p = argparse.ArgumentParser()
     p.add_argument("--train", required=True)
@@ -106,7 +93,7 @@ def main():
         np.save(hcache, h)
     hm = h[moving]
     print("T", T, "M", model.basis_size, "moving", len(moving), "heldout max/T %.3f p50/T %.3f" % (hm.max() / T, np.median(hm) / T))
-    cases = [soft(a.bin, a.model, s) for s in a.sets.split(",")]
+    cases = [soft_errors(np, a, a.model, s) for s in a.sets.split(",")]
     rules = {}
     start = int(np.argmax(motion[moving]))
     basecount = min(1024, q.shape[1] // 16)
