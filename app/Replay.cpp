@@ -175,18 +175,21 @@ nlohmann::ordered_json replayReport(const Model& model, const ReplayResult& resu
                           {"soft_max_point_error", r.softMaxPointError}});
     }
     const double count = std::max<double>(1.0, static_cast<double>(result.frames.size()));
-    // Models with regions only (a version-1 model's report is unchanged, byte for byte).
+    // The share of points computed, for models whose frames compute more than the keys or
+    // everything: regions (local fail-through) or a hit check (its sentinels, region keys and key
+    // neighbours are computed on every checked hit). A version-1 model's report is unchanged,
+    // byte for byte.
     const Index regionCount = model.regions ? model.regions->regionCount() : 0;
-    if (regionCount > 0) {
-        for (std::size_t i = 0; i < result.frames.size(); ++i) {
-            const auto& r = result.frames[i];
-            std::string states;
-            for (const CacheState st : r.regionStates)
-                states += st == CacheState::Hit ? 'h' : st == CacheState::Blend ? 'b' : 'm';
-            frames[i]["local"] = r.local;
-            frames[i]["points_evaluated_fraction"] = r.pointsEvaluatedFraction;
-            frames[i]["regions"] = states;
-        }
+    const bool partial = regionCount > 0 || model.sentinels.has_value() || model.keyNeighbours.has_value();
+    for (std::size_t i = 0; partial && i < result.frames.size(); ++i) {
+        const auto& r = result.frames[i];
+        frames[i]["points_evaluated_fraction"] = r.pointsEvaluatedFraction;
+        if (regionCount == 0) continue;
+        std::string states;
+        for (const CacheState st : r.regionStates)
+            states += st == CacheState::Hit ? 'h' : st == CacheState::Blend ? 'b' : 'm';
+        frames[i]["local"] = r.local;
+        frames[i]["regions"] = states;
     }
     json summary = {{"frames", result.frames.size()},
                     {"points", model.points},
@@ -201,12 +204,15 @@ nlohmann::ordered_json replayReport(const Model& model, const ReplayResult& resu
                     {"pm_max_point_error", pct(percentiles(pm))},
                     {"soft_max_point_error", pct(percentiles(soft))},
                     {"seconds", result.seconds}};
-    if (regionCount > 0) {
+    if (partial) {
         double evaluated = 0;
+        for (const auto& r : result.frames) evaluated += r.pointsEvaluatedFraction;
+        summary["points_evaluated_fraction"] = evaluated / count;
+    }
+    if (regionCount > 0) {
         Index local = 0;
         std::vector<std::array<Index, 3>> perRegion(static_cast<std::size_t>(regionCount), {0, 0, 0});
         for (const auto& r : result.frames) {
-            evaluated += r.pointsEvaluatedFraction;
             local += r.local;
             for (std::size_t g = 0; g < r.regionStates.size() && g < perRegion.size(); ++g)
                 ++perRegion[g][static_cast<std::size_t>(r.regionStates[g])];
@@ -217,7 +223,6 @@ nlohmann::ordered_json replayReport(const Model& model, const ReplayResult& resu
         summary["regions"] = regionCount;
         summary["local_fail_through"] = result.localFailThrough;
         summary["local_frames"] = local;
-        summary["points_evaluated_fraction"] = evaluated / count;
         summary["region_states"] = std::move(regions);
     }
     return json{{"summary", std::move(summary)}, {"frames", std::move(frames)}};

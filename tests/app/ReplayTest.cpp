@@ -161,6 +161,41 @@ TEST(Replay, ModelWithRegionsReportsLocalFramesAndWholeFrameFlagRestoresTheOldRo
     EXPECT_FALSE(report["frames"][1].contains("local"));
 }
 
+TEST(Replay, ModelWithSentinelsReportsThePointsItsCheckComputes) {
+    // The region model without its regions, with two sentinels: frame 0 (in the subspace) is a
+    // checked hit that computes 2 of 40 points; frame 1 misses and is computed whole. Without the
+    // sentinels (a version-1 model) the report has no such field.
+    pmsc::Model model = regionModel();
+    model.regions.reset();
+    pmsc::Sentinels s;
+    s.points = {0, 20};
+    s.coveringRadius = 10;
+    s.source = pmsc::SentinelSource::PointOrder;
+    model.sentinels = std::move(s);
+    model.tolerance = 0.01;  // frame 1 is off by up to 0.1: its sentinel 0 would refuse it as a hit
+    model.validate();
+    std::vector<double> values(240);
+    for (Index x = 0; x < 120; ++x) {
+        values[x] = 0.5 * model.basis(x, 0) - 0.25 * model.basis(x, 1);
+        values[120 + x] = values[x] + (x < 30 ? 0.1 * std::cos(double(x)) : 0.0);
+    }
+    pmsc::FrameFile file{pmsc::FrameSet(2, 40, 3), pmsc::NpyDtype::Float64};
+    file.frames.values.assign(values.begin(), values.end());
+    const pmsc::evaluators::ReplayEvaluator rec(std::move(file), "test");
+    pmsc::app::ReplayOptions options;
+    options.threads = 2;
+    auto report = pmsc::app::replayReport(model, pmsc::app::replay(model, rec, options));
+    EXPECT_EQ(report["frames"][0]["state"], "hit");
+    EXPECT_DOUBLE_EQ(report["frames"][0]["points_evaluated_fraction"].get<double>(), 2.0 / 40.0);
+    EXPECT_DOUBLE_EQ(report["frames"][1]["points_evaluated_fraction"].get<double>(), 1.0);
+    EXPECT_DOUBLE_EQ(report["summary"]["points_evaluated_fraction"].get<double>(), (2.0 / 40.0 + 1.0) / 2);
+    EXPECT_FALSE(report["summary"].contains("regions"));
+    model.sentinels.reset();
+    report = pmsc::app::replayReport(model, pmsc::app::replay(model, rec, options));
+    EXPECT_FALSE(report["frames"][0].contains("points_evaluated_fraction"));
+    EXPECT_FALSE(report["summary"].contains("points_evaluated_fraction"));
+}
+
 TEST(Replay, CancelFlagStopsWithCancelled) {
     const auto rec = recording({2, 2, 2, 1, 0, 0, 1, 0, 0}, 3);
     const pmsc::Model model = tinyModel(0.25, 0.75);
