@@ -230,9 +230,10 @@ TEST_F(Cli, ReplayReportHasEveryFieldAndTheOutputMatchesTheInput) {
     const auto& s = json.at("summary");
     for (const char* key :
          {"frames", "points", "channels", "key_points", "basis", "eps_min", "eps_max", "hit_rate",
-          "blend_rate", "miss_rate", "pm_max_point_error", "soft_max_point_error", "seconds"})
+          "blend_rate", "miss_rate", "pm_max_point_error", "soft_max_point_error", "seconds",
+          "points_evaluated_fraction"})  // the model has sentinels
         EXPECT_TRUE(s.contains(key)) << key;
-    EXPECT_EQ(s.size(), 13u);
+    EXPECT_EQ(s.size(), 14u);
     EXPECT_EQ(s.at("frames"), 60);
     EXPECT_EQ(s.at("points"), 144);
     EXPECT_EQ(s.at("channels"), 3);
@@ -254,8 +255,10 @@ TEST_F(Cli, ReplayReportHasEveryFieldAndTheOutputMatchesTheInput) {
     double worstSoft = 0;
     for (std::size_t i = 0; i < frames.size(); ++i) {
         const auto& f = frames[i];
-        EXPECT_EQ(f.size(), 6u);
+        EXPECT_EQ(f.size(), 7u);
         EXPECT_EQ(f.at("frame"), static_cast<int>(i));
+        const double evaluated = f.at("points_evaluated_fraction");
+        EXPECT_TRUE(evaluated > 0 && evaluated <= 1) << evaluated;  // the sentinels at least
         const std::string state = f.at("state");
         const double w = f.at("weight"), key = f.at("key_rms");
         if (state == "hit") {
