@@ -170,11 +170,11 @@ namespace {
 /// One round's keys (section 4): the block's vectors Varimax-rotated, visited by the variance they
 /// carry (column j of the rotated block carries ||diag(sigma) t_j||^2 of the block's energy), a
 /// teleconnection pair from each until the budget is met.
-void addRoundKeys(const Eigen::MatrixXd& blockU, const Eigen::VectorXd& blockSigma,
+void addRoundKeys(Eigen::MatrixXd&& blockU, const Eigen::VectorXd& blockSigma,
                   const TeleconnectionOptions& options, Index channels, KeySet& keys, Communicator& comm,
                   Index firstPoint) {
-    const VarimaxResult rotated = varimax(blockU, options.varimax, comm);
     const Index b = blockU.cols();
+    const VarimaxResult rotated = varimax(std::move(blockU), options.varimax, comm);
     Eigen::VectorXd variance(b);
     for (Index j = 0; j < b; ++j)
         variance[j] = (blockSigma.array() * rotated.rotation.col(j).array()).matrix().squaredNorm();
@@ -276,7 +276,7 @@ KeySelection selectKeysTeleconnection(RowBlocks& q, Communicator& comm, const Ei
     for (Index round = 1;; ++round) {
         const Index before = keys.size();
         if (blockU.cols() > 0 && keys.size() < options.maxKeys)
-            addRoundKeys(blockU, blockSigma, options, channels, keys, comm, q.firstPoint());
+            addRoundKeys(std::move(blockU), blockSigma, options, channels, keys, comm, q.firstPoint());
         {
             const std::vector<Index> added(keys.keys().begin() + qk.rows() / channels, keys.keys().end());
             const Eigen::MatrixXd rows = keyRowsOfQ(q, comm, added);

@@ -172,7 +172,7 @@ PointMultiplier::PointMultiplier(const Model& model, BasisPrecision precision) :
     // one stream read front to back against M streams N*C*8 bytes apart.
     if (precision == BasisPrecision::Single)
         singlePanels_ = panelsOf<float>(model_.basis);
-    else
+    else if (precision == BasisPrecision::Double)
         panels_ = panelsOf<double>(model_.basis);
     if (model_.sharedChannels) {
         projectedKeyMean_.resize(model_.coordCount());
@@ -299,8 +299,10 @@ void PointMultiplier::reconstructRange(const double* coords, Index first, Index 
     const Index scale = model_.sharedChannels ? 1 : c;
     if (singlePanels_.size() > 0)
         panelReconstructC(rows, singlePanels_.data(), coords, first * scale, count * scale, out);
-    else
+    else if (panels_.size() > 0 || m == 0)
         panelReconstructC(rows, panels_.data(), coords, first * scale, count * scale, out);
+    else
+        throw std::logic_error("PointMultiplier::reconstruct: made with BasisPrecision::None (no basis copy)");
 }
 
 void PointMultiplier::keyResiduals(const double* keyValues, const double* coords, double* perKey) const {

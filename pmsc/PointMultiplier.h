@@ -18,6 +18,11 @@ enum class BasisPrecision {
     /// default there) and clients that display (`pmsc view` sends halves). The copy adds half
     /// the basis's bytes to the memory a model holds.
     Single,
+    /// No copy: projecting, the key errors and reconstructPoints() read the model's own basis;
+    /// reconstruct() and reconstructRange() throw std::logic_error. For a caller that measures
+    /// whole frames in slabs of points (training's residual on its own frames, where a copy of a
+    /// million points' basis was the peak's last 312 MB).
+    None,
 };
 
 /// The runtime of point multiplication (section 6): key values -> pose-space

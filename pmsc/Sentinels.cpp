@@ -50,9 +50,16 @@ Eigen::VectorXd basisMotion(const Model& model) {
     const Index n = model.points, rowsPerPoint = model.basisChannels();
     Eigen::VectorXd motion = Eigen::VectorXd::Zero(n);
     if (model.basisSize() == 0) return motion;
-    const Eigen::MatrixXd scaled = model.basis * model.singularValues.asDiagonal();
-    for (Index p = 0; p < n; ++p)
-        motion[p] = std::sqrt(scaled.middleRows(p * rowsPerPoint, rowsPerPoint).squaredNorm());
+    // In slabs of points: the scaled basis of every point at once would be as large as the basis.
+    constexpr Index kSlabPoints = 8192;
+    Eigen::MatrixXd scaled;
+    for (Index first = 0; first < n; first += kSlabPoints) {
+        const Index count = std::min(kSlabPoints, n - first);
+        scaled = model.basis.middleRows(first * rowsPerPoint, count * rowsPerPoint) *
+                 model.singularValues.asDiagonal();
+        for (Index p = 0; p < count; ++p)
+            motion[first + p] = std::sqrt(scaled.middleRows(p * rowsPerPoint, rowsPerPoint).squaredNorm());
+    }
     return motion;
 }
 

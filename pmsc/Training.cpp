@@ -15,6 +15,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <numeric>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -139,7 +141,11 @@ void formLeftVectors(RowBlocks& q, TruncatedSvd& svd, Index count) {
     if (have >= count) return;
     const Eigen::MatrixXd vs = svd.v.middleCols(have, count - have) *
                                svd.sigma.segment(have, count - have).cwiseInverse().asDiagonal();
-    const Eigen::MatrixXd more = timesRight(q, vs);
+    Eigen::MatrixXd more = timesRight(q, vs);
+    if (have == 0) {  // taken, not copied: it is N*C x count
+        svd.u = std::move(more);
+        return;
+    }
     svd.u.conservativeResize(q.ownedRows(), count);
     svd.u.rightCols(count - have) = more;
 }
@@ -208,11 +214,15 @@ Model trainSharedChannels(FrameSet&& frames, const TrainingOptions& options, Tra
     // The largest point residual on the training frames, Euclidean over the channels like
     // everywhere else (the C=1 training measured it per channel). Frame t's channel ch is
     // column t*C + ch of the centred matrix plus the model's mean.
+    // Frames are reconstructed in slabs of points from the model's own basis (BasisPrecision::None):
+    // the copy a PointMultiplier makes for whole frames would be the peak of training.
     const Eigen::Map<const Eigen::MatrixXd> centred = static_cast<const MatrixBlocks&>(q).matrix();
-    PointMultiplier pm(model);
+    const PointMultiplier pm(model, BasisPrecision::None);
     const Index k = model.keyCount();
+    constexpr Index kSlabPoints = 8192;
+    std::vector<Index> slab(static_cast<std::size_t>(std::min(kSlabPoints, n)));
     std::vector<double> keys(static_cast<std::size_t>(k * c)),
-        coords(static_cast<std::size_t>(model.coordCount())), values(static_cast<std::size_t>(n * c));
+        coords(static_cast<std::size_t>(model.coordCount())), values(slab.size() * static_cast<std::size_t>(c));
     auto at = [&](Index t, Index p, Index ch) { return centred(p, t * c + ch) + model.mean[p * c + ch]; };
     double worst = 0;
     std::vector<double> keyErrors(static_cast<std::size_t>(f));
@@ -222,14 +232,19 @@ Model trainSharedChannels(FrameSet&& frames, const TrainingOptions& options, Tra
                 keys[static_cast<std::size_t>(i * c + ch)] =
                     at(t, model.keyPoints[static_cast<std::size_t>(i)], ch);
         pm.project(keys.data(), coords.data());
-        pm.reconstruct(coords.data(), values.data());
-        for (Index p = 0; p < n; ++p) {
-            double e = 0;
-            for (Index ch = 0; ch < c; ++ch) {
-                const double d = values[p * c + ch] - at(t, p, ch);
-                e += d * d;
+        for (Index first = 0; first < n; first += kSlabPoints) {
+            const Index count = std::min(kSlabPoints, n - first);
+            std::iota(slab.begin(), slab.begin() + count, first);
+            pm.reconstructPoints(coords.data(), std::span<const Index>(slab.data(), static_cast<std::size_t>(count)),
+                                 values.data());
+            for (Index i = 0; i < count; ++i) {
+                double e = 0;
+                for (Index ch = 0; ch < c; ++ch) {
+                    const double d = values[static_cast<std::size_t>(i * c + ch)] - at(t, first + i, ch);
+                    e += d * d;
+                }
+                worst = std::max(worst, e);
             }
-            worst = std::max(worst, e);
         }
         keyErrors[static_cast<std::size_t>(t)] = pm.keyError(keys.data(), coords.data());
     }
@@ -345,6 +360,13 @@ struct Trainer {
     void keyNeighbours();
     /// The sentinels (Sentinels.h), computed beside every hit; rank 0, on the final core.
     void sentinels();
+    /// U's columns are read after the keys: the learning state extends them.
+    bool keepsLeftVectors() const { return options.learnRank > 0 || options.learnable; }
+    /// Frees U once the keys are chosen, unless the learning state reads it: the folds of the
+    /// calibration, training's largest working set, run without it.
+    void releaseLeftVectors() {
+        if (!keepsLeftVectors()) svd.u = Eigen::MatrixXd();
+    }
 };
 
 void Trainer::progress(std::string_view stage, double done, double total) const {
@@ -461,7 +483,12 @@ void Trainer::chooseBasisSize() {
     report.memoryBound =
         memoryBound(std::max({m, options.block, options.learnRank, rule ? Index{0} : available}));
     formLeftVectors(q, svd, std::max(m, options.block));
-    basis = svd.u.leftCols(m);
+    // When U is the basis and nothing extends U later (the learning state), the basis takes U's
+    // storage instead of a copy of it (at a million points 312 MB at M = 40).
+    if (svd.u.cols() == m && !keepsLeftVectors())
+        basis = std::move(svd.u);
+    else
+        basis = svd.u.leftCols(m);
 }
 
 void Trainer::basisSizeFromPointErrors() {
@@ -499,7 +526,8 @@ void Trainer::teleconnectionKeys() {
         progress("keys", static_cast<double>(k), static_cast<double>(options.maxKeys));
     };
     progress("keys", 0, static_cast<double>(options.maxKeys));
-    KeySelection sel = selectKeysTeleconnection(q, comm, basis, svd.u, svd.sigma, t, gram);
+    KeySelection sel =
+        selectKeysTeleconnection(q, comm, basis, svd.u.cols() > 0 ? svd.u : basis, svd.sigma, t, gram);
     keys = std::move(sel.keys);
     keyRows = std::move(sel.keyRows);
     report.iterations = sel.rounds;
@@ -741,6 +769,7 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
     } else {
         t.qdeimKeys();
     }
+    t.releaseLeftVectors();
     if (static_cast<Index>(t.keys.size()) < options.maxKeys && options.maxError <= 0) {
         report.warnings.push_back("selected " + std::to_string(t.keys.size()) + " keys of the budget " +
                                   std::to_string(options.maxKeys) +
@@ -751,7 +780,8 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
     if (options.learnRank > 0 || options.learnable) t.learningState();
 
     // --- The (N*C)-row arrays go to rank 0, which writes the model.
-    t.model.basis = gatherRowsTo(comm, t.basis, t.rows, 0);
+    // One process: the model takes the basis's storage (a copy would be N*C x M more at the peak).
+    t.model.basis = comm.size() == 1 ? std::move(t.basis) : gatherRowsTo(comm, t.basis, t.rows, 0);
     t.model.mean = gatherRowsTo(comm, q.mean(), t.rows, 0);
     if (options.regions.count > 0 || options.regions.automatic) t.regions();
     if (comm.rank() == 0) t.keyNeighbours();

@@ -153,6 +153,10 @@ private:
 
 VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const VarimaxOptions& options,
                       Communicator& comm) {
+    return varimax(Eigen::MatrixXd(loadings), options, comm);
+}
+
+VarimaxResult varimax(Eigen::MatrixXd&& loadings, const VarimaxOptions& options, Communicator& comm) {
     if (!(options.tolerance >= 0)) throw std::invalid_argument("varimax: tolerance must be >= 0");
     if (options.maxIterations < 0) throw std::invalid_argument("varimax: negative iteration cap");
     const Index localRows = loadings.rows();
@@ -163,13 +167,13 @@ VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const V
     VarimaxResult result;
     result.rotation = Eigen::MatrixXd::Identity(k, k);
     if (k < 2 || p == 0) {
-        result.rotated = loadings;
         result.converged = true;
         result.objective.push_back(unrotatedCriterion(loadings, p, comm));
+        result.rotated = std::move(loadings);
         return result;
     }
 
-    Eigen::MatrixXd x = loadings;
+    Eigen::MatrixXd x = std::move(loadings);  // rotated where it lies
     Eigen::VectorXd scale;
     if (options.normalize) {
         scale = x.rowwise().norm();
@@ -196,12 +200,19 @@ VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const V
             break;
         }
     }
-    Eigen::MatrixXd z = x * result.rotation;
+    // X T in place, a chunk of rows at a time: the loadings are tall (N*C rows), and a second
+    // N*C x k array here was a third of key selection's peak at a million points.
+    Eigen::MatrixXd chunk;
+    for (Index first = 0; first < localRows; first += VarimaxGradient::kBlockRows) {
+        const Index count = std::min(VarimaxGradient::kBlockRows, localRows - first);
+        chunk.noalias() = x.middleRows(first, count) * result.rotation;
+        x.middleRows(first, count) = chunk;
+    }
     if (options.normalize) {
         for (Index i = 0; i < localRows; ++i)
-            if (scale[i] > 0) z.row(i) *= scale[i];
+            if (scale[i] > 0) x.row(i) *= scale[i];
     }
-    result.rotated = std::move(z);
+    result.rotated = std::move(x);
     return result;
 }
 

@@ -48,5 +48,8 @@ VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const V
 /// `rotated` holds this rank's rows. The single-process varimax above is this with one rank.
 VarimaxResult varimax(const Eigen::Ref<const Eigen::MatrixXd>& loadings, const VarimaxOptions& options,
                       Communicator& comm);
+/// The same, rotating `loadings` where they lie (no copy of the N*C x k block): key selection
+/// hands each round's block over.
+VarimaxResult varimax(Eigen::MatrixXd&& loadings, const VarimaxOptions& options, Communicator& comm);
 
 }  // namespace pmsc
