@@ -12,6 +12,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <stdexcept>
 #include <vector>
 
 namespace {
@@ -269,6 +270,25 @@ TEST(PointMultiplier, PointsAndRangeAgreeWithFullReconstruction) {
     for (int i = 0; i < 21; ++i) EXPECT_NEAR(chunk[i], all[60 + i], 1e-13);
     // Against the definition mean + B b.
     EXPECT_LT((all - (model.mean + model.basis * coords)).cwiseAbs().maxCoeff(), 1e-12);
+}
+
+TEST(PointMultiplier, WithoutABasisCopyItProjectsMeasuresAndReconstructsPointsButNotFrames) {
+    const pmsc::Model model = makeModel(60, 3, 5, {2, 30, 58});
+    const pmsc::PointMultiplier copy(model), none(model, pmsc::BasisPrecision::None);
+    const Eigen::VectorXd keys = pmsc::test::gaussian(9, 1, 14).col(0);
+    Eigen::VectorXd a(5), b(5);
+    copy.project(keys.data(), a.data());
+    none.project(keys.data(), b.data());
+    EXPECT_TRUE(a == b);
+    EXPECT_EQ(copy.keyError(keys.data(), a.data()), none.keyError(keys.data(), b.data()));
+    const std::vector<pmsc::Index> subset = {59, 0, 17};
+    std::vector<double> x(9), y(9);
+    copy.reconstructPoints(a.data(), subset, x.data());
+    none.reconstructPoints(b.data(), subset, y.data());
+    EXPECT_EQ(x, y);
+    Eigen::VectorXd all(180);
+    EXPECT_THROW(none.reconstruct(b.data(), all.data()), std::logic_error);
+    EXPECT_THROW(none.reconstructRange(b.data(), 0, 7, all.data()), std::logic_error);
 }
 
 TEST(PointMultiplier, LargestErrorAtPointsIsTheLargestEuclideanErrorOfTheirReconstruction) {

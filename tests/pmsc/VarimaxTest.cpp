@@ -1,6 +1,7 @@
 #include "pmsc/Varimax.h"
 
 #include "Synthetic.h"
+#include "pmsc/Communicator.h"
 
 #include <gtest/gtest.h>
 
@@ -8,6 +9,7 @@
 #include <Eigen/QR>
 
 #include <cmath>
+#include <utility>
 #include <vector>
 
 namespace {
@@ -164,6 +166,21 @@ TEST(Varimax, TallBlocksSumOnEveryCoreToTheSameRotationEveryRun) {
     // The rows reversed fall into other blocks and sum in another order: the same rotation.
     const pmsc::VarimaxResult r = pmsc::varimax(block.colwise().reverse(), tight(false));
     EXPECT_LT((r.rotation - a.rotation).cwiseAbs().maxCoeff(), 1e-8);
+}
+
+TEST(Varimax, ABlockHandedOverIsRotatedAsACopyOfItIs) {
+    // Key selection hands each block over (rotated where it lies); the result is the copy's.
+    Eigen::HouseholderQR<Eigen::MatrixXd> qr(pmsc::test::gaussian(40000, 6, 29));
+    const Eigen::MatrixXd block = qr.householderQ() * Eigen::MatrixXd::Identity(40000, 6);
+    pmsc::SingleProcess one;
+    for (const bool normalize : {false, true}) {
+        const pmsc::VarimaxResult copied = pmsc::varimax(block, tight(normalize), one);
+        Eigen::MatrixXd owned = block;
+        const pmsc::VarimaxResult moved = pmsc::varimax(std::move(owned), tight(normalize), one);
+        EXPECT_TRUE(copied.rotation == moved.rotation);
+        EXPECT_TRUE(copied.rotated == moved.rotated);
+        EXPECT_EQ(copied.objective, moved.objective);
+    }
 }
 
 TEST(Varimax, RecoversLocalizedVectorsHiddenByARotation) {
