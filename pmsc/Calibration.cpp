@@ -240,7 +240,8 @@ void Folds::score(Index first, Index last, CalibrationStats& s) {
     for (Index b = 0; b < q.blockCount(); ++b) {
         const Eigen::Ref<const Eigen::MatrixXd> block = q.block(b);
         for (Index r0 = 0; r0 < block.rows(); r0 += slab) {
-            const Eigen::Ref<const Eigen::MatrixXd> rows = block.middleRows(r0, std::min(slab, block.rows() - r0));
+            const Eigen::Ref<const Eigen::MatrixXd> rows =
+                block.middleRows(r0, std::min(slab, block.rows() - r0));
             heldInTimes(rows, uBlock);
             residual = rows.middleCols(first, out).colwise() - heldInMean(rows);
             residual.noalias() -= uBlock * coords;  // the PM residual of the held-out frames

@@ -302,7 +302,8 @@ void PointMultiplier::reconstructRange(const double* coords, Index first, Index 
     else if (panels_.size() > 0 || m == 0)
         panelReconstructC(rows, panels_.data(), coords, first * scale, count * scale, out);
     else
-        throw std::logic_error("PointMultiplier::reconstruct: made with BasisPrecision::None (no basis copy)");
+        throw std::logic_error(
+            "PointMultiplier::reconstruct: made with BasisPrecision::None (no basis copy)");
 }
 
 void PointMultiplier::keyResiduals(const double* keyValues, const double* coords, double* perKey) const {

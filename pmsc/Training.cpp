@@ -222,7 +222,8 @@ Model trainSharedChannels(FrameSet&& frames, const TrainingOptions& options, Tra
     constexpr Index kSlabPoints = 8192;
     std::vector<Index> slab(static_cast<std::size_t>(std::min(kSlabPoints, n)));
     std::vector<double> keys(static_cast<std::size_t>(k * c)),
-        coords(static_cast<std::size_t>(model.coordCount())), values(slab.size() * static_cast<std::size_t>(c));
+        coords(static_cast<std::size_t>(model.coordCount())),
+        values(slab.size() * static_cast<std::size_t>(c));
     auto at = [&](Index t, Index p, Index ch) { return centred(p, t * c + ch) + model.mean[p * c + ch]; };
     double worst = 0;
     std::vector<double> keyErrors(static_cast<std::size_t>(f));
@@ -235,7 +236,8 @@ Model trainSharedChannels(FrameSet&& frames, const TrainingOptions& options, Tra
         for (Index first = 0; first < n; first += kSlabPoints) {
             const Index count = std::min(kSlabPoints, n - first);
             std::iota(slab.begin(), slab.begin() + count, first);
-            pm.reconstructPoints(coords.data(), std::span<const Index>(slab.data(), static_cast<std::size_t>(count)),
+            pm.reconstructPoints(coords.data(),
+                                 std::span<const Index>(slab.data(), static_cast<std::size_t>(count)),
                                  values.data());
             for (Index i = 0; i < count; ++i) {
                 double e = 0;
