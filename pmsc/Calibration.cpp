@@ -159,10 +159,6 @@ Eigen::MatrixXd heldInGram(const Eigen::MatrixXd& gram, Index first, Index last)
     return g;
 }
 
-/// Points per slab of a fold's scoring (Folds::score): 8,192 points of 3 channels and a fold of 40
-/// vectors and 60 held-out frames hold 20 MB, where the GEMMs already run at their full rate.
-constexpr Index kCalibrationSlabPoints = 8192;
-
 /// The cross-fitting folds: what they share, and the tally of folds with a smaller basis.
 struct Folds {
     KeyErrorNorm norm;
@@ -233,10 +229,10 @@ void Folds::score(Index first, Index last, CalibrationStats& s) {
     heldOutK.noalias() -= uk * coords;  // the PM residual at the keys
 
     Eigen::VectorXd pointErr = Eigen::VectorXd::Zero(out);
-    // Slabs of kCalibrationSlabPoints points: a fold's held-in basis and residual exist for one
+    // Slabs of kSlabPoints points: a fold's held-in basis and residual exist for one
     // slab at a time, not for a whole block (in memory the block is every row: at a million
     // points they were 0.8 GB beside the frames). A point's error is the same in any slab.
-    const Index slab = kCalibrationSlabPoints * channels;
+    const Index slab = kSlabPoints * channels;
     for (Index b = 0; b < q.blockCount(); ++b) {
         const Eigen::Ref<const Eigen::MatrixXd> block = q.block(b);
         for (Index r0 = 0; r0 < block.rows(); r0 += slab) {

@@ -157,7 +157,8 @@ void panelReconstructC(const PanelRows& rows, const Scalar* panels, const double
 }
 }  // namespace
 
-PointMultiplier::PointMultiplier(const Model& model, BasisPrecision precision) : model_(model) {
+PointMultiplier::PointMultiplier(const Model& model, BasisPrecision precision)
+    : model_(model), precision_(precision) {
     model_.validate();
     const Eigen::Map<const Eigen::MatrixXd> meanColumn(model_.mean.data(), model_.mean.size(), 1);
     keyMean_ = gatherKeyRows(meanColumn, model_.channels, model_.keyPoints).col(0);
@@ -297,13 +298,13 @@ void PointMultiplier::reconstructRange(const double* coords, Index first, Index 
     const PanelRows rows = model_.sharedChannels ? PanelRows{model_.mean.data(), model_.points, m, c}
                                                  : PanelRows{model_.mean.data(), model_.points * c, m, 1};
     const Index scale = model_.sharedChannels ? 1 : c;
-    if (singlePanels_.size() > 0)
-        panelReconstructC(rows, singlePanels_.data(), coords, first * scale, count * scale, out);
-    else if (panels_.size() > 0 || m == 0)
-        panelReconstructC(rows, panels_.data(), coords, first * scale, count * scale, out);
-    else
+    if (precision_ == BasisPrecision::None)
         throw std::logic_error(
             "PointMultiplier::reconstruct: made with BasisPrecision::None (no basis copy)");
+    if (precision_ == BasisPrecision::Single)
+        panelReconstructC(rows, singlePanels_.data(), coords, first * scale, count * scale, out);
+    else
+        panelReconstructC(rows, panels_.data(), coords, first * scale, count * scale, out);
 }
 
 void PointMultiplier::keyResiduals(const double* keyValues, const double* coords, double* perKey) const {

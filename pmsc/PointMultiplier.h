@@ -77,6 +77,7 @@ private:
     Eigen::VectorXd keyMean_;           // K*C
     Eigen::MatrixXd keyBasis_;          // (K*C) x M; K x M when the channels share the basis
     Eigen::VectorXd projectedKeyMean_;  // M (or M x C): P mean_K, so project() needs no temporary
+    BasisPrecision precision_;          // which copy of the basis reconstruct() reads, if any
     Eigen::VectorXd panels_;  // BasisPrecision::Double: the basis in panels of rows (PointMultiplier.cpp)
     Eigen::VectorXf singlePanels_;  // BasisPrecision::Single: the basis (either layout) in float panels
     Eigen::VectorXd looScale_;      // KeyErrorNorm::LeaveOneOut: 1 / (1 - leverage) per key row

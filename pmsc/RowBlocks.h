@@ -14,6 +14,12 @@
 
 namespace pmsc {
 
+/// Points per slab where a pass over every point of an in-memory block would otherwise form an
+/// array as large as the block (the calibration folds' held-in basis and residual, the basis
+/// scaled by its singular values, a shared-channel model's reconstruction of its training
+/// frames): 8,192 points of 3 channels and 40 vectors are 8 MB, where the GEMMs run at full rate.
+constexpr Index kSlabPoints = 8192;
+
 /// The rows of the mean-removed training matrix Q ((N*C) x F, rows x = p*C + c, section 3) that
 /// this process owns: the contiguous points [firstPoint, firstPoint + ownedPoints), handed out in
 /// blocks of whole points. Training runs one algorithm over this abstraction: in memory

@@ -3,6 +3,7 @@
 #include "pmsc/ByteIO.h"
 #include "pmsc/Model.h"
 #include "pmsc/ModelSections.h"
+#include "pmsc/RowBlocks.h"
 
 #include <algorithm>
 #include <cmath>
@@ -51,7 +52,6 @@ Eigen::VectorXd basisMotion(const Model& model) {
     Eigen::VectorXd motion = Eigen::VectorXd::Zero(n);
     if (model.basisSize() == 0) return motion;
     // In slabs of points: the scaled basis of every point at once would be as large as the basis.
-    constexpr Index kSlabPoints = 8192;
     Eigen::MatrixXd scaled;
     for (Index first = 0; first < n; first += kSlabPoints) {
         const Index count = std::min(kSlabPoints, n - first);

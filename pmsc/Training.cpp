@@ -219,7 +219,6 @@ Model trainSharedChannels(FrameSet&& frames, const TrainingOptions& options, Tra
     const Eigen::Map<const Eigen::MatrixXd> centred = static_cast<const MatrixBlocks&>(q).matrix();
     const PointMultiplier pm(model, BasisPrecision::None);
     const Index k = model.keyCount();
-    constexpr Index kSlabPoints = 8192;
     std::vector<Index> slab(static_cast<std::size_t>(std::min(kSlabPoints, n)));
     std::vector<double> keys(static_cast<std::size_t>(k * c)),
         coords(static_cast<std::size_t>(model.coordCount())),

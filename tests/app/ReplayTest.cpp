@@ -124,17 +124,21 @@ pmsc::Model regionModel() {
     return m;
 }
 
-TEST(Replay, ModelWithRegionsReportsLocalFramesAndWholeFrameFlagRestoresTheOldRoute) {
-    const pmsc::Model model = regionModel();
-    // Frame 0 in the subspace (a hit); frame 1 the same plus a displacement of region 0's points.
-    std::vector<double> values(240);
+/// Two frames of regionModel()'s 40 points: frame 0 in the subspace (a hit); frame 1 the same plus
+/// a displacement of region 0's points (up to 0.1).
+pmsc::FrameFile hitThenRegion0Moved(const pmsc::Model& model) {
+    pmsc::FrameFile file{pmsc::FrameSet(2, 40, 3), pmsc::NpyDtype::Float64};
+    auto& values = file.frames.values;
     for (Index x = 0; x < 120; ++x) {
         values[x] = 0.5 * model.basis(x, 0) - 0.25 * model.basis(x, 1);
         values[120 + x] = values[x] + (x < 30 ? 0.1 * std::cos(double(x)) : 0.0);
     }
-    pmsc::FrameFile file{pmsc::FrameSet(2, 40, 3), pmsc::NpyDtype::Float64};
-    file.frames.values.assign(values.begin(), values.end());
-    const pmsc::evaluators::ReplayEvaluator rec(std::move(file), "test");
+    return file;
+}
+
+TEST(Replay, ModelWithRegionsReportsLocalFramesAndWholeFrameFlagRestoresTheOldRoute) {
+    const pmsc::Model model = regionModel();
+    const pmsc::evaluators::ReplayEvaluator rec(hitThenRegion0Moved(model), "test");
     pmsc::app::ReplayOptions options;
     options.threads = 2;
     auto report = pmsc::app::replayReport(model, pmsc::app::replay(model, rec, options));
@@ -174,14 +178,7 @@ TEST(Replay, ModelWithSentinelsReportsThePointsItsCheckComputes) {
     model.sentinels = std::move(s);
     model.tolerance = 0.01;  // frame 1 is off by up to 0.1: its sentinel 0 would refuse it as a hit
     model.validate();
-    std::vector<double> values(240);
-    for (Index x = 0; x < 120; ++x) {
-        values[x] = 0.5 * model.basis(x, 0) - 0.25 * model.basis(x, 1);
-        values[120 + x] = values[x] + (x < 30 ? 0.1 * std::cos(double(x)) : 0.0);
-    }
-    pmsc::FrameFile file{pmsc::FrameSet(2, 40, 3), pmsc::NpyDtype::Float64};
-    file.frames.values.assign(values.begin(), values.end());
-    const pmsc::evaluators::ReplayEvaluator rec(std::move(file), "test");
+    const pmsc::evaluators::ReplayEvaluator rec(hitThenRegion0Moved(model), "test");
     pmsc::app::ReplayOptions options;
     options.threads = 2;
     auto report = pmsc::app::replayReport(model, pmsc::app::replay(model, rec, options));
