@@ -48,9 +48,9 @@ struct Sentinels {
     SentinelSource source = SentinelSource::Mean;
     /// Each sentinel's kSentinelNeighbours nearest other sentinels (their positions in `points`),
     /// nearest first, `perSentinel` of them (fewer sentinels: all the others), and their distances;
-    /// what the slope check reads (HitCheck). Given or Mean: in space; PointOrder: by point index,
-    /// in points (the covering radius's units), the runs beside it, which are near in space as far
-    /// as the point order follows space.
+    /// what the slope check reads (HitCheck). Given or Mean: in space; PointOrder:
+    /// the runs beside it, at runs apart times a run's length (the covering radius's units), which
+    /// are near in space as far as the point order follows space.
     Index perSentinel = 0;
     std::vector<Index> neighbours;           ///< points.size() x perSentinel
     std::vector<double> neighbourDistances;  ///< the same shape, > 0

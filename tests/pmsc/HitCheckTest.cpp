@@ -366,21 +366,24 @@ TEST(Sentinels, EachKeepsItsNearestSentinelsInTheModelFile) {
     shorter.sentinels->neighbourDistances.pop_back();
     EXPECT_THROW(shorter.validate(), std::invalid_argument);
 
-    // Point order: the nearest by index, the distance in points.
+    // Point order: the nearest runs (a sentinel in each, ascending), the distance between the runs
+    // in points: runs apart times a run's length, whatever points the draw took inside them.
     const Model light = trainSheet(true, 0.01, 0, 20);
     const pmsc::Sentinels& o = *light.sentinels;
     ASSERT_EQ(o.perSentinel, pmsc::kSentinelNeighbours);
     ASSERT_EQ(o.neighbours.size(), o.points.size() * size_t(o.perSentinel));
-    for (size_t i = 0; i < o.points.size(); ++i) {
-        std::vector<double> all;
-        for (size_t j = 0; j < o.points.size(); ++j)
-            if (j != i) all.push_back(double(std::abs(o.points[j] - o.points[i])));
+    ASSERT_TRUE(std::is_sorted(o.points.begin(), o.points.end()));
+    const auto runs = static_cast<Index>(o.points.size());
+    for (Index i = 0; i < runs; ++i) {
+        std::vector<Index> all;
+        for (Index j = 0; j < runs; ++j)
+            if (j != i) all.push_back(std::abs(j - i));
         std::sort(all.begin(), all.end());
         for (Index k = 0; k < o.perSentinel; ++k) {
-            const size_t at = i * size_t(o.perSentinel) + size_t(k);
-            EXPECT_DOUBLE_EQ(o.neighbourDistances[at],
-                             double(std::abs(o.points[size_t(o.neighbours[at])] - o.points[i])));
-            EXPECT_DOUBLE_EQ(o.neighbourDistances[at], all[size_t(k)]);
+            const size_t at = size_t(i * o.perSentinel + k);
+            const Index apart = std::abs(o.neighbours[at] - i);
+            EXPECT_EQ(apart, all[size_t(k)]) << "the k-th nearest run, nearest first";
+            EXPECT_DOUBLE_EQ(o.neighbourDistances[at], double(apart) * o.coveringRadius);
         }
     }
     EXPECT_NO_THROW(light.validate());
