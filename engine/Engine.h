@@ -76,10 +76,11 @@ struct EngineOptions {
     /// least 256 points each. The automatic size depends on the point count only, never on the
     /// thread count, so the output is bit-identical at any `threads`.
     Index chunkPoints = 0;
-    /// > 0: a frame's key points are evaluated in parallel pieces of this many points instead of
-    /// one call. Latency over throughput: for one frame at a time (an interactive client, `pmsc
-    /// view`), where the keys are the calculation every move waits for; a batch run keeps every
-    /// core busy with frames already. Needs an evaluator whose subsets are cheap
+    /// > 0: a frame's key points, and the points its hit's check computes (the sentinels), are
+    /// evaluated in parallel pieces of this many points instead of one call each. Latency over
+    /// throughput: for one frame at a time (an interactive client, `pmsc view`), where the keys and
+    /// the check are the calculation every move waits for; a batch run keeps every core busy with
+    /// frames already. Needs an evaluator whose subsets are cheap
     /// (PointEvaluator::FailThroughShape::cheapSubsets; ignored otherwise). Same values either way.
     Index keyPiecePoints = 0;
     /// What a hit's and a blend's point multiplication read the basis in. Single halves the

@@ -1,5 +1,7 @@
 #include "nodes/ErrorMonitor.h"
 
+#include "nodes/PointPieces.h"
+
 #include <exception>
 #include <limits>
 #include <string>
@@ -104,7 +106,7 @@ Route ErrorMonitor::whole(FrameSlot& slot) const {
 bool ErrorMonitor::evaluateInto(FrameSlot& slot, std::span<const Index> points, double* out,
                                 const char* what) const {
     try {
-        evaluator_->evaluate(slot.frame, points, out);
+        evaluateInPieces(*evaluator_, slot.frame, points, pm_.model().channels, piecePoints_, out);
         return true;
     } catch (const std::exception& e) {
         slot.fail(kName, "evaluator '" + evaluator_->name() + "' (" + what + "): " + e.what());

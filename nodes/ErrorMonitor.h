@@ -41,14 +41,16 @@ public:
     /// With `evaluator`, a hit that one part of the predicted error alone certifies is checked
     /// (HitCheck): the check's points are computed through `evaluator`, and a hit that fails the
     /// check is computed whole and blended with weight 0; every hit, and the points a local frame
-    /// hands back as PM alone, when the model has sentinels.
+    /// hands back as PM alone, when the model has sentinels. `piecePoints` > 0: those points are
+    /// evaluated in parallel pieces of that many (EngineOptions::keyPiecePoints, as the keys).
     ErrorMonitor(const PointMultiplier& pm, SoftCachePolicy policy, bool keepPm,
-                 const RegionMultiplier* regions, const PointEvaluator* evaluator)
+                 const RegionMultiplier* regions, const PointEvaluator* evaluator, Index piecePoints = 0)
         : pm_(pm),
           policy_(policy),
           keepPm_(keepPm),
           regions_(regions),
           evaluator_(evaluator),
+          piecePoints_(piecePoints),
           check_(pm.model(), pm) {}
 
     Route operator()(FrameSlot& slot) const;
@@ -70,6 +72,7 @@ private:
     bool keepPm_;
     const RegionMultiplier* regions_ = nullptr;
     const PointEvaluator* evaluator_ = nullptr;
+    Index piecePoints_ = 0;
     HitCheck check_;
 };
 

@@ -170,7 +170,8 @@ struct RelightSession::Impl : engine::FrameSink {
         o.maxFramesInFlight = 1;
         // Every branch of a fail-through is a range the page can show as it arrives.
         o.localFailThrough = false;
-        // One frame at a time, every core on it: the keys in pieces (volume: 250 keys in 8).
+        // One frame at a time, every core on it: the keys and a hit's check points in pieces (volume:
+        // 250 keys in 8, 1,024 sentinels in 32).
         o.keyPiecePoints = 32;
         // The page shows half floats: a float basis halves the memory a hit's reconstruction
         // reads (volume: 81 MB of doubles) and changes no half by more than its last bit.

@@ -4,6 +4,7 @@
 #include "engine/FrameSetSink.h"
 #include "nodes/FrameSlot.h"
 #include "pmsc/Errors.h"
+#include "pmsc/Sentinels.h"
 #include "tests/engine/Synthetic.h"
 
 #include <gtest/gtest.h>
@@ -12,6 +13,7 @@
 #include <mutex>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <map>
@@ -445,6 +447,69 @@ TEST_F(Fixture, KeysInParallelPiecesGiveTheSameFrames) {
     };
     EXPECT_EQ(runWith(0, 2), runWith(2, 2));
     EXPECT_EQ(runWith(0, 1), runWith(2, 2));
+}
+
+/// Delegates to another evaluator and records the size of every evaluate() call.
+class CallSizes : public PointEvaluator {
+public:
+    explicit CallSizes(const PointEvaluator& inner) : inner_(inner) {}
+    FailThroughShape failThroughShape() const override { return inner_.failThroughShape(); }
+    std::string name() const override { return inner_.name(); }
+    Index pointCount() const override { return inner_.pointCount(); }
+    Index channelCount() const override { return inner_.channelCount(); }
+    Index frameCount() const override { return inner_.frameCount(); }
+    void evaluate(Index frame, std::span<const Index> points, double* out) const override {
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            sizes_.push_back(static_cast<Index>(points.size()));
+        }
+        inner_.evaluate(frame, points, out);
+    }
+    Index largest() const {
+        std::lock_guard<std::mutex> lock(mutex_);
+        return sizes_.empty() ? 0 : *std::max_element(sizes_.begin(), sizes_.end());
+    }
+
+private:
+    const PointEvaluator& inner_;
+    mutable std::mutex mutex_;
+    mutable std::vector<Index> sizes_;
+};
+
+TEST_F(Fixture, AHitsCheckPointsGoInTheKeysPiecesToo) {
+    // One frame at a time (pmsc view): the sentinels every hit computes are evaluated in pieces
+    // as the keys are, with the same frames as in one call.
+    Model checked = model;
+    checked.tolerance = 1e300;  // every check passes: every frame stays a hit
+    pmsc::Sentinels s;
+    s.source = pmsc::SentinelSource::PointOrder;
+    for (Index p = 5; p < checked.points; p += 10)
+        if (std::find(checked.keyPoints.begin(), checked.keyPoints.end(), p) == checked.keyPoints.end())
+            s.points.push_back(p);
+    s.coveringRadius = 10;
+    checked.sentinels = s;
+    checked.validate();
+    auto runWith = [&](Index piece, Index& largest) {
+        CallSizes counting(evaluator);
+        EngineOptions o = options(2);
+        o.policy = SoftCachePolicy(1e300, 1e300);
+        o.keyPiecePoints = piece;
+        Engine engine(checked, counting, o);
+        FrameSetSink sink(6, checked.points, 3);
+        RunStats stats;
+        withWatchdog(60, "run", [&] { stats = engine.run({0, 6, 1}, sink); });
+        EXPECT_EQ(stats.hits, 6);
+        largest = counting.largest();
+        return std::vector<double>(sink.values().frame(0), sink.values().frame(0) + 6 * checked.points * 3);
+    };
+    Index whole = 0, pieces = 0;
+    EXPECT_EQ(runWith(0, whole), runWith(4, pieces));
+    EXPECT_EQ(whole, static_cast<Index>(s.points.size())) << "in one call: the sentinels together";
+#if defined(__SANITIZE_THREAD__)
+    EXPECT_EQ(pieces, whole) << "ThreadSanitizer builds evaluate in one call (nodes/PointPieces.h)";
+#else
+    EXPECT_LE(pieces, 4) << "in pieces: no call of more than 4 points";
+#endif
 }
 
 TEST(EngineLarge, AHitOfALargeFrameReconstructsInBlocksTheSameAtAnyThreadCount) {

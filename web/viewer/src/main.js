@@ -17,7 +17,7 @@ const interactiveStep = Number(params.get('istep') || 1.5);
 const alwaysSmooth = params.get('smooth') === '1';  // trilinear density while moving too
 
 const stats = {
-  moves: [],           // {seq, state, firstImageMs, convergedMs, inputMs, pageMs, serverMs}: one per answered `set`
+  moves: [],           // {seq, state, firstImageMs, convergedMs, inputMs, pageMs, serverMs, parts, frameWaitMs, serverTiming}: one per answered `set`
   costs: [],           // {apply, upload, draw} ms and the resolution scale: one per image drawn
   checksumsVerified: 0,
   checksumErrors: 0,
@@ -141,7 +141,7 @@ async function start() {
     clearTimeout(refineTimer);
     if (moving) refineTimer = setTimeout(() => { if (!held) drawNow(1); }, refineMs);
     const events = drawnEvents.splice(0);
-    for (const event of events) drawn(event, t2);
+    for (const event of events) drawn(event, {t0, t1, t2});
     panel.showStats(stats);
     if (events.some(e => e.kind === 'first' && e.phase === 'estimate') && holdAfterEstimate) {
       holdAfterEstimate = false;
@@ -177,6 +177,27 @@ async function start() {
     return frame;
   }
 
+  /**
+   * One first image's path, in ms, consecutive so that they add up to t2 - sentAt:
+   * server (its own time, request received to update sent), network (the rest of the way from the
+   * `set` sent to its update's text message in hand: both directions over the WebSocket and the
+   * browser's event loop), binary (text to the binary message that pairs with it), body (to the
+   * whole cache in hand, by HTTP: after the binary message when it had not come first), queue (to
+   * the earlier updates applied), dispatch (to the page's update handler), apply (the values into
+   * the cache's array, the canvas set to the moving resolution), upload (the changed rows to the
+   * GPU) and draw (the scene rendered).
+   */
+  function pathParts(sentAt, event, t0, t1, t2) {
+    const a = event.arrival;
+    if (!a) return null;
+    const toText = a.textAt - sentAt;
+    const server = Number.isFinite(event.serverMs) ? Math.min(event.serverMs, toText) : 0;
+    const bodyAt = Math.max(a.binaryAt, a.bodyAt);
+    return {server, network: toText - server, binary: a.binaryAt - a.textAt, body: bodyAt - a.binaryAt,
+      queue: a.applyAt - bodyAt, dispatch: event.arrivedAt - a.applyAt, apply: t0 - event.arrivedAt,
+      upload: t1 - t0, draw: t2 - t1};
+  }
+
   function requestSet(waiter) {
     const now = performance.now();
     if (!outstanding) {
@@ -187,16 +208,24 @@ async function start() {
     }
   }
 
-  function drawn(event, at) {
+  function drawn(event, {t0, t1, t2}) {
     const frame = event.frame;
+    const at = t2;
     if (event.kind === 'first' && frame.firstAt === null) {
       frame.firstAt = at;
       if (frame.target === 'cache') {
         // pageMs: from the first image's update arriving to it drawn; serverMs: the server's own
-        // time for it (request received to update sent).
+        // time for it (request received to update sent); parts: the whole path, split so that the
+        // parts add up to firstImageMs.
         frame.move = {seq: frame.seq, state: frame.state, firstImageMs: at - frame.sentAt, convergedMs: null,
-          inputMs: at - frame.inputAt, pageMs: at - event.arrivedAt, serverMs: event.serverMs ?? null};
+          inputMs: at - frame.inputAt, pageMs: at - event.arrivedAt, serverMs: event.serverMs ?? null,
+          parts: pathParts(frame.sentAt, event, t0, t1, t2), frameWaitMs: null,
+          serverTiming: event.phase === 'final' ? event.serverTiming : null};
         stats.moves.push(frame.move);
+        const move = frame.move;
+        // The frame wait: from the image drawn into the canvas to the next frame the browser
+        // composites (its requestAnimationFrame callback); what a user waits beyond firstImageMs.
+        requestAnimationFrame(() => { move.frameWaitMs = performance.now() - t2; });
       }
       if (frame.target === 'cache' && outstanding === frame) {
         outstanding = null;
@@ -316,7 +345,7 @@ async function start() {
       if (!difference) view.cache.touched(first, count);
       if (update.phase === 'estimate' || update.phase === 'final' || update.phase === 'chunk')
         drawnEvents.push({frame, kind: 'first', phase: update.phase, arrivedAt: start,
-          serverMs: update.timing_ms?.since_request});
+          serverMs: update.timing_ms?.since_request, serverTiming: update.timing_ms, arrival: update.arrival});
       if (update.phase === 'final') drawnEvents.push({frame, kind: 'converged'});
       placeLight(update.light);
       if (held) heldUpdate = update;  // the panel stays with the held image too

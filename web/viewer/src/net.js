@@ -64,13 +64,14 @@ class BodyPoller {
         const url = response.headers.get('X-Pmsc-Body');
         if (!url) throw new Error('/api/body/next: an answer without X-Pmsc-Body');
         const bytes = await response.arrayBuffer();
+        const at = performance.now();
         this.failing = false;
         const waiter = this.wanted.get(url);
         if (waiter) {
           this.wanted.delete(url);
-          waiter.resolve(bytes);
+          waiter.resolve({bytes, at});
         } else {
-          this.arrived.set(url, bytes);
+          this.arrived.set(url, {bytes, at});
         }
       } catch (error) {
         // A stopped loop's request ends when the server lets it go: nothing to say.
@@ -83,12 +84,15 @@ class BodyPoller {
     }
   }
 
-  /** A body's bytes; one the waiting request has not brought in 5 s is asked for by its address. */
+  /**
+   * A body's bytes and the time they were in hand ({bytes, at}, performance.now()); one the waiting
+   * request has not brought in 5 s is asked for by its address.
+   */
   get(url) {
-    const bytes = this.arrived.get(url);
-    if (bytes) {
+    const body = this.arrived.get(url);
+    if (body) {
       this.arrived.delete(url);
-      return Promise.resolve(bytes);
+      return Promise.resolve(body);
     }
     return new Promise((resolve, reject) => {
       const timer = setTimeout(() => {
@@ -97,7 +101,7 @@ class BodyPoller {
         fetch(url, {cache: 'no-store'}).then(r => {
           if (!r.ok) throw new Error(`${url}: HTTP ${r.status}`);
           return r.arrayBuffer();
-        }).then(resolve, reject);
+        }).then(bytes => resolve({bytes, at: performance.now()}), reject);
       }, 5000);
       this.wanted.set(url, {
         resolve: b => { clearTimeout(timer); resolve(b); },
@@ -156,6 +160,8 @@ export class Connection {
           }
           if (message.type === 'update') {
             if (this.pending) this.onMessage({type: 'error', message: 'update without its binary message'});
+            // When each part of the update was in hand (performance.now()): the page's latency split.
+            message.arrival = {textAt: performance.now(), binaryAt: null, bodyAt: null, applyAt: null};
             this.pending = message;
           } else {
             this.onMessage(message);
@@ -176,8 +182,13 @@ export class Connection {
     }
     // A whole cache comes by HTTP (update.body; the WebSocket carried its header alone): fetch()
     // takes it several times faster than a WebSocket message in Chromium. Later updates wait for it.
-    const values = update.body ? this.bodies.get(update.body) : Promise.resolve(buffer);
-    this.applied = this.applied.then(() => values).then(data => this.apply(update, data)).catch(error => {
+    update.arrival.binaryAt = performance.now();
+    const values = update.body ? this.bodies.get(update.body) : Promise.resolve({bytes: buffer, at: update.arrival.binaryAt});
+    this.applied = this.applied.then(() => values).then(({bytes, at}) => {
+      update.arrival.bodyAt = at;
+      update.arrival.applyAt = performance.now();
+      this.apply(update, bytes);
+    }).catch(error => {
       this.onMessage({type: 'error', message: `update ${update.seq}: ${error.message}`});
     });
   }

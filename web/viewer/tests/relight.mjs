@@ -205,6 +205,29 @@ async function main() {
     const recorded = await page.evaluate(k => window.pmscView.stats.moves.slice(-k), options.moves);
     result.latency.serverMs = summary(recorded.map(m => m.serverMs).filter(Number.isFinite));
     result.latency.pageMs = summary(recorded.map(m => m.pageMs));
+    // The whole path of the hits' first images, part by part (main.js pathParts): each part's
+    // p50 / p95 / max, their means beside the mean total, and the largest gap between a move's parts
+    // and its total (the parts are consecutive, so it is rounding). frameWait: to the next composited
+    // frame, beyond firstImageMs.
+    const hitMoves = recorded.filter(m => m.state === 'hit' && m.parts);
+    const names = Object.keys(hitMoves[0]?.parts ?? {});
+    const mean = values => round(values.reduce((a, b) => a + b, 0) / Math.max(values.length, 1));
+    result.latency.hitPathMs = {
+      parts: Object.fromEntries(names.map(n => [n, summary(hitMoves.map(m => m.parts[n]))])),
+      meanParts: Object.fromEntries(names.map(n => [n, mean(hitMoves.map(m => m.parts[n]))])),
+      meanTotal: mean(hitMoves.map(m => m.firstImageMs)),
+      largestGap: round(Math.max(0, ...hitMoves.map(m =>
+        Math.abs(names.reduce((a, n) => a + m.parts[n], 0) - m.firstImageMs)))),
+      frameWait: summary(hitMoves.map(m => m.frameWaitMs).filter(Number.isFinite)),
+    };
+    // The server's part by engine node (its final update's timing_ms: each node's thread time, the
+    // engine's wall time, the encoding), for the hits whose first image is their final.
+    const timings = hitMoves.map(m => m.serverTiming).filter(t => t);
+    const nodeNames = [...new Set(timings.flatMap(t => Object.keys(t)))];
+    result.latency.hitServerMs = Object.fromEntries(nodeNames.map(n =>
+      [n, summary(timings.map(t => t[n]).filter(Number.isFinite))]));
+    check('the hits\' path parts add up to their first-image latency', hitMoves.length > 0 &&
+      result.latency.hitPathMs.largestGap < 0.5, {hits: hitMoves.length, largestGap: result.latency.hitPathMs.largestGap});
     const costs = await page.evaluate(() => window.pmscView.stats.costs);
     const moveCosts = costs.filter(c => c.scale < 1);
     result.pageCostsMs = {
