@@ -22,7 +22,7 @@ import argparse
 import os
 import sys
 
-from suite_common import fail, run, summarise
+from suite_common import fail, require_folder, run, summarise
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROM = os.path.join(HERE, "..", "tools", "bvh_range_of_motion.py")
@@ -57,11 +57,7 @@ def main():
                         "default: '--energy 0.99999')")
     p.add_argument("--no-variants", action="store_true", help="the defaults alone")
     args = p.parse_args()
-    if not os.path.isdir(args.bvh):
-        if os.environ.get("CI", "") in ("", "false", "0"):
-            print("mocap_suite: no folder %s: skipped" % args.bvh, file=sys.stderr)
-            sys.exit(77)
-        fail("no folder " + args.bvh)
+    require_folder(args.bvh)
     os.makedirs(args.work, exist_ok=True)
     variants = [""] if args.no_variants else [""] + (args.variant if args.variant is not None else ["--energy 0.99999"])
     print("| training | take | T | pmsc train options | M | hits | over T (hits / local) | worst | points computed |")

@@ -27,7 +27,7 @@ import itertools
 import os
 import sys
 
-from suite_common import fail, run, summarise
+from suite_common import fail, require_folder, run, summarise
 
 # The sets: four controls training leaves still, and the seed of the training take. A, B and C are
 # the sets the defaults were chosen with (pmsc::kConfirmedShare among them); D and E were made after
@@ -109,11 +109,7 @@ def main():
     for s in sets:
         if s not in SETS:
             fail("no set '%s' (sets: %s)" % (s, ",".join(SETS)))
-    if not os.path.isdir(args.data):
-        if os.environ.get("CI", "") in ("", "false", "0"):
-            print("novelty_suite: no folder %s: skipped" % args.data, file=sys.stderr)
-            sys.exit(77)
-        fail("no folder " + args.data)
+    require_folder(args.data)
     os.makedirs(args.work, exist_ok=True)
     variants = [""] if args.no_variants else [""] + (args.variant if args.variant is not None else ["--energy 0.99999"])
     tolerance = None

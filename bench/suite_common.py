@@ -12,6 +12,18 @@ def fail(message):
     sys.exit(2)
 
 
+def require_folder(path):
+    """A data folder the suite reads: when it is missing, exit 77 (a skip) unless CI is set, then
+    fail() (a test that needs data it cannot find fails under CI)."""
+    if os.path.isdir(path):
+        return
+    if os.environ.get("CI", "") in ("", "false", "0"):
+        print(os.path.splitext(os.path.basename(sys.argv[0]))[0] + ": no folder %s: skipped" % path,
+              file=sys.stderr)
+        sys.exit(77)
+    fail("no folder " + path)
+
+
 def run(cmd):
     """A command's output; fail() with its last lines when it exits non-zero."""
     done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
