@@ -22,7 +22,7 @@ import argparse
 import os
 import sys
 
-from suite_common import fail, require_folder, run, summarise
+from suite_common import add_variant_arguments, fail, models_of, require_folder, run, summarise
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROM = os.path.join(HERE, "..", "tools", "bvh_range_of_motion.py")
@@ -52,14 +52,11 @@ def main():
     p.add_argument("--bin", default="build/bin", help="folder of pmsc")
     p.add_argument("--work", required=True, help="folder for frames, models and reports (reused)")
     p.add_argument("--bvh", default="/usr/share/assimp/models/BVH", help="assimp-testmodels' BVH folder")
-    p.add_argument("--variant", action="append", default=None,
-                   help="pmsc train options of a model beside the defaults (repeatable; "
-                        "default: '--energy 0.99999')")
-    p.add_argument("--no-variants", action="store_true", help="the defaults alone")
+    add_variant_arguments(p)
     args = p.parse_args()
     require_folder(args.bvh)
     os.makedirs(args.work, exist_ok=True)
-    variants = [""] if args.no_variants else [""] + (args.variant if args.variant is not None else ["--energy 0.99999"])
+    variants = models_of(args)
     print("| training | take | T | pmsc train options | M | hits | over T (hits / local) | worst | points computed |")
     print("|---|---|---|---|---|---|---|---|---|")
     any_over = False

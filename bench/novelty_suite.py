@@ -27,7 +27,7 @@ import itertools
 import os
 import sys
 
-from suite_common import fail, require_folder, run, summarise
+from suite_common import add_variant_arguments, fail, models_of, require_folder, run, summarise
 
 # The sets: four controls training leaves still, and the seed of the training take. A, B and C are
 # the sets the defaults were chosen with (pmsc::kConfirmedShare among them); D and E were made after
@@ -95,10 +95,7 @@ def main():
     p.add_argument("--bin", default="build/bin", help="folder of pmsc and pmsc_ict_frames")
     p.add_argument("--work", required=True, help="folder for frames, models and reports (reused)")
     p.add_argument("--sets", default=",".join(SETS), help="sets to run, of " + ",".join(SETS))
-    p.add_argument("--variant", action="append", default=None,
-                   help="pmsc train options of a model beside the defaults (repeatable; "
-                        "default: '--energy 0.99999')")
-    p.add_argument("--no-variants", action="store_true", help="the defaults alone")
+    add_variant_arguments(p)
     p.add_argument("--tolerance-percent", type=float, default=1.0, help="T in %% of the head diagonal")
     args = p.parse_args()
     try:
@@ -111,7 +108,7 @@ def main():
             fail("no set '%s' (sets: %s)" % (s, ",".join(SETS)))
     require_folder(args.data)
     os.makedirs(args.work, exist_ok=True)
-    variants = [""] if args.no_variants else [""] + (args.variant if args.variant is not None else ["--energy 0.99999"])
+    variants = models_of(args)
     tolerance = None
     print("| set | pmsc train options | M | validation: hits, over T, worst, points evaluated | novel: hits, over T "
           "(hits / local), worst, points evaluated |")

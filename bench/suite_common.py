@@ -24,6 +24,22 @@ def require_folder(path):
     fail("no folder " + path)
 
 
+def add_variant_arguments(parser):
+    """--variant (pmsc train options of a model beside the defaults, repeatable) and --no-variants,
+    as the face and motion-capture suites take them; models_of() reads them."""
+    parser.add_argument("--variant", action="append", default=None,
+                        help="pmsc train options of a model beside the defaults (repeatable; "
+                             "default: '--energy 0.99999')")
+    parser.add_argument("--no-variants", action="store_true", help="the defaults alone")
+
+
+def models_of(args):
+    """The pmsc train options of each model add_variant_arguments() asked for, the defaults ("") first."""
+    if args.no_variants:
+        return [""]
+    return [""] + (args.variant if args.variant is not None else ["--energy 0.99999"])
+
+
 def run(cmd):
     """A command's output; fail() with its last lines when it exits non-zero."""
     done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
