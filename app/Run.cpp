@@ -311,8 +311,11 @@ RunReport runFrames(const Model& model, const PointEvaluator& evaluator, const R
     const FrameSpan& span = options.frames;
 
     checkEvaluatorFitsModel(model, evaluator, options);
-    FrameOutput output(options.outDir, options.format, offeredWriters(evaluator), model.points,
-                       model.channels, options.dtype);
+    // Only another format asks the evaluator for its writers (an exec child's asks for positions).
+    FrameOutput output(options.outDir, options.format,
+                       options.format == "npy" ? std::vector<std::shared_ptr<const FrameWriter>>{}
+                                               : offeredWriters(evaluator),
+                       model.points, model.channels, options.dtype);
     ensureWritableFolder(options.outDir);
     std::optional<KeptFrames> keep;
     if (!options.keepMisses.empty())

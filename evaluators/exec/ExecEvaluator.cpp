@@ -3,6 +3,8 @@
 
 #include "evaluators/exec/ChildProcess.h"
 #include "evaluators/exec/ExecProtocol.h"
+#include "evaluators/scene/PointCacheGrid.h"
+#include "evaluators/scene/VdbFrameWriter.h"
 #include "pmsc/Errors.h"
 
 #include <charconv>
@@ -244,6 +246,26 @@ FrameSet ExecEvaluator::pointPositions() const {
             throw EvaluatorError("exec '" + shortCommand(options_.command) +
                                  "': the child answered a non-finite position");
     return positions;
+}
+
+std::vector<std::shared_ptr<const FrameWriter>> ExecEvaluator::frameWriters() const {
+    if (version_ < kPositionsVersion || (channels_ != 1 && channels_ != 3)) return {};
+    // The positions and the voxel size, asked now: a child whose points have no places offers no
+    // .vdb, and `pmsc run --format vdb` says so before any frame.
+    auto positions = std::make_shared<FrameSet>();
+    try {
+        *positions = pointPositions();
+    } catch (const InputError&) {
+        return {};
+    }
+    const double cellSize = scene::PointCacheGrid::cellSizeFor(positions->values);
+    auto write = [this, positions, cellSize](const std::string& path, Index frame, const double* values) {
+        scene::PointCacheGrid::write(path, positions->values,
+                                     std::span<const double>(values, size_t(points_ * channels_)), channels_,
+                                     cellSize, frame);
+    };
+    auto points = [](const std::string& path) { return scene::PointCacheGrid::pointCount(path); };
+    return {std::make_shared<scene::VdbFrameWriter>(static_cast<std::int64_t>(points_), write, points)};
 }
 
 void ExecEvaluator::evaluate(Index frame, std::span<const Index> points, double* out) const {

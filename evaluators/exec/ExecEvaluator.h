@@ -1,6 +1,7 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include "pmsc/FrameWriter.h"
 #include "pmsc/PointEvaluator.h"
 #include "pmsc/PointPositions.h"
 
@@ -48,8 +49,12 @@ ExecOptions parseExecArgs(const std::string& args);
 /// `pmsc export-frames --positions` writes them for `pmsc train --positions`; asking a version-1
 /// child, or one that answers that its points have no places, throws pmsc::InputError.
 ///
+/// Frames as .vdb (`pmsc run --format vdb`): a child of protocol version 2 whose values have 1 or
+/// 3 channels and whose points have positions offers a point light cache (scene::PointCacheGrid)
+/// at them; frameWriters() asks for the positions.
+///
 /// Thread-safe; deterministic as far as the child is (values go through unchanged).
-class ExecEvaluator final : public PointEvaluator, public PointPositionsProvider {
+class ExecEvaluator final : public PointEvaluator, public PointPositionsProvider, public FrameWriterProvider {
 public:
     /// Starts the first child and reads its hello. @throws EvaluatorError when it cannot start,
     /// exits, hangs or says something that is not a version-1 or version-2 hello.
@@ -63,6 +68,7 @@ public:
     void evaluate(Index frame, std::span<const Index> points, double* out) const override;
     void evaluateAll(Index frame, double* out) const override;
     FrameSet pointPositions() const override;
+    std::vector<std::shared_ptr<const FrameWriter>> frameWriters() const override;
     /// The protocol version the first child's hello gave (1 or 2).
     std::uint32_t protocolVersion() const { return version_; }
 

@@ -10,6 +10,7 @@
 #include "evaluators/ReplayEvaluator.h"
 #include "evaluators/exec/ExecEvaluator.h"
 #include "evaluators/exec/Isolated.h"
+#include "evaluators/scene/PointCacheGrid.h"
 #include "pmsc/Errors.h"
 #include "pmsc/NpyIO.h"
 #include "pmsc/PointPositions.h"
@@ -140,6 +141,38 @@ TEST(ExecEvaluator, AVersion2ChildSaysWhereItsPointsAreAndOthersSayInOneLineThat
         expectContains(e.what(), {"protocol version 1", "no positions request"});
     }
     std::filesystem::remove_all(dir);
+}
+
+TEST(ExecEvaluator, AChildWithPositionsWritesItsFramesAsAPointLightCache) {
+    // `pmsc run --format vdb` through an exec child: the values at the child's own positions.
+    const std::string spec = "cornell:points=3000,samples=8";
+    ExecEvaluator child(options(kPmsc + " serve " + spec));
+    const auto writers = child.frameWriters();
+    ASSERT_EQ(writers.size(), 1u);
+    EXPECT_EQ(writers[0]->extension(), ".vdb");
+    std::vector<double> values(size_t(child.pointCount() * child.channelCount()));
+    child.evaluateAll(4, values.data());
+    const auto path =
+        std::filesystem::temp_directory_path() / ("pmsc-exec-vdb-" + std::to_string(::getpid()));
+    writers[0]->write(path.string(), 4, values.data());
+    EXPECT_TRUE(writers[0]->isValid(path.string()));
+    Index channels = 0;
+    const std::vector<double> back =
+        scene::PointCacheGrid::sample(path.string(), child.pointPositions().values, channels);
+    ASSERT_EQ(channels, 3);
+    ASSERT_EQ(back.size(), values.size());
+    size_t own = 0;  // points alone in their voxel get their own value back (in float)
+    for (size_t i = 0; i < back.size(); i += 3)
+        own += std::abs(back[i] - values[i]) <= 1e-6 * std::abs(values[i]) + 1e-12;
+    EXPECT_GT(own, size_t(0.85 * double(child.pointCount()))) << own;
+    std::filesystem::remove(path);
+    EXPECT_FALSE(writers[0]->isValid(path.string()));
+
+    // A child whose points have no places: no .vdb on offer (and it serves on).
+    ExecEvaluator synthetic(options(kPmsc + " serve synthetic:grid=12:frames=30:seed=4"));
+    EXPECT_TRUE(synthetic.frameWriters().empty());
+    std::vector<double> one(3);
+    EXPECT_NO_THROW(synthetic.evaluate(0, std::vector<Index>{5}, one.data()));
 }
 
 TEST(ExecEvaluator, AnAnswerStreamedInBlocksEqualsInProcessBitForBit) {
