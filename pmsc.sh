@@ -42,8 +42,9 @@ WEB_PACKAGES=(nodejs)
 BROWSER_PACKAGES=(chromium)
 
 # Blender as the calculation (ctest label blender, `./pmsc.sh test` only): Debian's Blender runs
-# headless as an exec child; its Python is the system python3 with numpy (docs/blender.md).
-BLENDER_PACKAGES=(blender)
+# headless as an exec child; its Python is the system python3 with numpy, and OpenVDB's Python
+# module reads `pmsc run --format vdb` caches back into it (docs/blender.md).
+BLENDER_PACKAGES=(blender python3-openvdb)
 
 # `./pmsc.sh fuzz` only: clang and its libFuzzer/sanitizer runtimes.
 FUZZ_PACKAGES=(clang-14 libclang-rt-14-dev)

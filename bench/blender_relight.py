@@ -19,7 +19,8 @@ Steps (each a command a lighting TD would type; docs/blender.md):
      as `pmsc demo cornell` sets it, and the --train options);
   5. `pmsc run` over the path frames, Cycles computing the keys (and what misses) in one Blender.
 Renders the first path frame with Blender (full | pmsc | 10 x difference: the values at the points,
-path000.png, and the scene's meshes lit by them, path000-lit.png) and prints
+path000.png, and the scene's meshes lit by them, path000-lit.png, pmsc's light read back from the
+frame's cache as `pmsc run --format vdb` writes it) and prints
 the speedup (Cycles' time for every point of a path frame over pmsc's per path frame,
 both measured inside the same child, one thread, same samples; and the same over the commands'
 wall times, Blender's start and pmsc's own work included), the RMS error against the full
@@ -203,10 +204,16 @@ def main():
          "--pmsc", os.path.join(w("run"), "frame.%06d.npy" % first), "--index", "0", "--out", w("path000.png")])
     report["picture"] = w("path000.png")
     # The same frame as the scene renders lit by the values: its meshes lit by Cycles' full result |
-    # by pmsc's | 10 x the difference (show_values.py --surfaces).
+    # by pmsc's | 10 x the difference (show_values.py --surfaces). pmsc's light comes as the farm
+    # loop hands it to a renderer: the frame's cache written by `pmsc run --format vdb`, read back
+    # in Blender.
+    shutil.rmtree(w("run-vdb"), ignore_errors=True)
+    run([pmsc, "run", "--model", w("model.pmsc"), "--evaluator", evaluator(args.samples, w("vdb.log")), "--frames",
+         str(first), "--out", w("run-vdb"), "--threads", "1", "--format", "vdb", "--quiet"])
+    report["cache_vdb"] = os.path.join(w("run-vdb"), "frame.%06d.vdb" % first)
     run([blender, "-b", scene, "--python-exit-code", "2", "--python",
          os.path.join(args.share, "show_values.py"), "--", "--points", w("points.npy"), "--full", w("full.npy"),
-         "--pmsc", os.path.join(w("run"), "frame.%06d.npy" % first), "--index", "0", "--surfaces",
+         "--pmsc", report["cache_vdb"], "--index", "0", "--surfaces",
          "--frame", str(first + 1), "--out", w("path000-lit.png")])
     report["picture_lit"] = w("path000-lit.png")
     with open(w("report.json"), "w") as f:

@@ -22,9 +22,12 @@ How a point is computed: one small triangle (a probe) per asked point, at the po
 normal, in a mesh of its own; a Cycles bake of type DIFFUSE with the asked passes and no colour
 into a float colour attribute on the probe's vertices; the value is the mean of its three. The
 probes are invisible to every secondary ray (diffuse, glossy, transmission, volume, shadow), so
-they cast no shadow and light nothing; they stay visible to the camera, which the bake needs. The
-probe mesh of a point set is kept and reused (the key points are asked every frame), so a call
-pays Cycles' synchronisation of the scene and the samples, not a mesh build.
+they cast no shadow and light nothing; they stay visible to the camera, which the bake needs. A
+bake seeds each corner's samples with its vertex number, and point p's probe is always vertices
+3p .. 3p + 2 (the other points' are loose vertices the bake skips), so a point's value does not
+depend on the other points of its call. The probe mesh of a point set is kept and reused (the key
+points are asked every frame), so a call pays Cycles' synchronisation of the scene and the
+samples, not a mesh build.
 
 Failures answer with one line (status 1), and pmsc fails the frame: a frame outside the range, a
 point outside the file. A .blend that does not open, a bad argument or a missing numpy ends Blender
@@ -111,16 +114,21 @@ def sample(args):
           f"bounding-box diagonal {np.linalg.norm(hi - lo):.6g}", file=sys.stderr, flush=True)
 
 
-def facing_polygons(name, centres, normals, corners):
-    """A mesh of one polygon per point: `corners` (k, 2) offsets in units of the point's tangent
-    frame (t, b), counter-clockwise about the normal, so each polygon faces its normal."""
+def polygon_corners(centres, normals, corners):
+    """The corners of one polygon per point, (N, k, 3): `corners` (k, 2) offsets in units of the
+    point's tangent frame (t, b), counter-clockwise about the normal, so each polygon faces its
+    normal."""
     helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
     t = np.cross(helper, normals)
     t /= np.linalg.norm(t, axis=1, keepdims=True)
     b = np.cross(normals, t)
-    k = len(corners)
-    verts = centres[:, None, :] + corners[None, :, :1] * t[:, None, :] + corners[None, :, 1:] * b[:, None, :]
-    count = len(centres)
+    return centres[:, None, :] + corners[None, :, :1] * t[:, None, :] + corners[None, :, 1:] * b[:, None, :]
+
+
+def facing_polygons(name, centres, normals, corners):
+    """A mesh of one polygon per point (polygon_corners)."""
+    verts = polygon_corners(centres, normals, corners)
+    count, k = verts.shape[0], verts.shape[1]
     mesh = bpy.data.meshes.new(name)
     mesh.vertices.add(k * count)
     mesh.vertices.foreach_set("co", verts.reshape(-1))
@@ -143,13 +151,30 @@ class Probes:
         self.size = 1e-4 * diagonal    # probe radius: far below the scene's detail
         self.lift = 1e-4 * diagonal    # above its surface, so its own surface does not shadow it
         self.cache = []                # (key, object), most recent last
+        self.corners = None            # every point's probe corners (N, 3, 3), built on first use
 
     def _build(self, ids):
-        p, n = self.points[ids], self.normals[ids]
-        s, h = self.size, self.size * np.sqrt(3) / 2
-        triangle = np.array([[s, 0.0], [-0.5 * s, h], [-0.5 * s, -h]])
-        mesh = facing_polygons("pmsc_probe", p + self.lift * n, n, triangle)
-        mesh.color_attributes.new("pmsc_light", "FLOAT_COLOR", "POINT")
+        # Every point's probe has its three vertices at 3p, 3p + 1, 3p + 2, in every set: a bake
+        # to a colour attribute seeds each corner's samples with its vertex number, so a point
+        # draws the same samples whichever points share its call. Only the asked points' probes
+        # are polygons; the rest are loose vertices, which the bake skips.
+        if self.corners is None:
+            s, h = self.size, self.size * np.sqrt(3) / 2
+            triangle = np.array([[s, 0.0], [-0.5 * s, h], [-0.5 * s, -h]])
+            self.corners = polygon_corners(self.points + self.lift * self.normals, self.normals, triangle)
+        mesh = bpy.data.meshes.new("pmsc_probe")
+        mesh.vertices.add(3 * len(self.corners))
+        mesh.vertices.foreach_set("co", self.corners.reshape(-1))
+        loops = (3 * ids[:, None] + np.arange(3)[None, :]).reshape(-1).astype(np.int32)
+        mesh.loops.add(len(loops))
+        mesh.loops.foreach_set("vertex_index", loops)
+        mesh.polygons.add(len(ids))
+        mesh.polygons.foreach_set("loop_start", np.arange(0, len(loops), 3, dtype=np.int32))
+        mesh.polygons.foreach_set("loop_total", np.full(len(ids), 3, dtype=np.int32))
+        mesh.update()
+        # On the corners: the bake writes the asked probes' corners only (on the points, it would
+        # also clear and average every loose vertex).
+        mesh.color_attributes.new("pmsc_light", "FLOAT_COLOR", "CORNER")
         mesh.attributes.active_color = mesh.color_attributes["pmsc_light"]
         mat = bpy.data.materials.get("pmsc_probe") or bpy.data.materials.new("pmsc_probe")
         mesh.materials.append(mat)
@@ -185,9 +210,9 @@ class Probes:
         bpy.context.view_layer.objects.active = obj
         bpy.ops.object.bake(type="DIFFUSE", pass_filter=self.passes, target="VERTEX_COLORS", margin=0,
                             use_clear=True)
-        colors = np.empty(len(obj.data.vertices) * 4, dtype=np.float32)
+        colors = np.empty(len(obj.data.loops) * 4, dtype=np.float32)
         obj.data.color_attributes["pmsc_light"].data.foreach_get("color", colors)
-        return colors.reshape(-1, 3, 4)[:, :, :3].mean(axis=1).astype(np.float64)
+        return colors.reshape(-1, 3, 4)[:, :, :3].mean(axis=1).astype(np.float64)  # in the asked order
 
 
 def new_point_light(name, power):

@@ -7,7 +7,8 @@
 POINTS.npy is the N x 6 file of `pmsc-blender ... sample` (positions and normals); FULL.npy and
 PMSC.npy are frames of values at those points ((F, N, 3) or (N, 3); --index picks the frame of a
 file with more than one, so a frame of `pmsc export-frames`' file compares with `pmsc run`'s
-one-frame file of it). The three renders go side by side into one PNG, through the scene's camera
+one-frame file of it), or a light cache `pmsc run --format vdb` wrote (PMSC.vdb: its grid
+'light', read at the points' positions with OpenVDB's Python module, python3-openvdb). The three renders go side by side into one PNG, through the scene's camera
 (at scene frame --frame, default the current one), scaled so the full result's 99th percentile is
 white; the difference |pmsc - full| is scaled by --gain more.
 
@@ -38,7 +39,35 @@ def fail(message):
     sys.exit(2)
 
 
-def load(path, index, count):
+def load_vdb(path, positions):
+    """The values of a `pmsc run --format vdb` light cache (its grid 'light', one voxel per point
+    or the mean of the few that share one) read back at the points, through OpenVDB's Python
+    module."""
+    try:
+        import pyopenvdb as vdb
+    except ImportError:
+        fail(f"{path}: reading a .vdb needs OpenVDB's Python module (apt-get install python3-openvdb)")
+    try:
+        grid = vdb.read(path, "light")
+    except Exception as error:  # noqa: BLE001 (pyopenvdb raises KeyError, IOError, RuntimeError)
+        fail(f"{path}: not a pmsc light cache ({type(error).__name__}: {error})")
+    if not isinstance(grid, vdb.Vec3SGrid):
+        fail(f"{path}: grid 'light' is not RGB (a Vec3SGrid)")
+    to_index, read = grid.transform.worldToIndexCellCentered, grid.getConstAccessor().probeValue
+    out = np.empty((len(positions), 3))
+    outside = 0
+    for i, p in enumerate(positions):
+        value, active = read(to_index(tuple(float(x) for x in p)))
+        out[i] = value
+        outside += not active
+    if outside:
+        fail(f"{path}: {outside} of the {len(positions)} points have no voxel (a cache of other points?)")
+    return out
+
+
+def load(path, index, count, positions=None):
+    if path.endswith(".vdb"):
+        return load_vdb(path, positions)
     try:
         a = np.load(path)
     except (OSError, ValueError) as error:
@@ -180,7 +209,8 @@ def main(argv):
     table = np.load(args.points)
     if table.ndim != 2 or table.shape[1] != 6:
         fail(f"{args.points}: expected N x 6 (x y z nx ny nz)")
-    full, pmsc = load(args.full, args.index, len(table)), load(args.pmsc, args.index, len(table))
+    full = load(args.full, args.index, len(table), table[:, :3])
+    pmsc = load(args.pmsc, args.index, len(table), table[:, :3])
     normals = table[:, 3:] / np.linalg.norm(table[:, 3:], axis=1, keepdims=True)
     if args.frame is not None:
         scene.frame_set(args.frame)

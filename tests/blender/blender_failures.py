@@ -9,8 +9,45 @@ CI it is a failure, exit 2).
 import argparse
 import os
 import shutil
+import socket
+import struct
 import subprocess
 import sys
+
+
+def ask(command, requests):
+    """Starts the exec child `command` (docs/exec-protocol.md) and returns its answers, as float64
+    arrays, to `requests`: (frame, point indices) pairs, None indices asking for every point."""
+    import numpy as np
+    hello, request, response = struct.Struct("<8sIIQQ"), struct.Struct("<IIqQQ"), struct.Struct("<IIQ")
+    ours, its = socket.socketpair()
+    child = subprocess.Popen(command, shell=True, stdin=its, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    its.close()
+
+    def read(size):
+        data = bytearray()
+        while len(data) < size:
+            chunk = ours.recv(size - len(data))
+            if not chunk:
+                raise EOFError("the child closed its socket: " + child.stderr.read().decode()[-300:])
+            data += chunk
+        return bytes(data)
+
+    _, _, channels, count, _ = hello.unpack(read(hello.size))
+    answers = []
+    for frame, ids in requests:
+        if ids is None:
+            ours.sendall(request.pack(2, 0, frame, count, 0))
+        else:
+            ours.sendall(request.pack(1, 0, frame, len(ids), 0) + np.asarray(ids, dtype="<u8").tobytes())
+        status, _, length = response.unpack(read(response.size))
+        data = read(length * (8 if status == 0 else 1))
+        if status != 0:
+            raise RuntimeError(data.decode())
+        answers.append(np.frombuffer(data, "<f8").reshape(-1, channels))
+    ours.close()
+    child.wait()
+    return answers
 
 
 def main():
@@ -39,6 +76,8 @@ def main():
         return 1
     with open(w("bad.npy"), "wb") as f:
         f.write(b"not a numpy file")
+    with open(w("bad.vdb"), "wb") as f:
+        f.write(b"not an OpenVDB file")
     # Controls by data path: the light's power and place, a row per frame (5 x 4).
     import numpy as np
     np.savez(w("controls.npz"), a=np.ones(5))
@@ -112,6 +151,21 @@ def main():
         if max(ratios) > 1e-5:
             print("blender_failures: controls: the values do not follow the --set power", file=sys.stderr)
             bad += 1
+    # A point's value does not depend on the other points of its call (its samples are seeded by
+    # the point): every point, then three subsets in other orders, give the same bits.
+    try:
+        full, some, reversed_, one = ask(serve(w("box.blend"))[len("exec:"):], [(2, None), (2, [3, 17, 40, 41]),
+                                                                 (2, [41, 40, 17, 3]), (2, [17])])
+        differs = max(float(np.abs(full[[3, 17, 40, 41]] - some).max()),
+                      float(np.abs(full[[41, 40, 17, 3]] - reversed_).max()), float(np.abs(full[[17]] - one).max()))
+        print("seeds        a point alone, with others, in another order against every point: largest difference %g"
+              % differs)
+        if differs != 0 or not full.any():
+            print("blender_failures: seeds: a point's value depends on the other points of its call", file=sys.stderr)
+            bad += 1
+    except (EOFError, RuntimeError) as error:
+        print("blender_failures: seeds: %s" % error, file=sys.stderr)
+        bad += 1
     # animate_light.py (a light keyed on a .blend): bad requests end Blender with exit 2, one line
     # on stderr, and no .blend written.
     animate = lambda *rest: ["blender", "-b", w("box.blend"), "--python-exit-code", "2", "--python",
@@ -125,6 +179,7 @@ def main():
         ("bad lattice", animate("--grid", "1"), "--grid must be at least 2"),
         ("bad subdivide", show("--surfaces", "--subdivide", "9"), "--subdivide must be 0 to 6"),
         ("bad values", show("--surfaces"), "values of shape"),
+        ("bad cache", show("--full", w("bad.vdb")), "not a pmsc light cache"),
         # bvh_character.py (a character from motion capture): a take that is not a BVH file
         ("bad take", ["blender", "-b", "--factory-startup", "--python-exit-code", "2", "--python",
                       os.path.join(args.share, "bvh_character.py"), "--", "--bvh", w("bad.npy"),
