@@ -8,9 +8,10 @@ POINTS.npy is the N x 6 file of `pmsc-blender ... sample` (positions and normals
 PMSC.npy are frames of values at those points ((F, N, 3) or (N, 3); --index picks the frame of a
 file with more than one, so a frame of `pmsc export-frames`' file compares with `pmsc run`'s
 one-frame file of it), or a light cache `pmsc run --format vdb` wrote (PMSC.vdb: its grid
-'light', read at the points' positions with OpenVDB's Python module, python3-openvdb). The three renders go side by side into one PNG, through the scene's camera
-(at scene frame --frame, default the current one), scaled so the full result's 99th percentile is
-white; the difference |pmsc - full| is scaled by --gain more.
+'light', read at the points' positions with OpenVDB's Python module, python3-openvdb). The three
+renders go side by side into one PNG, through the scene's camera (at scene frame --frame, default
+the current one), scaled so the full result's 99th percentile is white; the difference
+|pmsc - full| is scaled by --gain more.
 
 Two ways to draw the values:
 - by default each point is a small square facing its normal, emitting its value: the values
