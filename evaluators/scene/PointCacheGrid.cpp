@@ -8,7 +8,6 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <mutex>
 #include <stdexcept>
 #include <type_traits>
 #include <unordered_map>
@@ -17,11 +16,6 @@
 namespace pmsc::scene {
 
 namespace {
-
-void initOpenVdb() {
-    static std::once_flag once;
-    std::call_once(once, [] { openvdb::initialize(); });
-}
 
 constexpr const char* kLight = "light";
 constexpr const char* kPosition = "position";
@@ -65,13 +59,27 @@ std::vector<double> nearestDistances(std::span<const double> positions, double s
     return out;
 }
 
-template <typename GridT>
-typename GridT::Ptr newGrid(const char* name, double cellSize, typename GridT::ValueType background) {
-    auto g = GridT::create(background);
+/// The points of one voxel: sums of their values and positions, and how many.
+struct VoxelSum {
+    double value[3] = {0, 0, 0}, position[3] = {0, 0, 0};
+    int count = 0;
+};
+using VoxelSums = std::unordered_map<openvdb::Coord, VoxelSum, CellHash>;
+
+/// A grid named `name` with voxel size `cellSize` whose voxels hold valueOf(their sum).
+template <typename GridT, typename ValueOf>
+typename GridT::Ptr gridOf(const VoxelSums& voxels, const char* name, double cellSize, ValueOf valueOf) {
+    auto g = GridT::create(typename GridT::ValueType(0));
     g->setName(name);
     g->setTransform(openvdb::math::Transform::createLinearTransform(cellSize));
     g->setGridClass(openvdb::GRID_UNKNOWN);
+    auto a = g->getAccessor();
+    for (const auto& [ijk, s] : voxels) a.setValue(ijk, valueOf(s));
     return g;
+}
+
+openvdb::Vec3s meanOf(const double (&sum)[3], int count) {
+    return {float(sum[0] / count), float(sum[1] / count), float(sum[2] / count)};
 }
 
 }  // namespace
@@ -93,9 +101,10 @@ double PointCacheGrid::cellSizeFor(std::span<const double> positions) {
     // in them, a few per occupied cell; a cell with no other point near widens the search.
     double cell = diagonal / std::cbrt(static_cast<double>(n));
     std::vector<double> d = nearestDistances(positions, cell);
-    const auto found = static_cast<std::size_t>(
-        std::count_if(d.begin(), d.end(), [](double v) { return std::isfinite(v); }));
-    if (found < n / 2) d = nearestDistances(positions, diagonal);  // sparse: one cell holds them all
+    // Sparser than that (most points with no other in reach): cells twice as large, until most do.
+    auto found = [&] { return std::count_if(d.begin(), d.end(), [](double v) { return std::isfinite(v); }); };
+    while (static_cast<std::size_t>(found()) < n / 2 && cell < diagonal)
+        d = nearestDistances(positions, cell *= 2);
     std::nth_element(d.begin(), d.begin() + static_cast<std::ptrdiff_t>(n / 2), d.end());
     const double median = d[n / 2];
     return std::isfinite(median) && median > 0 ? median / 2 : 1;
@@ -109,45 +118,30 @@ void PointCacheGrid::write(const std::string& path, std::span<const double> posi
         throw std::invalid_argument("PointCacheGrid: " + std::to_string(values.size()) + " values of " +
                                     std::to_string(channels) + " channels at " + std::to_string(n) +
                                     " points (1 or 3 channels a point, a positive voxel size)");
-    initOpenVdb();
+    openvdb::initialize();  // idempotent and thread-safe (OpenVDB's own lock)
     // Sums and counts per voxel, then the means.
-    struct Sum {
-        double value[3] = {0, 0, 0}, position[3] = {0, 0, 0};
-        int count = 0;
-    };
-    std::unordered_map<openvdb::Coord, Sum, CellHash> voxels;
+    VoxelSums voxels;
     const auto transform = openvdb::math::Transform::createLinearTransform(cellSize);
     for (std::size_t i = 0; i < n; ++i) {
         const double* p = &positions[3 * i];
-        Sum& s = voxels[transform->worldToIndexCellCentered(openvdb::Vec3d(p[0], p[1], p[2]))];
+        VoxelSum& s = voxels[transform->worldToIndexCellCentered(openvdb::Vec3d(p[0], p[1], p[2]))];
         for (int c = 0; c < channels; ++c) s.value[c] += values[i * size_t(channels) + size_t(c)];
         for (int a = 0; a < 3; ++a) s.position[a] += p[a];
         ++s.count;
     }
-    auto position = newGrid<openvdb::Vec3SGrid>(kPosition, cellSize, openvdb::Vec3s(0.0f));
+    std::int64_t shared = 0;
+    for (const auto& entry : voxels)
+        if (entry.second.count > 1) shared += entry.second.count;
+    auto position = gridOf<openvdb::Vec3SGrid>(voxels, kPosition, cellSize,
+                                               [](const VoxelSum& s) { return meanOf(s.position, s.count); });
     position->setVectorType(openvdb::VEC_CONTRAVARIANT_ABSOLUTE);
     openvdb::GridBase::Ptr light;
-    auto vec = newGrid<openvdb::Vec3SGrid>(kLight, cellSize, openvdb::Vec3s(0.0f));
-    auto scalar = newGrid<openvdb::FloatGrid>(kLight, cellSize, 0.0f);
-    auto ap = position->getAccessor();
-    auto av = vec->getAccessor();
-    auto as = scalar->getAccessor();
-    std::int64_t shared = 0;
-    for (const auto& [ijk, s] : voxels) {
-        const double k = 1.0 / s.count;
-        if (s.count > 1) shared += s.count;
-        ap.setValue(ijk, openvdb::Vec3s(float(s.position[0] * k), float(s.position[1] * k),
-                                        float(s.position[2] * k)));
-        if (channels == 3)
-            av.setValue(ijk,
-                        openvdb::Vec3s(float(s.value[0] * k), float(s.value[1] * k), float(s.value[2] * k)));
-        else
-            as.setValue(ijk, float(s.value[0] * k));
-    }
     if (channels == 3)
-        light = vec;
+        light = gridOf<openvdb::Vec3SGrid>(voxels, kLight, cellSize,
+                                           [](const VoxelSum& s) { return meanOf(s.value, s.count); });
     else
-        light = scalar;
+        light = gridOf<openvdb::FloatGrid>(voxels, kLight, cellSize,
+                                           [](const VoxelSum& s) { return float(s.value[0] / s.count); });
     light->insertMeta("frame", openvdb::Int64Metadata(frame));
     light->insertMeta("points", openvdb::Int64Metadata(static_cast<std::int64_t>(n)));
     light->insertMeta("voxel_size", openvdb::DoubleMetadata(cellSize));
@@ -194,7 +188,7 @@ std::vector<double> voxelValues(const GridT& grid, std::span<const double> posit
 
 std::vector<double> PointCacheGrid::sample(const std::string& path, std::span<const double> positions,
                                            Index& channels) {
-    initOpenVdb();
+    openvdb::initialize();  // idempotent and thread-safe (OpenVDB's own lock)
     openvdb::GridBase::Ptr light;
     try {
         openvdb::io::File file(path);
@@ -219,7 +213,7 @@ std::vector<double> PointCacheGrid::sample(const std::string& path, std::span<co
 }
 
 std::int64_t PointCacheGrid::pointCount(const std::string& path) {
-    initOpenVdb();
+    openvdb::initialize();  // idempotent and thread-safe (OpenVDB's own lock)
     try {
         openvdb::io::File file(path);
         file.open();

@@ -15,6 +15,7 @@
 #include "pmsc/NpyIO.h"
 #include "pmsc/PointPositions.h"
 #include "pmsc/Training.h"
+#include "tests/common/TempDir.h"
 
 #include <gtest/gtest.h>
 
@@ -152,8 +153,8 @@ TEST(ExecEvaluator, AChildWithPositionsWritesItsFramesAsAPointLightCache) {
     EXPECT_EQ(writers[0]->extension(), ".vdb");
     std::vector<double> values(size_t(child.pointCount() * child.channelCount()));
     child.evaluateAll(4, values.data());
-    const auto path =
-        std::filesystem::temp_directory_path() / ("pmsc-exec-vdb-" + std::to_string(::getpid()));
+    const test::TempDir dir;
+    const std::filesystem::path path = dir.file("frame.vdb");
     writers[0]->write(path.string(), 4, values.data());
     EXPECT_TRUE(writers[0]->isValid(path.string()));
     Index channels = 0;

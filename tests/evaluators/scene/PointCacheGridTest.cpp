@@ -5,23 +5,16 @@
 // gets its own value back, points sharing one their mean), and the bad inputs.
 #include "evaluators/scene/PointCacheGrid.h"
 #include "pmsc/Errors.h"
+#include "tests/common/TempDir.h"
 
 #include <gtest/gtest.h>
 
-#include <unistd.h>
 #include <cmath>
-#include <filesystem>
 #include <fstream>
 #include <random>
 
 namespace pmsc::scene {
 namespace {
-
-std::string tempPath(const std::string& name) {
-    return (std::filesystem::temp_directory_path() /
-            ("pmsc-pointcache-" + std::to_string(::getpid()) + "-" + name))
-        .string();
-}
 
 /// A 20 x 20 lattice of spacing 2 in the plane z = 5, offset so no point is on a voxel boundary.
 std::vector<double> lattice() {
@@ -62,7 +55,8 @@ TEST(PointCacheGrid, ValuesComeBackAtTheirPointsAndSharedVoxelsHoldTheMean) {
     std::vector<double> rgb(3 * n);
     for (size_t i = 0; i < rgb.size(); ++i) rgb[i] = 0.25 * double(i % 97) + 1;
     const double h = PointCacheGrid::cellSizeFor(p);
-    const std::string path = tempPath("rgb.vdb");
+    const test::TempDir dir;
+    const std::string path = dir.file("rgb.vdb");
     PointCacheGrid::write(path, p, rgb, 3, h, 7);
     EXPECT_EQ(PointCacheGrid::pointCount(path), std::int64_t(n));
     Index channels = 0;
@@ -90,8 +84,7 @@ TEST(PointCacheGrid, ValuesComeBackAtTheirPointsAndSharedVoxelsHoldTheMean) {
     std::ofstream(path) << "not a vdb";
     EXPECT_THROW(PointCacheGrid::pointCount(path), InputError);
     EXPECT_THROW(PointCacheGrid::sample(path, p, channels), InputError);
-    EXPECT_THROW(PointCacheGrid::write(tempPath("no-such-dir") + "/x.vdb", p, one, 1, h, 0), IoError);
-    std::filesystem::remove(path);
+    EXPECT_THROW(PointCacheGrid::write(dir.file("no-such-dir/x.vdb"), p, one, 1, h, 0), IoError);
 }
 
 }  // namespace
