@@ -108,11 +108,14 @@ check_format() {
 
 # clang-tidy on the product translation units that include no OpenVDB, Embree, Assimp or Beast (those
 # cost ~25 s each to parse; the checks that matter for them run on the rest of their library).
+# tools/tidy_batched.py checks the files of one target in a few translation units, so Eigen's and
+# the standard library's headers are walked once a batch instead of once a file: 2.3 minutes on 2
+# cores where one clang-tidy a file takes 11.
 run_tidy() {
   local files
   mapfile -t files < <(git ls-files 'pmsc/*.cpp' 'nodes/*.cpp' 'engine/*.cpp' 'app/*.cpp' 'capi/*.cpp' 'cli/*.cpp' \
     'evaluators/*.cpp' 'viewer/*.cpp' | xargs grep -LE '#include <(openvdb|embree3|assimp|boost/beast)/')
-  run-clang-tidy-14 -quiet -p "$BUILD" -j "$JOBS" "${files[@]}" >"$BUILD/clang-tidy.log" 2>&1 \
+  python3 tools/tidy_batched.py --build "$BUILD" --jobs "$JOBS" "${files[@]}" >"$BUILD/clang-tidy.log" 2>&1 \
     || { grep -E 'warning:|error:' "$BUILD/clang-tidy.log" | sort -u | head -50; die "clang-tidy found problems (full log: $BUILD/clang-tidy.log)"; }
   echo "pmsc.sh: clang-tidy clean on ${#files[@]} files"
 }
