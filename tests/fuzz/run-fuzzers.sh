@@ -58,17 +58,15 @@ fi
 export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:allocator_may_return_null=1:max_allocation_size_mb=4096}
 export LSAN_OPTIONS=${LSAN_OPTIONS:-suppressions=$PWD/tests/fuzz/lsan.supp}
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
-status=0
-for t in "${TARGETS[@]}"; do
-  corpus=$BUILD/corpus/$t
-  mkdir -p "$corpus" "$BUILD/artifacts/$t" "$BUILD/tmp"
-  seeds=tests/fuzz/corpus/$t
+# fuzz_one TARGET: one target for SECONDS_PER seconds; its summary line goes to $BUILD/fuzz-TARGET.line
+# and its exit status says whether it found anything.
+fuzz_one() {
+  local t=$1 corpus=$BUILD/corpus/$1 seeds=tests/fuzz/corpus/$1 log=$BUILD/fuzz-$1.log result=clean status=0
+  mkdir -p "$corpus" "$BUILD/artifacts/$t" "$BUILD/tmp/$t"
   [ "$t" = skin ] && seeds=$BUILD/seeds/skin
-  log=$BUILD/fuzz-$t.log
   : >"$log"
-  result=clean
   # -timeout: an input slower than this is a hang; -rss_limit_mb: more memory is a failure.
-  if ! TMPDIR=$(realpath -m "$BUILD/tmp") "$BUILD/bin/fuzz_$t" "$corpus" "$seeds" -max_total_time="$SECONDS_PER" \
+  if ! TMPDIR=$(realpath -m "$BUILD/tmp/$t") "$BUILD/bin/fuzz_$t" "$corpus" "$seeds" -max_total_time="$SECONDS_PER" \
       -timeout=10 -rss_limit_mb=2048 -malloc_limit_mb=4097 -max_len=65536 -print_final_stats=1 \
       -artifact_prefix="$BUILD/artifacts/$t/" >"$log" 2>&1; then
     result="FAILED (see $log and $BUILD/artifacts/$t/)"
@@ -76,6 +74,21 @@ for t in "${TARGETS[@]}"; do
   fi
   runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | awk '{n += $1} END {print n}')
   last=$(grep -E '^#[0-9]+' "$log" | tail -1 | grep -oE 'cov: [0-9]+ ft: [0-9]+ corp: [0-9]+/[^ ]+' || true)
-  printf 'fuzz %-6s %6ss  %10s runs  %-40s %s\n' "$t" "$SECONDS_PER" "${runs:-?}" "${last:-?}" "$result"
+  printf 'fuzz %-6s %6ss  %10s runs  %-40s %s\n' "$t" "$SECONDS_PER" "${runs:-?}" "${last:-?}" "$result" >"$BUILD/fuzz-$t.line"
+  return $status
+}
+
+# JOBS targets at a time (each fuzzer is one process on one core), every one for its full time;
+# the summary lines print in the targets' order.
+status=0
+pids=()
+for t in "${TARGETS[@]}"; do
+  while (($(jobs -rp | wc -l) >= JOBS)); do wait -n || true; done
+  fuzz_one "$t" &
+  pids+=($!)
+done
+for i in "${!TARGETS[@]}"; do
+  wait "${pids[$i]}" || status=1
+  cat "$BUILD/fuzz-${TARGETS[$i]}.line"
 done
 exit $status
