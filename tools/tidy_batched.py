@@ -63,11 +63,11 @@ def header_filter(config):
     raise ValueError("%s has no HeaderFilterRegex" % config)
 
 
-def run_batch(tidy, workdir, index, key, files, headers):
+def run_batch(tidy, build, workdir, index, key, files, headers):
     """clang-tidy on one translation unit that includes `files`; returns (status, output, clashing files)."""
     directory, args = key
-    if directory is None:
-        proc = subprocess.run([tidy, "-p", os.path.dirname(workdir), "-quiet", files[0]], capture_output=True, text=True)
+    if directory is None:  # a file the build does not compile: alone, with the build's database
+        proc = subprocess.run([tidy, "-p", build, "-quiet", files[0]], capture_output=True, text=True)
         return proc.returncode, proc.stdout + proc.stderr, []
     unity = os.path.join(workdir, "batch_%d.cpp" % index)
     with open(unity, "w") as f:
@@ -146,7 +146,7 @@ def main():
         while pending:
             futures = []
             for key, files in pending:
-                futures.append((key, files, pool.submit(run_batch, opts.clang_tidy, workdir, counter, key, files, headers)))
+                futures.append((key, files, pool.submit(run_batch, opts.clang_tidy, opts.build, workdir, counter, key, files, headers)))
                 counter += 1
             pending = []
             for key, files, future in futures:
