@@ -79,6 +79,17 @@ ensure_web() {
   fi
 }
 
+# require_disk GB: fail at once, in one line, when the checkout's file system has less than GB free.
+# `test` holds about 0.5 GB of Release build, 1 GB of sanitizer builds and under 1 GB of test
+# outputs at a time (the novelty suites delete each set's frames once measured); a disk that fills
+# mid-run fails tests one by one with "No space left on device" instead.
+require_disk() {
+  local free_kb
+  free_kb=$(df -Pk . | awk 'NR == 2 { print $4 }')
+  [ -n "$free_kb" ] || return 0
+  ((free_kb >= $1 * 1024 * 1024)) || die "$((free_kb / 1024)) MB free on $(df -P . | awk 'NR == 2 { print $6 }'); './pmsc.sh $cmd' needs $1 GB (builds and test outputs)"
+}
+
 # configure DIR [cmake args...]: Ninja + ccache so rebuilds on two cores stay short. The build runs
 # on the machine that built it, so it is tuned for it (PMSC_NATIVE; installs and packages are not).
 configure() {
@@ -161,6 +172,7 @@ case "$cmd" in
     ensure_packages; ensure_web; build_release pmsc
     shift; exec "$BUILD/bin/pmsc" demo "$@" ;;
   test)
+    require_disk 3
     ensure_packages "${STYLE_PACKAGES[@]}" "${BROWSER_PACKAGES[@]}" "${BLENDER_PACKAGES[@]}"; ensure_web; check_format; build_release
     ctest --test-dir "$BUILD" --output-on-failure -j "$JOBS" -L '^(unit|cli)$'
     ctest --test-dir "$BUILD" --output-on-failure -j "$JOBS" -LE '^(unit|cli)$' ;;

@@ -24,7 +24,7 @@ import os
 import sys
 import time
 
-from suite_common import fail, require_folder, run
+from suite_common import add_clean_argument, discard, fail, require_folder, run
 
 SPLITS = [
     (1, "mouthPucker,cheekPuff_L,jawLeft,eyeWide_R"),
@@ -73,8 +73,12 @@ def measure(args, np, seed, controls, tolerance):
     learn_s = timed([pmsc, "learn", "--model", w("day1.pmsc"), "--frames", w("second.npy"), "--out",
                      w("learned.pmsc"), "--quiet"])
     scratch_s = timed([pmsc, "train", "--frames", w("union.npy"), "--out", w("scratch.pmsc")] + t)
-    return (replay(args, w("learned.pmsc"), test, tolerance), replay(args, w("scratch.pmsc"), test, tolerance),
-            learn_s, scratch_s)
+    result = (replay(args, w("learned.pmsc"), test, tolerance), replay(args, w("scratch.pmsc"), test, tolerance),
+              learn_s, scratch_s)
+    del held, free
+    discard(args, [w(name) for name in ("held.npy", "free.npy", "test.npy", "first.npy", "second.npy", "union.npy",
+                                         "day1.pmsc", "learned.pmsc", "scratch.pmsc")])
+    return result
 
 
 def main():
@@ -83,6 +87,7 @@ def main():
     p.add_argument("--bin", default="build/bin", help="folder of pmsc and pmsc_ict_frames")
     p.add_argument("--work", required=True, help="folder for frames, models and reports (reused)")
     p.add_argument("--tolerance-percent", type=float, default=1.0, help="T in %% of the head diagonal")
+    add_clean_argument(p)
     args = p.parse_args()
     try:
         import numpy as np

@@ -35,7 +35,7 @@ import json
 import os
 import sys
 
-from suite_common import fail, run, summarise
+from suite_common import add_clean_argument, discard, fail, run, summarise
 
 MESH = "/usr/share/assimp/models/OBJ/WusonOBJ.obj"
 VARIANTS = ["POSITIONS", "", "--shared-channels POSITIONS", "--shared-channels", "--energy 0.99999 POSITIONS",
@@ -90,6 +90,7 @@ def main():
                    help="pmsc train options of a model (repeatable; POSITIONS: --positions FILE); "
                         "default: " + "; ".join(v or "(defaults)" for v in VARIANTS))
     p.add_argument("--no-variants", action="store_true", help="the defaults with positions alone")
+    add_clean_argument(p)
     args = p.parse_args()
     try:
         import numpy as np
@@ -143,6 +144,8 @@ def main():
                 scene, variant.replace("POSITIONS", "--positions") or "(defaults)", basis,
                 "%d (%s)" % (sentinels["count"], sentinels["positions"]) if sentinels else "none",
                 " | ".join(cells)), flush=True)
+            discard(args, [model])
+        discard(args, list(paths.values()) + [positions])
     return 1 if any_over else 0
 
 

@@ -22,7 +22,7 @@ import argparse
 import os
 import sys
 
-from suite_common import add_variant_arguments, fail, models_of, require_folder, run, summarise
+from suite_common import add_clean_argument, add_variant_arguments, discard, fail, models_of, require_folder, run, summarise
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROM = os.path.join(HERE, "..", "tools", "bvh_range_of_motion.py")
@@ -53,6 +53,7 @@ def main():
     p.add_argument("--work", required=True, help="folder for frames, models and reports (reused)")
     p.add_argument("--bvh", default="/usr/share/assimp/models/BVH", help="assimp-testmodels' BVH folder")
     add_variant_arguments(p)
+    add_clean_argument(p)
     args = p.parse_args()
     require_folder(args.bvh)
     os.makedirs(args.work, exist_ok=True)
@@ -85,6 +86,9 @@ def main():
                               % (skeleton, rom_name, take, share, variant or "(defaults)", basis, s["hits"],
                                  s["frames"], s["over"], s["over_hits"], s["over_local"], s["worst"],
                                  100 * s["evaluated"]), flush=True)
+                    discard(args, [model])
+            discard(args, [train_frames])
+    discard(args, [os.path.join(args.work, take + ".npy") for _, _, takes in SKELETONS.values() for take in takes])
     return 1 if any_over else 0
 
 

@@ -27,7 +27,7 @@ import itertools
 import os
 import sys
 
-from suite_common import add_variant_arguments, fail, models_of, require_folder, run, summarise
+from suite_common import add_clean_argument, discard, add_variant_arguments, fail, models_of, require_folder, run, summarise
 
 # The sets: four controls training leaves still, and the seed of the training take. A, B and C are
 # the sets the defaults were chosen with (pmsc::kConfirmedShare among them); D and E were made after
@@ -96,6 +96,7 @@ def main():
     p.add_argument("--work", required=True, help="folder for frames, models and reports (reused)")
     p.add_argument("--sets", default=",".join(SETS), help="sets to run, of " + ",".join(SETS))
     add_variant_arguments(p)
+    add_clean_argument(p)
     p.add_argument("--tolerance-percent", type=float, default=1.0, help="T in %% of the head diagonal")
     args = p.parse_args()
     try:
@@ -138,6 +139,8 @@ def main():
                   "%.1f%% |" % (name, variant or "(defaults)", basis, va["hits"], va["frames"], va["over"], va["worst"],
                                 100 * va["evaluated"], no["hits"], no["frames"], no["over"], no["over_hits"],
                                 no["over_local"], no["worst"], 100 * no["evaluated"]), flush=True)
+            discard(args, [model])
+        discard(args, list(paths.values()) + [os.path.join(args.work, "part.npy")])
     return 1 if any_over else 0
 
 

@@ -33,6 +33,22 @@ def add_variant_arguments(parser):
     parser.add_argument("--no-variants", action="store_true", help="the defaults alone")
 
 
+def add_clean_argument(parser):
+    """--clean: discard() deletes what a set made once its rows are printed."""
+    parser.add_argument("--clean", action="store_true",
+                        help="delete each set's frames and models once its rows are printed (the reports stay), "
+                             "so the suite holds one set on disk at a time; without it the work folder is reused")
+
+
+def discard(args, paths):
+    """With --clean, delete the files named (frames, models) that exist; the reports stay."""
+    if not args.clean:
+        return
+    for path in paths:
+        if os.path.exists(path):
+            os.remove(path)
+
+
 def models_of(args):
     """The pmsc train options of each model add_variant_arguments() asked for, the defaults ("") first."""
     if args.no_variants:
