@@ -24,7 +24,7 @@ using pmsc::test::TempDir;
 using json = nlohmann::json;
 
 /// The shared generated shot, and the two models the tests drive.
-struct Shot : pmsc::test::SyntheticShot {
+struct ReconstructShot : pmsc::test::SyntheticShot {
     TempDir& dir = inputs;
     std::string plain = inputs.file("plain.pmsc"), regions = inputs.file("regions.pmsc");
 };
@@ -62,7 +62,7 @@ pmsc::FrameSet answer(const pmsc::FrameSet& frames, const json& report) {
 class Reconstruct : public ::testing::Test {
 protected:
     static void SetUpTestSuite() {
-        shot_ = new Shot;
+        shot_ = new ReconstructShot;
         for (const auto& [model, extra] :
              {std::pair{shot_->plain, std::vector<std::string>{}},
               std::pair{shot_->regions, std::vector<std::string>{"--regions", "4"}}}) {
@@ -136,10 +136,10 @@ protected:
         }
     }
 
-    static Shot* shot_;
+    static ReconstructShot* shot_;
 };
 
-Shot* Reconstruct::shot_ = nullptr;
+ReconstructShot* Reconstruct::shot_ = nullptr;
 
 TEST_F(Reconstruct, PlainModelTakesOnePassAndEqualsReplayByteForByte) {
     TempDir dir;

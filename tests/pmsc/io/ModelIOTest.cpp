@@ -1,6 +1,7 @@
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
 
+#include "tests/common/ModelBytes.h"
 #include "tests/common/SmallModel.h"
 #include "tests/common/TempDir.h"
 
@@ -15,19 +16,11 @@ namespace {
 
 using pmsc::InputError;
 using pmsc::Model;
+using pmsc::test::poke;
+using pmsc::test::reseal;
 using pmsc::test::smallModel;
 using pmsc::test::TempDir;
 using pmsc::test::writeBytes;
-
-template <class T>
-void poke(std::string& bytes, std::size_t offset, T value) {
-    std::memcpy(bytes.data() + offset, &value, sizeof(T));
-}
-
-/// Rewrites the checksum so only the check under test can object.
-void reseal(std::string& bytes) {
-    poke<std::uint64_t>(bytes, bytes.size() - 8, pmsc::fnv1a64(bytes.data(), bytes.size() - 8));
-}
 
 std::string inputErrorMessage(const std::string& path) {
     try {

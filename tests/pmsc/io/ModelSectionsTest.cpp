@@ -3,6 +3,7 @@
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
 
+#include "tests/common/ModelBytes.h"
 #include "tests/common/SmallModel.h"
 #include "tests/common/TempDir.h"
 
@@ -15,6 +16,9 @@ namespace {
 
 using pmsc::InputError;
 using pmsc::Model;
+using pmsc::test::peek;
+using pmsc::test::poke;
+using pmsc::test::reseal;
 using pmsc::test::smallModel;
 using pmsc::test::smallModelWithRegions;
 
@@ -24,20 +28,6 @@ constexpr std::size_t kTagAt = kCoreEnd + 8;
 constexpr std::size_t kLengthAt = kTagAt + 8;
 constexpr std::size_t kPayloadAt = kLengthAt + 8;
 
-template <class T>
-T peek(const std::string& bytes, std::size_t offset) {
-    T v;
-    std::memcpy(&v, bytes.data() + offset, sizeof(T));
-    return v;
-}
-template <class T>
-void poke(std::string& bytes, std::size_t offset, T value) {
-    std::memcpy(bytes.data() + offset, &value, sizeof(T));
-}
-/// Replaces the checksum (the last 8 bytes) so only the check under test can object.
-void reseal(std::string& bytes) {
-    poke<std::uint64_t>(bytes, bytes.size() - 8, pmsc::fnv1a64(bytes.data(), bytes.size() - 8));
-}
 std::string decodeMessage(const std::string& bytes) {
     try {
         pmsc::decodeModel(bytes, "m.pmsc");
