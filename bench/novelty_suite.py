@@ -16,7 +16,8 @@ and the share of points evaluated in full (0 for a hit, 1 for a whole miss).
     /usr/bin/python3 bench/novelty_suite.py --data ICT-FaceKit/FaceXModel --bin build/bin \\
         --work /tmp/novelty [--sets A,B,C] [--variant '--energy 0.99999'] [--variant '--regions 0']
 
-`--no-variants` runs the defaults alone (the ctest `novelty.defaults`, label novelty).
+`--no-variants` runs the defaults alone; `--clean` deletes each set's frames and models once its rows
+are printed (the ctests `novelty.defaults` and `novelty.held-out`, label novelty, run both).
 
 Needs numpy (the system python3). Exits 2 with one line on bad arguments or a failed command, 77
 when the face folder is missing and CI is not set (a skip; under CI it is exit 2), and 1 when any
@@ -27,7 +28,7 @@ import itertools
 import os
 import sys
 
-from suite_common import add_clean_argument, discard, add_variant_arguments, fail, models_of, require_folder, run, summarise
+from suite_common import add_clean_argument, add_variant_arguments, discard, fail, models_of, require_folder, run, summarise
 
 # The sets: four controls training leaves still, and the seed of the training take. A, B and C are
 # the sets the defaults were chosen with (pmsc::kConfirmedShare among them); D and E were made after

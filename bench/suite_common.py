@@ -1,5 +1,6 @@
-"""What the novelty suites share (bench/novelty_suite.py, bench/light_novelty.py): one-line failures,
-running pmsc's commands, and a replay report's summary against the tolerance."""
+"""What the novelty suites share (bench/novelty_suite.py, light_novelty.py, mocap_suite.py,
+learn_novelty.py): one-line failures, running pmsc's commands, --variant and --clean, and a replay
+report's summary against the tolerance."""
 import json
 import os
 import subprocess
