@@ -35,7 +35,7 @@ constexpr std::size_t kMagicSize = 6;
 // from making us allocate the whole file.
 constexpr std::uint64_t kMaxHeaderBytes = 1u << 20;
 
-[[noreturn]] void bad(const std::string& path, const std::string& what) {
+[[noreturn]] void badNpy(const std::string& path, const std::string& what) {
     throw InputError(path + ": " + what);
 }
 
@@ -46,11 +46,12 @@ public:
         fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
         if (fd_ < 0) {
             const int error = errno;
-            bad(path, error == ENOENT ? "no such file" : std::string("cannot open: ") + std::strerror(error));
+            badNpy(path,
+                   error == ENOENT ? "no such file" : std::string("cannot open: ") + std::strerror(error));
         }
         struct stat st {};
-        if (::fstat(fd_, &st) != 0) bad(path, std::string("cannot stat: ") + std::strerror(errno));
-        if (S_ISDIR(st.st_mode)) bad(path, "is a folder, not a .npy file");
+        if (::fstat(fd_, &st) != 0) badNpy(path, std::string("cannot stat: ") + std::strerror(errno));
+        if (S_ISDIR(st.st_mode)) badNpy(path, "is a folder, not a .npy file");
         size_ = static_cast<std::uint64_t>(st.st_size);
     }
     ~ReadFile() { ::close(fd_); }
@@ -67,9 +68,9 @@ public:
             const ssize_t n = ::pread(fd_, p, bytes, static_cast<off_t>(offset));
             if (n < 0) {
                 if (errno == EINTR) continue;
-                bad(path_, std::string("read failed: ") + std::strerror(errno));
+                badNpy(path_, std::string("read failed: ") + std::strerror(errno));
             }
-            if (n == 0) bad(path_, "unexpected end of file");
+            if (n == 0) badNpy(path_, "unexpected end of file");
             p += n;
             offset += static_cast<std::uint64_t>(n);
             bytes -= static_cast<std::size_t>(n);
@@ -143,7 +144,7 @@ public:
     }
 
 private:
-    [[noreturn]] void fail(const std::string& what) const { bad(path_, what); }
+    [[noreturn]] void fail(const std::string& what) const { badNpy(path_, what); }
     char peek() const { return i_ < s_.size() ? s_[i_] : '\0'; }
     void skipSpace() {
         while (i_ < s_.size() && (s_[i_] == ' ' || s_[i_] == '\t' || s_[i_] == '\n' || s_[i_] == '\r')) ++i_;
@@ -226,32 +227,32 @@ std::string shapeString(const std::vector<std::uint64_t>& shape) {
 /// `pointTable`: a (N, C) table is read as one frame (readPointTable).
 NpyInfo parseInfo(const std::string& path, const ReadFile& file, bool pointTable = false) {
     const std::uint64_t size = file.size();
-    if (size < kMagicSize + 2) bad(path, "not a .npy file (only " + std::to_string(size) + " bytes)");
+    if (size < kMagicSize + 2) badNpy(path, "not a .npy file (only " + std::to_string(size) + " bytes)");
     unsigned char prefix[12] = {};
     file.readAt(0, prefix, static_cast<std::size_t>(std::min<std::uint64_t>(size, sizeof prefix)));
-    if (std::memcmp(prefix, kMagic, kMagicSize) != 0) bad(path, "not a .npy file (bad magic)");
+    if (std::memcmp(prefix, kMagic, kMagicSize) != 0) badNpy(path, "not a .npy file (bad magic)");
     NpyInfo info;
     info.majorVersion = prefix[6];
     const int minor = prefix[7];
     std::uint64_t headerLength = 0, headerStart = 0;
     if (info.majorVersion == 1) {
-        if (size < 10) bad(path, "truncated .npy header");
+        if (size < 10) badNpy(path, "truncated .npy header");
         headerLength = prefix[8] | (prefix[9] << 8);
         headerStart = 10;
     } else if (info.majorVersion == 2 || info.majorVersion == 3) {
-        if (size < 12) bad(path, "truncated .npy header");
+        if (size < 12) badNpy(path, "truncated .npy header");
         headerLength = std::uint64_t(prefix[8]) | (std::uint64_t(prefix[9]) << 8) |
                        (std::uint64_t(prefix[10]) << 16) | (std::uint64_t(prefix[11]) << 24);
         headerStart = 12;
     } else {
-        bad(path, "unsupported .npy format version " + std::to_string(info.majorVersion) + "." +
-                      std::to_string(minor) + " (pmsc reads 1.0, 2.0 and 3.0)");
+        badNpy(path, "unsupported .npy format version " + std::to_string(info.majorVersion) + "." +
+                         std::to_string(minor) + " (pmsc reads 1.0, 2.0 and 3.0)");
     }
     if (headerLength > kMaxHeaderBytes)
-        bad(path, "bad header: header length " + std::to_string(headerLength) + " bytes is implausible");
+        badNpy(path, "bad header: header length " + std::to_string(headerLength) + " bytes is implausible");
     if (headerStart + headerLength > size)
-        bad(path, "truncated .npy header (header needs " + std::to_string(headerStart + headerLength) +
-                      " bytes, file has " + std::to_string(size) + ")");
+        badNpy(path, "truncated .npy header (header needs " + std::to_string(headerStart + headerLength) +
+                         " bytes, file has " + std::to_string(size) + ")");
     std::string text(static_cast<std::size_t>(headerLength), '\0');
     file.readAt(headerStart, text.data(), text.size());
     info.dataOffset = headerStart + headerLength;
@@ -262,40 +263,42 @@ NpyInfo parseInfo(const std::string& path, const ReadFile& file, bool pointTable
     } else if (fields.descr == "<f8" || fields.descr == "=f8") {
         info.dtype = NpyDtype::Float64;
     } else {
-        bad(path, "unsupported dtype '" + fields.descr +
-                      "' (pmsc reads little-endian float32 '<f4' or float64 '<f8')");
+        badNpy(path, "unsupported dtype '" + fields.descr +
+                         "' (pmsc reads little-endian float32 '<f4' or float64 '<f8')");
     }
     if (fields.fortranOrder)
-        bad(path, "fortran_order is True (pmsc reads C-order arrays; save with numpy.ascontiguousarray)");
+        badNpy(path, "fortran_order is True (pmsc reads C-order arrays; save with numpy.ascontiguousarray)");
     if (pointTable) {
         if (fields.shape.size() == 2) {
             fields.shape.insert(fields.shape.begin(), 1);
         } else if (fields.shape.size() != 3 || fields.shape[0] != 1) {
-            bad(path, "shape " + shapeString(fields.shape) +
-                          " is not a table of points: expected (points, channels) or (1, points, channels)");
+            badNpy(path,
+                   "shape " + shapeString(fields.shape) +
+                       " is not a table of points: expected (points, channels) or (1, points, channels)");
         }
     }
     if (fields.shape.size() != 3)
-        bad(path, "shape " + shapeString(fields.shape) + " has rank " + std::to_string(fields.shape.size()) +
-                      ", expected 3: (frames, points, channels)");
+        badNpy(path, "shape " + shapeString(fields.shape) + " has rank " +
+                         std::to_string(fields.shape.size()) + ", expected 3: (frames, points, channels)");
     for (int d = 0; d < 3; ++d) {
         static const char* const names[] = {"frames", "points", "channels"};
-        if (fields.shape[d] == 0) bad(path, "shape " + shapeString(fields.shape) + " has zero " + names[d]);
+        if (fields.shape[d] == 0)
+            badNpy(path, "shape " + shapeString(fields.shape) + " has zero " + names[d]);
     }
     std::uint64_t count = 0, bytes = 0;
     if (__builtin_mul_overflow(fields.shape[0], fields.shape[1], &count) ||
         __builtin_mul_overflow(count, fields.shape[2], &count) ||
         __builtin_mul_overflow(count, std::uint64_t(itemSize(info.dtype)), &bytes) ||
         bytes > static_cast<std::uint64_t>(INT64_MAX))
-        bad(path, "shape " + shapeString(fields.shape) + " is too large");
+        badNpy(path, "shape " + shapeString(fields.shape) + " is too large");
     const std::uint64_t actual = size - info.dataOffset;
     if (actual < bytes)
-        bad(path, "truncated data: shape " + shapeString(fields.shape) + " " +
-                      std::string(toString(info.dtype)) + " needs " + std::to_string(bytes) +
-                      " bytes of data, the file has " + std::to_string(actual));
+        badNpy(path, "truncated data: shape " + shapeString(fields.shape) + " " +
+                         std::string(toString(info.dtype)) + " needs " + std::to_string(bytes) +
+                         " bytes of data, the file has " + std::to_string(actual));
     if (actual > bytes)
-        bad(path, "trailing garbage: " + std::to_string(actual - bytes) + " bytes after the " +
-                      std::to_string(bytes) + " bytes of data of shape " + shapeString(fields.shape));
+        badNpy(path, "trailing garbage: " + std::to_string(actual - bytes) + " bytes after the " +
+                         std::to_string(bytes) + " bytes of data of shape " + shapeString(fields.shape));
     info.frames = static_cast<Index>(fields.shape[0]);
     info.points = static_cast<Index>(fields.shape[1]);
     info.channels = static_cast<Index>(fields.shape[2]);
@@ -313,8 +316,9 @@ void checkFinite(const std::string& path, const NpyInfo& info, std::uint64_t fir
     const std::uint64_t c = static_cast<std::uint64_t>(info.channels);
     const std::uint64_t n = static_cast<std::uint64_t>(info.points);
     const std::string what = std::isnan(*bad_value) ? "NaN" : (*bad_value > 0 ? "+Inf" : "-Inf");
-    bad(path, what + " at frame " + std::to_string(i / (n * c)) + ", point " + std::to_string((i / c) % n) +
-                  ", channel " + std::to_string(i % c) + " (frames must be finite)");
+    badNpy(path, what + " at frame " + std::to_string(i / (n * c)) + ", point " +
+                     std::to_string((i / c) % n) + ", channel " + std::to_string(i % c) +
+                     " (frames must be finite)");
 }
 
 /// Reads `count` values starting at value index `first` into `out` as doubles and
@@ -386,8 +390,8 @@ FrameFile readFrameRange(const std::string& path, Index first, Index count) {
     ReadFile file(path);
     const NpyInfo info = parseInfo(path, file);
     if (count <= 0 || first < 0 || first > info.frames - count)
-        bad(path, "frames [" + std::to_string(first) + ", " + std::to_string(first + count) +
-                      ") are not within the file's " + std::to_string(info.frames) + " frames");
+        badNpy(path, "frames [" + std::to_string(first) + ", " + std::to_string(first + count) +
+                         ") are not within the file's " + std::to_string(info.frames) + " frames");
     FrameFile out;
     out.dtype = info.dtype;
     out.frames = FrameSet(count, info.points, info.channels);
@@ -411,7 +415,7 @@ MappedFrames::MappedFrames(const std::string& path, ValueCheck check) : path_(pa
     ReadFile file(path);
     info_ = parseInfo(path, file);
     void* p = ::mmap(nullptr, static_cast<std::size_t>(file.size()), PROT_READ, MAP_PRIVATE, file.fd(), 0);
-    if (p == MAP_FAILED) bad(path, std::string("cannot map: ") + std::strerror(errno));
+    if (p == MAP_FAILED) badNpy(path, std::string("cannot map: ") + std::strerror(errno));
     base_ = static_cast<const unsigned char*>(p);
     mappedBytes_ = static_cast<std::size_t>(file.size());
     // One streaming pass checks every value, as readFrames() does, in chunks of a fixed size: the

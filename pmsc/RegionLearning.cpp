@@ -20,7 +20,7 @@ namespace pmsc {
 
 namespace {
 
-[[noreturn]] void badOption(const std::string& what) {
+[[noreturn]] void badRegionOption(const std::string& what) {
     throw std::invalid_argument("train: regions: " + what);
 }
 
@@ -143,19 +143,21 @@ void checkRegionInput(const Eigen::Ref<const Eigen::MatrixXd>& q, const Model& m
     const Index n = model.points;
     const Index c = model.channels;
     if (options.count < 1 || options.count > n)
-        badOption("count must be in [1, " + std::to_string(n) + "], got " + std::to_string(options.count));
+        badRegionOption("count must be in [1, " + std::to_string(n) + "], got " +
+                        std::to_string(options.count));
     if (!(options.featherFraction >= 0 && options.featherFraction < 1))
-        badOption("feather fraction must be in [0, 1), got " + std::to_string(options.featherFraction));
+        badRegionOption("feather fraction must be in [0, 1), got " + std::to_string(options.featherFraction));
     if (!(options.maxLocalFraction > 0 && options.maxLocalFraction <= 1))
-        badOption("largest local fraction must be in (0, 1], got " +
-                  std::to_string(options.maxLocalFraction));
-    if (!(options.energy > 0 && options.energy <= 1)) badOption("energy must be in (0, 1]");
-    if (options.minKeys < 1) badOption("min keys must be >= 1");
+        badRegionOption("largest local fraction must be in (0, 1], got " +
+                        std::to_string(options.maxLocalFraction));
+    if (!(options.energy > 0 && options.energy <= 1)) badRegionOption("energy must be in (0, 1]");
+    if (options.minKeys < 1) badRegionOption("min keys must be >= 1");
     if (options.frameStride < 1)
-        badOption("frame stride must be >= 1, got " + std::to_string(options.frameStride));
-    if (!(options.keyRadius >= 0)) badOption("key radius must be >= 0");
-    if (!(options.basisShare > 0 && options.basisShare <= 1)) badOption("basis share must be in (0, 1]");
-    if (!(options.ratioMargin >= 1)) badOption("ratio margin must be >= 1");
+        badRegionOption("frame stride must be >= 1, got " + std::to_string(options.frameStride));
+    if (!(options.keyRadius >= 0)) badRegionOption("key radius must be >= 0");
+    if (!(options.basisShare > 0 && options.basisShare <= 1))
+        badRegionOption("basis share must be in (0, 1]");
+    if (!(options.ratioMargin >= 1)) badRegionOption("ratio margin must be >= 1");
     if (model.sharedChannels)  // its basis has N rows, not N*C; Model::validate refuses the pair too
         throw std::invalid_argument(
             "learnRegions: a model whose channels share the basis has no regions in this version");
@@ -169,12 +171,12 @@ Eigen::MatrixXd pointPositions(const Model& model, const RegionOptions& options)
     Eigen::MatrixXd pos;
     if (options.positions.size() > 0) {
         if (options.positions.rows() != n || options.positions.cols() != 3 || !options.positions.allFinite())
-            badOption("positions must be N x 3 finite values (N = " + std::to_string(n) + ")");
+            badRegionOption("positions must be N x 3 finite values (N = " + std::to_string(n) + ")");
         pos = options.positions;
     } else if (c == 3) {
         pos = Eigen::Map<const Eigen::MatrixXd>(model.mean.data(), 3, n).transpose();
     } else {
-        badOption("point positions are needed for " + std::to_string(c) + "-channel data (none given)");
+        badRegionOption("point positions are needed for " + std::to_string(c) + "-channel data (none given)");
     }
     return pos;
 }

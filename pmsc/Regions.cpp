@@ -12,7 +12,7 @@ namespace pmsc {
 
 namespace {
 
-[[noreturn]] void invalid(const std::string& what) { throw std::invalid_argument("regions: " + what); }
+[[noreturn]] void invalidRegions(const std::string& what) { throw std::invalid_argument("regions: " + what); }
 
 bool ascendingUnique(const std::vector<Index>& v) {
     for (size_t i = 1; i < v.size(); ++i)
@@ -49,70 +49,75 @@ void LocalRegions::validate(const Model& model) const {
     const Index n = model.points;
     const Index c = model.channels;
     const Index k = model.keyCount() + static_cast<Index>(extraKeyPoints.size());
-    if (regions.empty()) invalid("no regions");
+    if (regions.empty()) invalidRegions("no regions");
     for (const Index p : extraKeyPoints)
         if (p < 0 || p >= n)
-            invalid("region key point " + std::to_string(p) + " outside [0, " + std::to_string(n) + ")");
+            invalidRegions("region key point " + std::to_string(p) + " outside [0, " + std::to_string(n) +
+                           ")");
     if (!std::isfinite(featherWidth) || featherWidth < 0)
-        invalid("feather width must be finite and >= 0, got " + std::to_string(featherWidth));
+        invalidRegions("feather width must be finite and >= 0, got " + std::to_string(featherWidth));
     if (!(maxLocalFraction > 0 && maxLocalFraction <= 1))
-        invalid("largest local fraction must be in (0, 1], got " + std::to_string(maxLocalFraction));
+        invalidRegions("largest local fraction must be in (0, 1], got " + std::to_string(maxLocalFraction));
     std::vector<char> seen(static_cast<size_t>(n), 0);
     Index covered = 0;
     for (Index r = 0; r < regionCount(); ++r) {
         const Region& g = regions[size_t(r)];
         const std::string name = "region " + std::to_string(r) + ": ";
-        if (g.points.empty()) invalid(name + "no points");
-        if (!ascendingUnique(g.points)) invalid(name + "points not ascending and unique");
+        if (g.points.empty()) invalidRegions(name + "no points");
+        if (!ascendingUnique(g.points)) invalidRegions(name + "points not ascending and unique");
         for (const Index p : g.points) {
             if (p < 0 || p >= n)
-                invalid(name + "point " + std::to_string(p) + " outside [0, " + std::to_string(n) + ")");
-            if (seen[size_t(p)]++) invalid(name + "point " + std::to_string(p) + " is in two regions");
+                invalidRegions(name + "point " + std::to_string(p) + " outside [0, " + std::to_string(n) +
+                               ")");
+            if (seen[size_t(p)]++) invalidRegions(name + "point " + std::to_string(p) + " is in two regions");
             ++covered;
         }
-        if (g.keys.empty()) invalid(name + "no keys");
-        if (!ascendingUnique(g.keys)) invalid(name + "keys not ascending and unique");
+        if (g.keys.empty()) invalidRegions(name + "no keys");
+        if (!ascendingUnique(g.keys)) invalidRegions(name + "keys not ascending and unique");
         if (g.keys.front() < 0 || g.keys.back() >= k)
-            invalid(name + "key number outside [0, " + std::to_string(k) + ")");
+            invalidRegions(name + "key number outside [0, " + std::to_string(k) + ")");
         const Index m = g.basis.cols();
         const Index rows = static_cast<Index>(g.points.size()) * c;
         const Index kc = static_cast<Index>(g.keys.size()) * c;
-        if (m < 1) invalid(name + "empty basis");
+        if (m < 1) invalidRegions(name + "empty basis");
         if (g.basis.rows() != rows)
-            invalid(name + "basis has " + std::to_string(g.basis.rows()) + " rows, expected " +
-                    std::to_string(rows));
+            invalidRegions(name + "basis has " + std::to_string(g.basis.rows()) + " rows, expected " +
+                           std::to_string(rows));
         if (g.keyBasis.rows() != kc || g.keyBasis.cols() != m)
-            invalid(name + "key basis is not " + std::to_string(kc) + " x " + std::to_string(m));
+            invalidRegions(name + "key basis is not " + std::to_string(kc) + " x " + std::to_string(m));
         if (g.projector.rows() != m || g.projector.cols() != kc)
-            invalid(name + "projector is not " + std::to_string(m) + " x " + std::to_string(kc));
+            invalidRegions(name + "projector is not " + std::to_string(m) + " x " + std::to_string(kc));
         if (!g.basis.allFinite() || !g.keyBasis.allFinite() || !g.projector.allFinite())
-            invalid(name + "NaN or Inf in its basis or projector");
+            invalidRegions(name + "NaN or Inf in its basis or projector");
         if (!std::isfinite(g.epsMin) || !std::isfinite(g.epsMax) || g.epsMin < 0 || g.epsMax < g.epsMin)
-            invalid(name + "thresholds must satisfy 0 <= eps_min <= eps_max, got [" +
-                    std::to_string(g.epsMin) + ", " + std::to_string(g.epsMax) + "]");
+            invalidRegions(name + "thresholds must satisfy 0 <= eps_min <= eps_max, got [" +
+                           std::to_string(g.epsMin) + ", " + std::to_string(g.epsMax) + "]");
         if (!std::isfinite(g.ratio) || g.ratio < 0)
-            invalid(name + "calibration ratio must be finite and >= 0");
+            invalidRegions(name + "calibration ratio must be finite and >= 0");
     }
     if (covered != n)
-        invalid("the regions cover " + std::to_string(covered) + " of the " + std::to_string(n) + " points");
+        invalidRegions("the regions cover " + std::to_string(covered) + " of the " + std::to_string(n) +
+                       " points");
     if (static_cast<Index>(featherStart.size()) != n + 1)
-        invalid("feather index has " + std::to_string(featherStart.size()) +
-                " entries, expected N+1 = " + std::to_string(n + 1));
+        invalidRegions("feather index has " + std::to_string(featherStart.size()) +
+                       " entries, expected N+1 = " + std::to_string(n + 1));
     if (featherStart.front() != 0 || featherStart.back() != static_cast<Index>(featherRegion.size()) ||
         featherRegion.size() != featherFactor.size())
-        invalid("feather index does not match its " + std::to_string(featherRegion.size()) + " entries");
+        invalidRegions("feather index does not match its " + std::to_string(featherRegion.size()) +
+                       " entries");
     const std::vector<Index> of = regionOfPoints(n);
     for (Index p = 0; p < n; ++p) {
-        if (featherStart[size_t(p) + 1] < featherStart[size_t(p)]) invalid("feather index not ascending");
+        if (featherStart[size_t(p) + 1] < featherStart[size_t(p)])
+            invalidRegions("feather index not ascending");
         for (Index e = featherStart[size_t(p)]; e < featherStart[size_t(p) + 1]; ++e) {
             const Index r = featherRegion[size_t(e)];
             const double f = featherFactor[size_t(e)];
             if (r < 0 || r >= regionCount() || r == of[size_t(p)])
-                invalid("point " + std::to_string(p) + " has a feather entry for region " +
-                        std::to_string(r));
+                invalidRegions("point " + std::to_string(p) + " has a feather entry for region " +
+                               std::to_string(r));
             if (!(f > 0 && f <= 1))
-                invalid("point " + std::to_string(p) + " has feather factor " + std::to_string(f) +
-                        " outside (0, 1]");
+                invalidRegions("point " + std::to_string(p) + " has feather factor " + std::to_string(f) +
+                               " outside (0, 1]");
         }
     }
 }

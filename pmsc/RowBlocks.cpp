@@ -131,7 +131,7 @@ void readExactly(int fd, const std::string& path, std::uint64_t offset, unsigned
     }
 }
 
-std::string num(double v) {
+std::string numberText(double v) {
     char buf[64];
     std::snprintf(buf, sizeof buf, "%.6g", v);
     return buf;
@@ -191,7 +191,7 @@ void NpyBlocks::readPoints(Index point, Index count, double* meanOut) {
                 if (!std::isfinite(out[i])) {
                     throw InputError("train: " + shots_[s].path + ": frame " + std::to_string(f) +
                                      ", point " + std::to_string(point + i / c) + ", channel " +
-                                     std::to_string(i % c) + " is " + num(out[i]));
+                                     std::to_string(i % c) + " is " + numberText(out[i]));
                 }
             }
         }

@@ -17,6 +17,9 @@ the files it names are checked again in a batch of their own (and again, until n
 A file that fails alone fails the check (the build compiles it, so it is a clang-only error worth
 seeing).
 
+A build in unity batches (PMSC_UNITY_BUILD) lists its batches, not its files, in
+compile_commands.json: each file a batch includes is checked with its batch's command.
+
 Exit status: 0 when every batch is clean, 1 on any warning or error (the config makes every
 warning an error), 2 on bad arguments.
 """
@@ -51,6 +54,31 @@ def compile_key(entry):
             continue
         out.append(a)
     return entry["directory"], tuple(out)
+
+
+UNITY_SOURCE = re.compile(r"/Unity/unity_\d+_(c|cxx)\.(c|cxx)$")
+UNITY_INCLUDE = re.compile(r'^#include "(/[^"]+)"\s*$')
+
+
+def with_unity_sources(database):
+    """`database` plus one entry per file a CMake unity batch includes, with the batch's command."""
+    expanded = list(database)
+    for entry in database:
+        if not UNITY_SOURCE.search(entry["file"]):
+            continue
+        try:
+            with open(entry["file"]) as f:
+                sources = [m.group(1) for m in map(UNITY_INCLUDE.match, f) if m]
+        except OSError:
+            continue  # a batch not generated yet: its files are checked alone
+        for source in sources:
+            copy = dict(entry, file=source)
+            if "command" in copy:
+                copy["command"] = copy["command"].replace(entry["file"], source)
+            else:
+                copy["arguments"] = [source if a == entry["file"] else a for a in copy["arguments"]]
+            expanded.append(copy)
+    return expanded
 
 
 def header_filter(config):
@@ -123,7 +151,7 @@ def main():
     except (OSError, ValueError) as e:
         print("tidy_batched.py: %s" % e, file=sys.stderr)
         return 2
-    by_file = {os.path.realpath(e["file"]): e for e in database}
+    by_file = {os.path.realpath(e["file"]): e for e in with_unity_sources(database)}
     groups = collections.defaultdict(list)
     for name in opts.files:
         path = os.path.realpath(name)

@@ -22,7 +22,7 @@ using namespace pmsc::cli;
 namespace {
 
 // One line per set and way: hit rate, points gathered, errors over the tolerance, one-thread speedup.
-void printLocalFailThrough(const nlohmann::json& local) {
+void printCornellLocalFailThrough(const nlohmann::json& local) {
     std::printf(
         "  local fail-through: %ld regions, feather %.1f mm, errors as multiples of the tolerance %.3g\n",
         local.at("regions").get<long>(), local.at("feather_width_mm").get<double>(),
@@ -130,7 +130,7 @@ int runDemoCornell(const std::vector<std::string>& args) {
                 r.at("reference_samples_per_point").get<long>() / r.at("samples_per_point").get<long>(),
                 r.at("reference_points").get<long>(), 100.0 * num("reference_rms_rel_error_full"),
                 100.0 * num("reference_rms_rel_error_pm"));
-    if (r.contains("local_fail_through")) printLocalFailThrough(r.at("local_fail_through"));
+    if (r.contains("local_fail_through")) printCornellLocalFailThrough(r.at("local_fail_through"));
     std::printf(
         "  wrote     %s/report.json, %zu .vdb lighting caches, %zu images (full | PMSC | |diff| x 10)  [%.0f "
         "s]\n",

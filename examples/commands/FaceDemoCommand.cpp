@@ -25,7 +25,7 @@ using namespace pmsc::cli;
 namespace {
 
 // report.json's "local_fail_through" (FaceLocalReport.h), one line per set and way.
-void printLocalFailThrough(const nlohmann::json& local) {
+void printFaceLocalFailThrough(const nlohmann::json& local) {
     std::printf("  local fail-through: %ld regions, %ld region keys, feather %.2f%% of the head diagonal\n",
                 local.at("regions").get<long>(), local.at("region_keys").get<long>(),
                 local.at("feather_width_pct_bbox").get<double>());
@@ -76,7 +76,7 @@ void printFaceDemoSummary(const nlohmann::json& r, const std::string& out) {
         1e3 * r.at("timing").at("key_posing").get<double>(),
         1e3 * r.at("timing").at("projection").get<double>(),
         1e3 * r.at("timing").at("reconstruction").get<double>(), num("speedup"));
-    if (r.contains("local_fail_through")) printLocalFailThrough(r.at("local_fail_through"));
+    if (r.contains("local_fail_through")) printFaceLocalFailThrough(r.at("local_fail_through"));
     std::printf(
         "  wrote      %s/report.json, frames.csv, keys.png, worst/typical/novel .png and .obj  [%.0f s]\n",
         out.c_str(), r.at("seconds").at("total").get<double>());

@@ -2,6 +2,7 @@
 
 #include "pmsc/Errors.h"
 
+#include <ctime>
 #include <filesystem>
 #include <system_error>
 #include <utility>
@@ -10,6 +11,12 @@ namespace pmsc::examples {
 
 double secondsSince(DemoClock::time_point t) {
     return std::chrono::duration<double>(DemoClock::now() - t).count();
+}
+
+double threadCpuSeconds() {
+    timespec t{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+    return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
 }
 
 void createOutputFolder(const std::string& dir, FolderErrorWording wording) {

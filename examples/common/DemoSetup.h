@@ -21,6 +21,10 @@ using DemoClock = std::chrono::steady_clock;
 /// Seconds from `t` to now.
 double secondsSince(DemoClock::time_point t);
 
+/// CPU seconds of the calling thread: a frame timed on one thread, unaffected by other processes
+/// time-slicing a shared machine.
+double threadCpuSeconds();
+
 /// A demo's progress hook: (stage, done, total); false asks the demo to stop.
 using DemoProgress = std::function<bool(std::string_view, double, double)>;
 

@@ -41,12 +41,7 @@ using examples::DemoClock;
 using examples::DemoSetup;
 using examples::FolderErrorWording;
 using examples::secondsSince;
-
-double threadCpuSeconds() {
-    timespec t{};
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-    return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
+using examples::threadCpuSeconds;
 
 // NumPy's default percentile (linear between closest ranks), as the replay report.
 double percentile(std::vector<double> v, double q) {

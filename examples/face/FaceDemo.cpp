@@ -15,8 +15,6 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
-#include <time.h>
-
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -45,14 +43,6 @@ FaceDemoOptions FaceDemoOptions::quickOptions() {
 namespace {
 
 using namespace demo;
-
-// CPU time of the calling thread. Timings are taken on one thread, one frame at a time, so this
-// is the work a frame costs, unaffected by other processes time-slicing a shared machine.
-double threadCpuSeconds() {
-    timespec t{};
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-    return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
 
 // The engine's consumer: records each frame's decision and keeps the output of a few frames.
 class DemoSink : public engine::FrameSink {

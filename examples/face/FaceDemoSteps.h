@@ -29,6 +29,7 @@ namespace pmsc::face::demo {
 using examples::DemoClock;
 using examples::DemoSetup;
 using examples::secondsSince;
+using examples::threadCpuSeconds;
 
 inline const char* stateName(CacheState s) {
     return s == CacheState::Hit ? "hit" : s == CacheState::Blend ? "blend" : "miss";
