@@ -167,8 +167,9 @@ run_sanitizers() {
 cmd=${1:-}
 case "$cmd" in
   demo)
-    # The program and its demos only (141 of the 231 translation units, about 44% of the compile
-    # time): the tests, benchmarks, Python module and fuzz targets come with `test`.
+    # The program and its demos only (31 of the build's 77 unity batches: 4 min 11 s on 2 cores
+    # without a compiler cache, where everything takes 7 min 18 s): the tests, benchmarks, Python
+    # module and fuzz targets come with `test`.
     ensure_packages; ensure_web; build_release pmsc
     shift; exec "$BUILD/bin/pmsc" demo "$@" ;;
   test)
