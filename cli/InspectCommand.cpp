@@ -102,6 +102,7 @@ void printModelJson(const Model& model, const ModelFileFacts& file) {
                           {"positions", model.sentinels->source == SentinelSource::Mean    ? "mean"
                                         : model.sentinels->source == SentinelSource::Given ? "given"
                                                                                            : "point order"}};
+    j["non_negative"] = model.nonNegative;
     if (model.learning)
         j["learning"] = {{"rank", model.learning->maxRank},
                          {"stored_vectors", model.basisSize() + model.learning->extraBasis.cols()},
@@ -182,6 +183,10 @@ void printModelText(const Model& model, const ModelFileFacts& file) {
                                 " of the covering radius, stays within T"
                           : std::string())
                   << "\n";
+    if (model.nonNegative)
+        std::cout
+            << "  output        clamped at 0 (every training value was >= 0; pmsc train --no-clamp keeps it "
+               "linear)\n";
     if (model.regions) {
         const LocalRegions& lr = *model.regions;
         std::cout << "  regions       R = " << lr.regionCount() << " (local fail-through), feather width "

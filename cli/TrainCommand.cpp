@@ -59,6 +59,7 @@ struct TrainArgs {
     app::TrainOptions request;
     std::string selector = "teleconnection", rule, keyError;  // named as typed; app:: checks the names
     bool quiet = false;
+    bool noClamp = false;  // --no-clamp: TrainingOptions::clampAtZero off
 };
 
 /// The parser with the command's description and its inputs and output (--frames, --out).
@@ -228,6 +229,11 @@ void declareScaleOptions(ArgParser& parser, TrainArgs& a) {
         "the channels share one basis over the points (for light: RGB share their spatial\n"
         "modes, a light's colour is reproduced exactly and reconstruction reads a third of the basis)",
         options.sharedChannels);
+    parser.flag("--no-clamp",
+                "keep PM's output linear: by default, when every training value is >= 0 (light, density),\n"
+                "the model clamps what it reconstructs at 0, which never moves a non-negative quantity\n"
+                "further from its true value",
+                a.noClamp);
     parser.flag("--quiet", "no progress display", a.quiet);
 }
 
@@ -243,6 +249,7 @@ std::optional<TrainArgs> parseTrainArgs(const std::vector<std::string>& args) {
         a.request.training.selector = app::selectorNamed(a.selector, kSpelling);
         a.request.training.calibrationRule = app::calibrationNamed(a.rule, kSpelling);
         a.request.training.keyErrorNorm = app::keyErrorNamed(a.keyError, kSpelling);
+        a.request.training.clampAtZero = !a.noClamp;
         app::validate(a.request, kSpelling);
     } catch (const app::OptionError& e) {
         parser.fail(e.what());

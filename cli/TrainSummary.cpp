@@ -79,6 +79,8 @@ void printTrainSummary(std::ostream& out, const std::string& modelPath, const Fr
             out << "spread over the " << describe(s.source) << ", every moving point within "
                 << fmt("%.6g", s.coveringRadius) << " of one\n";
     }
+    if (model.nonNegative)
+        out << "  output      clamped at 0: every training value is >= 0 (--no-clamp keeps PM linear)\n";
     if (!report.regions.empty()) out << "  regions     " << report.regions << "\n";
     for (const auto& w : report.warnings) out << "  warning: " << w << "\n";
 }

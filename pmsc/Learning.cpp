@@ -562,6 +562,12 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
     // --- 4. what the next update needs.
     out.learning = nextLearningState(settings, u);
     if (model.tolerance > 0) out.calibrationRecord = std::move(record);
+    // The clamp at 0 stays while every frame seen is >= 0 (set last: calibration measured PM
+    // unclamped, as training's does).
+    out.nonNegative = model.nonNegative && (fresh.size() == 0 || fresh.minCoeff() >= 0);
+    if (model.nonNegative && !out.nonNegative)
+        report.warnings.push_back(
+            "the new frames have negative values: the output is no longer clamped at 0");
     out.validate();
     report.seconds = since(start);
     return out;

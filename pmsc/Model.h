@@ -62,6 +62,12 @@ struct Model {
     /// (section KEYERROR); the key error is tolerance * min(e_rms / rms, e_loo / loo).
     PredictedParts partEps;
     double trainMaxPointResidual = 0;  ///< largest point error of PM on the training set
+    /// Every value training saw was >= 0 (light, density): PointMultiplier clamps what it
+    /// reconstructs at 0 (section NONNEG; TrainingOptions::clampAtZero). Why: for a quantity that
+    /// cannot be negative, max(PM, 0) is never further from the true value than PM, channel by
+    /// channel, so the clamp can only shrink a point's error; where a light the training never
+    /// saw makes PM ring below zero, it removes the error there (docs/calibration.md).
+    bool nonNegative = false;
 
     // --- optional parts: each one is a tagged section of a version-2 model file (ModelSections.h)
     /// Local fail-through: regions with their own keys, projection and thresholds.

@@ -39,6 +39,19 @@ ModelSectionCodec keyErrorSectionCodec() {
             }};
 }
 
+// NONNEG: the model's output is clamped at 0 (Model::nonNegative), one u32 that is 1. Absent =
+// no clamp, the reconstruction of every model written without it.
+ModelSectionCodec nonNegativeSectionCodec() {
+    return {{'N', 'O', 'N', 'N', 'E', 'G', '\0', '\0'},
+            [](const Model& m) { return m.nonNegative; },
+            [](const Model&, ByteWriter& out) { out.u32(1); },
+            [](ByteReader& in, Model& m) {
+                const std::uint32_t v = in.u32("non-negative flag");
+                if (v != 1) in.fail("non-negative flag " + std::to_string(v) + " is not 1");
+                m.nonNegative = true;
+            }};
+}
+
 }  // namespace
 
 std::span<const ModelSectionCodec> modelSectionCodecs() {
@@ -52,6 +65,7 @@ std::span<const ModelSectionCodec> modelSectionCodecs() {
         keyNeighboursSectionCodec(),       // KEYNEAR (where a hit one part certifies is checked)
         sentinelsSectionCodec(),           // SENTINEL (points computed beside every hit)
         sentinelNeighboursSectionCodec(),  // SENTNBRS (their neighbours: the slope check)
+        nonNegativeSectionCodec(),         // NONNEG (the output clamped at 0)
     };
     return codecs;
 }

@@ -157,6 +157,12 @@ void panelReconstructC(const PanelRows& rows, const Scalar* panels, const double
 }
 }  // namespace
 
+void clampAtZero(double* values, Index count) {
+    // max(v, 0) keeps a NaN a NaN (the soft cache reads a NaN as a miss), as std::max would not.
+    for (Index i = 0; i < count; ++i)
+        if (values[i] < 0) values[i] = 0;
+}
+
 PointMultiplier::PointMultiplier(const Model& model, BasisPrecision precision)
     : model_(model), precision_(precision) {
     model_.validate();
@@ -305,6 +311,7 @@ void PointMultiplier::reconstructRange(const double* coords, Index first, Index 
         panelReconstructC(rows, singlePanels_.data(), coords, first * scale, count * scale, out);
     else
         panelReconstructC(rows, panels_.data(), coords, first * scale, count * scale, out);
+    if (model_.nonNegative) clampAtZero(out, count * c);
 }
 
 void PointMultiplier::keyResiduals(const double* keyValues, const double* coords, double* perKey) const {
@@ -366,16 +373,17 @@ void PointMultiplier::reconstructPoints(const double* coords, std::span<const In
                 for (Index ch = 0; ch < c; ++ch) out[i * c + ch] += a * bj[ch];
             }
         }
-        return;
-    }
-    for (Index j = 0; j < m; ++j) {
-        const double bj = coords[j];
-        const double* column = basis + j * rows;
-        for (Index i = 0; i < n; ++i) {
-            const Index row = points[static_cast<size_t>(i)] * c;
-            for (Index ch = 0; ch < c; ++ch) out[i * c + ch] += column[row + ch] * bj;
+    } else {
+        for (Index j = 0; j < m; ++j) {
+            const double bj = coords[j];
+            const double* column = basis + j * rows;
+            for (Index i = 0; i < n; ++i) {
+                const Index row = points[static_cast<size_t>(i)] * c;
+                for (Index ch = 0; ch < c; ++ch) out[i * c + ch] += column[row + ch] * bj;
+            }
         }
     }
+    if (model_.nonNegative) clampAtZero(out, n * c);
 }
 
 }  // namespace pmsc

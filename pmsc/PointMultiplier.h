@@ -25,6 +25,10 @@ enum class BasisPrecision {
     None,
 };
 
+/// Sets the negative values of `values` (count of them) to 0, leaving NaN as it is: what every
+/// reconstruction of a Model::nonNegative model applies to its output.
+void clampAtZero(double* values, Index count);
+
 /// The runtime of point multiplication (section 6): key values -> pose-space
 /// coordinates by the precomputed least-squares projector, the key points'
 /// residual, and the reconstruction of any set of points.
@@ -58,7 +62,8 @@ public:
     /// the basis. NaN for a key with a non-finite value.
     void keyResiduals(const double* keyValues, const double* coords, double* perKey) const;
 
-    /// All N points: out = mean + B b (N*C doubles).
+    /// All N points: out = mean + B b (N*C doubles), clamped at 0 for a Model::nonNegative model
+    /// (as every reconstruction below).
     void reconstruct(const double* coords, double* out) const;
 
     /// Only the given points (a query by point subset): out[i*C + c].

@@ -108,7 +108,10 @@ void RegionMultiplier::reconstruct(Index r, const double* coords, double* frame)
     tmp.noalias() = g.basis * b;
     for (size_t i = 0; i < g.points.size(); ++i) {
         const Index row = g.points[i] * c;
-        for (Index ch = 0; ch < c; ++ch) frame[row + ch] = model_.mean[row + ch] + tmp[Index(i) * c + ch];
+        for (Index ch = 0; ch < c; ++ch) {
+            const double v = model_.mean[row + ch] + tmp[Index(i) * c + ch];
+            frame[row + ch] = model_.nonNegative && v < 0 ? 0.0 : v;  // as PointMultiplier's output
+        }
     }
 }
 

@@ -66,14 +66,17 @@ MatrixBlocks::MatrixBlocks(const Eigen::Ref<const Eigen::MatrixXd>& q, Index cha
       rows_(q.rows()),
       cols_(q.cols()) {
     mutableMatrix() = q;
-    if (centre)
+    if (centre) {
         this->centre();
-    else
+    } else {
         mean_ = Eigen::VectorXd::Zero(q.rows());
+        smallest_ = q.size() > 0 ? q.minCoeff() : 0.0;
+    }
 }
 
 void MatrixBlocks::centre() {
     Eigen::Map<Eigen::MatrixXd> q = mutableMatrix();
+    smallest_ = q.size() > 0 ? q.minCoeff() : 0.0;
     mean_ = q.rowwise().mean();
     q.colwise() -= mean_;
 }
@@ -197,6 +200,7 @@ void NpyBlocks::readPoints(Index point, Index count, double* meanOut) {
         }
     }
     auto raw = buffer_.topRows(rows);
+    if (meanOut && raw.size() > 0) smallest_ = std::min(smallest_, raw.minCoeff());
     const Eigen::VectorXd mean = raw.rowwise().mean();
     raw.colwise() -= mean;
     if (meanOut) Eigen::Map<Eigen::VectorXd>(meanOut, rows) = mean;
@@ -224,6 +228,11 @@ Eigen::VectorXd NpyBlocks::mean() {
     for (Index b = 0; b < blockCount(); ++b)
         if (!meanKnown_[static_cast<std::size_t>(b)]) block(b);
     return mean_;
+}
+
+double NpyBlocks::smallestValue() {
+    mean();  // every block read once
+    return smallest_;
 }
 
 std::uint64_t trainingMemoryBound(Index points, Index channels, Index frames, Index maxBasis, Index block,

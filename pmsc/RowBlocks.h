@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -58,6 +59,9 @@ public:
     virtual void pointRows(Index point, Eigen::Ref<Eigen::MatrixXd> out) = 0;
     /// The owned rows' means over the F frames (the model's mean), ownedRows() values.
     virtual Eigen::VectorXd mean() = 0;
+    /// The smallest value of the owned rows before centring, over every frame (what
+    /// Model::nonNegative is decided from); -infinity when a source does not know it.
+    virtual double smallestValue() { return -std::numeric_limits<double>::infinity(); }
 
 protected:
     RowBlocks(Index points, Index channels, Index frames, Index firstPoint, Index ownedPoints,
@@ -92,6 +96,7 @@ public:
     Eigen::Ref<const Eigen::MatrixXd> block(Index b) override;
     void pointRows(Index point, Eigen::Ref<Eigen::MatrixXd> out) override;
     Eigen::VectorXd mean() override { return mean_; }
+    double smallestValue() override { return smallest_; }
     /// The whole centred matrix (in-memory callers use it directly).
     Eigen::Map<const Eigen::MatrixXd> matrix() const { return {values_.data(), rows_, cols_}; }
 
@@ -104,6 +109,7 @@ private:
     decltype(FrameSet::values) values_;
     Index rows_ = 0, cols_ = 0;
     Eigen::VectorXd mean_;
+    double smallest_ = 0;  ///< before centring
 };
 
 /// One shot of a training set on disk: the header of a .npy frames file.
@@ -131,10 +137,12 @@ public:
     Eigen::Ref<const Eigen::MatrixXd> block(Index b) override;
     void pointRows(Index point, Eigen::Ref<Eigen::MatrixXd> out) override;
     Eigen::VectorXd mean() override;
+    /// Reads the blocks not read yet, as mean() does.
+    double smallestValue() override;
 
 private:
     /// Reads rows of `count` points from `point` (global) into buffer_'s top rows, centred; writes
-    /// their means to `meanOut` when not null.
+    /// their means to `meanOut` when not null, and then folds their smallest value into smallest_.
     void readPoints(Index point, Index count, double* meanOut);
 
     std::vector<Shot> shots_;
@@ -143,7 +151,8 @@ private:
     std::vector<unsigned char> bytes_;
     Eigen::VectorXd mean_;         ///< owned rows' means, filled as blocks are read
     std::vector<char> meanKnown_;  ///< per block: mean_ filled
-    Index current_ = -1;           ///< block in buffer_, -1 none
+    double smallest_ = std::numeric_limits<double>::infinity();  ///< over the blocks whose mean is known
+    Index current_ = -1;                                         ///< block in buffer_, -1 none
 };
 
 /// Bytes the shared training algorithm holds at its peak for one rank, beyond the program itself

@@ -189,9 +189,12 @@ Model trainSharedChannels(FrameSet&& frames, const TrainingOptions& options, Tra
     // the C=1 training (whose mean is then zero) learns the variation alone and the model keeps
     // a mean per channel.
     Eigen::VectorXd mean = frames.matrix().rowwise().mean();
+    const bool nonNegative =
+        options.clampAtZero && frames.values.size() > 0 && frames.matrix().minCoeff() >= 0;
     MatrixBlocks q(channelFramesInPlace(std::move(frames), mean));
     TrainingOptions one = options;
-    one.learnable = false;  // `pmsc learn` does not take shared-channel models
+    one.clampAtZero = false;  // the channel frames are centred: decided above from the frames
+    one.learnable = false;    // `pmsc learn` does not take shared-channel models
     one.sharedChannels = false;
     // Positions serve the sentinels alone here (the C = 1 model of the channels has no regions).
     one.regions.automatic = false;
@@ -211,6 +214,8 @@ Model trainSharedChannels(FrameSet&& frames, const TrainingOptions& options, Tra
     model.channels = c;
     model.trainFrames = f;
     model.sharedChannels = true;
+    model.nonNegative =
+        nonNegative;  // set last: the residual below measures PM unclamped, as calibration did
     // The largest point residual on the training frames, Euclidean over the channels like
     // everywhere else (the C=1 training measured it per channel). Frame t's channel ch is
     // column t*C + ch of the centred matrix plus the model's mean.
@@ -361,6 +366,8 @@ struct Trainer {
     void keyNeighbours();
     /// The sentinels (Sentinels.h), computed beside every hit; rank 0, on the final core.
     void sentinels();
+    /// Model::nonNegative from every rank's smallest training value (a collective: all ranks).
+    void nonNegative();
     /// U's columns are read after the keys: the learning state extends them.
     bool keepsLeftVectors() const { return options.learnRank > 0 || options.learnable; }
     /// Frees U once the keys are chosen, unless the learning state reads it: the folds of the
@@ -718,6 +725,15 @@ void Trainer::sentinels() {
     if (!chosen.points.empty()) model.sentinels = std::move(chosen);
 }
 
+void Trainer::nonNegative() {
+    // Decided after calibration, which measures PM unclamped: its held-out errors are then at
+    // least the clamped ones, so eps stay on the safe side of what a hit hands back.
+    const double mine = q.smallestValue();
+    std::vector<double> all;
+    comm.allGather(&mine, 1, all);
+    model.nonNegative = !all.empty() && *std::min_element(all.begin(), all.end()) >= 0;
+}
+
 }  // namespace
 
 KeyErrorNorm resolvedKeyErrorNorm(const TrainingOptions& options) {
@@ -785,6 +801,7 @@ Model train(RowBlocks& q, Communicator& comm, const TrainingOptions& options, Tr
     t.model.basis = comm.size() == 1 ? std::move(t.basis) : gatherRowsTo(comm, t.basis, t.rows, 0);
     t.model.mean = gatherRowsTo(comm, q.mean(), t.rows, 0);
     if (options.regions.count > 0 || options.regions.automatic) t.regions();
+    if (options.clampAtZero) t.nonNegative();
     if (comm.rank() == 0) t.keyNeighbours();
     if (comm.rank() == 0) t.sentinels();
     if (comm.rank() == 0) t.model.validate();

@@ -120,6 +120,7 @@ py::dict modelInfo(const Model& m) {
     d["shared_channels"] = m.sharedChannels;
     d["key_points"] = m.keyCount();
     d["sentinels"] = m.sentinels ? static_cast<Index>(m.sentinels->points.size()) : Index{0};
+    d["non_negative"] = m.nonNegative;
     d["train_frames"] = m.trainFrames;
     d["eps_min"] = m.epsMin;
     d["eps_max"] = m.epsMax;

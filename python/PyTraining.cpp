@@ -132,7 +132,8 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
                                     const std::string& keyError, Index learnRank, unsigned seed,
                                     int powerIterations, const py::object& regions, const py::object& feather,
                                     Index regionKeys, Index regionStride, bool sharedChannels,
-                                    Index sentinels, const py::object& positions, py::object progress) {
+                                    Index sentinels, bool clamp, const py::object& positions,
+                                    py::object progress) {
     // The keyword arguments into app::TrainOptions, checked by the rules `pmsc train` uses.
     constexpr app::Spelling kPython = app::Spelling::Python;
     app::TrainOptions request;
@@ -169,6 +170,7 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     o.regions.ownKeys = regionKeys;
     o.sharedChannels = sharedChannels;
     o.sentinels = sentinels;
+    o.clampAtZero = clamp;
     // Positions: a .npy path, or an array (N, 3+) or (1, N, 3+); checked against N once the frames are.
     FrameSet positionTable;
     std::string positionsName;
@@ -282,10 +284,12 @@ void bindTraining(py::module_& m) {
         "coverage"_a = py::none(), "key_error"_a = "", "learn_rank"_a = 0, "seed"_a = 20070101u,
         "power_iterations"_a = 2, "regions"_a = "auto", "feather"_a = py::none(), "region_keys"_a = 4,
         "region_stride"_a = 3, "shared_channels"_a = false, "sentinels"_a = kDefaultSentinels,
-        "positions"_a = py::none(), "progress"_a = py::none(),
+        "clamp"_a = true, "positions"_a = py::none(), "progress"_a = py::none(),
         "Trains a model as `pmsc train` does (same options, same model bytes). frames: an array (F, N, C), a "
         ".npy path, or a list of them (shots). positions: the points' positions for values that are not "
-        "positions (light), an array (N, 3) or (1, N, 3) or a .npy path, as --positions. progress(stage, "
+        "positions (light), an array (N, 3) or (1, N, 3) or a .npy path, as --positions. clamp=False: as "
+        "--no-clamp. "
+        "progress(stage, "
         "done, "
         "total) may return False to cancel.");
     m.def(

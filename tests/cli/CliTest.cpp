@@ -160,6 +160,32 @@ TEST_F(Cli, TrainRegionsAreChosenUnlessToldAndBadValuesFail) {
     EXPECT_TRUE(outputs(bad).empty());
 }
 
+TEST_F(Cli, FramesThatAreNeverNegativeTrainAClampedModelUnlessNoClamp) {
+    TempDir dir;
+    pmsc::FrameSet light = pmsc::readFrames(shot_->train).frames;
+    light.matrix().array() -= light.matrix().minCoeff();
+    const auto frames = dir.file("light.npy");
+    pmsc::writeFrames(frames, light, pmsc::NpyDtype::Float64);
+    RunResult r =
+        runPmsc(dir, {"train", "--frames", frames, "--out", dir.file("m.pmsc"), "--max-keys", "24"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.out.find("output      clamped at 0"), std::string::npos) << r.out;
+    EXPECT_TRUE(pmsc::readModel(dir.file("m.pmsc")).nonNegative);
+    r = runPmsc(dir, {"inspect", "--json", dir.file("m.pmsc")});
+    EXPECT_NE(r.out.find("\"non_negative\": true"), std::string::npos) << r.out;
+    r = runPmsc(dir, {"train", "--frames", frames, "--out", dir.file("linear.pmsc"), "--max-keys", "24",
+                      "--no-clamp", "--quiet"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_FALSE(pmsc::readModel(dir.file("linear.pmsc")).nonNegative);
+    r = runPmsc(dir, {"inspect", dir.file("linear.pmsc")});
+    EXPECT_EQ(r.out.find("clamped at 0"), std::string::npos) << r.out;
+    // The shot itself has negative values: no clamp.
+    r = runPmsc(
+        dir, {"train", "--frames", shot_->train, "--out", dir.file("s.pmsc"), "--max-keys", "24", "--quiet"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_FALSE(pmsc::readModel(dir.file("s.pmsc")).nonNegative);
+}
+
 TEST_F(Cli, TrainTakesPositionsForItsSentinelsAndBadOnesFail) {
     TempDir dir;
     // Positions from a table of one frame (1, N, 3): the training's first frame.

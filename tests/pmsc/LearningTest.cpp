@@ -289,3 +289,21 @@ TEST(Learning, NewFramesAreHeldOutInSlicesOfTheTrainingsSize) {
     four.slices = 1;
     EXPECT_THROW(pmsc::learn(old, patches(80, 40, 51, 0), four), std::invalid_argument);
 }
+
+TEST(Learning, NewFramesWithANegativeValueLiftTheClampAtZero) {
+    // Patches offset to be >= 0: the model clamps its output; new frames below 0 lift it.
+    pmsc::FrameSet day1 = patches(0, 60, 41, 0), more = patches(60, 20, 41, 0);
+    const double low = std::min(day1.matrix().minCoeff(), more.matrix().minCoeff());
+    day1.matrix().array() -= low;
+    more.matrix().array() -= low;
+    const pmsc::Model old = pmsc::train(day1, options(12));
+    ASSERT_TRUE(old.nonNegative);
+    EXPECT_TRUE(pmsc::learn(old, more).nonNegative);
+    more.values[5] = -0.25;
+    pmsc::LearnReport report;
+    const pmsc::Model learned = pmsc::learn(old, more, {}, &report);
+    EXPECT_FALSE(learned.nonNegative);
+    EXPECT_TRUE(std::any_of(report.warnings.begin(), report.warnings.end(), [](const std::string& w) {
+        return w.find("no longer clamped") != std::string::npos;
+    }));
+}

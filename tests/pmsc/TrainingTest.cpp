@@ -7,10 +7,12 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <set>
 #include <string>
+#include <vector>
 
 namespace {
 
@@ -267,4 +269,77 @@ TEST(Training, TrainMaxPointResidualIsThePmErrorOfTheFinalModel) {
         EXPECT_NEAR(model.trainMaxPointResidual, direct, 1e-12 * (1 + direct)) << "variant " << variant;
         EXPECT_GT(direct, 0.0);
     }
+}
+
+namespace {
+
+/// Low-rank frames shifted so that every value is >= 0 and the smallest is 0 (light, density).
+pmsc::FrameSet nonNegativeFrames(pmsc::Index channels) {
+    const Eigen::MatrixXd m = pmsc::test::lowRank(40 * channels, 30, 5, 77);
+    pmsc::FrameSet frames(m.cols(), 40, channels);
+    frames.matrix() = m.array() - m.minCoeff();
+    return frames;
+}
+
+pmsc::TrainingOptions clampOptions() {
+    pmsc::TrainingOptions o;
+    o.basis = 4;
+    o.maxKeys = 10;
+    o.block = 4;
+    return o;
+}
+
+}  // namespace
+
+TEST(Training, FramesThatAreNeverNegativeMakeAModelWhoseOutputIsClampedAtZero) {
+    const pmsc::FrameSet frames = nonNegativeFrames(3);
+    const pmsc::Model model = pmsc::train(frames, clampOptions());
+    ASSERT_TRUE(model.nonNegative);
+    // Key values far below anything training saw: PM rings negative, the output stops at 0.
+    const pmsc::PointMultiplier pm(model);
+    std::vector<double> keys(static_cast<size_t>(model.keyCount() * 3));
+    for (size_t i = 0; i < keys.size(); ++i) keys[i] = (i % 2 == 0) ? -5.0 : 8.0;
+    std::vector<double> coords(static_cast<size_t>(model.coordCount()));
+    pm.project(keys.data(), coords.data());
+    const Eigen::VectorXd linear =
+        model.mean + model.basis * Eigen::Map<const Eigen::VectorXd>(coords.data(), 4);
+    ASSERT_LT(linear.minCoeff(), -0.1);  // the case is one the clamp changes
+    std::vector<double> all(static_cast<size_t>(linear.size()));
+    pm.reconstruct(coords.data(), all.data());
+    std::vector<pmsc::Index> some{0, 7, 39};
+    std::vector<double> subset(some.size() * 3), range(9);
+    pm.reconstructPoints(coords.data(), some, subset.data());
+    pm.reconstructRange(coords.data(), 5, 3, range.data());
+    for (pmsc::Index i = 0; i < linear.size(); ++i)
+        EXPECT_NEAR(all[size_t(i)], std::max(linear[i], 0.0), 1e-12) << "row " << i;
+    for (size_t i = 0; i < some.size(); ++i)
+        for (pmsc::Index c = 0; c < 3; ++c)
+            EXPECT_NEAR(subset[i * 3 + size_t(c)], all[size_t(some[i] * 3 + c)], 1e-12);
+    for (pmsc::Index i = 0; i < 9; ++i) EXPECT_NEAR(range[size_t(i)], all[size_t(15 + i)], 1e-12);
+}
+
+TEST(Training, ANegativeValueOrNoClampKeepsTheOutputLinear) {
+    pmsc::FrameSet frames = nonNegativeFrames(3);
+    pmsc::TrainingOptions o = clampOptions();
+    o.clampAtZero = false;
+    EXPECT_FALSE(pmsc::train(frames, o).nonNegative);
+    frames.values[123] = -1e-9;
+    EXPECT_FALSE(pmsc::train(frames, clampOptions()).nonNegative);
+}
+
+TEST(Training, ChannelsSharingTheBasisDecideFromTheFramesNotTheirCentredChannels) {
+    pmsc::TrainingOptions o = clampOptions();
+    o.sharedChannels = true;
+    EXPECT_TRUE(pmsc::train(nonNegativeFrames(3), o).nonNegative);
+    o.clampAtZero = false;
+    EXPECT_FALSE(pmsc::train(nonNegativeFrames(3), o).nonNegative);
+}
+
+TEST(Training, ClampAtZeroKeepsNaN) {
+    std::vector<double> v{-1.0, std::nan(""), 2.0, -0.0, 0.5};
+    pmsc::clampAtZero(v.data(), pmsc::Index(v.size()));
+    EXPECT_EQ(v[0], 0.0);
+    EXPECT_TRUE(std::isnan(v[1]));
+    EXPECT_EQ(v[2], 2.0);
+    EXPECT_EQ(v[4], 0.5);
 }

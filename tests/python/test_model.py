@@ -130,6 +130,20 @@ class ModelTest(TempDirTest):
         self.assertEqual(self.model.to_bytes(), cli)
         self.assertEqual(pmsc.train(npy, max_keys=30, tolerance=0.05, seed=3).to_bytes(), cli)
 
+    def test_clamp_is_the_command_lines_no_clamp(self):
+        # Frames that are never negative give a model clamped at 0 unless clamp=False (--no-clamp).
+        self.require_cli()
+        npy = self.path("light.npy")
+        np.save(npy, self.frames - self.frames.min())
+        clamped = pmsc.train(npy, max_keys=30, seed=3)
+        self.assertTrue(clamped.info["non_negative"])
+        run_cli("train", "--frames", npy, "--out", self.path("linear.pmsc"), "--max-keys", 30, "--seed", 3,
+                "--no-clamp", "--quiet")
+        with open(self.path("linear.pmsc"), "rb") as f:
+            linear = f.read()
+        self.assertEqual(pmsc.train(npy, max_keys=30, seed=3, clamp=False).to_bytes(), linear)
+        self.assertFalse(pmsc.Model.from_bytes(linear).info["non_negative"])
+
     def test_positions_give_the_command_lines_sentinels(self):
         # positions= is --positions: an array or a .npy path, the same model bytes as `pmsc train`.
         self.require_cli()

@@ -53,6 +53,7 @@ void expectSameModel(const Model& a, const Model& b, const std::string& what) {
     EXPECT_LT((a.mean - b.mean).cwiseAbs().maxCoeff(), 1e-12);
     EXPECT_NEAR(a.epsMin, b.epsMin, 1e-7 * a.epsMin + 1e-15);
     EXPECT_NEAR(a.totalEnergy, b.totalEnergy, 1e-10 * a.totalEnergy);
+    EXPECT_EQ(a.nonNegative, b.nonNegative);
 }
 
 TrainingOptions smallOptions() {

@@ -301,3 +301,16 @@ TEST(ModelSections, SentinelsRoundTripBitExactAndBadOnesAreRejectedWithTheField)
 }
 
 }  // namespace
+
+TEST(ModelSections, TheClampAtZeroRoundTripsAndABadFlagIsRejected) {
+    Model m = smallModel();
+    EXPECT_FALSE(pmsc::decodeModel(pmsc::encodeModel(m), "m.pmsc").nonNegative);
+    m.nonNegative = true;
+    const std::string good = pmsc::encodeModel(m);
+    EXPECT_TRUE(pmsc::decodeModel(good, "m.pmsc").nonNegative);
+    ASSERT_EQ(std::string(good.data() + kTagAt, 6), "NONNEG");
+    std::string bytes = good;
+    poke<std::uint32_t>(bytes, kPayloadAt, 2);
+    reseal(bytes);
+    expectMessage(bytes, {"section 'NONNEG'", "non-negative flag 2 is not 1"});
+}
