@@ -64,7 +64,7 @@ void panelRows(const Scalar* block, Index m, Index c, const double* coords, cons
 /// A whole panel with C fixed: its kC x kPanel sums stay in registers for the whole pass over
 /// the M columns, so the loop reads the panel once and stores only the results.
 template <int kC, typename Scalar>
-void tileRows(const Scalar* block, Index m, const double* coords, const double* mu, double* o) {
+void tileRows(const Scalar* block, Index m, const double* coords, const double* mu, bool clamp, double* o) {
     using Column = Eigen::Matrix<double, kPanel, 1>;
     // The sums of a tile, channel by channel, in Eigen's fixed-size vectors (registers).
     Column acc[kC];
@@ -76,6 +76,9 @@ void tileRows(const Scalar* block, Index m, const double* coords, const double* 
         for (int ch = 0; ch < kC; ++ch) acc[ch] += column * coords[j * kC + ch];
     }
     Eigen::Map<Eigen::Matrix<double, kC, kPanel>> result(o);
+    // The clamp at 0 (Model::nonNegative) while the sums are in registers; a NaN stays a NaN.
+    if (clamp)
+        for (int ch = 0; ch < kC; ++ch) acc[ch] = (acc[ch].array() < 0.0).select(0.0, acc[ch]);
     for (int ch = 0; ch < kC; ++ch) result.row(ch) = acc[ch].transpose();
 }
 
@@ -85,6 +88,7 @@ void tileRows(const Scalar* block, Index m, const double* coords, const double* 
 struct PanelRows {
     const double* mean;
     Index rows, m, c;
+    bool clamp = false;  ///< clamp the values at 0 (Model::nonNegative)
 };
 
 /// Rows [first, first+count) of `rows`, from their panels.
@@ -123,11 +127,12 @@ void panelReconstruct(const PanelRows& rows_, const Scalar* panels, const double
         double* o = whole ? out + (at - first) * c : scratchOut.data();
         const Scalar* block = panels + panel * m * kPanel;
         if constexpr (kC > 0) {
-            tileRows<kC>(block, m, coords, mu, o);
+            tileRows<kC>(block, m, coords, mu, rows_.clamp, o);
         } else {
             panelRows(block, m, c, coords, mu, acc.data());
             for (Index ch = 0; ch < c; ++ch)
                 for (Index i = 0; i < kPanel; ++i) o[i * c + ch] = acc[ch * kPanel + i];
+            if (rows_.clamp) clampAtZero(o, kPanel * c);
         }
         if (!whole) std::copy(o + lo * c, o + (lo + rows) * c, out + (at - first) * c);
         at += rows;
@@ -301,8 +306,9 @@ void PointMultiplier::reconstructRange(const double* coords, Index first, Index 
     // over the N x M basis for all channels, a third of the (N*C) x M one's memory traffic at
     // C = 3. Channels with rows of their own: each channel's row is a row of the panels, one
     // channel each.
-    const PanelRows rows = model_.sharedChannels ? PanelRows{model_.mean.data(), model_.points, m, c}
-                                                 : PanelRows{model_.mean.data(), model_.points * c, m, 1};
+    const PanelRows rows = model_.sharedChannels
+                               ? PanelRows{model_.mean.data(), model_.points, m, c, model_.nonNegative}
+                               : PanelRows{model_.mean.data(), model_.points * c, m, 1, model_.nonNegative};
     const Index scale = model_.sharedChannels ? 1 : c;
     if (precision_ == BasisPrecision::None)
         throw std::logic_error(
@@ -311,7 +317,6 @@ void PointMultiplier::reconstructRange(const double* coords, Index first, Index 
         panelReconstructC(rows, singlePanels_.data(), coords, first * scale, count * scale, out);
     else
         panelReconstructC(rows, panels_.data(), coords, first * scale, count * scale, out);
-    if (model_.nonNegative) clampAtZero(out, count * c);
 }
 
 void PointMultiplier::keyResiduals(const double* keyValues, const double* coords, double* perKey) const {

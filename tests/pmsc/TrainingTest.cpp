@@ -330,7 +330,21 @@ TEST(Training, ANegativeValueOrNoClampKeepsTheOutputLinear) {
 TEST(Training, ChannelsSharingTheBasisDecideFromTheFramesNotTheirCentredChannels) {
     pmsc::TrainingOptions o = clampOptions();
     o.sharedChannels = true;
-    EXPECT_TRUE(pmsc::train(nonNegativeFrames(3), o).nonNegative);
+    // C = 3 (panels in registers) and C = 5 (the general panel path) clamp alike.
+    for (const pmsc::Index c : {pmsc::Index(3), pmsc::Index(5)}) {
+        const pmsc::Model model = pmsc::train(nonNegativeFrames(c), o);
+        ASSERT_TRUE(model.nonNegative) << c;
+        const pmsc::PointMultiplier pm(model, pmsc::BasisPrecision::Single);
+        std::vector<double> keys(static_cast<size_t>(model.keyCount() * c));
+        for (size_t i = 0; i < keys.size(); ++i) keys[i] = (i % 3 == 0) ? -6.0 : 7.0;
+        std::vector<double> coords(static_cast<size_t>(model.coordCount())), out(static_cast<size_t>(40 * c)),
+            range(static_cast<size_t>(3 * c));
+        pm.project(keys.data(), coords.data());
+        pm.reconstruct(coords.data(), out.data());
+        EXPECT_EQ(*std::min_element(out.begin(), out.end()), 0.0) << c;  // clamped, and something was
+        pm.reconstructRange(coords.data(), 17, 3, range.data());         // a range inside one panel
+        for (size_t i = 0; i < range.size(); ++i) EXPECT_EQ(range[i], out[size_t(17 * c) + i]) << c;
+    }
     o.clampAtZero = false;
     EXPECT_FALSE(pmsc::train(nonNegativeFrames(3), o).nonNegative);
 }
