@@ -41,6 +41,8 @@ import subprocess
 import sys
 import time
 
+from suite_common import under_ci
+
 
 PROG = os.path.splitext(os.path.basename(sys.argv[0]))[0]  # this bench, or blender_rig.py importing it
 
@@ -76,7 +78,7 @@ def numpy_and_blender():
         fail("needs numpy (run it with the system python3)")
     blender = shutil.which("blender")
     if blender is None:
-        if os.environ.get("CI", "") in ("", "false", "0"):
+        if not under_ci():
             print(PROG + ": no blender on PATH: skipped (apt-get install blender)", file=sys.stderr)
             sys.exit(77)
         fail("no blender on PATH (apt-get install blender)")

@@ -13,16 +13,25 @@ def fail(message):
     sys.exit(2)
 
 
+def under_ci():
+    """CI is set to anything but "", "false" or "0" (the rule of tests/common/MissingData.h)."""
+    return os.environ.get("CI", "") not in ("", "false", "0")
+
+
+def skip_or_fail(message):
+    """What a suite does without data it needs: exit 77 (a skip) unless under CI, then fail() (a
+    test that needs data it cannot find fails under CI)."""
+    if not under_ci():
+        print(os.path.splitext(os.path.basename(sys.argv[0]))[0] + ": " + message + ": skipped", file=sys.stderr)
+        sys.exit(77)
+    fail(message)
+
+
 def require_folder(path):
     """A data folder the suite reads: when it is missing, exit 77 (a skip) unless CI is set, then
     fail() (a test that needs data it cannot find fails under CI)."""
-    if os.path.isdir(path):
-        return
-    if os.environ.get("CI", "") in ("", "false", "0"):
-        print(os.path.splitext(os.path.basename(sys.argv[0]))[0] + ": no folder %s: skipped" % path,
-              file=sys.stderr)
-        sys.exit(77)
-    fail("no folder " + path)
+    if not os.path.isdir(path):
+        skip_or_fail("no folder " + path)
 
 
 def add_variant_arguments(parser):

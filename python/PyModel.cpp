@@ -242,7 +242,8 @@ void bindModelViews(ModelClass& c) {
              "Pose-space coordinates (M,) of key values (K, C), or (F, M) of a batch (F, K, C).")
         .def(
             "reconstruct", &reconstruct, "coords"_a, "points"_a = py::none(),
-            "Point values (N, C) from coordinates (M,) — or (F, N, C) from (F, M); only `points` when given.")
+            "Point values (N, C) from coordinates (M,) — or (F, N, C) from (F, M); only `points` when given. "
+            "Clamped at 0 when info['non_negative'] (every training value was >= 0).")
         .def("key_error", &keyError, "keys"_a, "coords"_a = py::none(),
              "The key points' RMS error (the soft cache's measure, data units) of key values (K, C) or a "
              "batch.")

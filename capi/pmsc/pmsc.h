@@ -225,7 +225,9 @@ PMSC_C_API pmsc_status pmsc_multiplier_key_error(const pmsc_multiplier* multipli
 PMSC_C_API pmsc_status pmsc_multiplier_decide(const pmsc_multiplier* multiplier, double key_error,
                                               pmsc_decision* decision) PMSC_C_NOEXCEPT;
 
-/** Every point of the frame: out = mean + basis coords, N*C values. */
+/** Every point of the frame: out = mean + basis coords, N*C values, clamped at 0 when the model
+ *  was trained on values that are all >= 0 (pmsc inspect: "output clamped at 0"), as every
+ *  reconstruction below. */
 PMSC_C_API pmsc_status pmsc_multiplier_reconstruct(const pmsc_multiplier* multiplier, const double* coords,
                                                    size_t coord_count, double* out,
                                                    size_t out_count) PMSC_C_NOEXCEPT;

@@ -8,6 +8,7 @@
 #include "pmsc/RowBlocks.h"
 #include "pmsc/Training.h"
 #include "tests/common/CliRunner.h"
+#include "tests/common/MissingData.h"
 
 #include <gtest/gtest.h>
 #include <Eigen/SVD>
@@ -311,7 +312,7 @@ std::uint64_t baselineAddressSpace(const TempDir& dir) {
 
 TEST(AddressLimit, ATrainingSetTwiceTheLimitTrainsToTheInMemoryModel) {
     if (std::system("command -v prlimit >/dev/null 2>&1") != 0) {
-        if (std::getenv("CI")) FAIL() << "prlimit (util-linux) is missing";
+        if (underCi()) FAIL() << "prlimit (util-linux) is missing";
         GTEST_SKIP() << "prlimit not installed";
     }
     TempDir dir;
@@ -413,8 +414,7 @@ TEST(Cgroup, ATrainingSetTwiceTheLimitStreamsInsideAMemoryCgroup) {
     ASSERT_GE(matrixBytes, 2.0 * double(limit)) << "the test data would not be twice the limit";
     const std::string cgroup = ::geteuid() == 0 ? makeMemoryCgroup(limit) : "";
     if (cgroup.empty()) {
-        if (std::getenv("CI"))
-            FAIL() << "no memory cgroup could be made (needs root and a memory controller)";
+        if (underCi()) FAIL() << "no memory cgroup could be made (needs root and a memory controller)";
         GTEST_SKIP() << "no memory cgroup could be made (needs root and a memory controller)";
     }
     std::printf("cgroup %s: limit %.1f MiB (streaming bound %.1f MiB), matrix %.1f MiB (%.2fx)\n",
@@ -493,8 +493,7 @@ TEST(Cgroup, ReplayCutsItsFramesInFlightToTheCgroup) {
     EXPECT_GT(inFlight(f.out), 8) << f.out;  // 2 x threads where memory allows
     const std::string cgroup = ::geteuid() == 0 ? makeMemoryCgroup(64u << 20) : "";
     if (cgroup.empty()) {
-        if (std::getenv("CI"))
-            FAIL() << "no memory cgroup could be made (needs root and a memory controller)";
+        if (underCi()) FAIL() << "no memory cgroup could be made (needs root and a memory controller)";
         GTEST_SKIP() << "no memory cgroup could be made (needs root and a memory controller)";
     }
     const RunResult r = runPmsc(dir, limited, insideCgroup(cgroup));

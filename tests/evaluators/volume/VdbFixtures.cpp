@@ -1,5 +1,7 @@
 #include "tests/evaluators/volume/VdbFixtures.h"
 
+#include "tests/common/MissingData.h"
+
 #include <openvdb/openvdb.h>
 
 #include <gtest/gtest.h>
@@ -55,9 +57,7 @@ std::string testMesh() {
     const std::string p = std::string(PMSC_ASSIMP_MODELS_DIR) + "/OBJ/WusonOBJ.obj";
     if (std::filesystem::exists(p)) return p;
     // CI installs assimp-testmodels: a missing mesh there is a failure, not a skip.
-    const char* ci = std::getenv("CI");
-    if (ci && std::string(ci) == "true")
-        ADD_FAILURE() << "missing " << p << " (apt-get install assimp-testmodels)";
+    if (pmsc::test::underCi()) ADD_FAILURE() << "missing " << p << " (apt-get install assimp-testmodels)";
     return "";
 }
 
