@@ -172,7 +172,9 @@ TEST(CornellDemoQuick, TheLocalFailThroughExperimentRunsWithFullOrALocalChangeOn
         const bool full = !flags.empty();
         EXPECT_EQ(r.at("full").get<bool>(), full) << flags;
         EXPECT_EQ(r.contains("local_fail_through"), full) << flags;
-        if (full) EXPECT_TRUE(r["local_fail_through"].contains("local_change")) << flags;  // 100 mm or 50 mm
+        if (full) {
+            EXPECT_TRUE(r["local_fail_through"].contains("local_change")) << flags;  // 100 mm or 50 mm
+        }
         EXPECT_EQ(out.find("local fail-through") != std::string::npos, full) << flags << ": " << out;
     }
     std::filesystem::remove_all(dir);
