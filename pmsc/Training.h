@@ -70,10 +70,10 @@ struct TrainingOptions {
     Index sentinels = kDefaultSentinels;
     /// When every training value is >= 0, the model's output is clamped at 0 (Model::nonNegative).
     /// Why on by default: a quantity that never went negative in training (light, density) cannot
-    /// be negative, and max(PM, 0) is then never further from the truth than PM; on the light
-    /// novelty suite it removed the only frame over T, a point where a light outside the trained
-    /// range made PM ring to -0.83 where the light was 0.14 (docs/calibration.md). false: PM stays
-    /// linear (a quantity that may go negative on frames training never saw).
+    /// be negative, and max(PM, 0) is then never further from the truth than PM. On the quick light
+    /// novelty suite the one frame over T without it is a point where a light outside the trained
+    /// range makes PM ring to -0.83 where the light is 0.14; with it, none (docs/calibration.md).
+    /// false: PM stays linear (a quantity that may go negative on frames training never saw).
     bool clampAtZero = true;
 
     // --- learning from misses (`pmsc learn`) ---
