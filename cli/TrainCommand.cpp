@@ -155,14 +155,15 @@ void declareCalibrationOptions(ArgParser& parser, TrainArgs& a) {
         "point positions (N x 3, or more columns whose first three are x, y, z) for values that are "
         "not positions themselves (light): the regions, key neighbours and sentinels read them",
         a.request.positions);
-    parser.option("--sentinels", "S",
-                  "points spread over what the training saw move, computed beside every hit of a model with "
-                  "a tolerance: a hit stands where PM is within 0.8 of the tolerance at each; spread over "
-                  "--positions or the training mean when it is a shape, else drawn in point order, " +
-                      std::to_string(kPointOrderFactor) + "x as many (default " +
-                      std::to_string(options.sentinels) + ", at most 1 point in " +
-                      std::to_string(kSentinelSpacing) + "; 0 = none)",
-                  [&](const std::string& v) { options.sentinels = parseIndex("--sentinels", v, 0); });
+    parser.option(
+        "--sentinels", "S",
+        "points spread over what the training saw move, computed beside every hit of a model with "
+        "a tolerance: a hit stands where PM is within 0.8 of the tolerance at each; spread over "
+        "--positions, the training mean when it is a shape or a training frame when the data deform "
+        "as a surface does, else drawn in point order, " +
+            std::to_string(kPointOrderFactor) + "x as many (default " + std::to_string(options.sentinels) +
+            ", at most 1 point in " + std::to_string(kSentinelSpacing) + "; 0 = none)",
+        [&](const std::string& v) { options.sentinels = parseIndex("--sentinels", v, 0); });
     parser.option(
         "--learn-rank", "R",
         "store what `pmsc learn` needs: R singular vectors (>= M; 2M is a good start), the key "

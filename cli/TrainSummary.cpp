@@ -73,7 +73,8 @@ void printTrainSummary(std::ostream& out, const std::string& modelPath, const Fr
         const Sentinels& s = *model.sentinels;
         out << "  sentinels   " << s.points.size() << ", computed beside every hit: ";
         if (s.source == SentinelSource::PointOrder)
-            out << "drawn in point order (no positions given, and the training mean is not a shape; "
+            out << "drawn in point order (no positions given, and neither the training mean nor its frames "
+                   "are a shape; "
                    "--positions POINTS.npy spreads them over space)\n";
         else
             out << "spread over the " << describe(s.source) << ", every moving point within "

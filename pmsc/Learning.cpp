@@ -257,12 +257,28 @@ void learnedKeyNeighbours(const Model& model, Model& out, LearnReport& report) {
 }
 
 /// The learned model's sentinels (Sentinels.h): chosen again, as many as before, from the learned
-/// mean and basis when they came from the mean or the point order (the new frames may move what
-/// the old ones left still, and the sentinels must cover it); the old ones, less any that became
-/// keys, when they came from positions the user gave.
-void learnedSentinels(const Model& model, Model& out, std::uint64_t seed) {
+/// mean and basis when they came from the mean, a training frame (one of the new frames now) or
+/// the point order (the new frames may move what the old ones left still, and the sentinels must
+/// cover it); the old ones, less any that became keys, when they came from positions the user gave.
+void learnedSentinels(const Model& model, Model& out, const Eigen::Map<const Eigen::MatrixXd>& fresh,
+                      std::uint64_t seed) {
     if (!model.sentinels) return;
     const Index count = static_cast<Index>(model.sentinels->points.size());
+    if (model.sentinels->source == SentinelSource::Frame && out.channels == 3 && !out.sharedChannels) {
+        // The new frames' coordinates in the learned (orthonormal) basis.
+        const Eigen::MatrixXd shape =
+            frameShape(out.mean, out.basis, out.basis.transpose() * (fresh.colwise() - out.mean));
+        if (shape.size() > 0) {
+            Sentinels chosen =
+                farthestPointSentinels(shape, basisMotion(out), out.keyPoints, count, SentinelSource::Frame);
+            if (!chosen.points.empty()) out.sentinels = std::move(chosen);
+            return;
+        }
+        Sentinels chosen =
+            pointOrderSentinels(basisMotion(out), out.keyPoints, kPointOrderFactor * count, seed);
+        if (!chosen.points.empty()) out.sentinels = std::move(chosen);
+        return;
+    }
     if (model.sentinels->source == SentinelSource::Mean && out.channels == 3 && !out.sharedChannels) {
         const Eigen::MatrixXd mean =
             Eigen::Map<const Eigen::MatrixXd>(out.mean.data(), 3, out.points).transpose();
@@ -545,7 +561,7 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
     learnedKeyNeighbours(model, out, report);
     // The draw's seed: the frames seen, so a learn of other frames draws afresh and the same learn
     // draws the same points.
-    learnedSentinels(model, out, static_cast<std::uint64_t>(out.trainFrames));
+    learnedSentinels(model, out, fresh, static_cast<std::uint64_t>(out.trainFrames));
     report.basisAfter = u.basisSize;
     report.largestAngle =
         largestPrincipalAngle(u.basis, model.basis.leftCols(std::min(u.basisSize, model.basisSize())));

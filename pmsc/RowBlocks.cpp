@@ -70,7 +70,8 @@ MatrixBlocks::MatrixBlocks(const Eigen::Ref<const Eigen::MatrixXd>& q, Index cha
         this->centre();
     } else {
         mean_ = Eigen::VectorXd::Zero(q.rows());
-        smallest_ = q.size() > 0 ? q.minCoeff() : 0.0;
+        // The values before any centring are not ours to know: "unknown", as RowBlocks says.
+        smallest_ = -std::numeric_limits<double>::infinity();
     }
 }
 

@@ -88,8 +88,8 @@ public:
     /// (a caller done with its frames saves their size in memory).
     explicit MatrixBlocks(FrameSet&& frames, Index blockPoints = 0);
     /// An already prepared matrix (rows x = p*C + c); with `centre` false it is used as it is
-    /// (mean() is then zero), which is what the per-function entry points (Calibration,
-    /// KeyPointSelector) need.
+    /// (mean() is then zero, smallestValue() unknown), which is what the per-function entry points
+    /// (Calibration, KeyPointSelector) need.
     MatrixBlocks(const Eigen::Ref<const Eigen::MatrixXd>& q, Index channels, bool centre,
                  Index blockPoints = 0);
 

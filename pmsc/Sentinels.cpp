@@ -203,6 +203,69 @@ Sentinels pointOrderSentinels(const Eigen::Ref<const Eigen::VectorXd>& motion, s
     return out;
 }
 
+namespace {
+
+/// Each of up to kShapeSamples points' (evenly spaced in point order) nearest other point in
+/// `shape` (N x 3) at a distance > 0; points with none are left out.
+std::vector<std::pair<Index, Index>> nearestPairs(const Eigen::MatrixXd& shape) {
+    const Index n = shape.rows();
+    const Index samples = std::min(n, kShapeSamples);
+    std::vector<std::pair<Index, Index>> pairs;
+    for (Index k = 0; k < samples; ++k) {
+        const Index i = k * n / samples;
+        const Eigen::RowVector3d at = shape.row(i);
+        double best = std::numeric_limits<double>::infinity();
+        Index nearest = -1;
+        for (Index j = 0; j < n; ++j) {
+            const double d = (shape.row(j) - at).squaredNorm();
+            if (d > 0 && d < best) {
+                best = d;
+                nearest = j;
+            }
+        }
+        if (nearest >= 0) pairs.emplace_back(i, nearest);
+    }
+    return pairs;
+}
+
+}  // namespace
+
+Eigen::MatrixXd frameShape(const Eigen::Ref<const Eigen::VectorXd>& mean,
+                           const Eigen::Ref<const Eigen::MatrixXd>& basis,
+                           const Eigen::Ref<const Eigen::MatrixXd>& coefficients) {
+    const Index n = mean.size() / 3, frames = coefficients.cols();
+    if (mean.size() != 3 * n || basis.rows() != mean.size() || coefficients.rows() != basis.cols())
+        throw std::invalid_argument("frameShape: " + std::to_string(mean.size()) +
+                                    " mean values, a basis of " + std::to_string(basis.rows()) + " x " +
+                                    std::to_string(basis.cols()) + ", " +
+                                    std::to_string(coefficients.rows()) + " coefficients a frame");
+    if (n < 2 || frames == 0) return {};
+    Index nearestToMean = 0;  // the frame nearest the mean (lowest index on ties)
+    for (Index f = 1; f < frames; ++f)
+        if (coefficients.col(f).squaredNorm() < coefficients.col(nearestToMean).squaredNorm())
+            nearestToMean = f;
+    const Eigen::VectorXd frame = mean + basis * coefficients.col(nearestToMean);
+    Eigen::MatrixXd shape = Eigen::Map<const Eigen::MatrixXd>(frame.data(), 3, n).transpose();
+    const std::vector<std::pair<Index, Index>> pairs = nearestPairs(shape);
+    if (pairs.empty()) return {};
+    const Index used = std::min(frames, kShapeFrames);
+    Eigen::MatrixXd c(coefficients.rows(), used);
+    for (Index k = 0; k < used; ++k) c.col(k) = coefficients.col(k * frames / used);
+    std::vector<double> spreads;
+    for (const auto& [i, j] : pairs) {
+        const Eigen::Matrix3Xd apart =
+            ((basis.middleRows(3 * i, 3) - basis.middleRows(3 * j, 3)) * c).colwise() +
+            (mean.segment<3>(3 * i) - mean.segment<3>(3 * j));
+        const Eigen::ArrayXd d = apart.colwise().norm().transpose().array();
+        const double average = d.mean();
+        const double spread = std::sqrt((d - average).square().mean());
+        spreads.push_back(average > 0 ? spread / average : std::numeric_limits<double>::infinity());
+    }
+    const auto middle = spreads.begin() + static_cast<std::ptrdiff_t>(spreads.size() / 2);
+    std::nth_element(spreads.begin(), middle, spreads.end());
+    return *middle <= kMostStretch ? shape : Eigen::MatrixXd();
+}
+
 const char* describe(SentinelSource source) {
     switch (source) {
         case SentinelSource::Given:
@@ -211,14 +274,16 @@ const char* describe(SentinelSource source) {
             return "training mean";
         case SentinelSource::PointOrder:
             return "point order: no positions";
+        case SentinelSource::Frame:
+            return "training frame nearest the mean";
     }
     return "?";
 }
 
 // --- the "SENTINEL" section --------------------------------------------------------------------
 //
-//   u32 source (SentinelSource: 0 given, 1 mean, 2 point order), f64 covering radius, u64 count S,
-//   u64[S] points
+//   u32 source (SentinelSource: 0 given, 1 mean, 2 point order, 3 a training frame), f64 covering radius, u64
+//   count S, u64[S] points
 
 // --- the "SENTNBRS" section (after "SENTINEL") ---------------------------------------------------
 //
@@ -273,7 +338,8 @@ ModelSectionCodec sentinelsSectionCodec() {
             [](ByteReader& in, Model& m) {
                 Sentinels s;
                 const std::uint32_t source = in.u32("sentinels' source");
-                if (source > 2) in.fail("sentinels' source " + std::to_string(source) + " is not 0, 1 or 2");
+                if (source > 3)
+                    in.fail("sentinels' source " + std::to_string(source) + " is not 0, 1, 2 or 3");
                 s.source = static_cast<SentinelSource>(source);
                 s.coveringRadius = in.finite("sentinels' covering radius");
                 if (s.coveringRadius < 0) in.fail("sentinels' covering radius is negative");

@@ -38,6 +38,8 @@ enum class SentinelSource : std::uint32_t {
     Given = 0,       ///< farthest-point samples of positions the user gave (learn keeps them)
     Mean = 1,        ///< farthest-point samples of the training mean, a shape (learn chooses again)
     PointOrder = 2,  ///< one at random in each equal run of moving points (learn chooses again)
+    Frame = 3,       ///< farthest-point samples of a training frame, a shape whose mean is not (frameShape;
+                     ///< learn chooses again from its new frames)
 };
 
 struct Sentinels {
@@ -135,6 +137,34 @@ Sentinels farthestPointSentinels(const Eigen::Ref<const Eigen::MatrixXd>& positi
 /// @throws std::invalid_argument when a key is out of range.
 Sentinels pointOrderSentinels(const Eigen::Ref<const Eigen::VectorXd>& motion, std::span<const Index> keys,
                               Index count, std::uint64_t seed);
+
+/// frameShape's test: at most kShapeSamples points, their nearest neighbours' distances over at
+/// most kShapeFrames frames, and a median relative spread (std / mean) of at most kMostStretch.
+constexpr Index kShapeSamples = 256;
+constexpr Index kShapeFrames = 256;
+constexpr double kMostStretch = 0.1;
+
+/// The positions a 3-channel data set's own frames give it when no positions are given and its
+/// mean is not a shape (a body whose limbs sweep far: the mean folds them together), for the
+/// sentinels: the frame nearest the mean, mean + basis * coefficients.col(f), N x 3, when the data
+/// deform as a surface does, near-isometrically. The test: at up to kShapeSamples points spread in
+/// point order, the distance to the point nearest it in that frame varies over the frames (up to
+/// kShapeFrames, evenly spaced) by a median relative spread (std / mean) of at most kMostStretch.
+/// Empty when it does not (light: the points nearest in one frame's values are not near in the
+/// next) or there is nothing to test. `mean` is N*3, `basis` N*3 x M, `coefficients` M x F (the
+/// frames' coordinates in the basis).
+///
+/// Why: without positions the sentinels are drawn in point order, whose slope check reads runs of
+/// points as neighbours; a skinned body's runs are not near in space as its surface is, and the
+/// check refused 57 of the CMU take 01_01's 509 hits at 2.5% (every one under T). Spread over a
+/// frame the body actually takes, the sentinels cover the body as they cover the face, and the
+/// slope check reads real distances. Why the test and 0.1: on the motion-capture ranges of motion
+/// (bench/mocap_suite.py: skinned tubes, poses swept to +-75 degrees) the median spread is 0.000
+/// (90th percentile 0.03); on light (the light novelty suite's Cornell box and smoke, Blender's
+/// four cubes) it is 0.71-0.89.
+Eigen::MatrixXd frameShape(const Eigen::Ref<const Eigen::VectorXd>& mean,
+                           const Eigen::Ref<const Eigen::MatrixXd>& basis,
+                           const Eigen::Ref<const Eigen::MatrixXd>& coefficients);
 
 /// How a model's sentinels were chosen, for `pmsc inspect` ("positions given to train", ...).
 const char* describe(SentinelSource source);

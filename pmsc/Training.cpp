@@ -709,16 +709,24 @@ void Trainer::keyNeighbours() {
 
 void Trainer::sentinels() {
     // Whatever the key error: the check needs only the tolerance and the computed points. Spread
-    // over positions when there are any (given, or the mean when it is a shape), else over the
-    // point order (Sentinels.h says what each promises).
+    // over positions when there are any (given, the mean when it is a shape, or a training frame
+    // when that is), else over the point order (Sentinels.h says what each promises).
     if (options.sentinels <= 0 || !(options.tolerance > 0)) return;
     const Index count = sentinelCount(options.sentinels, model.points);
     bool given = false;
-    const Eigen::MatrixXd positions = knownPositions(given);
+    Eigen::MatrixXd positions = knownPositions(given);
+    SentinelSource source = given ? SentinelSource::Given : SentinelSource::Mean;
+    if (positions.size() == 0 && model.channels == 3 && !model.sharedChannels) {
+        // A shape whose mean is not one (limbs swept far): a training frame, if the data deform
+        // as a surface does. Frame f is mean + basis * sigma * V^T e_f (U = Q V / sigma).
+        const Index m = model.basisSize();
+        positions = frameShape(model.mean, model.basis,
+                               model.singularValues.head(m).asDiagonal() * svd.v.leftCols(m).transpose());
+        source = SentinelSource::Frame;
+    }
     Sentinels chosen =
         positions.size() > 0
-            ? farthestPointSentinels(positions, basisMotion(model), model.keyPoints, count,
-                                     given ? SentinelSource::Given : SentinelSource::Mean)
+            ? farthestPointSentinels(positions, basisMotion(model), model.keyPoints, count, source)
             : pointOrderSentinels(basisMotion(model), model.keyPoints,
                                   sentinelCount(kPointOrderFactor * options.sentinels, model.points),
                                   options.seed);

@@ -42,6 +42,24 @@ pmsc::FrameSet sheetFrames(Index frames, bool light = false) {
     return set;
 }
 
+/// The same sheet, bent a little and turned about z through +-2 radians: a shape whose frames are
+/// surfaces (each point keeps its distance to its neighbours) but whose mean folds the sheet together.
+pmsc::FrameSet turningSheetFrames(Index frames) {
+    constexpr Index side = 30;
+    pmsc::FrameSet set(frames, side * side, 3);
+    for (Index f = 0; f < frames; ++f) {
+        const double angle = 2 * std::sin(0.37 * double(f)), bend = 0.1 * std::cos(0.23 * double(f));
+        for (Index p = 0; p < side * side; ++p) {
+            const double x = double(p % side) / double(side - 1), y = double(p / side) / double(side - 1);
+            double* v = set.frame(f) + 3 * p;
+            v[0] = std::cos(angle) * x - std::sin(angle) * y;
+            v[1] = std::sin(angle) * x + std::cos(angle) * y;
+            v[2] = bend * std::sin(3.14159 * x);
+        }
+    }
+    return set;
+}
+
 Model trainSheet(bool light = false, double tolerance = 0.01, Index regions = 0, Index sentinels = 0) {
     pmsc::TrainingOptions o;
     o.regions.count = regions;
@@ -278,6 +296,62 @@ TEST(Sentinels, TrainingSpreadsThemOverAShapeWithAPredictedKeyError) {
     EXPECT_EQ(light.sentinels->points.size(), size_t(pmsc::kPointOrderFactor * 20)) << "a draw: more of them";
     EXPECT_FALSE(trainSheet(false, 0, 0, 40).sentinels.has_value()) << "no tolerance: nothing to check";
     EXPECT_FALSE(trainSheet(false, 0.01, 0, 0).sentinels.has_value()) << "--sentinels 0";
+}
+
+TEST(Sentinels, AFrameIsTheShapeOfDataThatDeformAsASurfaceDoes) {
+    // frame f = mean + basis * coefficients.col(f): here the basis is the centred frames and the
+    // coefficients the identity, so every frame is as near the mean and the first one is taken.
+    const auto shapeOf = [](const pmsc::FrameSet& frames) {
+        const Eigen::MatrixXd x = frames.matrix();
+        const Eigen::VectorXd mean = x.rowwise().mean();
+        const Eigen::MatrixXd centred = x.colwise() - mean;
+        return pmsc::frameShape(mean, centred, Eigen::MatrixXd::Identity(frames.frames, frames.frames));
+    };
+    const pmsc::FrameSet turning = turningSheetFrames(40);
+    const Eigen::MatrixXd shape = shapeOf(turning);
+    ASSERT_EQ(shape.rows(), 900);
+    ASSERT_EQ(shape.cols(), 3);
+    const Eigen::MatrixXd first = Eigen::Map<const Eigen::MatrixXd>(turning.frame(0), 3, 900).transpose();
+    EXPECT_LT((shape - first).cwiseAbs().maxCoeff(), 1e-12);
+    EXPECT_EQ(shapeOf(sheetFrames(40, true)).size(), 0)
+        << "light: neighbours in one frame are not in the next";
+    // Stretched: the sheet's x axis scaled by 1 to 3 over the frames is no surface either.
+    pmsc::FrameSet stretched = turningSheetFrames(40);
+    for (Index f = 0; f < 40; ++f)
+        for (Index p = 0; p < 900; ++p) stretched.frame(f)[3 * p] *= 2 + std::sin(0.5 * double(f));
+    EXPECT_EQ(shapeOf(stretched).size(), 0);
+    EXPECT_THROW(
+        pmsc::frameShape(Eigen::VectorXd::Zero(9), Eigen::MatrixXd::Zero(8, 2), Eigen::MatrixXd::Zero(2, 4)),
+        std::invalid_argument);
+    EXPECT_EQ(
+        pmsc::frameShape(Eigen::VectorXd::Zero(9), Eigen::MatrixXd::Zero(9, 2), Eigen::MatrixXd::Zero(2, 0))
+            .size(),
+        0)
+        << "no frames";
+}
+
+TEST(Sentinels, TrainingSpreadsThemOverATrainingFrameWhenTheMeanIsNoShape) {
+    pmsc::TrainingOptions o;
+    o.basis = 6;
+    o.maxKeys = 24;
+    o.tolerance = 0.01;
+    o.regions.count = 0;
+    o.sentinels = 40;
+    o.learnable = true;
+    const Model m = pmsc::train(turningSheetFrames(60), o);
+    ASSERT_TRUE(m.sentinels.has_value());
+    EXPECT_EQ(m.sentinels->source, pmsc::SentinelSource::Frame);
+    EXPECT_EQ(m.sentinels->points.size(), 40u) << "a covering, not a draw: as many as asked";
+    // 40 farthest-point samples of a unit sheet are about 0.1-0.2 apart; over the mean, which folds
+    // the turning sheet towards its centre, they would be much closer.
+    EXPECT_GT(m.sentinels->coveringRadius, 0.08);
+    EXPECT_LT(m.sentinels->coveringRadius, 0.3);
+    EXPECT_NO_THROW(m.validate());
+    const Model learned = pmsc::learn(m, turningSheetFrames(90));
+    ASSERT_TRUE(learned.sentinels.has_value());
+    EXPECT_EQ(learned.sentinels->source, pmsc::SentinelSource::Frame) << "chosen again from a new frame";
+    EXPECT_EQ(learned.sentinels->points.size(), 40u);
+    EXPECT_NO_THROW(learned.validate());
 }
 
 TEST(Sentinels, LearnChoosesThemAgainFromTheLearnedMeanAndBasis) {

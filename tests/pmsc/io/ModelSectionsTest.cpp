@@ -283,9 +283,12 @@ TEST(ModelSections, SentinelsRoundTripBitExactAndBadOnesAreRejectedWithTheField)
     EXPECT_EQ(pmsc::encodeModel(r), good);
     // Payload: u32 source, f64 covering radius, u64 count, u64[count] points.
     std::string bytes = good;
-    poke<std::uint32_t>(bytes, kPayloadAt, 3);
+    poke<std::uint32_t>(bytes, kPayloadAt, 3);  // a training frame
     reseal(bytes);
-    expectMessage(bytes, {"sentinels' source 3"});
+    EXPECT_EQ(pmsc::decodeModel(bytes, "m.pmsc").sentinels->source, pmsc::SentinelSource::Frame);
+    poke<std::uint32_t>(bytes, kPayloadAt, 4);
+    reseal(bytes);
+    expectMessage(bytes, {"sentinels' source 4"});
     bytes = good;
     poke<double>(bytes, kPayloadAt + 4, -1.0);
     reseal(bytes);
