@@ -81,11 +81,12 @@ void checkOptions(const FaceDemoOptions& options) {
         options.maxKeys < 1 || options.maxKeys > 170 || !(options.tolerancePercent > 0) ||
         options.timingFrames < 1 || options.threads < 0 ||
         !(options.featherPercent >= 0 && options.featherPercent < 50) ||
-        !(options.maxLocalFraction > 0 && options.maxLocalFraction <= 1) || options.mixedSequences < 0) {
+        !(options.maxLocalFraction > 0 && options.maxLocalFraction <= 1) || options.mixedSequences < 0 ||
+        options.regionStride < 1) {
         throw InputError(
             "demo face: options out of range (sequences >= 2, novel >= 1, 8 <= minFrames <= maxFrames, "
             "0 < training fraction < 1, basis >= 1, 1 <= keys <= 170, tolerance > 0, threads >= 0, "
-            "0 <= feather < 50, 0 < largest local fraction <= 1, mixed >= 0)");
+            "0 <= feather < 50, 0 < largest local fraction <= 1, mixed >= 0, region stride >= 1)");
     }
 }
 
@@ -165,6 +166,7 @@ TrainedModel trainModel(const DemoRun& run, const FrameSet& training, double per
     if (options.calibrationRule) to.calibrationRule = *options.calibrationRule;
     to.regions.count = options.regions;
     to.regions.featherFraction = options.featherPercent / 100.0;
+    to.regions.frameStride = options.regionStride;
     to.regions.maxLocalFraction = options.maxLocalFraction;
     to.progress = [&](std::string_view stage, double done, double total) {
         return !options.progress ||
