@@ -265,9 +265,11 @@ void learnedSentinels(const Model& model, Model& out, const Eigen::Map<const Eig
     if (!model.sentinels) return;
     const Index count = static_cast<Index>(model.sentinels->points.size());
     if (model.sentinels->source == SentinelSource::Frame && out.channels == 3 && !out.sharedChannels) {
-        // The new frames' coordinates in the learned (orthonormal) basis.
-        const Eigen::MatrixXd shape =
-            frameShape(out.mean, out.basis, out.basis.transpose() * (fresh.colwise() - out.mean));
+        // The new frames' coordinates in the learned (orthonormal) basis, B^T x - B^T mean: no
+        // centred copy of the frames.
+        Eigen::MatrixXd coordinates = out.basis.transpose() * fresh;
+        coordinates.colwise() -= out.basis.transpose() * out.mean;
+        const Eigen::MatrixXd shape = frameShape(out.mean, out.basis, coordinates);
         if (shape.size() > 0) {
             Sentinels chosen =
                 farthestPointSentinels(shape, basisMotion(out), out.keyPoints, count, SentinelSource::Frame);
