@@ -234,6 +234,35 @@ TEST_F(Cli, TrainTakesPositionsForItsSentinelsAndBadOnesFail) {
     EXPECT_TRUE(outputs(bad).empty());
 }
 
+TEST_F(Cli, TrainSpreadsTheSentinelsOverATrainingFrameOfAShapeWhoseMeanIsNone) {
+    // A 20 x 20 sheet turned about z through +-2 radians: each frame is the sheet, the mean folds it.
+    TempDir dir;
+    constexpr pmsc::Index side = 20, frames = 48;
+    pmsc::FrameSet turning(frames, side * side, 3);
+    for (pmsc::Index f = 0; f < frames; ++f) {
+        const double angle = 2 * std::sin(0.37 * double(f)), bend = 0.1 * std::cos(0.23 * double(f));
+        for (pmsc::Index p = 0; p < side * side; ++p) {
+            const double x = double(p % side) / double(side - 1), y = double(p / side) / double(side - 1);
+            double* v = turning.frame(f) + 3 * p;
+            v[0] = std::cos(angle) * x - std::sin(angle) * y;
+            v[1] = std::sin(angle) * x + std::cos(angle) * y;
+            v[2] = bend * std::sin(3.14159 * x);
+        }
+    }
+    const auto framesFile = dir.file("turning.npy");
+    pmsc::writeFrames(framesFile, turning, pmsc::NpyDtype::Float64);
+    RunResult r = runPmsc(dir, {"train", "--frames", framesFile, "--out", dir.file("t.pmsc"), "--max-keys",
+                                "24", "--basis", "6", "--tolerance", "0.01", "--sentinels", "20"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.out.find("spread over the training frame nearest the mean"), std::string::npos) << r.out;
+    r = runPmsc(dir, {"inspect", dir.file("t.pmsc")});
+    EXPECT_NE(r.out.find("sentinels     20 (from the training frame nearest the mean)"), std::string::npos)
+        << r.out;
+    r = runPmsc(dir, {"inspect", "--json", dir.file("t.pmsc")});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_EQ(nlohmann::json::parse(r.out).at("sentinels").at("positions"), "frame");
+}
+
 TEST_F(Cli, TrainSeedsFiducials) {
     TempDir dir;
     const auto model = dir.file("m.pmsc");
