@@ -330,15 +330,20 @@ TEST(Sentinels, AFrameIsTheShapeOfDataThatDeformAsASurfaceDoes) {
         << "no frames";
 }
 
-TEST(Sentinels, TrainingSpreadsThemOverATrainingFrameWhenTheMeanIsNoShape) {
+/// Options of a learnable model with 40 sentinels and no regions.
+pmsc::TrainingOptions learnableWithSentinels(Index basis, Index keys) {
     pmsc::TrainingOptions o;
-    o.basis = 6;
-    o.maxKeys = 24;
+    o.basis = basis;
+    o.maxKeys = keys;
     o.tolerance = 0.01;
     o.regions.count = 0;
     o.sentinels = 40;
     o.learnable = true;
-    const Model m = pmsc::train(turningSheetFrames(60), o);
+    return o;
+}
+
+TEST(Sentinels, TrainingSpreadsThemOverATrainingFrameWhenTheMeanIsNoShape) {
+    const Model m = pmsc::train(turningSheetFrames(60), learnableWithSentinels(6, 24));
     ASSERT_TRUE(m.sentinels.has_value());
     EXPECT_EQ(m.sentinels->source, pmsc::SentinelSource::Frame);
     EXPECT_EQ(m.sentinels->points.size(), 40u) << "a covering, not a draw: as many as asked";
@@ -355,14 +360,7 @@ TEST(Sentinels, TrainingSpreadsThemOverATrainingFrameWhenTheMeanIsNoShape) {
 }
 
 TEST(Sentinels, LearnChoosesThemAgainFromTheLearnedMeanAndBasis) {
-    pmsc::TrainingOptions o;
-    o.basis = 3;
-    o.maxKeys = 12;
-    o.tolerance = 0.01;
-    o.regions.count = 0;
-    o.sentinels = 40;
-    o.learnable = true;
-    const Model m = pmsc::train(sheetFrames(60), o);
+    const Model m = pmsc::train(sheetFrames(60), learnableWithSentinels(3, 12));
     ASSERT_TRUE(m.sentinels.has_value());
     const Model learned = pmsc::learn(m, sheetFrames(90));
     ASSERT_TRUE(learned.sentinels.has_value());
