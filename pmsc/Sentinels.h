@@ -156,7 +156,7 @@ constexpr double kMostStretch = 0.1;
 ///
 /// Why: without positions the sentinels are drawn in point order, whose slope check reads runs of
 /// points as neighbours; a skinned body's runs are not near in space as its surface is, and the
-/// check refused 57 of the CMU take 01_01's 509 hits at 2.5% (every one under T). Spread over a
+/// check would refuse 57 of the CMU take 01_01's 509 hits at 2.5% (every one under T). Spread over a
 /// frame the body actually takes, the sentinels cover the body as they cover the face, and the
 /// slope check reads real distances. Why the test and 0.1: on the motion-capture ranges of motion
 /// (bench/mocap_suite.py: skinned tubes, poses swept to +-75 degrees) the median spread is 0.000
