@@ -57,7 +57,8 @@ std::optional<ReconstructArgs> parseReconstructArgs(const std::vector<std::strin
     parser.option("--needs-ply", "NEEDS.ply",
                   "where the needs go as points (default: REPORT with .ply for .json); needs --points",
                   a.plyPath);
-    parser.option("--eps", "MIN,MAX", "override the model's thresholds (key RMS, data units)",
+    parser.option("--eps", "MIN,MAX",
+                  "override the model's thresholds (in its key error, which pmsc inspect names; data units)",
                   [&](const std::string& v) {
                       const auto eps = parseDoublePair("--eps", v);
                       if (!(eps.first >= 0 && eps.first <= eps.second))

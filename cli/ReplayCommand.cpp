@@ -40,7 +40,8 @@ std::optional<ReplayArgs> parseReplayArgs(const std::vector<std::string>& args) 
     parser.option("--report", "REPORT.json", "report to write", a.request.report, true);
     parser.option("--out", "OUT.npy", "soft-cached frames to write (same shape and dtype as --frames)",
                   a.request.out);
-    parser.option("--eps", "MIN,MAX", "override the model's thresholds (key RMS, data units)",
+    parser.option("--eps", "MIN,MAX",
+                  "override the model's thresholds (in its key error, which pmsc inspect names; data units)",
                   [&](const std::string& v) {
                       const auto eps = parseDoublePair("--eps", v);
                       try {

@@ -1,6 +1,7 @@
 #include "cli/ReplaySummary.h"
 #include "cli/Format.h"
 #include "pmsc/Cross.h"
+#include "pmsc/KeyError.h"
 
 #include <algorithm>
 #include <cstdio>
@@ -37,8 +38,8 @@ void printReplaySummary(std::ostream& out, const Model& model, const app::Replay
         << " keys in " << fmt("%.3f", result.seconds) << " s ("
         << fmt("%.1f", frames / std::max(result.seconds, 1e-9)) << " frames/s, " << result.threads
         << " threads, " << result.framesInFlight << " frames in flight)\n";
-    out << "  eps         [" << fmt("%.6g", result.epsMin) << ", " << fmt("%.6g", result.epsMax)
-        << "] key RMS ("
+    out << "  eps         [" << fmt("%.6g", result.epsMin) << ", " << fmt("%.6g", result.epsMax) << "] "
+        << describe(model.keyErrorNorm) << " ("
         << (epsOverridden         ? "--eps"
             : model.tolerance > 0 ? "calibrated for tolerance " + fmt("%.6g", model.tolerance)
                                   : "model's, not calibrated")

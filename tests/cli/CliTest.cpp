@@ -281,6 +281,9 @@ TEST_F(Cli, ReplayReportHasEveryFieldAndTheOutputMatchesTheInput) {
         dir, {"replay", "--model", model_, "--frames", shot_->test32, "--out", out, "--report", report});
     ASSERT_EQ(r.exitCode, 0) << r.err;
     EXPECT_NE(r.out.find("replayed 60 frames"), std::string::npos) << r.out;
+    // eps in the model's own key error (trained with a tolerance: the predicted point error).
+    EXPECT_NE(r.out.find("] predicted point error (calibrated for tolerance 0.02)"), std::string::npos)
+        << r.out;
     const auto json = nlohmann::json::parse(pmsc::test::readBytes(report));
     const auto& s = json.at("summary");
     for (const char* key :
