@@ -53,7 +53,8 @@ def main():
     p.add_argument("--character", default="", help="more bvh_character.py options, as one string")
     p.add_argument("--train", default="", help="more `pmsc train` options, as one string")
     p.add_argument("--no-positions", action="store_true",
-                   help="train without the rest pose's positions (sentinels drawn in point order)")
+                   help="train without the rest pose's positions (no regions or key neighbours; the sentinels "
+                        "spread over the training frame nearest the mean)")
     p.add_argument("--check", action="store_true")
     p.add_argument("--check-p995", type=float, default=0.005, help="the largest p99.5 point error --check accepts")
     args = p.parse_args()
