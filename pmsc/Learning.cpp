@@ -5,6 +5,7 @@
 #include "pmsc/KeyPointSelector.h"
 #include "pmsc/LearningState.h"
 #include "pmsc/QDeim.h"
+#include "pmsc/RegionChoice.h"
 #include "pmsc/Sentinels.h"
 #include "pmsc/Subspace.h"
 
@@ -256,36 +257,41 @@ void learnedKeyNeighbours(const Model& model, Model& out, LearnReport& report) {
         "train again to get them");
 }
 
-/// The learned model's sentinels (Sentinels.h): chosen again, as many as before, from the learned
-/// mean and basis when they came from the mean, a training frame (one of the new frames now) or
-/// the point order (the new frames may move what the old ones left still, and the sentinels must
-/// cover it); the old ones, less any that became keys, when they came from positions the user gave.
+/// The positions the learned model's sentinels spread over, chosen as training chooses them: the
+/// learned mean when it is a shape, else the new frame nearest it when the new frames deform as a
+/// surface does (frameShape); `source` says which. Empty when neither is.
+Eigen::MatrixXd learnedShape(const Model& out, const Eigen::Map<const Eigen::MatrixXd>& fresh,
+                             SentinelSource& source) {
+    if (out.channels != 3 || out.sharedChannels) return {};
+    source = SentinelSource::Mean;
+    Eigen::MatrixXd shape = meanShape(out, rmsMotion(out));
+    if (shape.size() > 0) return shape;
+    source = SentinelSource::Frame;
+    // The new frames' coordinates in the learned (orthonormal) basis, B^T x - B^T mean: no
+    // centred copy of the frames.
+    Eigen::MatrixXd coordinates = out.basis.transpose() * fresh;
+    coordinates.colwise() -= out.basis.transpose() * out.mean;
+    return frameShape(out.mean, out.basis, coordinates);
+}
+
+/// The learned model's sentinels (Sentinels.h): chosen again, as many as before, when they came
+/// from the mean or a training frame (from the learned mean or a new frame, learnedShape; drawn in
+/// point order when neither is a shape any more) or from the point order (the new frames may move
+/// what the old ones left still, and the sentinels must cover it); the old ones, less any that
+/// became keys, when they came from positions the user gave.
 void learnedSentinels(const Model& model, Model& out, const Eigen::Map<const Eigen::MatrixXd>& fresh,
                       std::uint64_t seed) {
     if (!model.sentinels) return;
     const Index count = static_cast<Index>(model.sentinels->points.size());
-    if (model.sentinels->source == SentinelSource::Frame && out.channels == 3 && !out.sharedChannels) {
-        // The new frames' coordinates in the learned (orthonormal) basis, B^T x - B^T mean: no
-        // centred copy of the frames.
-        Eigen::MatrixXd coordinates = out.basis.transpose() * fresh;
-        coordinates.colwise() -= out.basis.transpose() * out.mean;
-        const Eigen::MatrixXd shape = frameShape(out.mean, out.basis, coordinates);
-        if (shape.size() > 0) {
-            Sentinels chosen =
-                farthestPointSentinels(shape, basisMotion(out), out.keyPoints, count, SentinelSource::Frame);
-            if (!chosen.points.empty()) out.sentinels = std::move(chosen);
-            return;
-        }
+    const SentinelSource was = model.sentinels->source;
+    if (was == SentinelSource::Mean || was == SentinelSource::Frame) {
+        SentinelSource source = was;
+        const Eigen::MatrixXd shape = learnedShape(out, fresh, source);
         Sentinels chosen =
-            pointOrderSentinels(basisMotion(out), out.keyPoints, kPointOrderFactor * count, seed);
-        if (!chosen.points.empty()) out.sentinels = std::move(chosen);
-        return;
-    }
-    if (model.sentinels->source == SentinelSource::Mean && out.channels == 3 && !out.sharedChannels) {
-        const Eigen::MatrixXd mean =
-            Eigen::Map<const Eigen::MatrixXd>(out.mean.data(), 3, out.points).transpose();
-        Sentinels chosen =
-            farthestPointSentinels(mean, basisMotion(out), out.keyPoints, count, SentinelSource::Mean);
+            shape.size() > 0
+                ? farthestPointSentinels(shape, basisMotion(out), out.keyPoints, count, source)
+                : pointOrderSentinels(basisMotion(out), out.keyPoints,
+                                      sentinelCount(kPointOrderFactor * count, out.points), seed);
         if (!chosen.points.empty()) out.sentinels = std::move(chosen);
         return;
     }

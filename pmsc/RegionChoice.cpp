@@ -60,6 +60,11 @@ double basisSupport(const Model& model) {
     return total > 0 ? weighted / total : 1.0;
 }
 
+double rmsMotion(const Model& model) {
+    const double cells = static_cast<double>(std::max<Index>(1, model.points * model.trainFrames));
+    return std::sqrt(model.totalEnergy / cells);
+}
+
 Eigen::MatrixXd meanShape(const Model& model, double rmsMotion) {
     if (model.channels != 3 || model.sharedChannels) return {};
     const Eigen::MatrixXd mean = Eigen::Map<const Eigen::MatrixXd>(model.mean.data(), 3, model.points);

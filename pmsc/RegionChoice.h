@@ -15,6 +15,10 @@ namespace pmsc {
 /// surface deformed whole) is not. In [0, 1].
 double basisSupport(const Model& model);
 
+/// RMS over points and frames of a point's motion about the training mean, from the model's total
+/// energy (the mean-removed matrix's energy per point and frame).
+double rmsMotion(const Model& model);
+
 /// The training mean as N x 3 positions (one row per point) when it is a shape: 3 channels, and
 /// the frames' RMS motion about it (`rmsMotion`) at most kMostMotion of its bounding-box diagonal
 /// (light moves by more: rule 2 of chooseRegions). Empty otherwise.

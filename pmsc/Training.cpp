@@ -354,10 +354,7 @@ struct Trainer {
     void regions();
     /// RMS over points and frames of a point's motion about its mean (the mean-removed matrix's
     /// energy per point and frame; read for 3-channel data only): whether the mean is a shape.
-    double rmsMotion() const {
-        const double cells = static_cast<double>(std::max<Index>(1, model.points * model.trainFrames));
-        return std::sqrt(model.totalEnergy / cells);
-    }
+    double rmsMotion() const { return pmsc::rmsMotion(model); }
     /// The positions of the points the hit check reads (key neighbours, sentinels), N x 3; empty
     /// when the model has no such check or no positions. `given`: they are the user's.
     Eigen::MatrixXd knownPositions(bool& given) const;

@@ -357,6 +357,15 @@ TEST(Sentinels, TrainingSpreadsThemOverATrainingFrameWhenTheMeanIsNoShape) {
     EXPECT_EQ(learned.sentinels->source, pmsc::SentinelSource::Frame) << "chosen again from a new frame";
     EXPECT_EQ(learned.sentinels->points.size(), 40u);
     EXPECT_NO_THROW(learned.validate());
+    // A model whose mean was a shape, learned with frames that turn the sheet: the learned mean
+    // folds the sheet, so learn chooses as training would, from a new frame.
+    const Model flat = pmsc::train(sheetFrames(60), learnableWithSentinels(3, 12));
+    ASSERT_TRUE(flat.sentinels.has_value());
+    ASSERT_EQ(flat.sentinels->source, pmsc::SentinelSource::Mean);
+    const Model turned = pmsc::learn(flat, turningSheetFrames(90));
+    ASSERT_TRUE(turned.sentinels.has_value());
+    EXPECT_EQ(turned.sentinels->source, pmsc::SentinelSource::Frame);
+    EXPECT_NO_THROW(turned.validate());
 }
 
 TEST(Sentinels, LearnChoosesThemAgainFromTheLearnedMeanAndBasis) {
