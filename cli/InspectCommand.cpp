@@ -23,21 +23,6 @@ double capturedBy(const Model& model, Index m) {
     return model.singularValues.head(m).squaredNorm() / model.totalEnergy;
 }
 
-/// The sentinels' positions, as `pmsc inspect --json` names them.
-const char* positionsName(SentinelSource source) {
-    switch (source) {
-        case SentinelSource::Given:
-            return "given";
-        case SentinelSource::Mean:
-            return "mean";
-        case SentinelSource::PointOrder:
-            return "point order";
-        case SentinelSource::Frame:
-            return "frame";
-    }
-    return "?";
-}
-
 /// What `pmsc inspect` was asked.
 struct InspectArgs {
     std::string modelPath;
@@ -114,7 +99,7 @@ void printModelJson(const Model& model, const ModelFileFacts& file) {
         j["sentinels"] = {{"count", model.sentinels->points.size()},
                           {"covering_radius", model.sentinels->coveringRadius},
                           {"neighbours", model.sentinels->perSentinel},
-                          {"positions", positionsName(model.sentinels->source)}};
+                          {"positions", toString(model.sentinels->source)}};
     j["non_negative"] = model.nonNegative;
     if (model.learning)
         j["learning"] = {{"rank", model.learning->maxRank},

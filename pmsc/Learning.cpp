@@ -257,25 +257,8 @@ void learnedKeyNeighbours(const Model& model, Model& out, LearnReport& report) {
         "train again to get them");
 }
 
-/// The positions the learned model's sentinels spread over, chosen as training chooses them: the
-/// learned mean when it is a shape, else the new frame nearest it when the new frames deform as a
-/// surface does (frameShape); `source` says which. Empty when neither is.
-Eigen::MatrixXd learnedShape(const Model& out, const Eigen::Map<const Eigen::MatrixXd>& fresh,
-                             SentinelSource& source) {
-    if (out.channels != 3 || out.sharedChannels) return {};
-    source = SentinelSource::Mean;
-    Eigen::MatrixXd shape = meanShape(out, rmsMotion(out));
-    if (shape.size() > 0) return shape;
-    source = SentinelSource::Frame;
-    // The new frames' coordinates in the learned (orthonormal) basis, B^T x - B^T mean: no
-    // centred copy of the frames.
-    Eigen::MatrixXd coordinates = out.basis.transpose() * fresh;
-    coordinates.colwise() -= out.basis.transpose() * out.mean;
-    return frameShape(out.mean, out.basis, coordinates);
-}
-
 /// The learned model's sentinels (Sentinels.h): chosen again, as many as before, when they came
-/// from the mean or a training frame (from the learned mean or a new frame, learnedShape; drawn in
+/// from the mean or a training frame (from the learned mean or a new frame, sentinelShape; drawn in
 /// point order when neither is a shape any more) or from the point order (the new frames may move
 /// what the old ones left still, and the sentinels must cover it); the old ones, less any that
 /// became keys, when they came from positions the user gave.
@@ -286,7 +269,13 @@ void learnedSentinels(const Model& model, Model& out, const Eigen::Map<const Eig
     const SentinelSource was = model.sentinels->source;
     if (was == SentinelSource::Mean || was == SentinelSource::Frame) {
         SentinelSource source = was;
-        const Eigen::MatrixXd shape = learnedShape(out, fresh, source);
+        // The new frames' coordinates in the learned (orthonormal) basis, B^T x - B^T mean: no
+        // centred copy of the frames.
+        const Eigen::MatrixXd shape = sentinelShape(out, source, [&] {
+            Eigen::MatrixXd coordinates = out.basis.transpose() * fresh;
+            coordinates.colwise() -= out.basis.transpose() * out.mean;
+            return coordinates;
+        });
         Sentinels chosen =
             shape.size() > 0
                 ? farthestPointSentinels(shape, basisMotion(out), out.keyPoints, count, source)

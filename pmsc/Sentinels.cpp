@@ -3,6 +3,7 @@
 #include "pmsc/ByteIO.h"
 #include "pmsc/Model.h"
 #include "pmsc/ModelSections.h"
+#include "pmsc/RegionChoice.h"
 #include "pmsc/RowBlocks.h"
 
 #include <algorithm>
@@ -240,10 +241,8 @@ Eigen::MatrixXd frameShape(const Eigen::Ref<const Eigen::VectorXd>& mean,
                                     std::to_string(basis.cols()) + ", " +
                                     std::to_string(coefficients.rows()) + " coefficients a frame");
     if (n < 2 || frames == 0) return {};
-    Index nearestToMean = 0;  // the frame nearest the mean (lowest index on ties)
-    for (Index f = 1; f < frames; ++f)
-        if (coefficients.col(f).squaredNorm() < coefficients.col(nearestToMean).squaredNorm())
-            nearestToMean = f;
+    Index nearestToMean = 0;  // the frame nearest the mean (Eigen takes the lowest index on ties)
+    coefficients.colwise().squaredNorm().minCoeff(&nearestToMean);
     const Eigen::VectorXd frame = mean + basis * coefficients.col(nearestToMean);
     Eigen::MatrixXd shape = Eigen::Map<const Eigen::MatrixXd>(frame.data(), 3, n).transpose();
     const std::vector<std::pair<Index, Index>> pairs = nearestPairs(shape);
@@ -264,6 +263,31 @@ Eigen::MatrixXd frameShape(const Eigen::Ref<const Eigen::VectorXd>& mean,
     const auto middle = spreads.begin() + static_cast<std::ptrdiff_t>(spreads.size() / 2);
     std::nth_element(spreads.begin(), middle, spreads.end());
     return *middle <= kMostStretch ? shape : Eigen::MatrixXd();
+}
+
+Eigen::MatrixXd sentinelShape(const Model& model, SentinelSource& source,
+                              const std::function<Eigen::MatrixXd()>& coefficients) {
+    if (model.channels != 3 || model.sharedChannels) return {};
+    source = SentinelSource::Mean;
+    Eigen::MatrixXd shape = meanShape(model, rmsMotion(model));
+    if (shape.size() > 0) return shape;
+    // A shape whose mean is not one (limbs swept far): a frame, if the data deform as a surface does.
+    source = SentinelSource::Frame;
+    return frameShape(model.mean, model.basis, coefficients());
+}
+
+const char* toString(SentinelSource source) {
+    switch (source) {
+        case SentinelSource::Given:
+            return "given";
+        case SentinelSource::Mean:
+            return "mean";
+        case SentinelSource::PointOrder:
+            return "point order";
+        case SentinelSource::Frame:
+            return "frame";
+    }
+    return "?";
 }
 
 const char* describe(SentinelSource source) {

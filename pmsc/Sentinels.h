@@ -6,6 +6,7 @@
 #include <Eigen/Core>
 
 #include <cstdint>
+#include <functional>
 #include <span>
 #include <vector>
 
@@ -166,6 +167,15 @@ Eigen::MatrixXd frameShape(const Eigen::Ref<const Eigen::VectorXd>& mean,
                            const Eigen::Ref<const Eigen::MatrixXd>& basis,
                            const Eigen::Ref<const Eigen::MatrixXd>& coefficients);
 
+/// The positions sentinels spread over when none are given, chosen in the same order by training
+/// and learn: the model's mean when it is a shape (meanShape), else frameShape of the frames whose
+/// coordinates in the model's basis `coefficients()` gives (asked only then); `source` says which
+/// (Mean or Frame). Empty for data whose channels are not positions (not 3, or shared).
+Eigen::MatrixXd sentinelShape(const Model& model, SentinelSource& source,
+                              const std::function<Eigen::MatrixXd()>& coefficients);
+
+/// "given" / "mean" / "point order" / "frame": the name `pmsc inspect --json` prints.
+const char* toString(SentinelSource source);
 /// How a model's sentinels were chosen, for `pmsc inspect` ("positions given to train", ...).
 const char* describe(SentinelSource source);
 

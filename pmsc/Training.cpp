@@ -352,9 +352,6 @@ struct Trainer {
     void learningState();
     /// Regions of local fail-through (paper section 9), on the final core.
     void regions();
-    /// RMS over points and frames of a point's motion about its mean (the mean-removed matrix's
-    /// energy per point and frame; read for 3-channel data only): whether the mean is a shape.
-    double rmsMotion() const { return pmsc::rmsMotion(model); }
     /// The positions of the points the hit check reads (key neighbours, sentinels), N x 3; empty
     /// when the model has no such check or no positions. `given`: they are the user's.
     Eigen::MatrixXd knownPositions(bool& given) const;
@@ -667,7 +664,7 @@ void Trainer::regions() {
             report.regions = "none: regions are learned in memory on one process";
             return;
         }
-        const RegionChoice choice = chooseRegions(model, chosen, options.tolerance, rmsMotion());
+        const RegionChoice choice = chooseRegions(model, chosen, options.tolerance, rmsMotion(model));
         report.regions = choice.reason;
         if (choice.count == 0) return;
         chosen.count = choice.count;
@@ -689,7 +686,7 @@ Eigen::MatrixXd Trainer::knownPositions(bool& given) const {
     given = options.regions.positions.size() > 0;
     Eigen::MatrixXd positions =
         given ? options.regions.positions
-              : (model.sharedChannels ? Eigen::MatrixXd() : meanShape(model, rmsMotion()));
+              : (model.sharedChannels ? Eigen::MatrixXd() : meanShape(model, rmsMotion(model)));
     if (positions.rows() != model.points || positions.cols() != 3) return {};
     return positions;
 }
@@ -710,16 +707,18 @@ void Trainer::sentinels() {
     // when that is), else over the point order (Sentinels.h says what each promises).
     if (options.sentinels <= 0 || !(options.tolerance > 0)) return;
     const Index count = sentinelCount(options.sentinels, model.points);
-    bool given = false;
-    Eigen::MatrixXd positions = knownPositions(given);
-    SentinelSource source = given ? SentinelSource::Given : SentinelSource::Mean;
-    if (positions.size() == 0 && model.channels == 3 && !model.sharedChannels) {
-        // A shape whose mean is not one (limbs swept far): a training frame, if the data deform
-        // as a surface does. Frame f is mean + basis * sigma * V^T e_f (U = Q V / sigma).
-        const Index m = model.basisSize();
-        positions = frameShape(model.mean, model.basis,
-                               model.singularValues.head(m).asDiagonal() * svd.v.leftCols(m).transpose());
-        source = SentinelSource::Frame;
+    bool given = options.regions.positions.size() > 0;
+    SentinelSource source = SentinelSource::Given;
+    Eigen::MatrixXd positions;
+    if (given) {
+        positions = knownPositions(given);
+    } else {
+        // The training frames' coordinates in the basis: frame f is mean + basis * sigma * V^T e_f
+        // (U = Q V / sigma).
+        positions = sentinelShape(model, source, [&] {
+            const Index m = model.basisSize();
+            return Eigen::MatrixXd(model.singularValues.head(m).asDiagonal() * svd.v.leftCols(m).transpose());
+        });
     }
     Sentinels chosen =
         positions.size() > 0
