@@ -12,9 +12,6 @@ namespace {
 
 // Decision: the constants of the rule, each from a measurement (docs/local-fail-through.md,
 // "Regions by default", has the tables and the commands).
-// The training mean is a shape when the frames' RMS motion is at most 10% of its diagonal: the ICT
-// face moves by 0.5%, the synthetic surface by 2.3%, the Cornell box's RGB irradiance by 20%.
-constexpr double kMostMotion = 0.1;
 // Regions only when a motion moves at most 25% of the points: the face 14.8% (its novel frames
 // then evaluate 44-48% of the points locally), the synthetic surface, deformed whole, 44.5%.
 constexpr double kMostSupport = 0.25;
@@ -58,19 +55,6 @@ double basisSupport(const Model& model) {
         total += all;
     }
     return total > 0 ? weighted / total : 1.0;
-}
-
-double rmsMotion(const Model& model) {
-    const double cells = static_cast<double>(std::max<Index>(1, model.points * model.trainFrames));
-    return std::sqrt(model.totalEnergy / cells);
-}
-
-Eigen::MatrixXd meanShape(const Model& model, double rmsMotion) {
-    if (model.channels != 3 || model.sharedChannels) return {};
-    const Eigen::MatrixXd mean = Eigen::Map<const Eigen::MatrixXd>(model.mean.data(), 3, model.points);
-    const double diagonal = (mean.rowwise().maxCoeff() - mean.rowwise().minCoeff()).norm();
-    if (!(rmsMotion <= kMostMotion * diagonal)) return {};
-    return mean.transpose();
 }
 
 RegionChoice chooseRegions(const Model& model, const RegionOptions& options, double tolerance,

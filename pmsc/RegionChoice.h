@@ -1,6 +1,7 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include "pmsc/MeanShape.h"  // rmsMotion, the mean as a shape (rule 2)
 #include "pmsc/Model.h"
 #include "pmsc/RegionLearning.h"
 
@@ -14,15 +15,6 @@ namespace pmsc {
 /// the jaw), is local; a calculation where every control moves every point (light in a room, a
 /// surface deformed whole) is not. In [0, 1].
 double basisSupport(const Model& model);
-
-/// RMS over points and frames of a point's motion about the training mean, from the model's total
-/// energy (the mean-removed matrix's energy per point and frame).
-double rmsMotion(const Model& model);
-
-/// The training mean as N x 3 positions (one row per point) when it is a shape: 3 channels, and
-/// the frames' RMS motion about it (`rmsMotion`) at most kMostMotion of its bounding-box diagonal
-/// (light moves by more: rule 2 of chooseRegions). Empty otherwise.
-Eigen::MatrixXd meanShape(const Model& model, double rmsMotion);
 
 /// The regions `pmsc train` learns when not told (RegionOptions::automatic), and why.
 struct RegionChoice {

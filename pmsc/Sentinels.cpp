@@ -1,9 +1,9 @@
 #include "pmsc/Sentinels.h"
 
 #include "pmsc/ByteIO.h"
+#include "pmsc/MeanShape.h"
 #include "pmsc/Model.h"
 #include "pmsc/ModelSections.h"
-#include "pmsc/RegionChoice.h"
 #include "pmsc/RowBlocks.h"
 
 #include <algorithm>
