@@ -73,15 +73,16 @@ struct EngineOptions {
     std::uint64_t memoryLimit = 0;
     FailurePolicy failurePolicy = FailurePolicy::StopRun;
     /// Output points per fail-through branch; 0 = automatic: about 64 branches per frame, at
-    /// least 256 points each. The automatic size depends on the point count only, never on the
-    /// thread count, so the output is bit-identical at any `threads`.
+    /// least 256 points each, or one branch per thread for an evaluator whose calls pay a set-up
+    /// (PointEvaluator::FailThroughShape::callSetUp). The values do not depend on the chunking,
+    /// so the output is bit-identical at any `threads`.
     Index chunkPoints = 0;
     /// > 0: a frame's key points, and the points its hit's check computes (the sentinels), are
     /// evaluated in parallel pieces of this many points instead of one call each. Latency over
     /// throughput: for one frame at a time (an interactive client, `pmsc view`), where the keys and
     /// the check are the calculation every move waits for; a batch run keeps every core busy with
-    /// frames already. Needs an evaluator whose subsets are cheap
-    /// (PointEvaluator::FailThroughShape::cheapSubsets; ignored otherwise). Same values either way.
+    /// frames already. Needs an evaluator whose subsets are cheap and whose calls have no set-up
+    /// of their own (PointEvaluator::FailThroughShape; ignored otherwise). Same values either way.
     Index keyPiecePoints = 0;
     /// What a hit's and a blend's point multiplication read the basis in. Single halves the
     /// memory a hit of a large cache reads, and its time: for outputs stored in float (`pmsc run`

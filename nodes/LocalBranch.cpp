@@ -9,10 +9,14 @@
 
 namespace pmsc::nodes {
 
+Index LocalBranch::piecePoints(const FrameSlot& slot) const {
+    if (pieceCount_ > 0) return (slot.localCount + pieceCount_ - 1) / pieceCount_;
+    return piecePoints_;
+}
+
 Index LocalBranch::messages(const FrameSlot& slot) const {
-    const Index pieces = slot.localCount == 0 ? 0
-                         : piecePoints_ <= 0  ? 1
-                                              : (slot.localCount + piecePoints_ - 1) / piecePoints_;
+    const Index size = piecePoints(slot);
+    const Index pieces = slot.localCount == 0 ? 0 : size <= 0 ? 1 : (slot.localCount + size - 1) / size;
     return regions_.regionCount() + pieces;
 }
 
@@ -29,8 +33,9 @@ void LocalBranch::operator()(FrameSlot& slot, Index message) const {
 }
 
 void LocalBranch::evaluatePiece(FrameSlot& slot, Index piece) const {
-    const Index first = piecePoints_ <= 0 ? 0 : piece * piecePoints_;
-    const Index last = piecePoints_ <= 0 ? slot.localCount : std::min(slot.localCount, first + piecePoints_);
+    const Index size = piecePoints(slot);
+    const Index first = size <= 0 ? 0 : piece * size;
+    const Index last = size <= 0 ? slot.localCount : std::min(slot.localCount, first + size);
     const std::span<const Index> set(slot.localPoints.data() + first, size_t(last - first));
     double* out = slot.localFull.data() + first * channels_;
     const Index order = regions_.regionCount() + piece;  // the lowest failing message names the frame's error

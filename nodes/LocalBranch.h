@@ -15,7 +15,9 @@ namespace pmsc::nodes {
 ///  - messages R .. R+P-1, one per piece: the frame's fully evaluated points (those with
 ///    w_p > 0, the union of the failing regions' fail sets; FrameSlot::localPoints) split into
 ///    P pieces of `piecePoints` (one piece when piecePoints is 0: an evaluator whose subset
-///    poses share work, like the face rig's relax rings, poses the union's closure once).
+///    poses share work, like the face rig's relax rings, poses the union's closure once), or
+///    into `pieceCount` pieces of equal size when that is given (an evaluator whose every call
+///    pays a set-up: one piece per thread).
 ///
 /// Decision: the union, not one evaluation per failing region. On the ICT face's novel set the
 /// failing regions' fail sets held 19,960 points a frame against 14,688 in their union (bands
@@ -29,9 +31,14 @@ public:
     static constexpr const char* kName = "local";
 
     /// @param piecePoints points per piece of the full evaluation; 0 = one piece
+    /// @param pieceCount  > 0: that many pieces (at most one a point) instead of piecePoints
     LocalBranch(const PointEvaluator& evaluator, const RegionMultiplier& regions, Index channels,
-                Index piecePoints)
-        : evaluator_(evaluator), regions_(regions), channels_(channels), piecePoints_(piecePoints) {}
+                Index piecePoints, Index pieceCount = 0)
+        : evaluator_(evaluator),
+          regions_(regions),
+          channels_(channels),
+          piecePoints_(piecePoints),
+          pieceCount_(pieceCount) {}
 
     /// How many branch messages the local frame in `slot` takes (regions, then pieces).
     Index messages(const FrameSlot& slot) const;
@@ -39,11 +46,14 @@ public:
 
 private:
     void evaluatePiece(FrameSlot& slot, Index piece) const;
+    /// Points per piece of the local frame in `slot`; 0 = one piece.
+    Index piecePoints(const FrameSlot& slot) const;
 
     const PointEvaluator& evaluator_;
     const RegionMultiplier& regions_;
     Index channels_;
     Index piecePoints_;
+    Index pieceCount_;
 };
 
 /// The end of a locally failed-through frame, after every branch: the feathered blend

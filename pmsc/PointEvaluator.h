@@ -34,6 +34,11 @@ public:
         /// evaluate() on a subset costs about in proportion to the subset (plus its dependencies),
         /// so local fail-through (only the points of regions that miss) pays off.
         bool cheapSubsets = true;
+        /// Every call pays a set-up its points do not (a child process's frame change, a
+        /// renderer's scene synchronisation and bake set-up): a fail-through asks in as few calls
+        /// as the engine's threads run at once, one chunk per thread, and the keys and a hit's
+        /// check are never cut into pieces.
+        bool callSetUp = false;
     };
 
     virtual ~PointEvaluator() = default;

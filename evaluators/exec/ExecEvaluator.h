@@ -65,6 +65,13 @@ public:
     Index pointCount() const override { return points_; }
     Index channelCount() const override { return channels_; }
     Index frameCount() const override { return frames_; }
+    /// Every request pays the child's set-up for a frame (a renderer's scene synchronisation, a
+    /// rig's evaluation of its cage) besides its points: a fail-through asks once per thread.
+    FailThroughShape failThroughShape() const override {
+        FailThroughShape shape;
+        shape.callSetUp = true;
+        return shape;
+    }
     void evaluate(Index frame, std::span<const Index> points, double* out) const override;
     void evaluateAll(Index frame, double* out) const override;
     FrameSet pointPositions() const override;

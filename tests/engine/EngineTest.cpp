@@ -18,6 +18,7 @@
 #include <cstring>
 #include <map>
 #include <mutex>
+#include <numeric>
 #include <random>
 
 namespace pmsc::engine {
@@ -510,6 +511,74 @@ TEST_F(Fixture, AHitsCheckPointsGoInTheKeysPiecesToo) {
 #else
     EXPECT_LE(pieces, 4) << "in pieces: no call of more than 4 points";
 #endif
+}
+
+/// Delegates to another evaluator, declares that every call pays a set-up
+/// (FailThroughShape::callSetUp), and records the frame and size of every evaluate() call.
+class SetUpCalls : public PointEvaluator {
+public:
+    explicit SetUpCalls(const PointEvaluator& inner) : inner_(inner) {}
+    FailThroughShape failThroughShape() const override {
+        FailThroughShape shape = inner_.failThroughShape();
+        shape.callSetUp = true;
+        return shape;
+    }
+    std::string name() const override { return inner_.name(); }
+    Index pointCount() const override { return inner_.pointCount(); }
+    Index channelCount() const override { return inner_.channelCount(); }
+    Index frameCount() const override { return inner_.frameCount(); }
+    void evaluate(Index frame, std::span<const Index> points, double* out) const override {
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            calls_.emplace_back(frame, static_cast<Index>(points.size()));
+        }
+        inner_.evaluate(frame, points, out);
+    }
+    std::vector<std::pair<Index, Index>> calls() const {
+        std::lock_guard<std::mutex> lock(mutex_);
+        return calls_;
+    }
+
+private:
+    const PointEvaluator& inner_;
+    mutable std::mutex mutex_;
+    mutable std::vector<std::pair<Index, Index>> calls_;
+};
+
+TEST_F(Fixture, AnEvaluatorWhoseCallsPayASetUpFailsThroughInOneCallPerThread) {
+    // Every frame misses (eps 0), or blends (eps 0 to infinity: PM reconstructed in the
+    // fail-through's chunks and blended with the full values): each asks for its keys, then for
+    // the rest of its points, with the same values as in the automatic chunks.
+    for (const bool blend : {false, true}) {
+        auto runWith = [&](const PointEvaluator& e, int threads) {
+            EngineOptions o = options(threads);
+            o.chunkPoints = 0;     // automatic
+            o.keyPiecePoints = 4;  // ignored: each piece would pay the set-up
+            o.policy = SoftCachePolicy(0, blend ? 1e300 : 0);
+            Engine engine(model, e, o);
+            FrameSetSink sink(12, model.points, 3);
+            RunStats stats;
+            withWatchdog(60, "run", [&] { stats = engine.run({0, 12, 1}, sink); });
+            EXPECT_EQ(blend ? stats.blends : stats.misses, 12);
+            return std::vector<double>(sink.values().frame(0),
+                                       sink.values().frame(0) + 12 * model.points * 3);
+        };
+        const std::vector<double> plain = runWith(evaluator, 2);
+        for (const int threads : {1, 2, 3}) {
+            const SetUpCalls counting(evaluator);
+            EXPECT_EQ(runWith(counting, threads), plain) << threads << " threads: the same values";
+            std::map<Index, std::vector<Index>> perFrame;
+            for (const auto& [frame, size] : counting.calls()) perFrame[frame].push_back(size);
+            ASSERT_EQ(perFrame.size(), 12u);
+            for (const auto& [frame, sizes] : perFrame) {
+                EXPECT_EQ(Index(sizes.size()), 1 + threads)
+                    << "frame " << frame << ": the keys, a call per thread";
+                EXPECT_EQ(sizes.front(), model.keyCount()) << "frame " << frame << ": the keys in one call";
+                EXPECT_EQ(std::accumulate(sizes.begin(), sizes.end(), Index(0)), model.points)
+                    << "frame " << frame << ": every point once (the fail-through reuses the keys)";
+            }
+        }
+    }
 }
 
 TEST(EngineLarge, AHitOfALargeFrameReconstructsInBlocksTheSameAtAnyThreadCount) {

@@ -12,6 +12,8 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <map>
+#include <mutex>
 #include <numbers>
 #include <stdexcept>
 #include <string>
@@ -379,6 +381,57 @@ TEST(LocalFailThrough, BitIdenticalAtAnyThreadCount) {
     for (size_t f = 0; f < one.size(); ++f) {
         EXPECT_EQ(one[f].values, four[f].values) << f;
         EXPECT_EQ(one[f].weights, four[f].weights) << f;
+    }
+}
+
+/// The novel sheet declaring that every call pays a set-up (FailThroughShape::callSetUp); counts
+/// the calls of each frame.
+class NovelWithSetUp : public LocalSurface {
+public:
+    NovelWithSetUp() : LocalSurface(40, true, 1000.0) {}
+    FailThroughShape failThroughShape() const override {
+        FailThroughShape shape;
+        shape.callSetUp = true;
+        return shape;
+    }
+    void evaluate(Index frame, std::span<const Index> points, double* out) const override {
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            ++calls_[frame];
+        }
+        LocalSurface::evaluate(frame, points, out);
+    }
+    std::map<Index, Index> calls() const {
+        std::lock_guard<std::mutex> lock(mutex_);
+        return calls_;
+    }
+
+private:
+    mutable std::mutex mutex_;
+    mutable std::map<Index, Index> calls_;
+};
+
+TEST(LocalFailThrough, AnEvaluatorWhoseCallsPayASetUpIsAskedOncePerThreadForALocalFrame) {
+    const Model& model = trainedModel();
+    const auto plain = runNovel(model, true, 2);
+    for (const int threads : {1, 2}) {
+        const NovelWithSetUp novel;
+        pmsc::engine::EngineOptions o;
+        o.threads = threads;
+        pmsc::engine::Engine engine(model, novel, o);
+        CollectingSink sink;
+        engine.run({0, novel.frameCount(), 1}, sink);
+        ASSERT_EQ(sink.frames.size(), plain.size());
+        const auto calls = novel.calls();
+        Index localFrames = 0;
+        for (size_t f = 0; f < plain.size(); ++f) {
+            EXPECT_EQ(sink.frames[f].values, plain[f].values) << f;
+            if (!sink.frames[f].local) continue;
+            ++localFrames;
+            // The keys, the region keys, then at most one piece per thread.
+            EXPECT_LE(calls.at(Index(f)), 2 + threads) << "frame " << f;
+        }
+        EXPECT_GE(localFrames, 30);
     }
 }
 
