@@ -450,11 +450,16 @@ TEST_F(Fixture, KeysInParallelPiecesGiveTheSameFrames) {
     EXPECT_EQ(runWith(0, 1), runWith(2, 2));
 }
 
-/// Delegates to another evaluator and records the size of every evaluate() call.
+/// Delegates to another evaluator and records the frame and size of every evaluate() call;
+/// `setUp` declares that every call pays a set-up (FailThroughShape::callSetUp).
 class CallSizes : public PointEvaluator {
 public:
-    explicit CallSizes(const PointEvaluator& inner) : inner_(inner) {}
-    FailThroughShape failThroughShape() const override { return inner_.failThroughShape(); }
+    explicit CallSizes(const PointEvaluator& inner, bool setUp = false) : inner_(inner), setUp_(setUp) {}
+    FailThroughShape failThroughShape() const override {
+        FailThroughShape shape = inner_.failThroughShape();
+        shape.callSetUp = shape.callSetUp || setUp_;
+        return shape;
+    }
     std::string name() const override { return inner_.name(); }
     Index pointCount() const override { return inner_.pointCount(); }
     Index channelCount() const override { return inner_.channelCount(); }
@@ -462,19 +467,25 @@ public:
     void evaluate(Index frame, std::span<const Index> points, double* out) const override {
         {
             std::lock_guard<std::mutex> lock(mutex_);
-            sizes_.push_back(static_cast<Index>(points.size()));
+            calls_.emplace_back(frame, static_cast<Index>(points.size()));
         }
         inner_.evaluate(frame, points, out);
     }
     Index largest() const {
+        Index most = 0;
+        for (const auto& call : calls()) most = std::max(most, call.second);
+        return most;
+    }
+    std::vector<std::pair<Index, Index>> calls() const {
         std::lock_guard<std::mutex> lock(mutex_);
-        return sizes_.empty() ? 0 : *std::max_element(sizes_.begin(), sizes_.end());
+        return calls_;
     }
 
 private:
     const PointEvaluator& inner_;
+    bool setUp_;
     mutable std::mutex mutex_;
-    mutable std::vector<Index> sizes_;
+    mutable std::vector<std::pair<Index, Index>> calls_;
 };
 
 TEST_F(Fixture, AHitsCheckPointsGoInTheKeysPiecesToo) {
@@ -513,38 +524,6 @@ TEST_F(Fixture, AHitsCheckPointsGoInTheKeysPiecesToo) {
 #endif
 }
 
-/// Delegates to another evaluator, declares that every call pays a set-up
-/// (FailThroughShape::callSetUp), and records the frame and size of every evaluate() call.
-class SetUpCalls : public PointEvaluator {
-public:
-    explicit SetUpCalls(const PointEvaluator& inner) : inner_(inner) {}
-    FailThroughShape failThroughShape() const override {
-        FailThroughShape shape = inner_.failThroughShape();
-        shape.callSetUp = true;
-        return shape;
-    }
-    std::string name() const override { return inner_.name(); }
-    Index pointCount() const override { return inner_.pointCount(); }
-    Index channelCount() const override { return inner_.channelCount(); }
-    Index frameCount() const override { return inner_.frameCount(); }
-    void evaluate(Index frame, std::span<const Index> points, double* out) const override {
-        {
-            std::lock_guard<std::mutex> lock(mutex_);
-            calls_.emplace_back(frame, static_cast<Index>(points.size()));
-        }
-        inner_.evaluate(frame, points, out);
-    }
-    std::vector<std::pair<Index, Index>> calls() const {
-        std::lock_guard<std::mutex> lock(mutex_);
-        return calls_;
-    }
-
-private:
-    const PointEvaluator& inner_;
-    mutable std::mutex mutex_;
-    mutable std::vector<std::pair<Index, Index>> calls_;
-};
-
 TEST_F(Fixture, AnEvaluatorWhoseCallsPayASetUpFailsThroughInOneCallPerThread) {
     // Every frame misses (eps 0), or blends (eps 0 to infinity: PM reconstructed in the
     // fail-through's chunks and blended with the full values): each asks for its keys, then for
@@ -565,7 +544,7 @@ TEST_F(Fixture, AnEvaluatorWhoseCallsPayASetUpFailsThroughInOneCallPerThread) {
         };
         const std::vector<double> plain = runWith(evaluator, 2);
         for (const int threads : {1, 2, 3}) {
-            const SetUpCalls counting(evaluator);
+            const CallSizes counting(evaluator, /*setUp*/ true);
             EXPECT_EQ(runWith(counting, threads), plain) << threads << " threads: the same values";
             std::map<Index, std::vector<Index>> perFrame;
             for (const auto& [frame, size] : counting.calls()) perFrame[frame].push_back(size);
