@@ -308,6 +308,31 @@ std::unique_ptr<engine::FrameSetSink> runEngine(const Model& model, const PointE
     return sink;
 }
 
+TEST(ExecEvaluator, EveryCallPaysASetUpSoAMissedFrameIsAskedForOncePerThread) {
+    const std::string spec = "synthetic:grid=12:frames=30:seed=4";
+    const auto local = makeEvaluator(spec);
+    ExecEvaluator child(options(kPmsc + " serve " + spec));
+    EXPECT_TRUE(child.failThroughShape().callSetUp);
+    EXPECT_FALSE(local->failThroughShape().callSetUp);
+    TrainingOptions t;
+    t.basis = 4;
+    t.maxKeys = 8;
+    const Model model = train(evaluateFrames(*local, 0, 30), t);
+    auto run = [&](const PointEvaluator& e) {
+        engine::EngineOptions o;
+        o.threads = 2;
+        o.policy = SoftCachePolicy{0, 0};  // every frame misses
+        engine::Engine engine(model, e, o);
+        engine::FrameSetSink sink(30, model.points, model.channels);
+        engine.run({0, 30, 1}, sink);
+        EXPECT_EQ(engine.lastStats().misses, 30);
+        return std::vector<double>(sink.values().frame(0),
+                                   sink.values().frame(0) + 30 * model.points * model.channels);
+    };
+    EXPECT_EQ(run(child), run(*local));
+    EXPECT_LE(child.childrenStarted(), 2u) << "one child per thread";
+}
+
 TEST(ExecEvaluator, TheEnginesFailurePoliciesHoldForAChildThatCrashes) {
     const Model model = trainOnCleanFrames();
     ExecEvaluator clean(options(kFault)), crashing(options(kFault + " crash=5"));
