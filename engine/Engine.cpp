@@ -113,14 +113,16 @@ Index automaticChunkPoints(Index outputPoints) {
 /// reconstruction of a range is the whole frame's, bit for bit), so the output stays identical at
 /// any thread count.
 Index chunkPointsOf(const EngineOptions& options, const PointEvaluator::FailThroughShape& shape,
-                    Index outputPoints) {
+                    Index outputPoints, int threads) {
     if (options.chunkPoints > 0) return options.chunkPoints;
     if (shape.chunkPoints > 0) return shape.chunkPoints;
-    if (shape.callSetUp) {
-        const Index threads = options.threads > 0 ? options.threads : tbb::info::default_concurrency();
-        return std::max<Index>(1, (outputPoints + threads - 1) / threads);
-    }
+    if (shape.callSetUp) return std::max<Index>(1, (outputPoints + threads - 1) / threads);
     return automaticChunkPoints(outputPoints);
+}
+
+/// The engine's threads: options.threads, or every core when it is 0.
+int threadCount(const EngineOptions& options) {
+    return options.threads > 0 ? options.threads : tbb::info::default_concurrency();
 }
 
 }  // namespace
@@ -153,10 +155,11 @@ struct Engine::Impl {
           pm(checked(m, e, options), options.basisPrecision),
           policy(options.policy ? *options.policy : SoftCachePolicy(m.epsMin, m.epsMax)),
           chunkPoints(chunkPointsOf(
-              options, shape, options.pointsWanted.empty() ? m.points : Index(options.pointsWanted.size()))),
+              options, shape, options.pointsWanted.empty() ? m.points : Index(options.pointsWanted.size()),
+              threadCount(options))),
           plan(FramePlan::make(m, options.pointsWanted, chunkPoints,
                                options.wholeFrameFailThrough || shape.wholeFrame)),
-          threads(options.threads > 0 ? options.threads : tbb::info::default_concurrency()),
+          threads(threadCount(options)),
           maxInFlight(options.maxFramesInFlight > 0 ? options.maxFramesInFlight : 2 * Index(threads)),
           arena(threads) {
         // A client of onEstimate wants the point multiplication of misses too.

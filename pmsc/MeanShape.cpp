@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace pmsc {
 
@@ -10,12 +11,17 @@ double rmsMotion(const Model& model) {
     return std::sqrt(model.totalEnergy / cells);
 }
 
+double motionShare(const Model& model, double rmsMotion) {
+    const Eigen::Map<const Eigen::MatrixXd> mean(model.mean.data(), 3, model.points);
+    const double diagonal = (mean.rowwise().maxCoeff() - mean.rowwise().minCoeff()).norm();
+    if (diagonal > 0) return rmsMotion / diagonal;
+    return rmsMotion > 0 ? std::numeric_limits<double>::infinity() : 0.0;
+}
+
 Eigen::MatrixXd meanShape(const Model& model, double rmsMotion) {
     if (model.channels != 3 || model.sharedChannels) return {};
-    const Eigen::MatrixXd mean = Eigen::Map<const Eigen::MatrixXd>(model.mean.data(), 3, model.points);
-    const double diagonal = (mean.rowwise().maxCoeff() - mean.rowwise().minCoeff()).norm();
-    if (!(rmsMotion <= kMostMotion * diagonal)) return {};
-    return mean.transpose();
+    if (!(motionShare(model, rmsMotion) <= kMostMotion)) return {};
+    return Eigen::Map<const Eigen::MatrixXd>(model.mean.data(), 3, model.points).transpose();
 }
 
 }  // namespace pmsc

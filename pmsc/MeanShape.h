@@ -14,9 +14,13 @@ inline constexpr double kMostMotion = 0.1;
 /// energy (the mean-removed matrix's energy per point and frame).
 double rmsMotion(const Model& model);
 
+/// The frames' RMS motion `rmsMotion` as a share of the training mean's bounding-box diagonal (3
+/// channels: the mean read as N points); 0 when neither moves, infinity when only the mean is a
+/// point. The mean is a shape when this is at most kMostMotion.
+double motionShare(const Model& model, double rmsMotion);
+
 /// The training mean as N x 3 positions (one row per point) when it is a shape: 3 channels, and
-/// the frames' RMS motion about it (`rmsMotion`) at most kMostMotion of its bounding-box diagonal.
-/// Empty otherwise.
+/// motionShare at most kMostMotion. Empty otherwise.
 Eigen::MatrixXd meanShape(const Model& model, double rmsMotion);
 
 }  // namespace pmsc

@@ -69,10 +69,9 @@ RegionChoice chooseRegions(const Model& model, const RegionOptions& options, dou
         return choice;
     }
     if (options.positions.size() == 0) {
-        const Eigen::MatrixXd mean = Eigen::Map<const Eigen::MatrixXd>(model.mean.data(), 3, model.points);
-        const double diagonal = (mean.rowwise().maxCoeff() - mean.rowwise().minCoeff()).norm();
-        if (!(rmsMotion <= kMostMotion * diagonal)) {
-            choice.reason = "none: the values move by " + percent(diagonal > 0 ? rmsMotion / diagonal : 1.0) +
+        const double share = motionShare(model, rmsMotion);
+        if (!(share <= kMostMotion)) {
+            choice.reason = "none: the values move by " + percent(std::isfinite(share) ? share : 1.0) +
                             " of their mean's extent (RMS), over " + percent(kMostMotion) +
                             ": not point positions";
             return choice;
