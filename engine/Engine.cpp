@@ -72,20 +72,22 @@ struct NodeClock {
     std::atomic<Index> calls{0};
 };
 
-/// Runs `body` and adds its duration to `clock`.
+/// Runs `body` and adds its duration to `clock` (and a call, unless `call` is false: the second
+/// part of a node's call).
 template <class Body>
-auto timed(NodeClock& clock, Body&& body) {
+auto timed(NodeClock& clock, Body&& body, bool call = true) {
     const auto start = Clock::now();
     struct Stop {
         NodeClock& clock;
         Clock::time_point start;
+        bool call;
         ~Stop() {
             clock.nanoseconds.fetch_add(
                 std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - start).count(),
                 std::memory_order_relaxed);
-            clock.calls.fetch_add(1, std::memory_order_relaxed);
+            if (call) clock.calls.fetch_add(1, std::memory_order_relaxed);
         }
-    } stop{clock, start};
+    } stop{clock, start, call};
     return body();
 }
 
@@ -209,6 +211,8 @@ struct Engine::Impl {
         if (o.chunkPoints < 0) {
             throw InputError("engine: chunk size must be >= 0, got " + std::to_string(o.chunkPoints));
         }
+        if (o.estimateBeforeCheck && !o.onEstimate)
+            throw InputError("engine: estimateBeforeCheck needs onEstimate, which it calls");
         return m;
     }
 
@@ -437,8 +441,8 @@ struct Engine::Impl::Graph {
 
     Graph(const Impl& impl, Bodies& bodies, FrameRange range, nodes::RunControl& control, Clocks& clocks,
           Clock::time_point start);
-    /// Hands a frame's point multiplication to EngineOptions::onEstimate.
-    void reportEstimate(const FrameSlot& slot) const;
+    /// Hands a frame's point multiplication to EngineOptions::onEstimate (once per frame).
+    void reportEstimate(FrameSlot& slot) const;
     /// Hands a finished fail-through branch to EngineOptions::onChunk.
     void reportChunk(const ChunkMsg& m) const;
     /// Connects the nodes as drawn above.
@@ -551,7 +555,20 @@ void Engine::Impl::Graph::monitorStep(Token slot, MonitorNode::output_ports_type
         send(slot, std::get<2>(out), slot);
         return;
     }
-    const Route route = timed(clocks[kMonitor], [&] { return bodies.monitor(*slot); });
+    Route route = timed(clocks[kMonitor], [&] { return bodies.monitor.decide(*slot); });
+    if (route == Route::Check) {
+        // A hit whose check points are computed next: an interactive client sees its image first.
+        if (options.estimateBeforeCheck && !control.cancelled()) {
+            timed(
+                clocks[kReconstruct], [&] { bodies.reconstruct.estimate(*slot); }, false);
+            reportEstimate(*slot);
+        }
+        // A run cancelled meanwhile (a client that moved on from the estimate) skips the check.
+        route = control.cancelled()
+                    ? Route::Done
+                    : timed(
+                          clocks[kMonitor], [&] { return bodies.monitor.check(*slot); }, false);
+    }
     if (route == Route::Reconstruct) {
         send(slot, std::get<0>(out), slot);
     } else if (route == Route::FailThrough) {
@@ -576,7 +593,7 @@ void Engine::Impl::Graph::reconstructStep(Token slot, ReconstructNode::output_po
     if (done) {
         send(slot, std::get<0>(out), slot);
     } else {
-        if (options.onEstimate && slot->pmValid) reportEstimate(*slot);
+        if (options.onEstimate && slot->pmValid && !slot->estimated) reportEstimate(*slot);
         sendChunks(slot, std::get<1>(out));
     }
 }
@@ -597,7 +614,8 @@ ChunkMsg Engine::Impl::Graph::blendStep(ChunkMsg m) {
     return m;
 }
 
-void Engine::Impl::Graph::reportEstimate(const FrameSlot& slot) const {
+void Engine::Impl::Graph::reportEstimate(FrameSlot& slot) const {
+    slot.estimated = true;
     FrameEstimate e;
     e.sequence = slot.sequence;
     e.frame = slot.frame;

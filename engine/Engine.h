@@ -35,12 +35,13 @@ struct Progress {
 };
 
 /// A frame that does not hit, as soon as its point multiplication is known and before its
-/// fail-through starts: what an interactive client shows while the full calculation catches up.
-/// The spans are valid only during the call.
+/// fail-through starts: what an interactive client shows while the full calculation catches up
+/// (and, with EngineOptions::estimateBeforeCheck, a hit before its check). The spans are valid
+/// only during the call.
 struct FrameEstimate {
     Index sequence = 0;
     Index frame = 0;
-    CacheState state = CacheState::Miss;  ///< Blend or Miss
+    CacheState state = CacheState::Miss;  ///< Blend or Miss (Hit: a hit before its check)
     double weight = 0;                    ///< weight of the full result the frame will get
     double keyError = 0;
     std::span<const Index> points;   ///< the output's points
@@ -117,6 +118,13 @@ struct EngineOptions {
     /// keepPointMultiplication does). From a worker thread; frames of a range may call it
     /// concurrently. Frames routed region by region (local fail-through) do not call it.
     std::function<void(const FrameEstimate&)> onEstimate;
+    /// With onEstimate: a hit whose check points must be computed (the sentinels, HitCheck) is
+    /// handed to onEstimate, state Hit, before they are; a hit the check refuses then blends
+    /// with weight 0 and its chunks follow, as for any blend. Why: an interactive client (`pmsc
+    /// view`) shows a hit's image while the check runs, as it shows a miss's estimate while the
+    /// full calculation runs, and what it waits for to see the light move is the keys and the
+    /// reconstruction, not the check. The delivered frame is the same either way.
+    bool estimateBeforeCheck = false;
     /// Called as each whole-frame fail-through branch finishes, with its range's final values.
     /// From worker threads, concurrently for the branches of one frame (each has its own range).
     /// Not called after the run was cancelled, nor for local frames, nor for a failed branch.

@@ -10,6 +10,11 @@
 namespace pmsc::nodes {
 
 Route ErrorMonitor::operator()(FrameSlot& slot) const {
+    const Route route = decide(slot);
+    return route == Route::Check ? check(slot) : route;
+}
+
+Route ErrorMonitor::decide(FrameSlot& slot) const {
     if (slot.failed()) return Route::Done;
     if (!slot.keysFinite) {
         slot.keyError = std::numeric_limits<double>::quiet_NaN();
@@ -17,10 +22,9 @@ Route ErrorMonitor::operator()(FrameSlot& slot) const {
         slot.pointsEvaluated = Index(slot.values.size()) / pm_.model().channels;
         return Route::FailThrough;
     }
-    PredictedParts parts;
-    slot.keyError = pm_.keyError(slot.keyValues.data(), slot.coords.data(), &parts);
+    slot.keyError = pm_.keyError(slot.keyValues.data(), slot.coords.data(), &slot.keyErrorParts);
     slot.decision = policy_.decide(slot.keyError);
-    if (evaluator_ != nullptr && check_.needed(slot.decision, parts)) return checkHit(slot, parts);
+    if (evaluator_ != nullptr && check_.needed(slot.decision, slot.keyErrorParts)) return Route::Check;
     if (slot.decision.state == CacheState::Hit) {
         slot.pointsEvaluated = 0;
         return Route::Reconstruct;
@@ -82,8 +86,9 @@ bool ErrorMonitor::checkLocal(FrameSlot& slot, Index& full, Index& checked) cons
     return true;
 }
 
-Route ErrorMonitor::checkHit(FrameSlot& slot, PredictedParts parts) const {
-    const std::vector<Index> points = check_.points(slot.keyValues.data(), slot.coords.data(), parts);
+Route ErrorMonitor::check(FrameSlot& slot) const {
+    const std::vector<Index> points =
+        check_.points(slot.keyValues.data(), slot.coords.data(), slot.keyErrorParts);
     thread_local std::vector<double> values;
     values.resize(points.size() * size_t(pm_.model().channels));
     if (!evaluateInto(slot, points, values.data(), "check points")) return Route::Done;

@@ -16,6 +16,7 @@ enum class Route : int {
     FailThrough = 1,  ///< a blend or a miss: the fail-through branches
     Done = 2,         ///< a failed frame: straight to the sink
     Local = 3,        ///< local fail-through: one branch per region
+    Check = 4,        ///< a hit whose check points must be computed first (ErrorMonitor::check)
 };
 
 /// Step 3 (section 5): the key points' RMS error decides hit / blend / miss
@@ -53,11 +54,16 @@ public:
           piecePoints_(piecePoints),
           check_(pm.model(), pm) {}
 
+    /// The whole decision: decide(), then check() where it asks for one. Never Route::Check.
     Route operator()(FrameSlot& slot) const;
+    /// The decision up to a hit's check: Route::Check for a hit HitCheck::needed, whose check
+    /// points are not computed yet (a caller may show the hit's point multiplication meanwhile).
+    Route decide(FrameSlot& slot) const;
+    /// A frame decide() sent to Route::Check: computes the check's points; a hit, or the whole
+    /// frame (blended with weight 0).
+    Route check(FrameSlot& slot) const;
 
 private:
-    /// A hit HitCheck::needed: computes the check's points; a hit, or the whole frame.
-    Route checkHit(FrameSlot& slot, PredictedParts parts) const;
     /// A local frame: computes the sentinels it would hand back as PM alone (`checked` of them);
     /// the regions of those PM misses fail through too (`full` becomes the new count of points
     /// computed in full). False when the evaluator failed.

@@ -46,7 +46,9 @@ void FrameSlot::reset(Index sequenceNumber, Index frameNumber) {
     keysFinite = true;
     keyError = 0;
     decision = CacheDecision{};
+    keyErrorParts = PredictedParts{};
     pmValid = false;
+    estimated = false;
     local = false;
     localCount = 0;
     regionsEvaluated = false;

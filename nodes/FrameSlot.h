@@ -2,6 +2,7 @@
 #pragma once
 
 #include "nodes/FramePlan.h"
+#include "pmsc/KeyError.h"
 #include "pmsc/RegionMultiplier.h"
 #include "pmsc/SoftCache.h"
 
@@ -50,12 +51,14 @@ struct FrameSlot {
     bool keysFinite = true;         ///< false forces a fail-through of every point
     std::vector<double> coords;     ///< Model::coordCount() pose-space coordinates
     double keyError = 0;            ///< section 5's key-point error (NaN if keys not finite)
+    PredictedParts keyErrorParts;   ///< its parts (the RMS and leave-one-out errors of the keys)
     CacheDecision decision;         ///< hit / blend / miss and the weight of the full result
 
     std::vector<double> values;    ///< output: plan.outputCount() * C
     std::vector<double> scratch;   ///< fail-through / blend workspace (plan.scratchSize())
     std::vector<double> pmValues;  ///< PM result of the output points (only when kept)
     bool pmValid = false;          ///< pmValues holds this frame's PM result
+    bool estimated = false;        ///< EngineOptions::onEstimate has had this frame
 
     std::atomic<Index> chunksLeft{0};  ///< fail-through branches still running
 

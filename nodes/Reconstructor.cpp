@@ -29,7 +29,24 @@ constexpr Index kBlockPoints = 16384;
 
 bool Reconstructor::operator()(FrameSlot& slot) const {
     const bool hit = slot.decision.state == CacheState::Hit;
-    double* out = hit ? slot.values.data() : slot.pmValues.data();
+    if (slot.pmValid) {  // estimate() ran: the same values, computed once
+        if (hit) {
+            slot.values.swap(slot.pmValues);  // both hold outputCount * C; a hit keeps no PM apart
+            slot.pmValid = false;
+        }
+        return hit;
+    }
+    reconstructInto(slot, hit ? slot.values.data() : slot.pmValues.data());
+    slot.pmValid = !hit;
+    return hit;
+}
+
+void Reconstructor::estimate(FrameSlot& slot) const {
+    reconstructInto(slot, slot.pmValues.data());
+    slot.pmValid = true;
+}
+
+void Reconstructor::reconstructInto(const FrameSlot& slot, double* out) const {
     if (plan_.allPoints && plan_.points >= kParallelPoints) {
         const Index n = plan_.points, c = plan_.channels;
         const Index blocks = (n + kBlockPoints - 1) / kBlockPoints;
@@ -42,8 +59,6 @@ bool Reconstructor::operator()(FrameSlot& slot) const {
     } else {
         pm_.reconstructPoints(slot.coords.data(), plan_.outputPoints, out);
     }
-    slot.pmValid = !hit;
-    return hit;
 }
 
 }  // namespace pmsc::nodes

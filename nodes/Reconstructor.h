@@ -16,11 +16,18 @@ public:
     Reconstructor(const PointMultiplier& pm, const FramePlan& plan) : pm_(pm), plan_(plan) {}
 
     /// Writes the PM result into slot.values (a hit), or into slot.pmValues
-    /// when the frame goes on to a fail-through and the PM result is kept.
+    /// when the frame goes on to a fail-through and the PM result is kept. A frame estimate()
+    /// reconstructed already is not reconstructed again: a hit takes the estimate's buffer.
     /// @return true if the frame is finished (a hit), false if it continues to the fail-through
     bool operator()(FrameSlot& slot) const;
+    /// Writes the PM result into slot.pmValues (which must be kept) whatever the decision: the
+    /// estimate of a hit shown before its check (EngineOptions::estimateBeforeCheck).
+    void estimate(FrameSlot& slot) const;
 
 private:
+    /// The PM result of the plan's output points into `out`.
+    void reconstructInto(const FrameSlot& slot, double* out) const;
+
     const PointMultiplier& pm_;
     const FramePlan& plan_;
 };

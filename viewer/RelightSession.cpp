@@ -131,6 +131,7 @@ struct RelightSession::Impl : engine::FrameSink {
     std::mutex emitMutex;
     HalfCache cache, reference;
     Index pointsDone = 0;
+    bool estimateSent = false;  ///< the running request's estimate is in the page's cache
     double encodeMs = 0;
 
     // The request being answered (set by the worker before a run; read by the engine's callbacks).
@@ -176,12 +177,17 @@ struct RelightSession::Impl : engine::FrameSink {
         // The page shows half floats: a float basis halves the memory a hit's reconstruction
         // reads (volume: 81 MB of doubles) and changes no half by more than its last bit.
         o.basisPrecision = BasisPrecision::Single;
+        // A hit's image goes out before its check (the 1,024 sentinels: on the volume 11 ms of a
+        // hit's 21 ms in the server), as a miss's estimate goes out before its branches: the
+        // light moves on the keys' time. The final update says whether the check let it stand.
+        o.estimateBeforeCheck = true;
         o.cancel = &cancel;
         o.onEstimate = [this](const engine::FrameEstimate& f) { sendEstimate(f); };
         o.onChunk = [this](const engine::ChunkFinished& c) { sendChunk(c); };
         engine = std::make_unique<engine::Engine>(model, frames, o);  // checks N and C
         // The full calculation in the same branches, cancelled the same way: no estimate to show.
         o.onEstimate = nullptr;
+        o.estimateBeforeCheck = false;
         o.policy = SoftCachePolicy::alwaysMiss();
         fullEngine = std::make_unique<engine::Engine>(model, frames, std::move(o));
         worker = std::thread([this] { loop(); });
@@ -227,6 +233,7 @@ struct RelightSession::Impl : engine::FrameSink {
         text["weight"] = f.weight;
         text["key_error"] = f.keyError;
         sendRange(cache, std::move(text), 0, f.values, true);
+        estimateSent = true;
     }
 
     void sendChunk(const engine::ChunkFinished& c) {
@@ -245,7 +252,7 @@ struct RelightSession::Impl : engine::FrameSink {
         deliveredState = r.state;
         deliveredWeight = r.weight;
         deliveredKeyError = r.keyError;
-        if (r.state == CacheState::Hit && !fullRun) {
+        if (r.state == CacheState::Hit && !fullRun && !estimateSent) {  // else the cache holds it
             const auto t = Clock::now();
             cache.write(0, r.values);
             encodeMs += msSince(t);
@@ -315,6 +322,7 @@ struct RelightSession::Impl : engine::FrameSink {
                 currentLight = scene.light(r.controls);
                 pointsDone = 0;
                 encodeMs = 0;
+                estimateSent = false;
                 const bool toReference = r.kind == Request::Kind::Reference;
                 target = toReference ? &reference : &cache;
                 targetName = toReference ? "reference" : "cache";
@@ -356,8 +364,12 @@ struct RelightSession::Impl : engine::FrameSink {
             else
                 ++counts.misses;
         }
-        sendFinal(*target, targetName, state, !fullRun && deliveredState == CacheState::Hit,
-                  std::move(timing));
+        bool withValues = false;
+        {
+            std::lock_guard<std::mutex> lock(emitMutex);
+            withValues = !fullRun && deliveredState == CacheState::Hit && !estimateSent;
+        }
+        sendFinal(*target, targetName, state, withValues, std::move(timing));
     }
 
     void receive(const std::string& text) {

@@ -471,6 +471,11 @@ public:
         }
         inner_.evaluate(frame, points, out);
     }
+    /// Records an event of the caller's beside the calls (a negative `size` tells them apart).
+    void mark(Index frame, Index size) const {
+        std::lock_guard<std::mutex> lock(mutex_);
+        calls_.emplace_back(frame, size);
+    }
     Index largest() const {
         Index most = 0;
         for (const auto& call : calls()) most = std::max(most, call.second);
@@ -488,19 +493,24 @@ private:
     mutable std::vector<std::pair<Index, Index>> calls_;
 };
 
+/// `m` with sentinels every 10th point (no key among them), its hits checked at `tolerance`.
+Model withSentinels(Model m, double tolerance) {
+    m.tolerance = tolerance;
+    pmsc::Sentinels s;
+    s.source = pmsc::SentinelSource::PointOrder;
+    for (Index p = 5; p < m.points; p += 10)
+        if (std::find(m.keyPoints.begin(), m.keyPoints.end(), p) == m.keyPoints.end()) s.points.push_back(p);
+    s.coveringRadius = 10;
+    m.sentinels = s;
+    m.validate();
+    return m;
+}
+
 TEST_F(Fixture, AHitsCheckPointsGoInTheKeysPiecesToo) {
     // One frame at a time (pmsc view): the sentinels every hit computes are evaluated in pieces
     // as the keys are, with the same frames as in one call.
-    Model checked = model;
-    checked.tolerance = 1e300;  // every check passes: every frame stays a hit
-    pmsc::Sentinels s;
-    s.source = pmsc::SentinelSource::PointOrder;
-    for (Index p = 5; p < checked.points; p += 10)
-        if (std::find(checked.keyPoints.begin(), checked.keyPoints.end(), p) == checked.keyPoints.end())
-            s.points.push_back(p);
-    s.coveringRadius = 10;
-    checked.sentinels = s;
-    checked.validate();
+    const Model checked = withSentinels(model, 1e300);  // every check passes: every frame stays a hit
+    const pmsc::Sentinels& s = *checked.sentinels;
     auto runWith = [&](Index piece, Index& largest) {
         CallSizes counting(evaluator);
         EngineOptions o = options(2);
@@ -522,6 +532,85 @@ TEST_F(Fixture, AHitsCheckPointsGoInTheKeysPiecesToo) {
 #else
     EXPECT_LE(pieces, 4) << "in pieces: no call of more than 4 points";
 #endif
+}
+
+TEST_F(Fixture, AHitsEstimateBeforeItsCheckComesBetweenTheKeysAndTheSentinelsAndChangesNoFrame) {
+    // pmsc view's order for a hit: keys, the reconstruction handed to onEstimate, then the
+    // sentinels. A hit the check lets stand is delivered as it was shown; one it refuses blends
+    // with weight 0 and is shown once. Either way the frames are those of a run without it.
+    for (const double tolerance : {1e300, 1e-12}) {  // every check passes; every check refuses
+        const Model checked = withSentinels(model, tolerance);
+        const auto sentinels = static_cast<Index>(checked.sentinels->points.size());
+        std::vector<CacheState> states;  // as delivered (the same with and without the option)
+        auto runWith = [&](bool early, std::map<Index, std::vector<double>>& shown, RunStats& stats) {
+            const CallSizes counting(evaluator);
+            EngineOptions o = options(2);
+            o.policy = SoftCachePolicy(1e300, 1e300);  // every key error is a hit's
+            o.estimateBeforeCheck = early;
+            std::mutex m;
+            o.onEstimate = [&](const FrameEstimate& e) {
+                std::lock_guard<std::mutex> lock(m);
+                EXPECT_EQ(shown.count(e.frame), 0u) << "frame " << e.frame << " shown twice";
+                EXPECT_EQ(e.state, early ? CacheState::Hit : CacheState::Blend) << "frame " << e.frame;
+                shown[e.frame].assign(e.values.begin(), e.values.end());
+                counting.mark(e.frame, -1);
+            };
+            Engine engine(checked, counting, o);
+            FrameSetSink sink(6, checked.points, 3);
+            withWatchdog(60, "run", [&] { stats = engine.run({0, 6, 1}, sink); });
+            if (early) {
+                for (Index f = 0; f < 6; ++f) EXPECT_EQ(sink.info()[size_t(f)].state, states[size_t(f)]) << f;
+            } else {
+                for (Index f = 0; f < 6; ++f) states.push_back(sink.info()[size_t(f)].state);
+            }
+            if (early) {
+                std::map<Index, std::vector<Index>> perFrame;
+                for (const auto& [frame, size] : counting.calls()) perFrame[frame].push_back(size);
+                for (const auto& [frame, sizes] : perFrame) {
+                    EXPECT_GE(sizes.size(), 3u) << frame;
+                    if (sizes.size() < 3) continue;
+                    EXPECT_EQ(sizes[0], checked.keyCount()) << "frame " << frame << ": the keys first";
+                    EXPECT_EQ(sizes[1], -1) << "frame " << frame << ": then its image";
+                    EXPECT_EQ(sizes[2], sentinels) << "frame " << frame << ": then the sentinels";
+                }
+            }
+            return std::vector<double>(sink.values().frame(0),
+                                       sink.values().frame(0) + 6 * checked.points * 3);
+        };
+        std::map<Index, std::vector<double>> shownLate, shownEarly;
+        RunStats late, early;
+        const std::vector<double> plain = runWith(false, shownLate, late);
+        EXPECT_EQ(runWith(true, shownEarly, early), plain) << "tolerance " << tolerance;
+        EXPECT_EQ(shownEarly.size(), 6u) << "every hit is shown once, before its check";
+        // At T = 1e-12 the check refuses the frames PM does not reproduce to the last bits.
+        EXPECT_EQ(early.hits + early.blends, 6);
+        EXPECT_EQ(early.blends > 0, tolerance < 1) << "tolerance " << tolerance;
+        for (Index f = 0; f < 6; ++f) {
+            const std::vector<double>& values = shownEarly[f];
+            if (states[size_t(f)] == CacheState::Hit) {
+                EXPECT_EQ(shownLate.count(f), 0u)
+                    << "without the option a hit is not shown before it is delivered";
+                EXPECT_TRUE(std::equal(values.begin(), values.end(),
+                                       plain.begin() + std::ptrdiff_t(f * checked.points * 3)))
+                    << "frame " << f << ": the image shown is the hit delivered";
+            } else {
+                EXPECT_EQ(values, shownLate[f])
+                    << "frame " << f << ": a refused hit's image is its point multiplication";
+            }
+        }
+    }
+}
+
+TEST_F(Fixture, AnEstimateBeforeTheCheckNeedsSomeoneToShowItTo) {
+    EngineOptions o = options(2);
+    o.estimateBeforeCheck = true;
+    try {
+        Engine engine(model, evaluator, o);
+        ADD_FAILURE() << "an estimate with no onEstimate to hand it to was accepted";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("estimateBeforeCheck needs onEstimate"), std::string::npos)
+            << e.what();
+    }
 }
 
 TEST_F(Fixture, AnEvaluatorWhoseCallsPayASetUpFailsThroughInOneCallPerThread) {

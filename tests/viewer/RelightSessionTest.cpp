@@ -2,6 +2,7 @@
 // a page applying the updates ends with the engine's answer (a miss: the full calculation's).
 #include "engine/Engine.h"
 #include "pmsc/Errors.h"
+#include "pmsc/Sentinels.h"
 #include "tests/common/MissingData.h"
 #include "tests/viewer/ViewerFixture.h"
 #include "viewer/HalfCache.h"
@@ -9,6 +10,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
@@ -114,11 +116,25 @@ protected:
         m.epsMax = epsMax;
         return m;
     }
+    /// `m` with sentinels every 10th point (no key among them), its hits checked at `tolerance`.
+    static Model withSentinels(Model m, double tolerance) {
+        m.tolerance = tolerance;
+        Sentinels s;
+        s.source = SentinelSource::PointOrder;
+        for (Index p = 5; p < m.points; p += 10)
+            if (std::find(m.keyPoints.begin(), m.keyPoints.end(), p) == m.keyPoints.end())
+                s.points.push_back(p);
+        s.coveringRadius = 10;
+        m.sentinels = s;
+        m.validate();
+        return m;
+    }
 };
 
-TEST_F(RelightSessionTest, AHitSendsOneFinalHoldingTheReconstruction) {
+TEST_F(RelightSessionTest, AHitWithNothingToCheckSendsOneFinalHoldingTheReconstruction) {
     const auto& v = smallVolume();
     const Model model = withThresholds(1e9, 2e9);
+    ASSERT_FALSE(model.sentinels) << "the small volume's model has no sentinels";
     Page page(v.scene->pointCount());
     RelightSession session(model, *v.scene, 2, page.emitter());
     session.receive(setMessage(1, 100, 30));
@@ -132,6 +148,52 @@ TEST_F(RelightSessionTest, AHitSendsOneFinalHoldingTheReconstruction) {
     const auto expected = halfsOf(engineAnswer(model, *v.scene, {{"azimuth", 100}, {"elevation", 30}}));
     EXPECT_TRUE(std::equal(expected.begin(), expected.end(), page.cache.values().begin()));
     EXPECT_EQ(session.counts().hits, 1u);
+}
+
+TEST_F(RelightSessionTest, AHitShowsItsImageBeforeItsCheckAndConvergesOnIt) {
+    const auto& v = smallVolume();
+    const Model model = withSentinels(withThresholds(1e9, 2e9), 1e300);  // every check passes
+    Page page(v.scene->pointCount());
+    RelightSession session(model, *v.scene, 2, page.emitter());
+    session.receive(setMessage(1, 100, 30));
+    const nlohmann::json last = page.waitFinal(1);
+    EXPECT_EQ(last["state"], "hit");
+    EXPECT_TRUE(last["converged"].get<bool>());
+    EXPECT_TRUE(last["timing_ms"].contains("keys"));
+    // The reconstruction goes out as the estimate, before the sentinels are computed; the final
+    // says the check let it stand and carries no values again.
+    const auto updates = page.of(1);
+    ASSERT_EQ(updates.size(), 2u);
+    EXPECT_EQ(updates[0].text["phase"], "estimate");
+    EXPECT_EQ(updates[0].text["state"], "hit");
+    EXPECT_EQ(updates[0].halfs.size(), size_t(v.scene->pointCount() * 3));
+    EXPECT_TRUE(updates[1].halfs.empty());
+    EXPECT_EQ(updates[1].text["checksum"], updates[0].text["checksum"]);
+    const auto expected = halfsOf(engineAnswer(model, *v.scene, {{"azimuth", 100}, {"elevation", 30}}));
+    EXPECT_TRUE(std::equal(expected.begin(), expected.end(), page.cache.values().begin()));
+    EXPECT_EQ(session.counts().hits, 1u);
+}
+
+TEST_F(RelightSessionTest, AHitItsCheckRefusesConvergesToTheEnginesBlendAfterItsImage) {
+    const auto& v = smallVolume();
+    // Every sentinel is off by more than 0.8 T: the check refuses the hit.
+    const Model model = withSentinels(withThresholds(1e9, 2e9), 1e-12);
+    const Index n = v.scene->pointCount();
+    Page page(n);
+    RelightSession session(model, *v.scene, 2, page.emitter());
+    session.receive(setMessage(2, 100, 30));
+    const nlohmann::json last = page.waitFinal(2);
+    EXPECT_EQ(last["state"], "blend");
+    const auto updates = page.of(2);
+    ASSERT_GE(updates.size(), 3u);
+    EXPECT_EQ(updates.front().text["phase"], "estimate");
+    EXPECT_EQ(updates.front().text["state"], "hit");
+    EXPECT_EQ(updates[1].text["phase"], "chunk");
+    EXPECT_EQ(updates[1].text["state"], "blend");
+    EXPECT_TRUE(updates.back().halfs.empty());
+    const auto expected = halfsOf(engineAnswer(model, *v.scene, {{"azimuth", 100}, {"elevation", 30}}));
+    EXPECT_TRUE(std::equal(expected.begin(), expected.end(), page.cache.values().begin()));
+    EXPECT_EQ(session.counts().blends, 1u);
 }
 
 TEST_F(RelightSessionTest, AMissShowsTheEstimateThenConvergesToTheFullCalculation) {

@@ -241,7 +241,12 @@ async function start() {
       if (frame.target === 'cache' && frame.move) {
         const move = frame.move;
         move.convergedMs = at - frame.sentAt;
-        panel.showConverged(frame.state === 'hit' ? `hit: ${move.convergedMs.toFixed(1)} ms`
+        // A hit's first image is its estimate, shown before its check: the state and the server's
+        // timing of the whole request are the final's (a hit the check refused converges a blend).
+        move.state = frame.state;
+        move.serverTiming ??= event.serverTiming;
+        panel.showConverged(frame.state === 'hit'
+          ? `hit: checked in ${move.convergedMs.toFixed(1)} ms (first image ${move.firstImageMs.toFixed(1)} ms)`
           : `converged in ${move.convergedMs.toFixed(1)} ms (first image ${move.firstImageMs.toFixed(1)} ms)`);
       }
     }
@@ -346,7 +351,7 @@ async function start() {
       if (update.phase === 'estimate' || update.phase === 'final' || update.phase === 'chunk')
         drawnEvents.push({frame, kind: 'first', phase: update.phase, arrivedAt: start,
           serverMs: update.timing_ms?.since_request, serverTiming: update.timing_ms, arrival: update.arrival});
-      if (update.phase === 'final') drawnEvents.push({frame, kind: 'converged'});
+      if (update.phase === 'final') drawnEvents.push({frame, kind: 'converged', serverTiming: update.timing_ms});
       placeLight(update.light);
       if (held) heldUpdate = update;  // the panel stays with the held image too
       else showUpdate(update);

@@ -194,12 +194,17 @@ async function main() {
     check('page cache checksum equals the server\'s for every final (and estimate)', badChecksums.length === 0, {mismatched: badChecksums});
     const unchanged = hashes.slice(1).filter((h, i) => h === hashes[i]).length;
     check('canvas changes as the light moves', unchanged === 0, {samples: hashes.length, unchanged});
-    const byState = {};
-    for (const r of moves) (byState[r.state] ??= []).push(r.firstImageMs);
+    const byState = {}, convergedByState = {};
+    for (const r of moves) {
+      (byState[r.state] ??= []).push(r.firstImageMs);
+      (convergedByState[r.state] ??= []).push(r.convergedMs);
+    }
     result.latency = {
       firstImageMs: summary(moves.map(r => r.firstImageMs)),
       convergedMs: summary(moves.map(r => r.convergedMs)),
       firstImageByState: Object.fromEntries(Object.entries(byState).map(([s, v]) => [s, summary(v)])),
+      // A hit's first image is shown before its check; converged is the checked image.
+      convergedByState: Object.fromEntries(Object.entries(convergedByState).map(([s, v]) => [s, summary(v)])),
     };
     // The first image's latency split: the server's own time, the page's (update arrived to drawn).
     const recorded = await page.evaluate(k => window.pmscView.stats.moves.slice(-k), options.moves);
@@ -221,7 +226,7 @@ async function main() {
       frameWait: summary(hitMoves.map(m => m.frameWaitMs).filter(Number.isFinite)),
     };
     // The server's part by engine node (its final update's timing_ms: each node's thread time, the
-    // engine's wall time, the encoding), for the hits whose first image is their final.
+    // engine's wall time, the encoding): the whole request's, the check after the image included.
     const timings = hitMoves.map(m => m.serverTiming).filter(t => t);
     const nodeNames = [...new Set(timings.flatMap(t => Object.keys(t)))];
     result.latency.hitServerMs = Object.fromEntries(nodeNames.map(n =>
