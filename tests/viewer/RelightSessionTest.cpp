@@ -131,47 +131,35 @@ protected:
     }
 };
 
-TEST_F(RelightSessionTest, AHitWithNothingToCheckSendsOneFinalHoldingTheReconstruction) {
+TEST_F(RelightSessionTest, AHitSendsItsReconstructionOnceAndBeforeItsCheck) {
+    // Without sentinels a hit has nothing to check: one final holding every point. With them the
+    // reconstruction goes out as the estimate, before the sentinels are computed, and the final
+    // says the check let it stand, without the values again.
     const auto& v = smallVolume();
-    const Model model = withThresholds(1e9, 2e9);
-    ASSERT_FALSE(model.sentinels) << "the small volume's model has no sentinels";
-    Page page(v.scene->pointCount());
-    RelightSession session(model, *v.scene, 2, page.emitter());
-    session.receive(setMessage(1, 100, 30));
-    const nlohmann::json last = page.waitFinal(1);
-    EXPECT_EQ(last["state"], "hit");
-    EXPECT_TRUE(last["converged"].get<bool>());
-    EXPECT_TRUE(last["timing_ms"].contains("keys"));
-    const auto updates = page.of(1);
-    ASSERT_EQ(updates.size(), 1u);
-    EXPECT_EQ(updates[0].halfs.size(), size_t(v.scene->pointCount() * 3));
-    const auto expected = halfsOf(engineAnswer(model, *v.scene, {{"azimuth", 100}, {"elevation", 30}}));
-    EXPECT_TRUE(std::equal(expected.begin(), expected.end(), page.cache.values().begin()));
-    EXPECT_EQ(session.counts().hits, 1u);
-}
-
-TEST_F(RelightSessionTest, AHitShowsItsImageBeforeItsCheckAndConvergesOnIt) {
-    const auto& v = smallVolume();
-    const Model model = withSentinels(withThresholds(1e9, 2e9), 1e300);  // every check passes
-    Page page(v.scene->pointCount());
-    RelightSession session(model, *v.scene, 2, page.emitter());
-    session.receive(setMessage(1, 100, 30));
-    const nlohmann::json last = page.waitFinal(1);
-    EXPECT_EQ(last["state"], "hit");
-    EXPECT_TRUE(last["converged"].get<bool>());
-    EXPECT_TRUE(last["timing_ms"].contains("keys"));
-    // The reconstruction goes out as the estimate, before the sentinels are computed; the final
-    // says the check let it stand and carries no values again.
-    const auto updates = page.of(1);
-    ASSERT_EQ(updates.size(), 2u);
-    EXPECT_EQ(updates[0].text["phase"], "estimate");
-    EXPECT_EQ(updates[0].text["state"], "hit");
-    EXPECT_EQ(updates[0].halfs.size(), size_t(v.scene->pointCount() * 3));
-    EXPECT_TRUE(updates[1].halfs.empty());
-    EXPECT_EQ(updates[1].text["checksum"], updates[0].text["checksum"]);
-    const auto expected = halfsOf(engineAnswer(model, *v.scene, {{"azimuth", 100}, {"elevation", 30}}));
-    EXPECT_TRUE(std::equal(expected.begin(), expected.end(), page.cache.values().begin()));
-    EXPECT_EQ(session.counts().hits, 1u);
+    ASSERT_FALSE(smallVolume().model.sentinels) << "the small volume's model has no sentinels";
+    for (const bool checked : {false, true}) {
+        const Model plain = withThresholds(1e9, 2e9);
+        const Model model = checked ? withSentinels(plain, 1e300) : plain;  // every check passes
+        Page page(v.scene->pointCount());
+        RelightSession session(model, *v.scene, 2, page.emitter());
+        session.receive(setMessage(1, 100, 30));
+        const nlohmann::json last = page.waitFinal(1);
+        EXPECT_EQ(last["state"], "hit");
+        EXPECT_TRUE(last["converged"].get<bool>());
+        EXPECT_TRUE(last["timing_ms"].contains("keys"));
+        const auto updates = page.of(1);
+        ASSERT_EQ(updates.size(), checked ? 2u : 1u);
+        EXPECT_EQ(updates[0].text["phase"], checked ? "estimate" : "final");
+        EXPECT_EQ(updates[0].text["state"], "hit");
+        EXPECT_EQ(updates[0].halfs.size(), size_t(v.scene->pointCount() * 3));
+        if (checked) {
+            EXPECT_TRUE(updates[1].halfs.empty());
+            EXPECT_EQ(updates[1].text["checksum"], updates[0].text["checksum"]);
+        }
+        const auto expected = halfsOf(engineAnswer(model, *v.scene, {{"azimuth", 100}, {"elevation", 30}}));
+        EXPECT_TRUE(std::equal(expected.begin(), expected.end(), page.cache.values().begin()));
+        EXPECT_EQ(session.counts().hits, 1u);
+    }
 }
 
 TEST_F(RelightSessionTest, AHitItsCheckRefusesConvergesToTheEnginesBlendAfterItsImage) {
