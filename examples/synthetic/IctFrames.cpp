@@ -192,4 +192,17 @@ FrameSet poseIctFrames(const IctRig& rig, Index frames, unsigned seed,
     return out;
 }
 
+FrameSet poseIctSegments(const IctRig& rig, Index framesPerSegment, unsigned seed,
+                         const std::vector<std::string>& without,
+                         const std::vector<std::vector<std::pair<std::string, double>>>& holds) {
+    if (holds.empty()) throw InputError("no segments to pose");
+    FrameSet out(framesPerSegment * static_cast<Index>(holds.size()), rig.points, 3);
+    for (std::size_t h = 0; h < holds.size(); ++h) {
+        const FrameSet segment = poseIctFrames(rig, framesPerSegment, seed, without, holds[h]);
+        std::copy(segment.values.begin(), segment.values.end(),
+                  out.values.begin() + static_cast<std::ptrdiff_t>(h * segment.values.size()));
+    }
+    return out;
+}
+
 }  // namespace pmsc::synthetic

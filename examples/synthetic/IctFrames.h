@@ -61,4 +61,13 @@ FrameSet poseIctFrames(const IctRig& rig, Index frames, unsigned seed,
                        const std::vector<std::string>& without = {},
                        const std::vector<std::pair<std::string, double>>& hold = {});
 
+/// Segments of one take, one after another: for each entry of `holds`, poseIctFrames(rig,
+/// framesPerSegment, seed, without, that entry), that is the take's frames 0 to
+/// framesPerSegment - 1 with those shapes held. A held weight overrides `without`. A test set of
+/// many held controls thus comes from one load of the rig, which is most of a short set's time.
+/// @throws InputError as poseIctFrames, or for no segments.
+FrameSet poseIctSegments(const IctRig& rig, Index framesPerSegment, unsigned seed,
+                         const std::vector<std::string>& without,
+                         const std::vector<std::vector<std::pair<std::string, double>>>& holds);
+
 }  // namespace pmsc::synthetic

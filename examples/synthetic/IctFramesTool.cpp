@@ -1,8 +1,11 @@
 // pmsc_ict_frames --data DIR --out F.npy --frames N --seed S [--dtype float32|float64]
-//                 [--without SHAPE,SHAPE...] [--hold SHAPE=W,SHAPE=W...]
+//                 [--without SHAPE,SHAPE...] [--hold SHAPE=W,SHAPE=W... [--hold ...]]
 //
 // --without holds blendshapes at 0 (a control the training set never moves); --hold holds them at
 // the weight W in [0, 1] in every frame (that control moved at a chosen amplitude, for test sets).
+// Given more than once, each --hold is a segment of N frames of the same take (its frames 0 to
+// N - 1), written one after another: a test set of many held controls comes from one load of the
+// rig (loading it is most of the time of a short set).
 //
 // Poses the ICT FaceKit meshes (blendshapes + a rotational jaw, IctFrames.h) into a frames file
 // for `pmsc train` / `pmsc replay`. The folder is always an argument: users clone ICT-FaceKit
@@ -36,7 +39,7 @@ int usage(const char* why) {
     std::fprintf(
         stderr,
         "pmsc_ict_frames: %s\nusage: pmsc_ict_frames --data ICT_FACEKIT_DIR --out FRAMES.npy --frames N "
-        "--seed S [--dtype float32|float64] [--without SHAPE,...] [--hold SHAPE=W,...]\n",
+        "--seed S [--dtype float32|float64] [--without SHAPE,...] [--hold SHAPE=W,... [--hold ...]]\n",
         why);
     return 2;
 }
@@ -46,7 +49,7 @@ int usage(const char* why) {
 int main(int argc, char** argv) {
     std::string data, out, dtype = "float32";
     std::vector<std::string> without;
-    std::vector<std::pair<std::string, double>> hold;
+    std::vector<std::vector<std::pair<std::string, double>>> holds;  // one per segment
     long frames = 0;
     long long seed = -1;
     for (int i = 1; i < argc; ++i) {
@@ -65,6 +68,7 @@ int main(int argc, char** argv) {
         } else if (a == "--without") {
             for (std::string& name : splitCommas(v)) without.push_back(std::move(name));
         } else if (a == "--hold") {
+            auto& hold = holds.emplace_back();
             for (const std::string& item : splitCommas(v)) {
                 const auto eq = item.find('=');
                 if (eq == std::string::npos || eq == 0) return usage("--hold takes SHAPE=W,...");
@@ -94,17 +98,18 @@ int main(int argc, char** argv) {
     try {
         const auto start = std::chrono::steady_clock::now();
         const auto rig = pmsc::synthetic::loadIctRig(data);
+        if (holds.empty()) holds.emplace_back();
         const auto set =
-            pmsc::synthetic::poseIctFrames(rig, frames, static_cast<unsigned>(seed), without, hold);
+            pmsc::synthetic::poseIctSegments(rig, frames, static_cast<unsigned>(seed), without, holds);
         pmsc::writeFrames(out, set, dtype == "float32" ? pmsc::NpyDtype::Float32 : pmsc::NpyDtype::Float64);
         const double seconds =
             std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         std::printf(
-            "wrote %s: %ld frames x %lld points x 3 (%s), %zu blendshapes + jaw hinge (%.3f rad at "
+            "wrote %s: %lld frames x %lld points x 3 (%s), %zu blendshapes + jaw hinge (%.3f rad at "
             "jawOpen=1, "
             "%zu jaw vertices), in %.1f s\n",
-            out.c_str(), frames, static_cast<long long>(rig.points), dtype.c_str(), rig.shapes.size(),
-            rig.jawAngle, rig.jawVertices.size(), seconds);
+            out.c_str(), static_cast<long long>(set.frames), static_cast<long long>(rig.points),
+            dtype.c_str(), rig.shapes.size(), rig.jawAngle, rig.jawVertices.size(), seconds);
         std::printf("head bounding-box diagonal %.6g (0.5%% = %.6g, 1%% = %.6g)\n", rig.bboxDiagonal,
                     0.005 * rig.bboxDiagonal, 0.01 * rig.bboxDiagonal);
         return 0;

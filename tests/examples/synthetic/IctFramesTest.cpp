@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <vector>
 
 namespace {
 
@@ -135,3 +136,18 @@ TEST(IctFrames, BadFoldersAndMeshesNameTheFile) {
 }
 
 }  // namespace
+
+TEST(IctFrames, SegmentsAreTheTakesFirstFramesWithEachHoldOneAfterAnother) {
+    TempDir dir;
+    const Mesh mesh;
+    const auto rig = loadRig(dir, mesh);
+    const auto segments = pmsc::synthetic::poseIctSegments(rig, 12, 3, {"smile"}, {{{"smile", 0.5}}, {}});
+    const auto held = pmsc::synthetic::poseIctFrames(rig, 12, 3, {}, {{"smile", 0.5}});
+    const auto still = pmsc::synthetic::poseIctFrames(rig, 12, 3, {"smile"});
+    ASSERT_EQ(segments.frames, 24);
+    std::vector<double> both(held.values.begin(), held.values.end());
+    both.insert(both.end(), still.values.begin(), still.values.end());
+    EXPECT_EQ(std::vector<double>(segments.values.begin(), segments.values.end()), both);
+    EXPECT_THROW(pmsc::synthetic::poseIctSegments(rig, 5, 1, {}, {}), pmsc::InputError);
+    EXPECT_THROW(pmsc::synthetic::poseIctSegments(rig, 5, 1, {}, {{}, {{"frown", 0.5}}}), pmsc::InputError);
+}
