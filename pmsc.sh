@@ -62,7 +62,9 @@ ensure_packages() {
   [ "$(id -u)" = 0 ] || die "missing Debian packages (${missing[*]}); run as root or install them"
   echo "pmsc.sh: installing ${missing[*]}"
   apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+  # The lock timeout: a `test` whose build failed leaves its background installation (below) running.
+  DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends -o DPkg::Lock::Timeout=600 \
+    "${missing[@]}" >/dev/null
 }
 
 # The page's npm packages (three, puppeteer-core: pinned in web/viewer/package-lock.json) from the
@@ -77,6 +79,24 @@ ensure_web() {
     (cd "$web" && PUPPETEER_SKIP_DOWNLOAD=1 npm ci --no-audit --no-fund --loglevel=error)
     touch "$web/node_modules/.package-lock.json"
   fi
+}
+
+# What only the tests need (Blender, Chromium, Node.js and the page's npm packages: most of the
+# set-up on a fresh machine, and downloads and unpacking rather than computing) installs in the
+# background while the build keeps both cores busy; test_setup_wait joins it before the tests that
+# use it. Nothing the build compiles or links comes from it.
+SETUP_PID=
+test_setup_start() {
+  mkdir -p "$BUILD"
+  (ensure_packages "${BROWSER_PACKAGES[@]}" "${BLENDER_PACKAGES[@]}"; ensure_web) >"$BUILD/test-setup.log" 2>&1 &
+  SETUP_PID=$!
+}
+test_setup_wait() {
+  wait "$SETUP_PID" || {
+    tail -n 5 "$BUILD/test-setup.log" >&2
+    die "installing what the tests need (Blender, Chromium, the page's npm packages) failed; log: $BUILD/test-setup.log"
+  }
+  cat "$BUILD/test-setup.log"
 }
 
 # require_disk GB: fail at once, in one line, when the checkout's file system has less than GB free.
@@ -174,8 +194,9 @@ case "$cmd" in
     shift; exec "$BUILD/bin/pmsc" demo "$@" ;;
   test)
     require_disk 3
-    ensure_packages "${STYLE_PACKAGES[@]}" "${BROWSER_PACKAGES[@]}" "${BLENDER_PACKAGES[@]}"; ensure_web; check_format; build_release
+    ensure_packages "${STYLE_PACKAGES[@]}"; test_setup_start; check_format; build_release
     ctest --test-dir "$BUILD" --output-on-failure -j "$JOBS" -L '^(unit|cli)$'
+    test_setup_wait
     ctest --test-dir "$BUILD" --output-on-failure -j "$JOBS" -LE '^(unit|cli)$' ;;
   format)
     ensure_packages "${STYLE_PACKAGES[@]}"; check_format "${2:-}" ;;
