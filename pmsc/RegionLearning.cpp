@@ -60,14 +60,27 @@ std::vector<Index> kmeans(const Eigen::MatrixXd& x, Index k, int iterations) {
         nearest = nearest.cwiseMin((x.rowwise() - centres.row(i)).rowwise().squaredNorm());
     }
     std::vector<Index> label(size_t(n), 0);
+    // The assignment runs on every core in blocks of points: each point's nearest centre is the
+    // same expression on any thread, so the labels do not depend on the thread count.
+    constexpr Index kBlock = 4096;
+    const Index blocks = (n + kBlock - 1) / kBlock;
     for (int it = 0; it < iterations; ++it) {
-        bool changed = false;
-        for (Index p = 0; p < n; ++p) {
-            Index best = 0;
-            (centres.rowwise() - x.row(p)).rowwise().squaredNorm().minCoeff(&best);
-            if (best != label[size_t(p)] || it == 0) changed = changed || best != label[size_t(p)];
-            label[size_t(p)] = best;
-        }
+        std::atomic<Index> next{0};
+        std::atomic<bool> changed{false};
+        runOnEveryCore(
+            [&] {
+                for (Index b = next++; b < blocks; b = next++) {
+                    bool moved = false;
+                    for (Index p = b * kBlock; p < std::min(n, (b + 1) * kBlock); ++p) {
+                        Index best = 0;
+                        (centres.rowwise() - x.row(p)).rowwise().squaredNorm().minCoeff(&best);
+                        moved = moved || best != label[size_t(p)];
+                        label[size_t(p)] = best;
+                    }
+                    if (moved) changed = true;
+                }
+            },
+            blocks);
         Eigen::MatrixXd sum = Eigen::MatrixXd::Zero(k, x.cols());
         Eigen::VectorXd count = Eigen::VectorXd::Zero(k);
         for (Index p = 0; p < n; ++p) {
