@@ -7,6 +7,7 @@
 #include "pmsc/QDeim.h"
 #include "pmsc/RegionChoice.h"
 #include "pmsc/Sentinels.h"
+#include "pmsc/RowBlocks.h"
 #include "pmsc/Subspace.h"
 
 #include <algorithm>
@@ -14,6 +15,8 @@
 #include <cmath>
 #include <stdexcept>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace pmsc {
 
@@ -44,21 +47,51 @@ void checkFrames(const Model& model, const FrameSet& frames) {
 }
 
 // Key error (PointMultiplier::keyError, by `norm`) and largest point error of PM of every column
-// of a mean-removed matrix under a basis and a key projector, appended to `out`. For
+// of `frames` less `mean` under a basis and a key projector, appended to `out`. For
 // KeyErrorNorm::Predicted the two parts: the key RMS to out.keyRms, the leave-one-out error to
 // out.keyLoo (setPredictedThresholds, or predictedPointError, combines them).
-void scoreFrames(const Eigen::Ref<const Eigen::MatrixXd>& centered, const Eigen::MatrixXd& basis,
-                 const Eigen::MatrixXd& projector, Index channels, const std::vector<Index>& keys,
-                 KeyErrorNorm norm, CalibrationStats& out) {
-    const Eigen::MatrixXd coords = projector * gatherKeyRows(centered, channels, keys);
-    Eigen::MatrixXd residual = centered;
-    residual.noalias() -= basis * coords;
-    const Eigen::VectorXd pointErr = maxPointNormPerColumn(residual, channels);
-    const Eigen::MatrixXd keyResidual = gatherKeyRows(residual, channels, keys);
+//
+// Decision: the frames are centred and their residual formed a slab of kSlabPoints points at a
+// time, as training's folds score theirs, never as a whole (N*C) x m copy: at the ICT face's
+// 26,719 points and 300 new frames each whole copy was 192 MB of fresh pages, and learn made four.
+// A slab is whole points and a multiple of 24 rows, the row panel of Eigen's product kernel (12
+// without AVX-512), so each residual entry is the same sum, to the bit, as in one product over
+// every row.
+void scoreFrames(const Eigen::Ref<const Eigen::MatrixXd>& frames, const Eigen::VectorXd& mean,
+                 const Eigen::MatrixXd& basis, const Eigen::MatrixXd& projector, Index channels,
+                 const std::vector<Index>& keys, KeyErrorNorm norm, CalibrationStats& out) {
+    const Index k = static_cast<Index>(keys.size());
+    Eigen::MatrixXd keyRows = gatherKeyRows(frames, channels, keys);
+    for (Index i = 0; i < k; ++i)
+        for (Index c = 0; c < channels; ++c)
+            keyRows.row(i * channels + c).array() -= mean[keys[static_cast<size_t>(i)] * channels + c];
+    const Eigen::MatrixXd coords = projector * keyRows;
+
+    // Key i's residual rows are filled from the slab that holds its point.
+    std::vector<std::pair<Index, Index>> byPoint;  // (point, key index), in point order
+    byPoint.reserve(static_cast<size_t>(k));
+    for (Index i = 0; i < k; ++i) byPoint.emplace_back(keys[static_cast<size_t>(i)], i);
+    std::sort(byPoint.begin(), byPoint.end());
+    Eigen::MatrixXd keyResidual(k * channels, frames.cols());
+    Eigen::VectorXd pointErr = Eigen::VectorXd::Zero(frames.cols());
+    Eigen::MatrixXd residual;
+    const Index slab = kSlabPoints * channels;
+    auto nextKey = byPoint.begin();
+    for (Index r0 = 0; r0 < frames.rows(); r0 += slab) {
+        const Index h = std::min(slab, frames.rows() - r0);
+        residual = frames.middleRows(r0, h).colwise() - mean.segment(r0, h);
+        residual.noalias() -= basis.middleRows(r0, h) * coords;
+        const Eigen::VectorXd e = maxPointNormPerColumn(residual, channels);
+        for (Index j = 0; j < frames.cols(); ++j)
+            if (!(e[j] <= pointErr[j])) pointErr[j] = e[j];  // NaN wins
+        for (; nextKey != byPoint.end() && nextKey->first * channels < r0 + h; ++nextKey)
+            keyResidual.middleRows(nextKey->second * channels, channels) =
+                residual.middleRows(nextKey->first * channels - r0, channels);
+    }
     const Eigen::VectorXd looScale = usesLeaveOneOut(norm)
                                          ? leaveOneOutScale(gatherKeyRows(basis, channels, keys), projector)
                                          : Eigen::VectorXd();
-    for (Index j = 0; j < centered.cols(); ++j) {
+    for (Index j = 0; j < frames.cols(); ++j) {
         appendKeyScore(out, keyResidual.col(j), channels, norm, looScale);
         out.maxPointError.push_back(pointErr[j]);
     }
@@ -85,9 +118,8 @@ void checkLearnInput(const Model& model, const FrameSet& newFrames, const LearnO
 /// The largest key RMS of the new frames under the old model (what made them misses).
 double oldModelKeyRmsMax(const Model& model, const Eigen::Map<const Eigen::MatrixXd>& fresh) {
     CalibrationStats s;
-    const Eigen::MatrixXd centered = fresh.colwise() - model.mean;
-    scoreFrames(centered, model.basis, model.projector, model.channels, model.keyPoints, model.keyErrorNorm,
-                s);
+    scoreFrames(fresh, model.mean, model.basis, model.projector, model.channels, model.keyPoints,
+                model.keyErrorNorm, s);
     if (model.keyErrorNorm == KeyErrorNorm::Predicted)
         s.keyRms = predictedErrors(s.keyRms, s.keyLoo, model.partEps, model.tolerance);
     double largest = 0;
@@ -326,8 +358,8 @@ CalibrationStats crossFitNewFrames(const SubspaceUpdate& u, const Eigen::Map<con
         const Index foldM = std::min(u.basisSize, fold.rank());
         const Eigen::MatrixXd foldBasis = fold.u.leftCols(foldM);
         const Eigen::MatrixXd foldProjector = makeProjector(foldBasis, channels, keys);
-        const Eigen::MatrixXd heldOut = fresh.middleCols(first, last - first).colwise() - fold.mean;
-        scoreFrames(heldOut, foldBasis, foldProjector, channels, keys, norm, scores);
+        scoreFrames(fresh.middleCols(first, last - first), fold.mean, foldBasis, foldProjector, channels, keys,
+                    norm, scores);
         for (Index j = first; j < last; ++j) scores.frames.push_back(j);
         progress("calibration", static_cast<double>(slice + 1), static_cast<double>(slices));
     }
@@ -444,9 +476,8 @@ CalibrationRecord learnThresholds(const Model& model, const SubspaceUpdate& u,
                                   const Eigen::Map<const Eigen::MatrixXd>& fresh,
                                   const std::vector<Index>& keys, const LearnOptions& options, Model& out,
                                   LearnReport& report, const auto& progress) {
-    const Eigen::MatrixXd centeredNew = fresh.colwise() - out.mean;
     CalibrationStats fit;
-    scoreFrames(centeredNew, out.basis, out.projector, model.channels, keys, model.keyErrorNorm, fit);
+    scoreFrames(fresh, out.mean, out.basis, out.projector, model.channels, keys, model.keyErrorNorm, fit);
     const std::vector<double>& eNew = fit.keyRms;  // read only by an uncalibrated model's rule
     report.newFramesMaxPointError = *std::max_element(fit.maxPointError.begin(), fit.maxPointError.end());
     // Decision: the training residual field becomes the largest point error on the frames of
