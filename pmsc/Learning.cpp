@@ -6,8 +6,8 @@
 #include "pmsc/LearningState.h"
 #include "pmsc/QDeim.h"
 #include "pmsc/RegionChoice.h"
-#include "pmsc/Sentinels.h"
 #include "pmsc/RowBlocks.h"
+#include "pmsc/Sentinels.h"
 #include "pmsc/Subspace.h"
 
 #include <algorithm>
@@ -358,8 +358,8 @@ CalibrationStats crossFitNewFrames(const SubspaceUpdate& u, const Eigen::Map<con
         const Index foldM = std::min(u.basisSize, fold.rank());
         const Eigen::MatrixXd foldBasis = fold.u.leftCols(foldM);
         const Eigen::MatrixXd foldProjector = makeProjector(foldBasis, channels, keys);
-        scoreFrames(fresh.middleCols(first, last - first), fold.mean, foldBasis, foldProjector, channels, keys,
-                    norm, scores);
+        scoreFrames(fresh.middleCols(first, last - first), fold.mean, foldBasis, foldProjector, channels,
+                    keys, norm, scores);
         for (Index j = first; j < last; ++j) scores.frames.push_back(j);
         progress("calibration", static_cast<double>(slice + 1), static_cast<double>(slices));
     }
