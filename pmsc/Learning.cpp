@@ -54,9 +54,11 @@ void checkFrames(const Model& model, const FrameSet& frames) {
 // Decision: the frames are centred and their residual formed a slab of kSlabPoints points at a
 // time, as training's folds score theirs, never as a whole (N*C) x m copy: at the ICT face's
 // 26,719 points and 300 new frames each whole copy was 192 MB of fresh pages, and learn made four.
-// A slab is whole points and a multiple of 24 rows, the row panel of Eigen's product kernel (12
-// without AVX-512), so each residual entry is the same sum, to the bit, as in one product over
-// every row.
+// A slab is whole points and a multiple of 24 rows (kScoreSlabPoints x channels), the row panel of
+// Eigen's product kernel with AVX-512 (12 with AVX, 6 with SSE), so each slab's rows fall in the
+// same panels as in one product over every row and each residual entry is the same sum, to the bit.
+constexpr Index kScoreSlabPoints = kSlabPoints / 24 * 24;
+
 void scoreFrames(const Eigen::Ref<const Eigen::MatrixXd>& frames, const Eigen::VectorXd& mean,
                  const Eigen::MatrixXd& basis, const Eigen::MatrixXd& projector, Index channels,
                  const std::vector<Index>& keys, KeyErrorNorm norm, CalibrationStats& out) {
@@ -75,7 +77,7 @@ void scoreFrames(const Eigen::Ref<const Eigen::MatrixXd>& frames, const Eigen::V
     Eigen::MatrixXd keyResidual(k * channels, frames.cols());
     Eigen::VectorXd pointErr = Eigen::VectorXd::Zero(frames.cols());
     Eigen::MatrixXd residual;
-    const Index slab = kSlabPoints * channels;
+    const Index slab = kScoreSlabPoints * channels;
     auto nextKey = byPoint.begin();
     for (Index r0 = 0; r0 < frames.rows(); r0 += slab) {
         const Index h = std::min(slab, frames.rows() - r0);

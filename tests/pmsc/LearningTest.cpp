@@ -307,3 +307,44 @@ TEST(Learning, NewFramesWithANegativeValueLiftTheClampAtZero) {
         return w.find("no longer clamped") != std::string::npos;
     }));
 }
+
+TEST(Learning, ScoresOfFramesSpanningSeveralSlabsAreThoseOfTheWholeFrames) {
+    // 18,000 points of one channel: learn scores the new frames in slabs of about 8,200 points,
+    // so the keys and the largest point errors fall in three of them. Uncalibrated (no tolerance),
+    // the learned eps_min is the largest key error on the new frames and the report their largest
+    // point error: both must be what PM gives on the whole frames.
+    const pmsc::FrameSet shot = pmsc::test::patchFrames(6, 3000, 1, 120, 7);
+    pmsc::FrameSet day1(80, shot.points, 1), fresh(40, shot.points, 1);
+    day1.matrix() = shot.matrix().leftCols(80);
+    fresh.matrix() = shot.matrix().rightCols(40);
+    fresh.matrix() += 0.05 * pmsc::test::gaussian(fresh.rows(), 40, 8);  // what the old basis lacks
+    pmsc::TrainingOptions o;
+    o.basis = 6;
+    o.maxKeys = 24;
+    o.keyErrorNorm = pmsc::KeyErrorNorm::Rms;
+    o.learnRank = 12;
+    const pmsc::Model old = pmsc::train(day1, o);
+    ASSERT_EQ(old.tolerance, 0.0);
+    pmsc::LearnOptions lo;
+    lo.basis = 6;
+    pmsc::LearnReport report;
+    const pmsc::Model learned = pmsc::learn(old, fresh, lo, &report);
+    ASSERT_GT(*std::max_element(learned.keyPoints.begin(), learned.keyPoints.end()), 2 * 8192);
+
+    const pmsc::PointMultiplier pm(learned);
+    std::vector<double> keys(learned.keyPoints.size()), coords(static_cast<size_t>(learned.basisSize())),
+        out(static_cast<size_t>(fresh.rows()));
+    double keyMax = 0, pointMax = 0;
+    for (Index f = 0; f < fresh.frames; ++f) {
+        const double* full = fresh.frame(f);
+        for (size_t k = 0; k < keys.size(); ++k) keys[k] = full[learned.keyPoints[k]];
+        pm.project(keys.data(), coords.data());
+        keyMax = std::max(keyMax, pm.keyError(keys.data(), coords.data()));
+        pm.reconstruct(coords.data(), out.data());
+        for (Index p = 0; p < fresh.points; ++p)
+            pointMax = std::max(pointMax, std::abs(out[size_t(p)] - full[p]));
+    }
+    ASSERT_GT(keyMax, old.epsMin);  // so the learned threshold is the new frames' own
+    EXPECT_NEAR(learned.epsMin, keyMax, 1e-9 * keyMax);
+    EXPECT_NEAR(report.newFramesMaxPointError, pointMax, 1e-9 * pointMax);
+}
