@@ -1,10 +1,12 @@
-// Small but complete models for the model-file tests.
+// Small but complete models for the model-file tests, and a model with sentinels for the engine's.
 #pragma once
 
 #include "pmsc/Model.h"
+#include "pmsc/Sentinels.h"
 
 #include <Eigen/QR>
 
+#include <algorithm>
 #include <cmath>
 
 namespace pmsc::test {
@@ -76,6 +78,20 @@ inline pmsc::Model smallModelWithRegions() {
     regions.featherRegion = {1, 0};
     regions.featherFactor = {0.5, 0.25};
     m.regions = std::move(regions);
+    return m;
+}
+
+/// `m` with sentinels every 10th point (no key among them), its hits checked at `tolerance`:
+/// 1e300 lets every check pass, 1e-12 refuses every hit PM does not reproduce to the last bits.
+inline pmsc::Model withSentinels(pmsc::Model m, double tolerance) {
+    m.tolerance = tolerance;
+    pmsc::Sentinels s;
+    s.source = pmsc::SentinelSource::PointOrder;
+    for (pmsc::Index p = 5; p < m.points; p += 10)
+        if (std::find(m.keyPoints.begin(), m.keyPoints.end(), p) == m.keyPoints.end()) s.points.push_back(p);
+    s.coveringRadius = 10;
+    m.sentinels = s;
+    m.validate();
     return m;
 }
 

@@ -5,6 +5,7 @@
 #include "nodes/FrameSlot.h"
 #include "pmsc/Errors.h"
 #include "pmsc/Sentinels.h"
+#include "tests/common/SmallModel.h"
 #include "tests/engine/Synthetic.h"
 
 #include <gtest/gtest.h>
@@ -20,12 +21,25 @@
 #include <mutex>
 #include <numeric>
 #include <random>
+#include <string>
 
 namespace pmsc::engine {
 namespace {
 
+using pmsc::test::withSentinels;
 using testing::SyntheticEvaluator;
 using testing::withWatchdog;
+
+/// `make` throws an InputError whose message holds `words`.
+template <class Make>
+void expectInputError(Make&& make, const std::string& words) {
+    try {
+        make();
+        ADD_FAILURE() << "no InputError; expected one saying '" << words << "'";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find(words), std::string::npos) << e.what();
+    }
+}
 
 /// Checks order and finiteness as frames arrive; keeps a copy of what it is told to keep.
 class CheckingSink : public FrameSink {
@@ -142,13 +156,7 @@ TEST_F(Fixture, AMemoryLimitCutsTheFramesInFlightAndNotTheResults) {
     EXPECT_EQ(got.frames, expected.frames);
     EXPECT_EQ(got.values, expected.values);
     o.memoryLimit = perFrame - 1;  // not one frame
-    try {
-        Engine none(model, evaluator, o);
-        FAIL() << "an engine whose limit holds no frame was made";
-    } catch (const InputError& e) {
-        EXPECT_NE(std::string(e.what()).find("cannot hold one frame in flight"), std::string::npos)
-            << e.what();
-    }
+    expectInputError([&] { Engine none(model, evaluator, o); }, "cannot hold one frame in flight");
 }
 
 TEST_F(Fixture, AnExceptionOnARandomFrameEndsTheRunWithFrameAndNode) {
@@ -493,19 +501,6 @@ private:
     mutable std::vector<std::pair<Index, Index>> calls_;
 };
 
-/// `m` with sentinels every 10th point (no key among them), its hits checked at `tolerance`.
-Model withSentinels(Model m, double tolerance) {
-    m.tolerance = tolerance;
-    pmsc::Sentinels s;
-    s.source = pmsc::SentinelSource::PointOrder;
-    for (Index p = 5; p < m.points; p += 10)
-        if (std::find(m.keyPoints.begin(), m.keyPoints.end(), p) == m.keyPoints.end()) s.points.push_back(p);
-    s.coveringRadius = 10;
-    m.sentinels = s;
-    m.validate();
-    return m;
-}
-
 TEST_F(Fixture, AHitsCheckPointsGoInTheKeysPiecesToo) {
     // One frame at a time (pmsc view): the sentinels every hit computes are evaluated in pieces
     // as the keys are, with the same frames as in one call.
@@ -604,13 +599,7 @@ TEST_F(Fixture, AHitsEstimateBeforeItsCheckComesBetweenTheKeysAndTheSentinelsAnd
 TEST_F(Fixture, AnEstimateBeforeTheCheckNeedsSomeoneToShowItTo) {
     EngineOptions o = options(2);
     o.estimateBeforeCheck = true;
-    try {
-        Engine engine(model, evaluator, o);
-        ADD_FAILURE() << "an estimate with no onEstimate to hand it to was accepted";
-    } catch (const InputError& e) {
-        EXPECT_NE(std::string(e.what()).find("estimateBeforeCheck needs onEstimate"), std::string::npos)
-            << e.what();
-    }
+    expectInputError([&] { Engine engine(model, evaluator, o); }, "estimateBeforeCheck needs onEstimate");
 }
 
 TEST_F(Fixture, AnEvaluatorWhoseCallsPayASetUpFailsThroughInOneCallPerThread) {

@@ -2,8 +2,8 @@
 // a page applying the updates ends with the engine's answer (a miss: the full calculation's).
 #include "engine/Engine.h"
 #include "pmsc/Errors.h"
-#include "pmsc/Sentinels.h"
 #include "tests/common/MissingData.h"
+#include "tests/common/SmallModel.h"
 #include "tests/viewer/ViewerFixture.h"
 #include "viewer/HalfCache.h"
 #include "viewer/RelightSession.h"
@@ -21,6 +21,7 @@
 namespace pmsc::viewer {
 namespace {
 
+using pmsc::test::withSentinels;
 using test::fullValues;
 using test::smallVolume;
 
@@ -114,19 +115,6 @@ protected:
         Model m = smallVolume().model;
         m.epsMin = epsMin;
         m.epsMax = epsMax;
-        return m;
-    }
-    /// `m` with sentinels every 10th point (no key among them), its hits checked at `tolerance`.
-    static Model withSentinels(Model m, double tolerance) {
-        m.tolerance = tolerance;
-        Sentinels s;
-        s.source = SentinelSource::PointOrder;
-        for (Index p = 5; p < m.points; p += 10)
-            if (std::find(m.keyPoints.begin(), m.keyPoints.end(), p) == m.keyPoints.end())
-                s.points.push_back(p);
-        s.coveringRadius = 10;
-        m.sentinels = s;
-        m.validate();
         return m;
     }
 };
