@@ -16,6 +16,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <atomic>
 #include <iostream>
 #include <mutex>
@@ -103,24 +104,39 @@ int runExportFrames(const std::vector<std::string>& args) {
     std::atomic<Index> done{0};
     const std::atomic<bool>& stop = interruptFlag();
 
-    // Frames are independent: evaluate them in parallel, each into its own place in the file.
+    // Frames are independent: evaluate them in parallel, each into its own place in the file. An
+    // evaluator whose frames share work (framesSharingWork) gets them in groups of that many, as
+    // large as 256 MB of values allow, and spreads each group's points over the threads itself.
+    const std::size_t frameValues = static_cast<std::size_t>(n * c);
+    const Index byMemory =
+        std::max<Index>(1, static_cast<Index>((std::size_t{256} << 20) / (8 * frameValues)));
+    const Index group = std::clamp<Index>(evaluator->framesSharingWork(), 1, byMemory);
+    const Index groups = (count + group - 1) / group;
     tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
     arena.execute([&] {
-        tbb::parallel_for(tbb::blocked_range<Index>(0, count, 1), [&](const tbb::blocked_range<Index>& r) {
-            std::vector<double> buffer(static_cast<std::size_t>(n * c));
-            for (Index i = r.begin(); i < r.end(); ++i) {
+        tbb::parallel_for(tbb::blocked_range<Index>(0, groups, 1), [&](const tbb::blocked_range<Index>& r) {
+            std::vector<double> buffer;
+            std::vector<Index> frames;
+            for (Index g = r.begin(); g < r.end(); ++g) {
                 if (stop.load(std::memory_order_relaxed)) throw Cancelled("export-frames interrupted");
-                const Index frame = span.frame(i);
+                frames.clear();
+                for (Index i = g * group; i < std::min(count, (g + 1) * group); ++i)
+                    frames.push_back(span.frame(i));
+                buffer.resize(frames.size() * frameValues);
                 try {
-                    evaluator->evaluateAll(frame, buffer.data());
+                    evaluator->evaluateAllFrames(frames, buffer.data());
                 } catch (const InputError&) {
                     throw;
                 } catch (const std::exception& e) {
-                    throw EvaluatorError("frame " + std::to_string(frame) + ": " + evaluator->name() + ": " +
-                                         e.what());
+                    const std::string which = frames.size() == 1
+                                                  ? "frame " + std::to_string(frames.front())
+                                                  : "frames " + std::to_string(frames.front()) + " to " +
+                                                        std::to_string(frames.back());
+                    throw EvaluatorError(which + ": " + evaluator->name() + ": " + e.what());
                 }
-                writer.writeFrame(i, buffer.data());
-                const Index d = ++done;
+                for (std::size_t k = 0; k < frames.size(); ++k)
+                    writer.writeFrame(g * group + static_cast<Index>(k), buffer.data() + k * frameValues);
+                const Index d = done += static_cast<Index>(frames.size());
                 if (std::unique_lock lock(progressMutex, std::try_to_lock); lock)
                     progress.update("frames", static_cast<double>(d), static_cast<double>(count));
             }

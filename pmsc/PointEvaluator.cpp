@@ -13,6 +13,11 @@ void PointEvaluator::evaluateAll(Index frame, double* out) const {
     evaluate(frame, all, out);
 }
 
+void PointEvaluator::evaluateAllFrames(std::span<const Index> frames, double* out) const {
+    const std::size_t frameValues = static_cast<std::size_t>(pointCount() * channelCount());
+    for (std::size_t k = 0; k < frames.size(); ++k) evaluateAll(frames[k], out + k * frameValues);
+}
+
 FrameSet evaluateFrames(const PointEvaluator& evaluator, Index first, Index count) {
     if (first < 0 || count <= 0 || first + count > evaluator.frameCount()) {
         throw std::out_of_range("evaluateFrames: frames [" + std::to_string(first) + ", " +
@@ -21,7 +26,9 @@ FrameSet evaluateFrames(const PointEvaluator& evaluator, Index first, Index coun
                                 evaluator.name() + "'");
     }
     FrameSet set(count, evaluator.pointCount(), evaluator.channelCount());
-    for (Index f = 0; f < count; ++f) evaluator.evaluateAll(first + f, set.frame(f));
+    std::vector<Index> frames(static_cast<std::size_t>(count));
+    std::iota(frames.begin(), frames.end(), first);
+    evaluator.evaluateAllFrames(frames, set.frame(0));
     return set;
 }
 

@@ -66,6 +66,17 @@ public:
     /// calls evaluate() with 0..N-1; evaluators override it when a full pose
     /// shares work between points.
     virtual void evaluateAll(Index frame, double* out) const;
+
+    /// Evaluates all N points of each of `frames` into out, frame after frame (frames.size() * N * C
+    /// doubles; frame k at out + k*N*C), with the values evaluateAll() gives each. The default
+    /// calls evaluateAll() per frame; evaluators override it when frames share work that no
+    /// control changes (a renderer's gather rays traced once for a set of lights), which is how
+    /// training frames are best made.
+    virtual void evaluateAllFrames(std::span<const Index> frames, double* out) const;
+
+    /// How many frames one evaluateAllFrames() call is best given (1: frames share no work, and
+    /// callers spread frames over threads instead). `pmsc export-frames` asks in groups of this many.
+    virtual Index framesSharingWork() const { return 1; }
 };
 
 /// Evaluates frames [first, first+count) at all points into a FrameSet

@@ -36,8 +36,7 @@ struct Candidate {
     bool fromGather;
 };
 struct Scratch {
-    std::vector<Ray> rays;
-    std::vector<Hit> hits;
+    CornellEvaluator::GatherRays gatherRays;
     std::vector<Candidate> cand;
     std::vector<Ray> occ;
     std::vector<std::uint8_t> blocked;
@@ -167,39 +166,53 @@ std::shared_ptr<const CornellEvaluator::LightPool> CornellEvaluator::lightPool(I
     return pool;
 }
 
+void CornellEvaluator::traceGatherRays(Index point, GatherRays& g) const {
+    const SurfaceVoxels& vox = world_->voxels;
+    const Vec3 nx = vox.normal[static_cast<size_t>(point)];
+    Vec3 t, b;
+    orthonormalBasis(nx, t, b);
+    const Vec3 o = vox.position[static_cast<size_t>(point)] + nx * kOffsetMm;
+    const auto id = static_cast<std::uint32_t>(point);
+    const auto sA = static_cast<std::uint32_t>(samples_ / 2 + samples_ % 2);
+    g.rays.resize(sA);
+    g.hits.resize(sA);
+    for (std::uint32_t i = 0; i < sA; ++i) {
+        double u, v;
+        hammersleyShifted(id, i, sA, u, v);
+        g.rays[i] = makeRay(o, cosineDirection(nx, t, b, u, v), 1e30);
+    }
+    world_->tracer->intersect(g.rays, g.hits);
+}
+
 void CornellEvaluator::gather(const PointLight& light, const LightPool& pool, Index point,
                               double* rgb) const {
+    Scratch& s = scratch();
+    traceGatherRays(point, s.gatherRays);
+    shade(light, pool, point, s.gatherRays, rgb);
+}
+
+void CornellEvaluator::shade(const PointLight& light, const LightPool& pool, Index point, const GatherRays& g,
+                             double* rgb) const {
     const SurfaceVoxels& vox = world_->voxels;
     const auto& quads = world_->scene.quads();
     const Vec3 x = vox.position[static_cast<size_t>(point)];
     const Vec3 nx = vox.normal[static_cast<size_t>(point)];
-    Vec3 t, b;
-    orthonormalBasis(nx, t, b);
     const Vec3 o = x + nx * kOffsetMm;
     const Vec3 lp = light.position;
     const auto id = static_cast<std::uint32_t>(point);
-    const auto sA = static_cast<std::uint32_t>(samples_ / 2 + samples_ % 2);
+    const auto sA = static_cast<std::uint32_t>(g.rays.size());
     const double nA = sA, nB = pool.perSet;  // cosine gathers, light paths
-
     Scratch& s = scratch();
-    s.rays.resize(sA);
-    s.hits.resize(sA);
-    for (std::uint32_t i = 0; i < sA; ++i) {
-        double u, v;
-        hammersleyShifted(id, i, sA, u, v);
-        s.rays[i] = makeRay(o, cosineDirection(nx, t, b, u, v), 1e30);
-    }
-    world_->tracer->intersect(s.rays, s.hits);
 
     // Candidates y: A = cosine-gather hits (need a shadow ray y -> light), B = this point's set
     // of the frame's light paths (need a connection ray x -> y). One occlusion batch for both.
     s.cand.clear();
     s.occ.clear();
     for (std::uint32_t i = 0; i < sA; ++i) {
-        const Hit& h = s.hits[i];
+        const Hit& h = g.hits[i];
         if (h.quad < 0) continue;
         const Quad& q = quads[static_cast<size_t>(h.quad)];
-        const Ray& ray = s.rays[i];
+        const Ray& ray = g.rays[i];
         const Vec3 d{ray.dir[0], ray.dir[1], ray.dir[2]};
         if (dot(d, q.normal) >= 0) continue;  // back face: nothing leaves it toward x
         const Vec3 y = o + d * static_cast<double>(h.t);
@@ -280,6 +293,27 @@ void CornellEvaluator::evaluateAll(Index frame, double* out) const {
                       [&](const tbb::blocked_range<Index>& r) {
                           for (Index p = r.begin(); p != r.end(); ++p) gather(light, *pool, p, out + 3 * p);
                       });
+}
+
+void CornellEvaluator::evaluateAllFrames(std::span<const Index> frames, double* out) const {
+    std::vector<std::shared_ptr<const LightPool>> pools;
+    pools.reserve(frames.size());
+    for (const Index frame : frames) {
+        if (frame < 0 || frame >= frameCount())
+            throw std::out_of_range("cornell: frame " + std::to_string(frame) + " outside [0, " +
+                                    std::to_string(frameCount()) + ")");
+        pools.push_back(lightPool(frame));
+    }
+    const Index n = pointCount();
+    tbb::parallel_for(tbb::blocked_range<Index>(0, n, 256), [&](const tbb::blocked_range<Index>& r) {
+        GatherRays g;
+        for (Index p = r.begin(); p != r.end(); ++p) {
+            traceGatherRays(p, g);
+            for (std::size_t k = 0; k < frames.size(); ++k)
+                shade(lights_[static_cast<std::size_t>(frames[k])], *pools[k], p, g,
+                      out + 3 * (static_cast<std::size_t>(n) * k + static_cast<std::size_t>(p)));
+        }
+    });
 }
 
 // One frame of the cache as a .vdb file. Its state is "soft-cached": `pmsc run` hands the writer the

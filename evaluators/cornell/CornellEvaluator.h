@@ -79,6 +79,12 @@ public:
 
     void evaluate(Index frame, std::span<const Index> points, double* out) const override;
     void evaluateAll(Index frame, double* out) const override;
+    /// Traces each point's cosine-gather rays once for all of `frames` (they depend on the point
+    /// alone) and shades them with each frame's light: the same values as evaluateAll() per frame,
+    /// bit for bit, with strategy A's closest-hit rays paid once instead of once per frame.
+    void evaluateAllFrames(std::span<const Index> frames, double* out) const override;
+    /// 12: the gather rays' share of a frame falls to a twelfth (a row of the training rig).
+    Index framesSharingWork() const override { return 12; }
 
     std::vector<std::shared_ptr<const FrameWriter>> frameWriters() const override;
     /// The gather points: each voxel's nearest surface point, in millimetres.
@@ -88,10 +94,22 @@ public:
     const std::vector<PointLight>& lights() const { return lights_; }
     int samplesPerPoint() const { return samples_; }
 
+    /// A point's cosine-gather rays and what they hit (scratch of evaluate and evaluateFrames).
+    struct GatherRays {
+        std::vector<Ray> rays;
+        std::vector<Hit> hits;
+    };
+
 private:
     struct LightPool;
     std::shared_ptr<const LightPool> lightPool(Index frame) const;
     void gather(const PointLight& light, const LightPool& pool, Index point, double* rgb) const;
+    /// Strategy A's cosine-gather rays from `point` and their first hits: the frame's light
+    /// plays no part in them.
+    void traceGatherRays(Index point, GatherRays& g) const;
+    /// One frame's estimate at `point` from its traced gather rays `g` and the frame's light paths.
+    void shade(const PointLight& light, const LightPool& pool, Index point, const GatherRays& g,
+               double* rgb) const;
 
     mutable std::mutex poolMutex_;
     mutable std::vector<std::pair<Index, std::shared_ptr<const LightPool>>> pools_;  // most recent last

@@ -107,9 +107,15 @@ FrameSet gatherTrainingFrames(DemoSetup& run, const CornellDemoOptions& o,
     const Index trainFrames = trainEval.frameCount();
     const auto t = DemoClock::now();
     FrameSet q(trainFrames, n, 3);
-    for (Index f = 0; f < trainFrames; ++f) {
+    // A row of the rig's lights at a time: each point's gather rays are traced once per call and
+    // shaded for each light (evaluateAllFrames), the same frames as one evaluateAll() each.
+    const Index kFramesPerCall = trainEval.framesSharingWork();
+    std::vector<Index> frames;
+    for (Index f = 0; f < trainFrames; f += kFramesPerCall) {
         run.progress("training frames", static_cast<double>(f), static_cast<double>(trainFrames));
-        run.arena.execute([&] { trainEval.evaluateAll(f, q.frame(f)); });
+        frames.resize(static_cast<std::size_t>(std::min(kFramesPerCall, trainFrames - f)));
+        std::iota(frames.begin(), frames.end(), f);
+        run.arena.execute([&] { trainEval.evaluateAllFrames(frames, q.frame(f)); });
     }
     run.lap("training_gathers", t);
     return q;

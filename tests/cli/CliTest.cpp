@@ -96,6 +96,30 @@ TEST_F(Cli, SyntheticSpecOptionsAreCheckedWithOneLine) {
     EXPECT_TRUE(outputs(dir).empty());
 }
 
+// The Cornell gather's frames share their gather rays, so export-frames asks for them in groups
+// (PointEvaluator::framesSharingWork): the file must hold each frame as it is alone, whatever group
+// or step put it there.
+TEST_F(Cli, ExportFramesInGroupsWritesEachFrameAsItIsAlone) {
+    TempDir dir;
+    const std::string spec = "cornell:points=1000,samples=4,lights=scattered";
+    for (const auto& [frames, file] :
+         {std::pair{"0-15", "all.npy"}, {"1-15:2", "odd.npy"}, {"7-7", "one.npy"}})
+        ASSERT_EQ(
+            runPmsc(dir, {"export-frames", spec, "--frames", frames, "--out", dir.file(file), "--quiet"})
+                .exitCode,
+            0);
+    const pmsc::FrameSet all = pmsc::readFrames(dir.file("all.npy")).frames;
+    const pmsc::FrameSet odd = pmsc::readFrames(dir.file("odd.npy")).frames;
+    const pmsc::FrameSet one = pmsc::readFrames(dir.file("one.npy")).frames;
+    ASSERT_EQ(all.frames, 16);
+    ASSERT_EQ(odd.frames, 8);
+    const auto bytes = static_cast<std::size_t>(all.rows()) * sizeof(double);
+    for (pmsc::Index k = 0; k < 8; ++k)
+        EXPECT_EQ(0, std::memcmp(odd.frame(k), all.frame(2 * k + 1), bytes)) << "frame " << 2 * k + 1;
+    EXPECT_EQ(0, std::memcmp(one.frame(0), all.frame(7), bytes));
+    EXPECT_NE(0, std::memcmp(all.frame(6), all.frame(7), bytes));
+}
+
 TEST_F(Cli, TrainWritesAModelAndASummary) {
     TempDir dir;
     const auto model = dir.file("m.pmsc");

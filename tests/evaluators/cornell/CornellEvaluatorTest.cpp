@@ -41,6 +41,27 @@ TEST(CornellEvaluator, PointAloneEqualsPointAmongAllBitForBit) {
         EXPECT_EQ(0, std::memcmp(&some[3 * i], all.data() + 3 * subset[i], 3 * sizeof(double)));
 }
 
+// Training's frames come a set of lights at a time, each point's gather rays traced once for the
+// set: every frame must be the one evaluateAll() gives, bit for bit, in any order (more frames
+// than the light-path cache holds, a frame twice).
+TEST(CornellEvaluator, FramesEvaluatedTogetherAreEachFrameAloneBitForBit) {
+    const CornellEvaluator ev(smallWorld(), LightRig{}.trainingLights(), 24);
+    const std::size_t n = static_cast<std::size_t>(ev.pointCount()) * 3;
+    std::vector<Index> frames(20);
+    std::iota(frames.begin(), frames.end(), Index{100});
+    frames[3] = 7;
+    frames[11] = 7;
+    std::vector<double> together(frames.size() * n), alone(n);
+    ev.evaluateAllFrames(frames, together.data());
+    for (std::size_t k = 0; k < frames.size(); ++k) {
+        ev.evaluateAll(frames[k], alone.data());
+        EXPECT_EQ(0, std::memcmp(alone.data(), together.data() + k * n, n * sizeof(double)))
+            << "frame " << frames[k];
+    }
+    const std::vector<Index> bad = {0, ev.frameCount()};
+    EXPECT_THROW(ev.evaluateAllFrames(bad, together.data()), std::out_of_range);
+}
+
 // Embree on oneTBB caps the whole process's parallelism when its device is given a thread count;
 // the ray tracer must not (it once did, and every Cornell run used one core of two).
 TEST(CornellEvaluator, TheRayTracerLeavesTheProcesssParallelismAlone) {
