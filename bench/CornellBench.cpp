@@ -29,7 +29,8 @@ void BM_FramesTogetherVersusAlone(benchmark::State& state) {
     bench::timeAlternately(
         state, "together", [&] { ev.evaluateAllFrames(frames, together.data()); }, "alone",
         [&] {
-            for (std::size_t k = 0; k < frames.size(); ++k) ev.evaluateAll(frames[k], alone.data() + k * frameValues);
+            for (std::size_t k = 0; k < frames.size(); ++k)
+                ev.evaluateAll(frames[k], alone.data() + k * frameValues);
         });
     state.counters["frames"] = static_cast<double>(frames.size());
     if (together != alone) state.SkipWithError("frames together differ from frames alone");
