@@ -106,40 +106,46 @@ int runExportFrames(const std::vector<std::string>& args) {
 
     // Frames are independent: evaluate them in parallel, each into its own place in the file. An
     // evaluator whose frames share work (framesSharingWork) gets them in groups of that many, as
-    // large as 256 MB of values allow, and spreads each group's points over the threads itself.
+    // large as 256 MB of values allow, one group at a time: it spreads each group's points over the
+    // threads itself, and one group's buffer is all the memory the export holds beside the file.
     const std::size_t frameValues = static_cast<std::size_t>(n * c);
     const Index byMemory =
         std::max<Index>(1, static_cast<Index>((std::size_t{256} << 20) / (8 * frameValues)));
     const Index group = std::clamp<Index>(evaluator->framesSharingWork(), 1, byMemory);
     const Index groups = (count + group - 1) / group;
+    auto exportGroup = [&](Index g, std::vector<Index>& frames, std::vector<double>& buffer) {
+        if (stop.load(std::memory_order_relaxed)) throw Cancelled("export-frames interrupted");
+        frames.clear();
+        for (Index i = g * group; i < std::min(count, (g + 1) * group); ++i) frames.push_back(span.frame(i));
+        buffer.resize(frames.size() * frameValues);
+        try {
+            evaluator->evaluateAllFrames(frames, buffer.data());
+        } catch (const InputError&) {
+            throw;
+        } catch (const std::exception& e) {
+            const std::string which = frames.size() == 1 ? "frame " + std::to_string(frames.front())
+                                                         : "frames " + std::to_string(frames.front()) +
+                                                               " to " + std::to_string(frames.back());
+            throw EvaluatorError(which + ": " + evaluator->name() + ": " + e.what());
+        }
+        for (std::size_t k = 0; k < frames.size(); ++k)
+            writer.writeFrame(g * group + static_cast<Index>(k), buffer.data() + k * frameValues);
+        const Index d = done += static_cast<Index>(frames.size());
+        if (std::unique_lock lock(progressMutex, std::try_to_lock); lock)
+            progress.update("frames", static_cast<double>(d), static_cast<double>(count));
+    };
     tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
     arena.execute([&] {
-        tbb::parallel_for(tbb::blocked_range<Index>(0, groups, 1), [&](const tbb::blocked_range<Index>& r) {
-            std::vector<double> buffer;
+        if (group > 1) {
             std::vector<Index> frames;
-            for (Index g = r.begin(); g < r.end(); ++g) {
-                if (stop.load(std::memory_order_relaxed)) throw Cancelled("export-frames interrupted");
-                frames.clear();
-                for (Index i = g * group; i < std::min(count, (g + 1) * group); ++i)
-                    frames.push_back(span.frame(i));
-                buffer.resize(frames.size() * frameValues);
-                try {
-                    evaluator->evaluateAllFrames(frames, buffer.data());
-                } catch (const InputError&) {
-                    throw;
-                } catch (const std::exception& e) {
-                    const std::string which = frames.size() == 1
-                                                  ? "frame " + std::to_string(frames.front())
-                                                  : "frames " + std::to_string(frames.front()) + " to " +
-                                                        std::to_string(frames.back());
-                    throw EvaluatorError(which + ": " + evaluator->name() + ": " + e.what());
-                }
-                for (std::size_t k = 0; k < frames.size(); ++k)
-                    writer.writeFrame(g * group + static_cast<Index>(k), buffer.data() + k * frameValues);
-                const Index d = done += static_cast<Index>(frames.size());
-                if (std::unique_lock lock(progressMutex, std::try_to_lock); lock)
-                    progress.update("frames", static_cast<double>(d), static_cast<double>(count));
-            }
+            std::vector<double> buffer;
+            for (Index g = 0; g < groups; ++g) exportGroup(g, frames, buffer);
+            return;
+        }
+        tbb::parallel_for(tbb::blocked_range<Index>(0, groups, 1), [&](const tbb::blocked_range<Index>& r) {
+            std::vector<Index> frames;
+            std::vector<double> buffer;
+            for (Index g = r.begin(); g < r.end(); ++g) exportGroup(g, frames, buffer);
         });
     });
     progress.finish();
