@@ -63,11 +63,8 @@ void scoreFrames(const Eigen::Ref<const Eigen::MatrixXd>& frames, const Eigen::V
                  const Eigen::MatrixXd& basis, const Eigen::MatrixXd& projector, Index channels,
                  const std::vector<Index>& keys, KeyErrorNorm norm, CalibrationStats& out) {
     const Index k = static_cast<Index>(keys.size());
-    Eigen::MatrixXd keyRows = gatherKeyRows(frames, channels, keys);
-    for (Index i = 0; i < k; ++i)
-        for (Index c = 0; c < channels; ++c)
-            keyRows.row(i * channels + c).array() -= mean[keys[static_cast<size_t>(i)] * channels + c];
-    const Eigen::MatrixXd coords = projector * keyRows;
+    const Eigen::MatrixXd coords = projector * (gatherKeyRows(frames, channels, keys).colwise() -
+                                                gatherKeyRows(mean, channels, keys).col(0));
 
     // Key i's residual rows are filled from the slab that holds its point.
     std::vector<std::pair<Index, Index>> byPoint;  // (point, key index), in point order

@@ -268,10 +268,14 @@ void CornellEvaluator::shade(const PointLight& light, const LightPool& pool, Ind
     for (int ch = 0; ch < 3; ++ch) rgb[ch] = sum[ch];
 }
 
-void CornellEvaluator::evaluate(Index frame, std::span<const Index> points, double* out) const {
+void CornellEvaluator::checkFrame(Index frame) const {
     if (frame < 0 || frame >= frameCount())
         throw std::out_of_range("cornell: frame " + std::to_string(frame) + " outside [0, " +
                                 std::to_string(frameCount()) + ")");
+}
+
+void CornellEvaluator::evaluate(Index frame, std::span<const Index> points, double* out) const {
+    checkFrame(frame);
     const Index n = pointCount();
     const PointLight& light = lights_[static_cast<size_t>(frame)];
     const auto pool = lightPool(frame);
@@ -284,24 +288,15 @@ void CornellEvaluator::evaluate(Index frame, std::span<const Index> points, doub
 }
 
 void CornellEvaluator::evaluateAll(Index frame, double* out) const {
-    if (frame < 0 || frame >= frameCount())
-        throw std::out_of_range("cornell: frame " + std::to_string(frame) + " outside [0, " +
-                                std::to_string(frameCount()) + ")");
-    const PointLight& light = lights_[static_cast<size_t>(frame)];
-    const auto pool = lightPool(frame);
-    tbb::parallel_for(tbb::blocked_range<Index>(0, pointCount(), 256),
-                      [&](const tbb::blocked_range<Index>& r) {
-                          for (Index p = r.begin(); p != r.end(); ++p) gather(light, *pool, p, out + 3 * p);
-                      });
+    const Index one[1] = {frame};
+    evaluateAllFrames(one, out);
 }
 
 void CornellEvaluator::evaluateAllFrames(std::span<const Index> frames, double* out) const {
     std::vector<std::shared_ptr<const LightPool>> pools;
     pools.reserve(frames.size());
     for (const Index frame : frames) {
-        if (frame < 0 || frame >= frameCount())
-            throw std::out_of_range("cornell: frame " + std::to_string(frame) + " outside [0, " +
-                                    std::to_string(frameCount()) + ")");
+        checkFrame(frame);
         pools.push_back(lightPool(frame));
     }
     const Index n = pointCount();

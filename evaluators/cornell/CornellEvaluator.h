@@ -103,6 +103,8 @@ public:
 private:
     struct LightPool;
     std::shared_ptr<const LightPool> lightPool(Index frame) const;
+    /// @throws std::out_of_range for a frame outside [0, frameCount()).
+    void checkFrame(Index frame) const;
     void gather(const PointLight& light, const LightPool& pool, Index point, double* rgb) const;
     /// Strategy A's cosine-gather rays from `point` and their first hits: the frame's light
     /// plays no part in them.

@@ -109,11 +109,11 @@ FrameSet gatherTrainingFrames(DemoSetup& run, const CornellDemoOptions& o,
     FrameSet q(trainFrames, n, 3);
     // A row of the rig's lights at a time: each point's gather rays are traced once per call and
     // shaded for each light (evaluateAllFrames), the same frames as one evaluateAll() each.
-    const Index kFramesPerCall = trainEval.framesSharingWork();
+    const Index perCall = trainEval.framesSharingWork();
     std::vector<Index> frames;
-    for (Index f = 0; f < trainFrames; f += kFramesPerCall) {
+    for (Index f = 0; f < trainFrames; f += perCall) {
         run.progress("training frames", static_cast<double>(f), static_cast<double>(trainFrames));
-        frames.resize(static_cast<std::size_t>(std::min(kFramesPerCall, trainFrames - f)));
+        frames.resize(static_cast<std::size_t>(std::min(perCall, trainFrames - f)));
         std::iota(frames.begin(), frames.end(), f);
         run.arena.execute([&] { trainEval.evaluateAllFrames(frames, q.frame(f)); });
     }
