@@ -68,6 +68,10 @@ LearnOutcome learnFiles(const LearnOptions& options, ProgressFn progress) {
     const FrameSet frames = readFrameFiles(options.frames);
     checkFramesFit(outcome.before, options.model, frames, options.frames.front());
     pmsc::LearnOptions learning = options.learning;
+    if (!options.positions.empty())
+        learning.positions =
+            positionsFromTable(readPointTable(options.positions).frames, outcome.before.points,
+                               "--positions " + options.positions, "learn");
     learning.progress = std::move(progress);
     outcome.learned = learn(outcome.before, frames, learning, &outcome.report);
     if (!options.out.empty()) writeModel(options.out, outcome.learned);

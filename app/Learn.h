@@ -17,6 +17,9 @@ struct LearnOptions {
     std::string model;                ///< the model file to update
     std::vector<std::string> frames;  ///< the new frames (.npy), one after the other
     std::string out;                  ///< the learned model, written atomically (empty: not written)
+    /// The points' positions the model was trained with (a point table, .npy: --positions); empty:
+    /// none. Read into learning.positions by learnFiles.
+    std::string positions;
     pmsc::LearnOptions learning;
 };
 

@@ -273,14 +273,17 @@ MemoryPlan planMemory(const TrainOptions& o, const TrainSizes& sizes, Communicat
 
 }  // namespace
 
-Eigen::MatrixXd positionsFromTable(const FrameSet& t, Index points, const std::string& what) {
+Eigen::MatrixXd positionsFromTable(const FrameSet& t, Index points, const std::string& what,
+                                   std::string_view command) {
     if (t.frames != 1 || t.points != points || t.channels < 3)
-        throw InputError("train: " + what + " has " + std::to_string(t.points) + " rows of " +
-                         std::to_string(t.channels) + " values, expected " + std::to_string(points) +
-                         " rows (one per point) of at least 3 (x, y, z)");
+        throw InputError(std::string(command) + ": " + what + " has " + std::to_string(t.points) +
+                         " rows of " + std::to_string(t.channels) + " values, expected " +
+                         std::to_string(points) + " rows (one per point) of at least 3 (x, y, z)");
     Eigen::MatrixXd out(points, 3);
     for (Index p = 0; p < points; ++p)
         for (Index k = 0; k < 3; ++k) out(p, k) = t.frame(0)[p * t.channels + k];
+    if (!out.allFinite())
+        throw InputError(std::string(command) + ": " + what + " has a position that is not finite");
     return out;
 }
 

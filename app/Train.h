@@ -78,9 +78,10 @@ struct TrainPlan {
 TrainPlan planTraining(const TrainOptions& options, Communicator& comm);
 
 /// The first three columns of a point table (one frame of `points` rows of at least 3 values: x, y,
-/// z, ...) as the N x 3 positions TrainingOptions::regions takes. @throws InputError naming `what`
-/// for another shape.
-Eigen::MatrixXd positionsFromTable(const FrameSet& table, Index points, const std::string& what);
+/// z, ...) as the N x 3 positions TrainingOptions::regions and LearnOptions::positions take.
+/// @throws InputError naming `command` and `what` for another shape or a value that is not finite.
+Eigen::MatrixXd positionsFromTable(const FrameSet& table, Index points, const std::string& what,
+                                   std::string_view command = "train");
 
 /// A model trained from files, and what training said about it.
 struct TrainOutcome {

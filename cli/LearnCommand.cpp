@@ -120,6 +120,11 @@ int runLearn(const std::vector<std::string>& args) {
         "cross-fitting folds over the new frames (default: slices as large as the training's on all frames "
         "seen, (n + m) / S frames, at least one)",
         [&](const std::string& v) { options.slices = parseIndex("--slices", v, 2); });
+    parser.option("--positions", "POINTS.npy",
+                  "the point positions the model was trained with (train --positions): its sentinels and "
+                  "key neighbours are chosen again from them for the new keys and the points the new "
+                  "frames move",
+                  request.positions);
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
     try {

@@ -112,6 +112,20 @@ void checkLearnInput(const Model& model, const FrameSet& newFrames, const LearnO
         throw std::invalid_argument("learn: a basis size and an energy rule both set M: give one");
     if (options.slices < 0 || options.slices == 1)
         throw std::invalid_argument("learn: slices must be >= 2 (0 = the training's slice size)");
+    if (options.positions.size() == 0) return;
+    if (options.positions.rows() != model.points || options.positions.cols() != 3)
+        throw InputError("learn: positions are " + std::to_string(options.positions.rows()) + " x " +
+                         std::to_string(options.positions.cols()) + ", the model has " +
+                         std::to_string(model.points) + " points (expected " + std::to_string(model.points) +
+                         " x 3)");
+    if (!options.positions.allFinite()) throw InputError("learn: positions have a value that is not finite");
+    // A silently ignored option would be a surprise: the positions must be what the model used.
+    const bool sentinelsFromPositions = model.sentinels && model.sentinels->source == SentinelSource::Given;
+    const bool neighboursFromPositions = model.keyNeighbours && !model.keyNeighbours->fromMean;
+    if (!sentinelsFromPositions && !neighboursFromPositions)
+        throw InputError(
+            "learn: the model keeps nothing chosen from positions given to train (its sentinels and key "
+            "neighbours, if any, came from its mean, a frame or the point order): give no positions");
 }
 
 /// The largest key RMS of the new frames under the old model (what made them misses).
@@ -266,15 +280,21 @@ Model learnedCore(const Model& model, const SubspaceUpdate& u, const std::vector
 
 /// The learned model's key neighbours (KeyNeighbours): the old ones when the keys are the same;
 /// recomputed from the learned mean when they came from the mean (it is still a shape: learning
-/// adds frames of the same calculation) and the keys changed; none, with a warning, when they came
-/// from positions the user gave, which the model does not keep.
-void learnedKeyNeighbours(const Model& model, Model& out, LearnReport& report) {
+/// adds frames of the same calculation) and the keys changed; from the positions when they came
+/// from positions the user gave and gives again (LearnOptions::positions); else none, with a
+/// warning: the model does not keep the positions.
+void learnedKeyNeighbours(const Model& model, Model& out, const LearnOptions& options, LearnReport& report) {
     if (!model.keyNeighbours || out.keyErrorNorm != KeyErrorNorm::Predicted) return;
     if (out.keyPoints == model.keyPoints) {
         out.keyNeighbours = model.keyNeighbours;
         return;
     }
     const Index perKey = model.keyNeighbours->perKey;
+    if (!model.keyNeighbours->fromMean && options.positions.size() > 0 &&
+        out.points - out.keyCount() >= perKey) {
+        out.keyNeighbours = nearestToKeys(options.positions, out.keyPoints, perKey, false);
+        return;
+    }
     if (model.keyNeighbours->fromMean && out.channels == 3 && out.points - out.keyCount() >= perKey) {
         const Eigen::MatrixXd mean =
             Eigen::Map<const Eigen::MatrixXd>(out.mean.data(), 3, out.points).transpose();
@@ -282,21 +302,24 @@ void learnedKeyNeighbours(const Model& model, Model& out, LearnReport& report) {
         return;
     }
     report.warnings.push_back(
-        "the model's key neighbours came from positions given to train, which learn does not have (the "
+        "the model's key neighbours came from positions given to train, which learn was not given (the "
         "keys change): the learned model has none, so nothing checks a hit one part of its key error alone "
-        "certifies; "
-        "train again to get them");
+        "certifies; learn with the same --positions to get them");
 }
 
 /// The learned model's sentinels (Sentinels.h): chosen again, as many as before, when they came
 /// from the mean or a training frame (from the learned mean or a new frame, sentinelShape; drawn in
-/// point order when neither is a shape any more) or from the point order (the new frames may move
-/// what the old ones left still, and the sentinels must cover it); the old ones, less any that
-/// became keys, when they came from positions the user gave.
+/// point order when neither is a shape any more), from the point order (the new frames may move
+/// what the old ones left still, and the sentinels must cover it), or from positions the user
+/// gave and gives again (LearnOptions::positions). Without those positions: the old ones, less any
+/// that became keys (withoutPoints), with a warning, as they cannot follow what the new frames move.
 void learnedSentinels(const Model& model, Model& out, const Eigen::Map<const Eigen::MatrixXd>& fresh,
-                      std::uint64_t seed) {
+                      const LearnOptions& options, LearnReport& report) {
     if (!model.sentinels) return;
     const Index count = static_cast<Index>(model.sentinels->points.size());
+    // The draw's seed: the frames seen, so a learn of other frames draws afresh and the same learn
+    // draws the same points.
+    const auto seed = static_cast<std::uint64_t>(out.trainFrames);
     const SentinelSource was = model.sentinels->source;
     if (was == SentinelSource::Mean || was == SentinelSource::Frame) {
         SentinelSource source = was;
@@ -315,16 +338,23 @@ void learnedSentinels(const Model& model, Model& out, const Eigen::Map<const Eig
         if (!chosen.points.empty()) out.sentinels = std::move(chosen);
         return;
     }
-    if (model.sentinels->source == SentinelSource::PointOrder) {
-        Sentinels chosen = pointOrderSentinels(basisMotion(out), out.keyPoints, count, seed);
+    if (was == SentinelSource::PointOrder || options.positions.size() > 0) {
+        Sentinels chosen = was == SentinelSource::PointOrder
+                               ? pointOrderSentinels(basisMotion(out), out.keyPoints, count, seed)
+                               : farthestPointSentinels(options.positions, basisMotion(out), out.keyPoints,
+                                                        count, SentinelSource::Given);
         if (!chosen.points.empty()) out.sentinels = std::move(chosen);
         return;
     }
-    Sentinels kept = *model.sentinels;
-    std::erase_if(kept.points, [&](Index p) {
-        return std::find(out.keyPoints.begin(), out.keyPoints.end(), p) != out.keyPoints.end();
-    });
-    out.sentinels = std::move(kept);
+    out.sentinels = withoutPoints(*model.sentinels, out.keyPoints);
+    const auto lost = model.sentinels->points.size() - out.sentinels->points.size();
+    report.warnings.push_back(
+        "the model's sentinels came from positions given to train, which learn was not given: the learned "
+        "model keeps them" +
+        (lost > 0 ? " less the " + std::to_string(lost) + " that became keys (their covering radius grows)"
+                  : std::string()) +
+        ", and they do not follow points the new frames move; learn with the same --positions to choose "
+        "them again");
 }
 
 /// Step 3, cross-fitting: each slice of the new frames is scored by a model that never saw it
@@ -585,10 +615,8 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
         u.basis.conservativeResize(Eigen::NoChange, u.basisSize);
     }
     Model out = learnedCore(model, u, keys);
-    learnedKeyNeighbours(model, out, report);
-    // The draw's seed: the frames seen, so a learn of other frames draws afresh and the same learn
-    // draws the same points.
-    learnedSentinels(model, out, fresh, static_cast<std::uint64_t>(out.trainFrames));
+    learnedKeyNeighbours(model, out, options, report);
+    learnedSentinels(model, out, fresh, options, report);
     report.basisAfter = u.basisSize;
     report.largestAngle =
         largestPrincipalAngle(u.basis, model.basis.leftCols(std::min(u.basisSize, model.basisSize())));

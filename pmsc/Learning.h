@@ -34,6 +34,12 @@ struct LearnOptions {
     /// Cross-fitting folds over the new frames for the calibration; 0 = slices of the training's
     /// size on all frames seen ((n + m) / S frames each, S the training's folds; at least one).
     Index slices = 0;
+    /// The points' positions train was given (N x 3; --positions); empty: none. Learn chooses again
+    /// from them what the model took from them: its sentinels (SentinelSource::Given) and its key
+    /// neighbours, so both follow the new keys and the points the new frames move. Without them
+    /// learn keeps the old sentinels less those that became keys, and drops the key neighbours
+    /// (LearnReport::warnings says so).
+    Eigen::MatrixXd positions;
     ProgressFn progress;  ///< optional; returning false cancels (pmsc::Cancelled)
 };
 

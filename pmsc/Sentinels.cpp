@@ -206,6 +206,76 @@ Sentinels pointOrderSentinels(const Eigen::Ref<const Eigen::VectorXd>& motion, s
 
 namespace {
 
+/// For each sentinel of `s` that `gone` marks, the distance to the nearest kept one along the
+/// neighbour lists (Bellman-Ford on the removed ones: there are few); infinity where none is
+/// reached.
+std::vector<double> distanceToKept(const Sentinels& s, const std::vector<char>& gone) {
+    const size_t count = s.points.size(), k = size_t(s.perSentinel);
+    std::vector<double> reach(count, std::numeric_limits<double>::infinity());
+    for (size_t i = 0; i < count; ++i)
+        if (!gone[i]) reach[i] = 0;
+    for (bool changed = true; changed;) {
+        changed = false;
+        for (size_t i = 0; i < count; ++i) {
+            if (!gone[i]) continue;
+            for (size_t n = i * k; n < (i + 1) * k; ++n) {
+                const double via = s.neighbourDistances[n] + reach[size_t(s.neighbours[n])];
+                if (via < reach[i]) {
+                    reach[i] = via;
+                    changed = true;
+                }
+            }
+        }
+    }
+    return reach;
+}
+
+}  // namespace
+
+Sentinels withoutPoints(const Sentinels& s, std::span<const Index> removed) {
+    const size_t count = s.points.size(), k = size_t(s.perSentinel);
+    std::vector<char> gone(count, 0);
+    for (size_t i = 0; i < count; ++i)
+        gone[i] = std::find(removed.begin(), removed.end(), s.points[i]) != removed.end();
+    if (std::find(gone.begin(), gone.end(), 1) == gone.end()) return s;
+    std::vector<Index> renumbered(count, -1);
+    Sentinels out;
+    out.source = s.source;
+    for (size_t i = 0; i < count; ++i) {
+        if (gone[i]) continue;
+        renumbered[i] = static_cast<Index>(out.points.size());
+        out.points.push_back(s.points[i]);
+    }
+    const std::vector<double> reach = distanceToKept(s, gone);
+    double grown = 0;
+    for (size_t i = 0; i < count; ++i)
+        if (gone[i]) grown = std::max(grown, reach[i]);
+    // The shortest kept list: every list cut to it keeps the fixed count the model stores.
+    Index shortest = s.perSentinel;
+    for (size_t i = 0; i < count; ++i) {
+        if (gone[i]) continue;
+        Index kept = 0;
+        for (size_t n = i * k; n < (i + 1) * k; ++n) kept += gone[size_t(s.neighbours[n])] ? 0 : 1;
+        shortest = std::min(shortest, kept);
+    }
+    out.coveringRadius = s.coveringRadius + (std::isfinite(grown) ? grown : 0.0);
+    if (!std::isfinite(grown) || out.points.size() < 2) return out;  // no slope check: perSentinel 0
+    out.perSentinel = shortest;
+    for (size_t i = 0; i < count; ++i) {
+        if (gone[i]) continue;
+        Index taken = 0;
+        for (size_t n = i * k; n < (i + 1) * k && taken < shortest; ++n) {
+            if (gone[size_t(s.neighbours[n])]) continue;
+            out.neighbours.push_back(renumbered[size_t(s.neighbours[n])]);
+            out.neighbourDistances.push_back(s.neighbourDistances[n]);
+            ++taken;
+        }
+    }
+    return out;
+}
+
+namespace {
+
 /// Each of up to kShapeSamples points' (evenly spaced in point order) nearest other point in
 /// `shape` (N x 3) at a distance > 0; points with none are left out.
 std::vector<std::pair<Index, Index>> nearestPairs(const Eigen::MatrixXd& shape) {

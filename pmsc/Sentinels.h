@@ -139,6 +139,17 @@ Sentinels farthestPointSentinels(const Eigen::Ref<const Eigen::MatrixXd>& positi
 Sentinels pointOrderSentinels(const Eigen::Ref<const Eigen::VectorXd>& motion, std::span<const Index> keys,
                               Index count, std::uint64_t seed);
 
+/// `s` less the sentinels at `removed` points, for when the positions that placed them are gone
+/// (learn without them, when sentinels became keys). Each kept sentinel's neighbours are its old
+/// ones that are kept, renumbered: they were its nearest among all, so they are its nearest among
+/// those kept; every list is cut to the shortest (perSentinel falls by as many as one sentinel
+/// lost). The covering radius grows to a bound that needs no positions: a point whose nearest
+/// sentinel was a removed r is within R + d(r, the nearest kept sentinel along r's neighbour
+/// lists) of a kept one, a larger reach for the slope check, never a smaller. When some removed
+/// sentinel reaches no kept one through the lists, nothing bounds R: the neighbours are dropped
+/// (perSentinel 0, no slope check) and each sentinel's own check stays.
+Sentinels withoutPoints(const Sentinels& s, std::span<const Index> removed);
+
 /// frameShape's test: at most kShapeSamples points, their nearest neighbours' distances over at
 /// most kShapeFrames frames, and a median relative spread (std / mean) of at most kMostStretch.
 constexpr Index kShapeSamples = 256;

@@ -124,6 +124,31 @@ private:
     std::optional<py::error_already_set> error_;
 };
 
+/// A positions argument: a .npy path, or an array (N, 3+) or (1, N, 3+); None: an empty name.
+/// Checked against N (app::positionsFromTable) once the frames are known.
+struct PositionsArgument {
+    FrameSet table;
+    std::string name;
+};
+
+PositionsArgument positionsArgument(const py::object& positions, const std::string& command) {
+    PositionsArgument out;
+    if (py::isinstance<py::str>(positions)) {
+        out.name = "positions " + positions.cast<std::string>();
+        out.table = readPointTable(positions.cast<std::string>()).frames;
+    } else if (!positions.is_none()) {
+        const auto a = doubleArray(positions);
+        if (a.ndim() != 2 && !(a.ndim() == 3 && a.shape(0) == 1))
+            throw InputError(command + ": positions must be an array (N, 3) or (1, N, 3), got " +
+                             shapeText(a));
+        const Index rows = a.shape(a.ndim() - 2), cols = a.shape(a.ndim() - 1);
+        out.table = FrameSet(1, rows, cols);
+        std::copy(a.data(), a.data() + rows * cols, out.table.values.begin());
+        out.name = "positions";
+    }
+    return out;
+}
+
 std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energy, double basisError,
                                     Index maxBasis, double maxError, Index maxKeys, Index block,
                                     std::vector<Index> fiducials, std::vector<Index> gridPoints,
@@ -171,30 +196,15 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
     o.sharedChannels = sharedChannels;
     o.sentinels = sentinels;
     o.clampAtZero = clamp;
-    // Positions: a .npy path, or an array (N, 3+) or (1, N, 3+); checked against N once the frames are.
-    FrameSet positionTable;
-    std::string positionsName;
-    if (py::isinstance<py::str>(positions)) {
-        positionsName = "positions " + positions.cast<std::string>();
-        positionTable = readPointTable(positions.cast<std::string>()).frames;
-    } else if (!positions.is_none()) {
-        const auto a = doubleArray(positions);
-        if (a.ndim() != 2 && !(a.ndim() == 3 && a.shape(0) == 1))
-            throw InputError("train: positions must be an array (N, 3) or (1, N, 3), got " + shapeText(a));
-        const Index rows = a.shape(a.ndim() - 2), cols = a.shape(a.ndim() - 1);
-        positionTable = FrameSet(1, rows, cols);
-        std::copy(a.data(), a.data() + rows * cols, positionTable.values.begin());
-        for (const double v : positionTable.values)
-            if (!std::isfinite(v)) throw InputError("train: positions has a value that is not finite");
-        positionsName = "positions";
-    }
+    const PositionsArgument given = positionsArgument(positions, "train");
+    const std::string& positionsName = given.name;
     request.positions = positionsName;  // validate() refuses them with a cross target
     app::validate(request, kPython);
 
     TrainingFrames t = trainingFrames(frames);
     if (!positionsName.empty())
         o.regions.positions =
-            app::positionsFromTable(positionTable, t.view ? t.view->points() : t.copy.points, positionsName);
+            app::positionsFromTable(given.table, t.view ? t.view->points() : t.copy.points, positionsName);
     PythonProgress hook(progress);
     o.progress = hook.function();
     TrainingReport report;
@@ -234,7 +244,7 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
 
 std::shared_ptr<PyModel> learnModel(const PyModel& model, py::handle frames, Index basis, double energy,
                                     Index rank, const std::string& calibration, const py::object& coverage,
-                                    Index slices, py::object progress) {
+                                    Index slices, const py::object& positions, py::object progress) {
     // The keyword arguments into app::LearnOptions, checked by the rules `pmsc learn` uses.
     constexpr app::Spelling kPython = app::Spelling::Python;
     app::LearnOptions request;
@@ -255,6 +265,9 @@ std::shared_ptr<PyModel> learnModel(const PyModel& model, py::handle frames, Ind
         std::copy(a.doubles(), a.doubles() + t.copy.values.size(), t.copy.values.begin());
     }
     app::checkFramesFit(model.get(), "model", t.copy, "frames");
+    const PositionsArgument given = positionsArgument(positions, "learn");
+    if (!given.name.empty())
+        o.positions = app::positionsFromTable(given.table, model.get().points, given.name, "learn");
     PythonProgress hook(std::move(progress));
     o.progress = hook.function();
     LearnReport report;
@@ -295,10 +308,11 @@ void bindTraining(py::module_& m) {
     m.def(
         "learn", &learnModel, "model"_a, "frames"_a, py::kw_only(), "basis"_a = 0, "energy"_a = 0.0,
         "rank"_a = 0, "calibration"_a = "", "coverage"_a = py::none(), "slices"_a = 0,
-        "progress"_a = py::none(),
+        "positions"_a = py::none(), "progress"_a = py::none(),
         "Updates a model with new frames as `pmsc learn` does (same options, same model bytes), without its "
         "training frames. frames: an array (F, N, C), a .npy path, or a list of them. Returns the learned "
-        "model; its training_report says what the update did.");
+        "model; its training_report says what the update did. positions: the positions the model was "
+        "trained with, as train's positions (--positions).");
 }
 
 }  // namespace pmsc::python

@@ -4,6 +4,7 @@
 #include "pmsc/KeptFrames.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/NpyIO.h"
+#include "pmsc/Sentinels.h"
 #include "tests/common/CliRunner.h"
 
 #include <gtest/gtest.h>
@@ -130,6 +131,47 @@ TEST_F(LearnCli, RunKeepsMissesWithTheirFullValues) {
         for (pmsc::Index v = 0; v < test.frames.rows(); ++v)
             ASSERT_EQ(keptFrames.frames.frame(static_cast<pmsc::Index>(i))[v],
                       test.frames.frame(missed[i])[v]);
+}
+
+TEST_F(LearnCli, PositionsTheModelWasTrainedWithChooseItsSentinelsAgain) {
+    TempDir work;
+    // The training frames' first frame as the points' positions (a point table).
+    const pmsc::FrameSet train = pmsc::readFrames(dir_->file("train.npy")).frames;
+    pmsc::FrameSet positions(1, train.points, 3);
+    std::copy(train.frame(0), train.frame(0) + positions.values.size(), positions.values.begin());
+    pmsc::writeFrames(work.file("p.npy"), positions, pmsc::NpyDtype::Float64);
+    RunResult r = runPmsc(work, {"train", "--frames", dir_->file("train.npy"), "--out",
+                                 work.file("given.pmsc"), "--max-keys", "24", "--tolerance", "0.02",
+                                 "--learn-rank", "30", "--positions", work.file("p.npy"), "--quiet"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    ASSERT_EQ(pmsc::readModel(work.file("given.pmsc")).sentinels->source, pmsc::SentinelSource::Given);
+
+    r = runPmsc(work, {"learn", "--model", work.file("given.pmsc"), "--frames", dir_->file("test.npy"),
+                       "--out", work.file("kept.pmsc"), "--quiet"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.out.find("learn with the same --positions to choose them again"), std::string::npos) << r.out;
+    EXPECT_NO_THROW(pmsc::readModel(work.file("kept.pmsc")));
+    r = runPmsc(work, {"learn", "--model", work.file("given.pmsc"), "--frames", dir_->file("test.npy"),
+                       "--out", work.file("again.pmsc"), "--positions", work.file("p.npy"), "--quiet"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_EQ(r.out.find("--positions"), std::string::npos) << r.out;
+    const pmsc::Model again = pmsc::readModel(work.file("again.pmsc"));
+    ASSERT_TRUE(again.sentinels.has_value());
+    EXPECT_EQ(again.sentinels->source, pmsc::SentinelSource::Given);
+
+    // Positions of another size, a file that is not there, a model that took nothing from positions.
+    pmsc::writeFrames(work.file("short.npy"), pmsc::FrameSet(1, train.points - 1, 3),
+                      pmsc::NpyDtype::Float64);
+    r = runPmsc(work, {"learn", "--model", work.file("given.pmsc"), "--frames", dir_->file("test.npy"),
+                       "--out", work.file("bad.pmsc"), "--positions", work.file("short.npy")});
+    expectFailure(r, 2, {"learn: --positions", "short.npy", std::to_string(train.points) + " rows"});
+    r = runPmsc(work, {"learn", "--model", work.file("given.pmsc"), "--frames", dir_->file("test.npy"),
+                       "--out", work.file("bad.pmsc"), "--positions", work.file("none.npy")});
+    expectFailure(r, 2, {"none.npy"});
+    r = runPmsc(work, {"learn", "--model", dir_->file("m.pmsc"), "--frames", dir_->file("test.npy"), "--out",
+                       work.file("bad.pmsc"), "--positions", work.file("p.npy")});
+    expectFailure(r, 2, {"give no positions"});
+    EXPECT_FALSE(fs::exists(work.file("bad.pmsc")));
 }
 
 TEST_F(LearnCli, BadInputsFailWithOneLineAndLeaveFilesAlone) {

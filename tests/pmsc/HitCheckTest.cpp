@@ -11,6 +11,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <random>
 #include <set>
 #include <stdexcept>
 #include <vector>
@@ -378,6 +380,157 @@ TEST(Sentinels, LearnChoosesThemAgainFromTheLearnedMeanAndBasis) {
     const std::set<Index> keys(learned.keyPoints.begin(), learned.keyPoints.end());
     for (const Index p : learned.sentinels->points) EXPECT_EQ(keys.count(p), 0u) << p;
     EXPECT_NO_THROW(learned.validate());
+}
+
+/// The light sheet's points where they lie: the unit square at z = 0 (what train --positions takes).
+Eigen::MatrixXd sheetPositions() {
+    constexpr Index side = 30;
+    Eigen::MatrixXd at = Eigen::MatrixXd::Zero(side * side, 3);
+    for (Index p = 0; p < side * side; ++p) {
+        at(p, 0) = double(p % side) / double(side - 1);
+        at(p, 1) = double(p / side) / double(side - 1);
+    }
+    return at;
+}
+
+/// Light sheet frames [first, first + frames) plus, with `corner`, a ripple in the corner x, y >
+/// 0.6 that frames without it never show.
+pmsc::FrameSet lightSheetFrames(Index first, Index frames, bool corner) {
+    const pmsc::FrameSet all = sheetFrames(first + frames, true);
+    pmsc::FrameSet set(frames, all.points, 3);
+    std::copy(all.frame(first), all.frame(first) + set.values.size(), set.values.begin());
+    if (!corner) return set;
+    const Eigen::MatrixXd at = sheetPositions();
+    for (Index f = 0; f < frames; ++f)
+        for (Index p = 0; p < set.points; ++p)
+            if (at(p, 0) > 0.6 && at(p, 1) > 0.6)
+                for (Index ch = 0; ch < 3; ++ch)
+                    set.frame(f)[3 * p + ch] += 5 * std::sin(0.9 * double(first + f)) *
+                                                std::sin(9 * at(p, 0)) * std::cos(7 * at(p, 1));
+    return set;
+}
+
+TEST(Sentinels, LearnChoosesThemAgainFromTheGivenPositionsOrKeepsTheOldOnesLessTheNewKeys) {
+    pmsc::TrainingOptions o = learnableWithSentinels(3, 12);
+    o.regions.positions = sheetPositions();
+    const Model m = pmsc::train(lightSheetFrames(0, 60, false), o);
+    ASSERT_TRUE(m.sentinels.has_value());
+    ASSERT_EQ(m.sentinels->source, pmsc::SentinelSource::Given);
+    const pmsc::FrameSet corner = lightSheetFrames(60, 60, true);
+
+    // Without the positions: the old sentinels less those that became keys, a valid model that
+    // reads back from its file, and a warning.
+    pmsc::LearnReport report;
+    const Model kept = pmsc::learn(m, corner, {}, &report);
+    ASSERT_TRUE(kept.sentinels.has_value());
+    const std::set<Index> keys(kept.keyPoints.begin(), kept.keyPoints.end());
+    Index lost = 0;
+    for (const Index p : m.sentinels->points) lost += keys.count(p) ? 1 : 0;
+    ASSERT_GT(lost, 0) << "the case this test is for: sentinels that became keys";
+    EXPECT_EQ(kept.sentinels->points.size() + size_t(lost), m.sentinels->points.size());
+    for (const Index p : kept.sentinels->points) EXPECT_EQ(keys.count(p), 0u) << p;
+    EXPECT_GT(kept.sentinels->coveringRadius, m.sentinels->coveringRadius);
+    EXPECT_NO_THROW(kept.validate());
+    EXPECT_NO_THROW(pmsc::decodeModel(pmsc::encodeModel(kept), "kept"));
+    EXPECT_TRUE(std::any_of(report.warnings.begin(), report.warnings.end(), [](const std::string& w) {
+        return w.find("--positions") != std::string::npos && w.find("sentinels") != std::string::npos;
+    }));
+
+    // With them: chosen again as training would from the learned model's motion, and the key
+    // neighbours with them.
+    pmsc::LearnOptions given;
+    given.positions = sheetPositions();
+    const Model again = pmsc::learn(m, corner, given);
+    ASSERT_TRUE(again.sentinels.has_value());
+    const pmsc::Sentinels expected =
+        pmsc::farthestPointSentinels(given.positions, pmsc::basisMotion(again), again.keyPoints,
+                                     Index(m.sentinels->points.size()), pmsc::SentinelSource::Given);
+    EXPECT_EQ(again.sentinels->points, expected.points);
+    EXPECT_EQ(again.sentinels->neighbours, expected.neighbours);
+    EXPECT_DOUBLE_EQ(again.sentinels->coveringRadius, expected.coveringRadius);
+    if (m.keyNeighbours) {
+        ASSERT_TRUE(again.keyNeighbours.has_value());
+        EXPECT_FALSE(again.keyNeighbours->fromMean);
+        EXPECT_EQ(
+            again.keyNeighbours->points,
+            pmsc::nearestToKeys(given.positions, again.keyPoints, m.keyNeighbours->perKey, false).points);
+    }
+    EXPECT_NO_THROW(again.validate());
+
+    // Positions that are not the model's points, or for a model that took nothing from positions.
+    pmsc::LearnOptions wrong;
+    wrong.positions = Eigen::MatrixXd::Zero(m.points + 1, 3);
+    EXPECT_THROW(pmsc::learn(m, corner, wrong), pmsc::InputError);
+    wrong.positions = sheetPositions();
+    wrong.positions(7, 1) = std::nan("");
+    EXPECT_THROW(pmsc::learn(m, corner, wrong), pmsc::InputError);
+    const Model fromMean = pmsc::train(sheetFrames(60), learnableWithSentinels(3, 12));
+    EXPECT_THROW(pmsc::learn(fromMean, sheetFrames(90), given), pmsc::InputError);
+}
+
+TEST(Sentinels, WithoutPointsKeepsEachOnesNearestAndBoundsTheCoveringRadius) {
+    // 400 points spread in the unit cube, all moving; 40 farthest-point sentinels.
+    std::mt19937_64 rng(11);
+    std::uniform_real_distribution<double> unit(0, 1);
+    Eigen::MatrixXd at(400, 3);
+    for (Index p = 0; p < at.rows(); ++p)
+        for (Index k = 0; k < 3; ++k) at(p, k) = unit(rng);
+    const Eigen::VectorXd motion = Eigen::VectorXd::Ones(at.rows());
+    const pmsc::Sentinels s =
+        pmsc::farthestPointSentinels(at, motion, std::vector<Index>{}, 40, pmsc::SentinelSource::Given);
+    ASSERT_EQ(s.perSentinel, pmsc::kSentinelNeighbours);
+    EXPECT_EQ(pmsc::withoutPoints(s, std::vector<Index>{}).points, s.points) << "nothing removed";
+
+    // Remove sentinel 3 and every one of its neighbours but the farthest, and two more.
+    std::vector<Index> removed = {s.points[3], s.points[20], s.points[31]};
+    for (Index k = 0; k + 1 < s.perSentinel; ++k)
+        removed.push_back(s.points[size_t(s.neighbours[size_t(3 * 6 + k)])]);
+    const pmsc::Sentinels out = pmsc::withoutPoints(s, removed);
+    std::vector<Index> keptPoints;
+    for (const Index p : s.points)
+        if (std::find(removed.begin(), removed.end(), p) == removed.end()) keptPoints.push_back(p);
+    ASSERT_EQ(out.points, keptPoints);
+    ASSERT_GT(out.perSentinel, 0);
+    EXPECT_LT(out.perSentinel, s.perSentinel) << "some kept sentinel lost a neighbour";
+    ASSERT_EQ(out.neighbours.size(), out.points.size() * size_t(out.perSentinel));
+    // Each list: the nearest kept sentinels, nearest first, at their distances.
+    const auto count = static_cast<Index>(out.points.size());
+    for (Index i = 0; i < count; ++i) {
+        std::vector<double> all;
+        for (Index j = 0; j < count; ++j)
+            if (j != i) all.push_back((at.row(out.points[size_t(i)]) - at.row(out.points[size_t(j)])).norm());
+        std::sort(all.begin(), all.end());
+        for (Index k = 0; k < out.perSentinel; ++k) {
+            const size_t n = size_t(i * out.perSentinel + k);
+            const Index j = out.neighbours[n];
+            ASSERT_NE(j, i);
+            EXPECT_NEAR(out.neighbourDistances[n],
+                        (at.row(out.points[size_t(i)]) - at.row(out.points[size_t(j)])).norm(), 1e-12);
+            EXPECT_NEAR(out.neighbourDistances[n], all[size_t(k)], 1e-12);
+        }
+    }
+    // The covering radius bounds every point's distance to its nearest kept sentinel.
+    double farthest = 0;
+    for (Index p = 0; p < at.rows(); ++p) {
+        double nearest = std::numeric_limits<double>::infinity();
+        for (const Index q : out.points) nearest = std::min(nearest, (at.row(p) - at.row(q)).norm());
+        farthest = std::max(farthest, nearest);
+    }
+    EXPECT_GT(farthest, s.coveringRadius) << "the case this test is for: the radius grew";
+    EXPECT_GE(out.coveringRadius, farthest);
+
+    // Two pairs, each the other's only neighbour: a removed pair reaches no kept sentinel, nothing
+    // bounds the radius, and the slope check goes (each sentinel's own check stays).
+    pmsc::Sentinels pairs;
+    pairs.points = {10, 11, 20, 21};
+    pairs.coveringRadius = 1;
+    pairs.perSentinel = 1;
+    pairs.neighbours = {1, 0, 3, 2};
+    pairs.neighbourDistances = {1, 1, 1, 1};
+    const pmsc::Sentinels lone = pmsc::withoutPoints(pairs, std::vector<Index>{10, 11});
+    EXPECT_EQ(lone.points, (std::vector<Index>{20, 21}));
+    EXPECT_EQ(lone.perSentinel, 0);
+    EXPECT_TRUE(lone.neighbours.empty());
 }
 
 TEST(Sentinels, EveryHitComputesThemAndTheyHoldPmWithinTheirShareOfTheTolerance) {

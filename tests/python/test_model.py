@@ -181,6 +181,28 @@ class ModelTest(TempDirTest):
         self.assertEqual(learned.train_frames, 80)
         self.assertEqual(learned.training_report["new_frames"], 40)
 
+    def test_learn_takes_the_positions_the_model_was_trained_with(self):
+        # positions= is learn's --positions: the sentinels chosen again from them, the same bytes.
+        self.require_cli()
+        first, second = synthetic_frames(seed=4)[:40], synthetic_frames(seed=4, novel=20)[40:]
+        positions = np.random.default_rng(5).random((first.shape[1], 3))
+        table = self.path("positions.npy")
+        np.save(table, positions)
+        model = pmsc.train(first, max_keys=30, tolerance=0.05, seed=3, positions=positions)
+        model.save(self.path("day1.pmsc"))
+        np.save(self.path("new.npy"), second)
+        run_cli("learn", "--model", self.path("day1.pmsc"), "--frames", self.path("new.npy"), "--out",
+                self.path("day2.pmsc"), "--positions", table, "--quiet")
+        with open(self.path("day2.pmsc"), "rb") as f:
+            cli = f.read()
+        learned = pmsc.learn(model, second, positions=positions)
+        self.assertEqual(learned.to_bytes(), cli)
+        self.assertEqual(pmsc.learn(model, second, positions=table).to_bytes(), cli)
+        self.assertFalse(any("--positions" in w for w in learned.training_report["warnings"]))
+        self.assertTrue(any("--positions" in w for w in pmsc.learn(model, second).training_report["warnings"]))
+        with self.assertRaisesRegex(pmsc.InputError, "learn: positions"):
+            pmsc.learn(model, second, positions=positions[:-1])
+
     def test_regions_by_default_as_the_command_line(self):
         # Local motion on a surface (each of 24 bumps moves a few percent of 2,025 points): `pmsc
         # train --tolerance` learns regions without being told; pmsc.train does the same, byte for byte.
