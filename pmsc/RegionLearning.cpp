@@ -60,22 +60,33 @@ std::vector<Index> kmeans(const Eigen::MatrixXd& x, Index k, int iterations) {
         nearest = nearest.cwiseMin((x.rowwise() - centres.row(i)).rowwise().squaredNorm());
     }
     std::vector<Index> label(size_t(n), 0);
-    // The assignment runs on every core in blocks of points: each point's nearest centre is the
-    // same expression on any thread, so the labels do not depend on the thread count.
-    constexpr Index kBlock = 4096;
+    // The assignment runs on every core in fixed blocks of points: each block is the same
+    // arithmetic on any thread, so the labels do not depend on the thread count.
+    // Decision: a point's nearest centre minimises |c|^2 - 2 x.c (|x - c|^2 less |x|^2, the same
+    // for every centre), one matrix product per block. Why: a k x d difference per point took 14%
+    // of the CPU of the face's training (`perf record pmsc train`: 26,719 points, 159 centres, 27
+    // features), the product 2%; the product's rounding (|x|^2 is at most about R + 1 here, so
+    // about 1e-14) only reorders centres that tie: the novelty suite's set A gives the same model
+    // file, byte for byte.
+    constexpr Index kBlock = 1024;
     const Index blocks = (n + kBlock - 1) / kBlock;
     for (int it = 0; it < iterations; ++it) {
         std::atomic<Index> next{0};
         std::atomic<bool> changed{false};
+        const Eigen::RowVectorXd centreNorms = centres.rowwise().squaredNorm().transpose();
+        const Eigen::MatrixXd centresT = centres.transpose();
         runOnEveryCore(
             [&] {
+                Eigen::MatrixXd dots;
                 for (Index b = next++; b < blocks; b = next++) {
+                    const Index first = b * kBlock, rows = std::min(n, first + kBlock) - first;
+                    dots.noalias() = x.middleRows(first, rows) * centresT;
                     bool moved = false;
-                    for (Index p = b * kBlock; p < std::min(n, (b + 1) * kBlock); ++p) {
+                    for (Index i = 0; i < rows; ++i) {
                         Index best = 0;
-                        (centres.rowwise() - x.row(p)).rowwise().squaredNorm().minCoeff(&best);
-                        moved = moved || best != label[size_t(p)];
-                        label[size_t(p)] = best;
+                        (centreNorms - 2 * dots.row(i)).minCoeff(&best);
+                        moved = moved || best != label[size_t(first + i)];
+                        label[size_t(first + i)] = best;
                     }
                     if (moved) changed = true;
                 }
