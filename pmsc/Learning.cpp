@@ -346,8 +346,9 @@ void learnedSentinels(const Model& model, Model& out, const Eigen::Map<const Eig
         if (!chosen.points.empty()) out.sentinels = std::move(chosen);
         return;
     }
-    out.sentinels = withoutPoints(*model.sentinels, out.keyPoints);
-    const auto lost = model.sentinels->points.size() - out.sentinels->points.size();
+    Sentinels kept = withoutPoints(*model.sentinels, out.keyPoints);
+    const auto lost = model.sentinels->points.size() - kept.points.size();
+    if (!kept.points.empty()) out.sentinels = std::move(kept);
     report.warnings.push_back(
         "the model's sentinels came from positions given to train, which learn was not given: the learned "
         "model keeps them" +
