@@ -36,7 +36,8 @@ struct ModelSectionCodec;
 /// in an arbitrary order it is a random sample, whose chance of missing a share f of the moving
 /// points is (1 - f)^S. Positions are always better: `pmsc export-frames --positions` writes them.
 enum class SentinelSource : std::uint32_t {
-    Given = 0,       ///< farthest-point samples of positions the user gave (learn keeps them)
+    Given = 0,       ///< farthest-point samples of positions the user gave (learn chooses again from the
+                     ///< same positions, else keeps them less the new keys)
     Mean = 1,        ///< farthest-point samples of the training mean, a shape (learn chooses again)
     PointOrder = 2,  ///< one at random in each equal run of moving points (learn chooses again)
     Frame = 3,       ///< farthest-point samples of a training frame, a shape whose mean is not (frameShape;
