@@ -63,11 +63,10 @@ std::vector<Index> kmeans(const Eigen::MatrixXd& x, Index k, int iterations) {
     // The assignment runs on every core in fixed blocks of points: each block is the same
     // arithmetic on any thread, so the labels do not depend on the thread count.
     // Decision: a point's nearest centre minimises |c|^2 - 2 x.c (|x - c|^2 less |x|^2, the same
-    // for every centre), one matrix product per block. Why: a k x d difference per point took 14%
-    // of the CPU of the face's training (`perf record pmsc train`: 26,719 points, 159 centres, 27
-    // features), the product 2%; the product's rounding (|x|^2 is at most about R + 1 here, so
-    // about 1e-14) only reorders centres that tie: the novelty suite's set A gives the same model
-    // file, byte for byte.
+    // for every centre), one matrix product per block. Why: on the face's training (`perf record
+    // pmsc train`: 26,719 points, 159 centres, 27 features) a k x d difference per point is 14% of
+    // the CPU and the product 2%. The product rounds to about 1e-16 |x|^2, which reorders only
+    // centres that all but tie: the novelty suite's set A gives the same model file, byte for byte.
     constexpr Index kBlock = 1024;
     const Index blocks = (n + kBlock - 1) / kBlock;
     for (int it = 0; it < iterations; ++it) {
