@@ -65,13 +65,13 @@ LearnOutcome learnFiles(const LearnOptions& options, ProgressFn progress) {
     LearnOutcome outcome;
     outcome.before = readModel(options.model);
     checkLearnable(outcome.before, options.model);
-    const FrameSet frames = readFrameFiles(options.frames);
-    checkFramesFit(outcome.before, options.model, frames, options.frames.front());
     pmsc::LearnOptions learning = options.learning;
-    if (!options.positions.empty())
+    if (!options.positions.empty())  // small: read before the frames, so a bad file fails first
         learning.positions =
             positionsFromTable(readPointTable(options.positions).frames, outcome.before.points,
                                "--positions " + options.positions, "learn");
+    const FrameSet frames = readFrameFiles(options.frames);
+    checkFramesFit(outcome.before, options.model, frames, options.frames.front());
     learning.progress = std::move(progress);
     outcome.learned = learn(outcome.before, frames, learning, &outcome.report);
     if (!options.out.empty()) writeModel(options.out, outcome.learned);

@@ -290,15 +290,16 @@ void learnedKeyNeighbours(const Model& model, Model& out, const LearnOptions& op
         return;
     }
     const Index perKey = model.keyNeighbours->perKey;
-    if (!model.keyNeighbours->fromMean && options.positions.size() > 0 &&
-        out.points - out.keyCount() >= perKey) {
-        out.keyNeighbours = nearestToKeys(options.positions, out.keyPoints, perKey, false);
-        return;
+    const bool fromMean = model.keyNeighbours->fromMean;
+    // The points they are the nearest in: the learned mean (a shape, 3 channels) or the positions.
+    Eigen::MatrixXd where;
+    if (fromMean && out.channels == 3) {
+        where = Eigen::Map<const Eigen::MatrixXd>(out.mean.data(), 3, out.points).transpose();
+    } else if (!fromMean) {
+        where = options.positions;
     }
-    if (model.keyNeighbours->fromMean && out.channels == 3 && out.points - out.keyCount() >= perKey) {
-        const Eigen::MatrixXd mean =
-            Eigen::Map<const Eigen::MatrixXd>(out.mean.data(), 3, out.points).transpose();
-        out.keyNeighbours = nearestToKeys(mean, out.keyPoints, perKey, true);
+    if (where.size() > 0 && out.points - out.keyCount() >= perKey) {
+        out.keyNeighbours = nearestToKeys(where, out.keyPoints, perKey, fromMean);
         return;
     }
     report.warnings.push_back(
@@ -321,6 +322,7 @@ void learnedSentinels(const Model& model, Model& out, const Eigen::Map<const Eig
     // draws the same points.
     const auto seed = static_cast<std::uint64_t>(out.trainFrames);
     const SentinelSource was = model.sentinels->source;
+    Sentinels chosen;
     if (was == SentinelSource::Mean || was == SentinelSource::Frame) {
         SentinelSource source = was;
         // The new frames' coordinates in the learned (orthonormal) basis, B^T x - B^T mean: no
@@ -330,32 +332,28 @@ void learnedSentinels(const Model& model, Model& out, const Eigen::Map<const Eig
             coordinates.colwise() -= out.basis.transpose() * out.mean;
             return coordinates;
         });
-        Sentinels chosen =
-            shape.size() > 0
-                ? farthestPointSentinels(shape, basisMotion(out), out.keyPoints, count, source)
-                : pointOrderSentinels(basisMotion(out), out.keyPoints,
-                                      sentinelCount(kPointOrderFactor * count, out.points), seed);
-        if (!chosen.points.empty()) out.sentinels = std::move(chosen);
-        return;
+        chosen = shape.size() > 0
+                     ? farthestPointSentinels(shape, basisMotion(out), out.keyPoints, count, source)
+                     : pointOrderSentinels(basisMotion(out), out.keyPoints,
+                                           sentinelCount(kPointOrderFactor * count, out.points), seed);
+    } else if (was == SentinelSource::PointOrder) {
+        chosen = pointOrderSentinels(basisMotion(out), out.keyPoints, count, seed);
+    } else if (options.positions.size() > 0) {
+        chosen = farthestPointSentinels(options.positions, basisMotion(out), out.keyPoints, count,
+                                        SentinelSource::Given);
+    } else {
+        chosen = withoutPoints(*model.sentinels, out.keyPoints);
+        const auto lost = model.sentinels->points.size() - chosen.points.size();
+        report.warnings.push_back(
+            "the model's sentinels came from positions given to train, which learn was not given: the "
+            "learned model keeps them" +
+            (lost > 0
+                 ? " less the " + std::to_string(lost) + " that became keys (their covering radius grows)"
+                 : std::string()) +
+            ", and they do not follow points the new frames move; learn with the same --positions to "
+            "choose them again");
     }
-    if (was == SentinelSource::PointOrder || options.positions.size() > 0) {
-        Sentinels chosen = was == SentinelSource::PointOrder
-                               ? pointOrderSentinels(basisMotion(out), out.keyPoints, count, seed)
-                               : farthestPointSentinels(options.positions, basisMotion(out), out.keyPoints,
-                                                        count, SentinelSource::Given);
-        if (!chosen.points.empty()) out.sentinels = std::move(chosen);
-        return;
-    }
-    Sentinels kept = withoutPoints(*model.sentinels, out.keyPoints);
-    const auto lost = model.sentinels->points.size() - kept.points.size();
-    if (!kept.points.empty()) out.sentinels = std::move(kept);
-    report.warnings.push_back(
-        "the model's sentinels came from positions given to train, which learn was not given: the learned "
-        "model keeps them" +
-        (lost > 0 ? " less the " + std::to_string(lost) + " that became keys (their covering radius grows)"
-                  : std::string()) +
-        ", and they do not follow points the new frames move; learn with the same --positions to choose "
-        "them again");
+    if (!chosen.points.empty()) out.sentinels = std::move(chosen);
 }
 
 /// Step 3, cross-fitting: each slice of the new frames is scored by a model that never saw it
