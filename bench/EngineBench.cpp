@@ -6,8 +6,10 @@
 //   miss:         a missed frame through the graph vs a plain full evaluation, linear-cost evaluator
 //   reconstruct:  one frame's PM reconstruction at 160,000 points x 3 channels x 32 basis vs a
 //                 memcpy of the basis' bytes (the memory roofline)
+//   decode:       a 123 MB model file's bytes decoded with the checksum first vs beside the decode
 #include "bench/EngineBenchSupport.h"
 #include "engine/Engine.h"
+#include "pmsc/ModelIO.h"
 #include "pmsc/PointMultiplier.h"
 #include "pmsc/SoftCache.h"
 
@@ -16,6 +18,7 @@
 #include <cstring>
 #include <ctime>
 #include <memory>
+#include <string>
 #include <vector>
 
 namespace pmsc::bench {
@@ -218,8 +221,25 @@ void BM_Memcpy_BasisBytes(benchmark::State& state) {
     state.SetBytesProcessed(state.iterations() * std::int64_t(n));
 }
 
+// ---- reading a model: the checksum first, then the decode (0), or beside it (1) -------------------
+
+// The bytes of bigModel()'s file (123 MB), decoded as `pmsc run` and `pmsc inspect` read them once
+// the file is in memory. The ratio /0 over /1 is what computing the checksum beside the decode saves
+// (pmsc::kChecksumThreadBytes); with one core it is about 1.
+void BM_DecodeModel(benchmark::State& state) {
+    static const std::string bytes = encodeModel(bigModel());
+    const auto where = state.range(0) == 1 ? ChecksumThread::Beside : ChecksumThread::First;
+    state.SetLabel(state.range(0) == 1 ? "checksum beside" : "checksum first");
+    for (auto _ : state) {
+        const Model m = decodeModel(bytes, "bench.pmsc", where);
+        benchmark::DoNotOptimize(m.basis.data());
+    }
+    state.SetBytesProcessed(state.iterations() * std::int64_t(bytes.size()));
+}
+
 }  // namespace
 
+BENCHMARK(BM_DecodeModel)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_Overhead_PlainLoop)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_Overhead_Graph1Thread)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_Scaling_Graph)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();

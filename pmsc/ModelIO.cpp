@@ -10,9 +10,13 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <exception>
+#include <memory>
 #include <set>
 #include <stdexcept>
 #include <string>
+#include <system_error>
+#include <thread>
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -310,22 +314,57 @@ void validateDecoded(const Model& model, const std::string& name) {
     }
 }
 
-}  // namespace
-
-Model decodeModel(std::string_view bytes, const std::string& name) {
-    const std::uint64_t length = bytes.size();
-    const std::uint32_t version = checkVersion(bytes, name);
-    const bool hasSections = version >= 2;
-    const CoreLayout layout = readLayout(bytes, name, version);
-    checkChecksum(bytes, name);
+/// The header's values, the core arrays and the sections, each checked (not the checksum).
+Model decodeContents(std::string_view bytes, const std::string& name, const CoreLayout& layout,
+                     std::uint32_t version) {
     checkHeaderValues(layout, name);
     Model model = readCore(bytes, name, layout);
     validateDecoded(model, name);
-    if (hasSections) {
-        decodeSections(bytes.substr(layout.coreEnd, length - 8 - layout.coreEnd), name, model);
+    if (version >= 2) {
+        decodeSections(bytes.substr(layout.coreEnd, bytes.size() - 8 - layout.coreEnd), name, model);
         // Again with the sections: what they may not be combined with (shared channels have none).
         validateDecoded(model, name);
     }
+    return model;
+}
+
+}  // namespace
+
+Model decodeModel(std::string_view bytes, const std::string& name, ChecksumThread where) {
+    const std::uint32_t version = checkVersion(bytes, name);
+    const CoreLayout layout = readLayout(bytes, name, version);
+    if (where == ChecksumThread::First || bytes.size() < kChecksumThreadBytes) {
+        checkChecksum(bytes, name);
+        return decodeContents(bytes, name, layout, version);
+    }
+    std::exception_ptr checksumError;
+    std::thread checksum;
+    try {
+        checksum = std::thread([&] {
+            try {
+                checkChecksum(bytes, name);
+            } catch (...) {
+                checksumError = std::current_exception();
+            }
+        });
+    } catch (const std::system_error&) {  // no thread to be had: one after the other
+        checkChecksum(bytes, name);
+        return decodeContents(bytes, name, layout, version);
+    }
+    // The checksum's verdict comes first, as when it is checked before the contents: a corrupted file
+    // is reported as corrupted, whatever its contents would have been refused for. The decode reads
+    // only within the lengths readLayout checked against the file, so corrupted bytes cannot lead it
+    // outside them.
+    Model model;
+    std::exception_ptr decodeError;
+    try {
+        model = decodeContents(bytes, name, layout, version);
+    } catch (...) {
+        decodeError = std::current_exception();
+    }
+    checksum.join();
+    if (checksumError) std::rethrow_exception(checksumError);
+    if (decodeError) std::rethrow_exception(decodeError);
     return model;
 }
 
@@ -348,10 +387,11 @@ Model readModel(const std::string& path) {
     if (::fstat(fd, &st) != 0) bad(path, std::string("cannot stat: ") + std::strerror(errno));
     if (S_ISDIR(st.st_mode)) bad(path, "is a folder, not a model file");
     // The buffer is as large as the file really is; nothing is allocated from a size field.
-    std::string bytes(static_cast<std::size_t>(st.st_size), '\0');
+    const auto size = static_cast<std::size_t>(st.st_size);
+    const std::unique_ptr<char[]> buffer(new char[size]);  // no zero fill: read() writes it
     std::size_t done = 0;
-    while (done < bytes.size()) {
-        const ssize_t got = ::read(fd, bytes.data() + done, bytes.size() - done);
+    while (done < size) {
+        const ssize_t got = ::read(fd, buffer.get() + done, size - done);
         if (got < 0) {
             if (errno == EINTR) continue;
             bad(path, std::string("read failed: ") + std::strerror(errno));
@@ -359,8 +399,7 @@ Model readModel(const std::string& path) {
         if (got == 0) break;
         done += static_cast<std::size_t>(got);
     }
-    bytes.resize(done);
-    return decodeModel(bytes, path);
+    return decodeModel(std::string_view(buffer.get(), done), path);
 }
 
 }  // namespace pmsc

@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 #include <Eigen/QR>
 
+#include <cmath>
 #include <cstring>
 #include <limits>
 #include <string>
@@ -253,6 +254,76 @@ TEST(ModelFile, EveryFlippedByteIsRejected) {
             }
         }
     }
+}
+
+/// A model whose file is past kChecksumThreadBytes (100,000 points, 2 basis vectors: 7.2 MB), made
+/// as smallModel() is.
+Model largeModel() {
+    Model m;
+    m.points = 100000;
+    m.channels = 3;
+    m.trainFrames = 5;
+    const Eigen::Index rows = m.points * m.channels;
+    Eigen::MatrixXd random(rows, 2);
+    for (Eigen::Index i = 0; i < random.size(); ++i) random.data()[i] = std::sin(0.37 * double(i) + 0.1);
+    m.basis =
+        Eigen::HouseholderQR<Eigen::MatrixXd>(random).householderQ() * Eigen::MatrixXd::Identity(rows, 2);
+    m.mean = Eigen::VectorXd::LinSpaced(rows, -1.0, 1.0);
+    m.singularValues = Eigen::Vector2d(4.0, 0.5);
+    m.totalEnergy = m.singularValues.squaredNorm() + 0.25;
+    m.keyPoints = {17, 40000, 99999};
+    m.projector = pmsc::makeProjector(m.basis, m.channels, m.keyPoints);
+    m.selector = pmsc::Selector::QDeim;
+    m.epsMin = 0.01;
+    m.epsMax = 0.015;
+    m.tolerance = 0.05;
+    return m;
+}
+
+// A file past kChecksumThreadBytes has its checksum computed beside the decode: the same model, and
+// the same verdicts in the same order as with the checksum first (a corrupted file is reported as
+// corrupted even where its contents would also be refused).
+TEST(ModelFile, ALargeFileDecodesBesideItsChecksumWithTheSameVerdicts) {
+    const Model m = largeModel();
+    const std::string good = pmsc::encodeModel(m);
+    ASSERT_GE(good.size(), pmsc::kChecksumThreadBytes);
+    for (const auto where : {pmsc::ChecksumThread::Beside, pmsc::ChecksumThread::First}) {
+        const Model r = pmsc::decodeModel(good, "big.pmsc", where);
+        EXPECT_EQ(r.keyPoints, m.keyPoints);
+        EXPECT_EQ(r.mean, m.mean);
+        EXPECT_EQ(r.basis, m.basis);
+        EXPECT_EQ(r.projector, m.projector);
+    }
+    TempDir dir;
+    const auto path = dir.file("big.pmsc");
+    writeBytes(path, good);
+    EXPECT_EQ(pmsc::encodeModel(pmsc::readModel(path)), good);
+
+    const auto message = [](const std::string& bytes, pmsc::ChecksumThread where) {
+        try {
+            pmsc::decodeModel(bytes, "big.pmsc", where);
+        } catch (const InputError& e) {
+            return std::string(e.what());
+        }
+        return std::string("NO ERROR");
+    };
+    const std::size_t keysAt = pmsc::kModelHeaderBytes + 8 * (300000 + 600000 + 2);
+    std::string flipped = good;
+    flipped[pmsc::kModelHeaderBytes + 8 * 300000 + 5] ^= 0x10;  // a basis value
+    std::string badKey = good;
+    poke<std::uint64_t>(badKey, keysAt + 8, 100000);  // the second key, one past the points
+    for (const auto where : {pmsc::ChecksumThread::Beside, pmsc::ChecksumThread::First}) {
+        EXPECT_NE(message(flipped, where).find("big.pmsc: checksum mismatch"), std::string::npos);
+        EXPECT_NE(message(badKey, where).find("big.pmsc: checksum mismatch"), std::string::npos)
+            << message(badKey, where);
+        std::string resealed = badKey;
+        reseal(resealed);
+        EXPECT_NE(message(resealed, where).find("key point index 100000 is outside [0, 100000)"),
+                  std::string::npos)
+            << message(resealed, where);
+    }
+    writeBytes(path, badKey);
+    expectRejected(path, {"checksum mismatch"});
 }
 
 TEST(ModelFile, WrongMagic) {
