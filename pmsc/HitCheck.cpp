@@ -23,6 +23,17 @@ HitCheck::HitCheck(const Model& model, const PointMultiplier& pm) : model_(model
             sentinelAt_.push_back(at);
         }
     }
+    if (!sentinels_.empty()) {
+        const Index c = model.channels, width = model.sharedChannels ? 1 : c;
+        const auto s = static_cast<Index>(sentinels_.size());
+        sentinelMean_.resize(s * c);
+        sentinelBasis_.resize(s * width, model.basisSize());
+        for (Index i = 0; i < s; ++i) {
+            const Index p = sentinels_[size_t(i)];
+            sentinelMean_.segment(i * c, c) = model.mean.segment(p * c, c);
+            sentinelBasis_.middleRows(i * width, width) = model.basis.middleRows(p * width, width);
+        }
+    }
     predicted_ = model.keyErrorNorm == KeyErrorNorm::Predicted && !model.sharedChannels;
     available_ =
         !sentinels_.empty() || (predicted_ && (!regionKeys_.empty() || model.keyNeighbours.has_value()));
@@ -79,11 +90,60 @@ bool HitCheck::passes(const double* coords, std::span<const Index> points, const
     return offPoints(coords, points, values).empty();
 }
 
+void HitCheck::reconstruct(const double* coords, std::span<const Index> points, double* out) const {
+    const Index c = model_.channels;
+    std::vector<Index> at, others;  // positions in sentinels_ of the sentinels, the other points
+    std::vector<size_t> atOut, othersOut;
+    for (size_t i = 0; i < points.size(); ++i) {
+        const auto s = std::lower_bound(sentinels_.begin(), sentinels_.end(), points[i]);
+        if (s != sentinels_.end() && *s == points[i]) {
+            at.push_back(static_cast<Index>(s - sentinels_.begin()));
+            atOut.push_back(i);
+        } else {
+            others.push_back(points[i]);
+            othersOut.push_back(i);
+        }
+    }
+    if (!others.empty()) {
+        std::vector<double> pm(others.size() * size_t(c));
+        pm_.reconstructPoints(coords, others, pm.data());
+        for (size_t i = 0; i < others.size(); ++i)
+            std::copy_n(pm.data() + i * size_t(c), c, out + othersOut[i] * size_t(c));
+    }
+    if (at.empty()) return;
+    // reconstructPoints' loops on the gathered rows: the mean, then basis vector by basis vector.
+    const auto n = static_cast<Index>(at.size());
+    std::vector<double> pm(size_t(n * c));
+    for (Index i = 0; i < n; ++i)
+        for (Index ch = 0; ch < c; ++ch) pm[size_t(i * c + ch)] = sentinelMean_[at[size_t(i)] * c + ch];
+    bool all = n == static_cast<Index>(sentinels_.size());  // every sentinel, in ascending order
+    for (Index i = 0; all && i < n; ++i) all = at[size_t(i)] == i;
+    for (Index j = 0; j < model_.basisSize(); ++j) {
+        const double* column = sentinelBasis_.col(j).data();
+        if (model_.sharedChannels) {
+            const double* bj = coords + j * c;
+            for (Index i = 0; i < n; ++i) {
+                const double a = column[all ? i : at[size_t(i)]];
+                for (Index ch = 0; ch < c; ++ch) pm[size_t(i * c + ch)] += a * bj[ch];
+            }
+        } else if (all) {
+            const double bj = coords[j];
+            for (Index r = 0; r < n * c; ++r) pm[size_t(r)] += column[r] * bj;
+        } else {
+            const double bj = coords[j];
+            for (Index i = 0; i < n; ++i)
+                for (Index ch = 0; ch < c; ++ch)
+                    pm[size_t(i * c + ch)] += column[at[size_t(i)] * c + ch] * bj;
+        }
+    }
+    for (Index i = 0; i < n; ++i) std::copy_n(pm.data() + i * c, c, out + atOut[size_t(i)] * size_t(c));
+}
+
 std::vector<Index> HitCheck::offPoints(const double* coords, std::span<const Index> points,
                                        const double* values) const {
     const Index c = model_.channels;
     std::vector<double> pm(points.size() * size_t(c));
-    pm_.reconstructPoints(coords, points, pm.data());
+    reconstruct(coords, points, pm.data());
     std::vector<Index> off;
     // PM's error at each computed sentinel, by its position in the model's list (NaN: not computed).
     std::vector<double> atSentinel;

@@ -82,6 +82,16 @@ private:
     std::vector<Index> sentinelAt_;  ///< sentinels_[i]'s position in the model's list
     bool predicted_ = false;         ///< the key error has two parts that can disagree
     bool available_ = false;
+    /// The sentinels' rows of the mean and of the basis, gathered once, column-major: (S*C) x M, or
+    /// S x M with shared channels. Why: a hit reconstructs PM at its sentinels, and gathering their
+    /// rows from the whole basis reads a cache line per sentinel and basis vector (1,024 x M misses
+    /// over a basis of tens of MB); from these few MB the same sums, in the same order, stream.
+    Eigen::VectorXd sentinelMean_;
+    Eigen::MatrixXd sentinelBasis_;
+
+    /// PM at `points` (points.size()*C values), as PointMultiplier::reconstructPoints computes it (the
+    /// same sums in the same order), the sentinels among them from the rows gathered above.
+    void reconstruct(const double* coords, std::span<const Index> points, double* out) const;
 
     bool disagree(PredictedParts parts) const;
     /// Appends to `off` the sentinels the slope check refuses (kSentinelSlopeShare), from PM's

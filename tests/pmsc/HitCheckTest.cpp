@@ -697,4 +697,46 @@ TEST(Sentinels, ModelsWhoseKeyErrorHasOnePartOrWhoseChannelsShareTheBasisCheckEv
     }
 }
 
+// The check reconstructs PM at the sentinels from their rows gathered once; the sums are
+// PointMultiplier::reconstructPoints' own, in its order, so with a tolerance of 1e-300 a check of
+// values PM computed passes only when every value is reproduced to the last bit: all the sentinels,
+// in another order, some of them, and sentinels among other points, with and without shared channels.
+TEST(Sentinels, TheCheckReconstructsPmAtThemToTheLastBit) {
+    pmsc::TrainingOptions o;
+    o.regions.count = 0;
+    o.sentinels = 40;
+    o.basis = 3;
+    o.maxKeys = 12;
+    o.tolerance = 0.01;
+    o.keyErrorNorm = pmsc::KeyErrorNorm::Rms;
+    Model separate = pmsc::train(sheetFrames(60), o);
+    o.sharedChannels = true;
+    Model shared = pmsc::train(sheetFrames(60, true), o);
+    for (Model* m : {&separate, &shared}) {
+        m->tolerance = 1e-300;
+        const pmsc::PointMultiplier pm(*m);
+        const pmsc::HitCheck check(*m, pm);
+        std::vector<double> keys = unseenKeys(*m), coords(size_t(m->coordCount()));
+        pm.project(keys.data(), coords.data());
+        std::vector<Index> all(check.sentinels().begin(), check.sentinels().end());
+        std::vector<Index> some, mixed = {0, 1, m->keyPoints[0]};
+        for (size_t i = 0; i < all.size(); i += 3) some.push_back(all[i]);
+        mixed.insert(mixed.end(), some.begin(), some.end());
+        std::sort(mixed.begin(), mixed.end());
+        mixed.erase(std::unique(mixed.begin(), mixed.end()), mixed.end());
+        std::vector<Index> reversed(all.rbegin(), all.rend());  // the C API passes the model's order
+        for (const std::vector<Index>* points : {&all, &reversed, &some, &mixed}) {
+            std::vector<double> values(points->size() * size_t(m->channels));
+            pm.reconstructPoints(coords.data(), *points, values.data());
+            EXPECT_TRUE(check.offPoints(coords.data(), *points, values.data()).empty())
+                << points->size() << " points, shared " << m->sharedChannels;
+            const size_t last = values.size() - 1;
+            values[last] = std::nextafter(values[last], 1e300);
+            // One bit off is off (and its sentinel neighbours with it, by the slope check).
+            const std::vector<Index> off = check.offPoints(coords.data(), *points, values.data());
+            EXPECT_NE(std::find(off.begin(), off.end(), points->back()), off.end());
+        }
+    }
+}
+
 }  // namespace
