@@ -665,7 +665,9 @@ TEST(Sentinels, TheSlopeCheckRefusesASentinelWellOverItsNeighbours) {
     EXPECT_TRUE(check.passes(coords.data(), alone, one.data()));
 }
 
-TEST(Sentinels, ModelsWhoseKeyErrorHasOnePartOrWhoseChannelsShareTheBasisCheckEveryHitAtThem) {
+/// The sheet trained with 40 sentinels, a one-part key error (the key RMS) and no regions; with
+/// `shared`, its light version with the channels sharing the basis.
+Model sheetWithSentinels(bool shared) {
     pmsc::TrainingOptions o;
     o.regions.count = 0;
     o.sentinels = 40;
@@ -673,11 +675,15 @@ TEST(Sentinels, ModelsWhoseKeyErrorHasOnePartOrWhoseChannelsShareTheBasisCheckEv
     o.maxKeys = 12;
     o.tolerance = 0.01;
     o.keyErrorNorm = pmsc::KeyErrorNorm::Rms;
-    const Model rms = pmsc::train(sheetFrames(60), o);
+    o.sharedChannels = shared;
+    return pmsc::train(sheetFrames(60, shared), o);
+}
+
+TEST(Sentinels, ModelsWhoseKeyErrorHasOnePartOrWhoseChannelsShareTheBasisCheckEveryHitAtThem) {
+    const Model rms = sheetWithSentinels(false);
     ASSERT_TRUE(rms.sentinels.has_value());
     EXPECT_EQ(rms.sentinels->source, pmsc::SentinelSource::Mean);
-    o.sharedChannels = true;
-    const Model shared = pmsc::train(sheetFrames(60, true), o);
+    const Model shared = sheetWithSentinels(true);
     ASSERT_TRUE(shared.sentinels.has_value());
     EXPECT_EQ(shared.sentinels->source, pmsc::SentinelSource::PointOrder) << "shared channels: no mean shape";
     for (const Model* m : {&rms, &shared}) {
@@ -702,16 +708,7 @@ TEST(Sentinels, ModelsWhoseKeyErrorHasOnePartOrWhoseChannelsShareTheBasisCheckEv
 // values PM computed passes only when every value is reproduced to the last bit: all the sentinels,
 // in another order, some of them, and sentinels among other points, with and without shared channels.
 TEST(Sentinels, TheCheckReconstructsPmAtThemToTheLastBit) {
-    pmsc::TrainingOptions o;
-    o.regions.count = 0;
-    o.sentinels = 40;
-    o.basis = 3;
-    o.maxKeys = 12;
-    o.tolerance = 0.01;
-    o.keyErrorNorm = pmsc::KeyErrorNorm::Rms;
-    Model separate = pmsc::train(sheetFrames(60), o);
-    o.sharedChannels = true;
-    Model shared = pmsc::train(sheetFrames(60, true), o);
+    Model separate = sheetWithSentinels(false), shared = sheetWithSentinels(true);
     for (Model* m : {&separate, &shared}) {
         m->tolerance = 1e-300;
         const pmsc::PointMultiplier pm(*m);
