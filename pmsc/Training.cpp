@@ -4,6 +4,7 @@
 #include "pmsc/Errors.h"
 #include "pmsc/KeyNeighbours.h"
 #include "pmsc/KeyPointSelector.h"
+#include "pmsc/Parallel.h"
 #include "pmsc/PointMultiplier.h"
 #include "pmsc/QDeim.h"
 #include "pmsc/RegionChoice.h"
@@ -12,6 +13,7 @@
 #include "pmsc/Subspace.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -219,41 +221,57 @@ Model trainSharedChannels(FrameSet&& frames, const TrainingOptions& options, Tra
     // The largest point residual on the training frames, Euclidean over the channels like
     // everywhere else (the C=1 training measured it per channel). Frame t's channel ch is
     // column t*C + ch of the centred matrix plus the model's mean.
-    // Frames are reconstructed in slabs of points from the model's own basis (BasisPrecision::None):
-    // the copy a PointMultiplier makes for whole frames would be the peak of training.
+    // PM of every training frame at every point is mean + B X, X (M x F*C) the frames' coordinates
+    // in the centred matrix's column order (frame t's channel ch at column t*C + ch), so its residual
+    // is B X - Q for Q the centred matrix: one matrix product per slab of points, on every core.
+    // Slabs of points and runs of frames keep each product small (the whole residual would be
+    // training's peak); a point's error is the largest over the frames of its Euclidean norm over the
+    // channels, which no slab or thread order changes.
     const Eigen::Map<const Eigen::MatrixXd> centred = static_cast<const MatrixBlocks&>(q).matrix();
     const PointMultiplier pm(model, BasisPrecision::None);
-    const Index k = model.keyCount();
-    std::vector<Index> slab(static_cast<std::size_t>(std::min(kSlabPoints, n)));
+    const Index k = model.keyCount(), m = model.basisSize();
     std::vector<double> keys(static_cast<std::size_t>(k * c)),
-        coords(static_cast<std::size_t>(model.coordCount())),
-        values(slab.size() * static_cast<std::size_t>(c));
-    auto at = [&](Index t, Index p, Index ch) { return centred(p, t * c + ch) + model.mean[p * c + ch]; };
-    double worst = 0;
+        coords(static_cast<std::size_t>(model.coordCount()));
+    Eigen::MatrixXd x(m, f * c);
     std::vector<double> keyErrors(static_cast<std::size_t>(f));
     for (Index t = 0; t < f; ++t) {
         for (Index i = 0; i < k; ++i)
-            for (Index ch = 0; ch < c; ++ch)
-                keys[static_cast<std::size_t>(i * c + ch)] =
-                    at(t, model.keyPoints[static_cast<std::size_t>(i)], ch);
-        pm.project(keys.data(), coords.data());
-        for (Index first = 0; first < n; first += kSlabPoints) {
-            const Index count = std::min(kSlabPoints, n - first);
-            std::iota(slab.begin(), slab.begin() + count, first);
-            pm.reconstructPoints(coords.data(),
-                                 std::span<const Index>(slab.data(), static_cast<std::size_t>(count)),
-                                 values.data());
-            for (Index i = 0; i < count; ++i) {
-                double e = 0;
-                for (Index ch = 0; ch < c; ++ch) {
-                    const double d = values[static_cast<std::size_t>(i * c + ch)] - at(t, first + i, ch);
-                    e += d * d;
-                }
-                worst = std::max(worst, e);
+            for (Index ch = 0; ch < c; ++ch) {
+                const Index p = model.keyPoints[static_cast<std::size_t>(i)];
+                keys[static_cast<std::size_t>(i * c + ch)] = centred(p, t * c + ch) + model.mean[p * c + ch];
             }
-        }
+        pm.project(keys.data(), coords.data());
+        for (Index j = 0; j < m; ++j)
+            for (Index ch = 0; ch < c; ++ch) x(j, t * c + ch) = coords[static_cast<std::size_t>(j * c + ch)];
         keyErrors[static_cast<std::size_t>(t)] = pm.keyError(keys.data(), coords.data());
     }
+    const Index slabs = (n + kSlabPoints - 1) / kSlabPoints;
+    // Each product is at most 2^22 values (32 MB a thread), whatever the frame count.
+    const Index framesPerProduct = std::max<Index>(1, (Index{1} << 22) / (kSlabPoints * c));
+    std::vector<double> slabWorst(static_cast<std::size_t>(slabs), 0.0);
+    std::atomic<Index> nextSlab{0};
+    runOnEveryCore(
+        [&] {
+            Eigen::MatrixXd d;
+            for (Index b = nextSlab++; b < slabs; b = nextSlab++) {
+                const Index first = b * kSlabPoints, count = std::min(kSlabPoints, n - first);
+                double w = 0;
+                for (Index t0 = 0; t0 < f; t0 += framesPerProduct) {
+                    const Index frames = std::min(framesPerProduct, f - t0);
+                    d.noalias() = model.basis.middleRows(first, count) * x.middleCols(t0 * c, frames * c);
+                    d -= centred.block(first, t0 * c, count, frames * c);
+                    for (Index t = 0; t < frames; ++t)
+                        for (Index i = 0; i < count; ++i) {
+                            double e = 0;
+                            for (Index ch = 0; ch < c; ++ch) e += d(i, t * c + ch) * d(i, t * c + ch);
+                            w = std::max(w, e);
+                        }
+                }
+                slabWorst[static_cast<std::size_t>(b)] = w;
+            }
+        },
+        slabs);
+    const double worst = *std::max_element(slabWorst.begin(), slabWorst.end());
     model.trainMaxPointResidual = std::sqrt(worst);
     if (!(options.tolerance > 0)) {
         // Uncalibrated eps are the training frames' largest key error (thresholdsFromKeyRows):

@@ -114,6 +114,41 @@ TEST(SharedChannels, ALightOfANewColourIsReproducedExactlyWhereAPerChannelBasisI
     EXPECT_LT(shared.trainMaxPointResidual, 1e-8);
 }
 
+// The training residual is PM's largest point error (Euclidean over the channels) on the training
+// frames, recomputed here frame by frame through PointMultiplier; 9,000 points: two slabs.
+TEST(SharedChannels, TheTrainingResidualIsPmsLargestPointErrorOnTheTrainingFrames) {
+    const LightFrames data(9000, 3, 6);
+    static_assert(pmsc::kSlabPoints < 9000);
+    // 180 frames: past the 170 frames of one product at 3 channels, and a spike PM cannot follow,
+    // in the second run of frames and near the end of the last slab of points.
+    pmsc::FrameSet q = data.training(180);
+    q.frame(175)[8990 * 3 + 1] += 100;
+    const pmsc::Model model = pmsc::train(q, options(4, 12, true));  // M < rank: residuals
+    ASSERT_TRUE(model.sharedChannels);
+    const pmsc::PointMultiplier pm(model);
+    std::vector<double> coords(static_cast<size_t>(model.coordCount())), out(9000 * 3);
+    double worst = 0;
+    Index worstPoint = -1;
+    for (Index f = 0; f < q.frames; ++f) {
+        const std::vector<double> keys = keysOf(model, q.frame(f));
+        pm.project(keys.data(), coords.data());
+        pm.reconstruct(coords.data(), out.data());
+        for (Index p = 0; p < 9000; ++p) {
+            double e = 0;
+            for (Index ch = 0; ch < 3; ++ch) {
+                const double d = out[size_t(p * 3 + ch)] - q.frame(f)[p * 3 + ch];
+                e += d * d;
+            }
+            if (std::sqrt(e) > worst) {
+                worst = std::sqrt(e);
+                worstPoint = p;
+            }
+        }
+    }
+    EXPECT_EQ(worstPoint, 8990);
+    EXPECT_NEAR(model.trainMaxPointResidual, worst, 1e-10 * worst);
+}
+
 TEST(SharedChannels, ProjectReconstructAndKeyErrorAgreeWithTheFormulas) {
     const LightFrames data(120, 3, 4);
     const pmsc::Model model = pmsc::train(data.training(24), options(3, 10, true));  // M < rank: residuals
