@@ -111,32 +111,11 @@ void HitCheck::reconstruct(const double* coords, std::span<const Index> points, 
             std::copy_n(pm.data() + i * size_t(c), c, out + othersOut[i] * size_t(c));
     }
     if (at.empty()) return;
-    // reconstructPoints' loops on the gathered rows: the mean, then basis vector by basis vector.
-    const auto n = static_cast<Index>(at.size());
-    std::vector<double> pm(size_t(n * c));
-    for (Index i = 0; i < n; ++i)
-        for (Index ch = 0; ch < c; ++ch) pm[size_t(i * c + ch)] = sentinelMean_[at[size_t(i)] * c + ch];
-    bool all = n == static_cast<Index>(sentinels_.size());  // every sentinel, in ascending order
-    for (Index i = 0; all && i < n; ++i) all = at[size_t(i)] == i;
-    for (Index j = 0; j < model_.basisSize(); ++j) {
-        const double* column = sentinelBasis_.col(j).data();
-        if (model_.sharedChannels) {
-            const double* bj = coords + j * c;
-            for (Index i = 0; i < n; ++i) {
-                const double a = column[all ? i : at[size_t(i)]];
-                for (Index ch = 0; ch < c; ++ch) pm[size_t(i * c + ch)] += a * bj[ch];
-            }
-        } else if (all) {
-            const double bj = coords[j];
-            for (Index r = 0; r < n * c; ++r) pm[size_t(r)] += column[r] * bj;
-        } else {
-            const double bj = coords[j];
-            for (Index i = 0; i < n; ++i)
-                for (Index ch = 0; ch < c; ++ch)
-                    pm[size_t(i * c + ch)] += column[at[size_t(i)] * c + ch] * bj;
-        }
-    }
-    for (Index i = 0; i < n; ++i) std::copy_n(pm.data() + i * c, c, out + atOut[size_t(i)] * size_t(c));
+    std::vector<double> pm(at.size() * size_t(c));
+    reconstructAt(sentinelMean_, sentinelBasis_, c, model_.sharedChannels, model_.nonNegative, coords, at,
+                  pm.data());
+    for (size_t i = 0; i < at.size(); ++i)
+        std::copy_n(pm.data() + i * size_t(c), c, out + atOut[i] * size_t(c));
 }
 
 std::vector<Index> HitCheck::offPoints(const double* coords, std::span<const Index> points,

@@ -85,12 +85,12 @@ private:
     /// The sentinels' rows of the mean and of the basis, gathered once, column-major: (S*C) x M, or
     /// S x M with shared channels. Why: a hit reconstructs PM at its sentinels, and gathering their
     /// rows from the whole basis reads a cache line per sentinel and basis vector (1,024 x M misses
-    /// over a basis of tens of MB); from these few MB the same sums, in the same order, stream.
+    /// over a basis of tens of MB); from these few MB reconstructAt computes the same values.
     Eigen::VectorXd sentinelMean_;
     Eigen::MatrixXd sentinelBasis_;
 
-    /// PM at `points` (points.size()*C values), as PointMultiplier::reconstructPoints computes it (the
-    /// same sums in the same order), the sentinels among them from the rows gathered above.
+    /// PM at `points` (points.size()*C values), as PointMultiplier::reconstructPoints computes it
+    /// (reconstructAt, clamped as it clamps), the sentinels among them from the rows gathered above.
     void reconstruct(const double* coords, std::span<const Index> points, double* out) const;
 
     bool disagree(PredictedParts parts) const;

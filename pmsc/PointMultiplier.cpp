@@ -356,39 +356,41 @@ double PointMultiplier::largestErrorAt(const double* coords, std::span<const Ind
     return largest;
 }
 
-void PointMultiplier::reconstructPoints(const double* coords, std::span<const Index> points,
-                                        double* out) const {
-    const Index c = model_.channels;
-    const Index m = model_.basisSize();
-    const Index rows = model_.mean.size();
+void reconstructAt(const Eigen::VectorXd& mean, const Eigen::MatrixXd& basis, Index channels,
+                   bool sharedChannels, bool nonNegative, const double* coords, std::span<const Index> points,
+                   double* out) {
+    const Index c = channels;
+    const Index m = basis.cols();
     const auto n = static_cast<Index>(points.size());
     for (Index i = 0; i < n; ++i) {
         const Index row = points[static_cast<size_t>(i)] * c;
-        for (Index ch = 0; ch < c; ++ch) out[i * c + ch] = model_.mean[row + ch];
+        for (Index ch = 0; ch < c; ++ch) out[i * c + ch] = mean[row + ch];
     }
     // Column-major basis: walking column by column reads each column's selected rows in order,
     // instead of striding by N*C for every row dot product.
-    const double* basis = model_.basis.data();
-    if (model_.sharedChannels) {
-        for (Index j = 0; j < m; ++j) {
-            const double* column = basis + j * model_.points;
+    for (Index j = 0; j < m; ++j) {
+        const double* column = basis.col(j).data();
+        if (sharedChannels) {
             const double* bj = coords + j * c;
             for (Index i = 0; i < n; ++i) {
                 const double a = column[points[static_cast<size_t>(i)]];
                 for (Index ch = 0; ch < c; ++ch) out[i * c + ch] += a * bj[ch];
             }
-        }
-    } else {
-        for (Index j = 0; j < m; ++j) {
+        } else {
             const double bj = coords[j];
-            const double* column = basis + j * rows;
             for (Index i = 0; i < n; ++i) {
                 const Index row = points[static_cast<size_t>(i)] * c;
                 for (Index ch = 0; ch < c; ++ch) out[i * c + ch] += column[row + ch] * bj;
             }
         }
     }
-    if (model_.nonNegative) clampAtZero(out, n * c);
+    if (nonNegative) clampAtZero(out, n * c);
+}
+
+void PointMultiplier::reconstructPoints(const double* coords, std::span<const Index> points,
+                                        double* out) const {
+    reconstructAt(model_.mean, model_.basis, model_.channels, model_.sharedChannels, model_.nonNegative,
+                  coords, points, out);
 }
 
 }  // namespace pmsc

@@ -88,4 +88,13 @@ private:
     Eigen::VectorXd looScale_;      // KeyErrorNorm::LeaveOneOut: 1 / (1 - leverage) per key row
 };
 
+/// PM at `points`, which index the rows of `mean` (C values a point) and `basis` (column-major:
+/// C rows a point, or one with shared channels): mean + basis * coords at each point, clamped at 0
+/// when `nonNegative`, summed basis vector by basis vector. PointMultiplier::reconstructPoints on
+/// the model's rows, and the hit check on its sentinels' rows gathered once (HitCheck), so both
+/// compute the same values to the bit.
+void reconstructAt(const Eigen::VectorXd& mean, const Eigen::MatrixXd& basis, Index channels,
+                   bool sharedChannels, bool nonNegative, const double* coords, std::span<const Index> points,
+                   double* out);
+
 }  // namespace pmsc
