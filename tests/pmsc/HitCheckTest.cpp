@@ -728,8 +728,9 @@ TEST(Sentinels, TheCheckReconstructsPmAtThemToTheLastBit) {
         for (const std::vector<Index>* points : {&all, &reversed, &some, &mixed}) {
             std::vector<double> values(points->size() * size_t(m->channels));
             pm.reconstructPoints(coords.data(), *points, values.data());
-            if (m == &clamped && points == &all)
+            if (m == &clamped && points == &all) {
                 EXPECT_EQ(*std::min_element(values.begin(), values.end()), 0.0) << "some value clamped";
+            }
             EXPECT_TRUE(check.offPoints(coords.data(), *points, values.data()).empty())
                 << points->size() << " points, shared " << m->sharedChannels;
             const size_t last = values.size() - 1;
