@@ -205,6 +205,18 @@ void bindModelViews(ModelClass& c) {
             },
             "the K key point indices, in selection order (a copy)")
         .def_property_readonly(
+            "sentinel_points",
+            [](const PyModel& s) {
+                const Model& m = s.get();
+                const Index n = m.sentinels ? static_cast<Index>(m.sentinels->points.size()) : Index{0};
+                py::array_t<std::int64_t> out(n);
+                if (n > 0)
+                    std::copy(m.sentinels->points.begin(), m.sentinels->points.end(), out.mutable_data());
+                return out;
+            },
+            "the sentinels' point indices (computed beside every hit), in the order training chose them; "
+            "empty without them (a copy)")
+        .def_property_readonly(
             "mean",
             [](const py::object& self) {
                 const Model& m = self.cast<const PyModel&>().get();

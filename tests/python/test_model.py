@@ -159,6 +159,17 @@ class ModelTest(TempDirTest):
         self.assertEqual(from_array.to_bytes(), cli)
         self.assertEqual(pmsc.train(npy, max_keys=30, tolerance=0.05, seed=3, positions=table).to_bytes(), cli)
         self.assertGreater(from_array.info["sentinels"], 0)
+        # sentinel_points: the points a hit computes beside its keys, farthest-point samples of the
+        # positions (the second is the non-key point farthest from the first), none of them a key.
+        s = from_array.sentinel_points
+        self.assertEqual(s.dtype, np.int64)
+        self.assertEqual(len(s), from_array.info["sentinels"])
+        self.assertEqual(len(set(s.tolist())), len(s))
+        self.assertFalse(set(s.tolist()) & set(from_array.key_points.tolist()))
+        others = np.setdiff1d(np.arange(300), from_array.key_points)
+        far = others[np.argmax(np.linalg.norm(positions[others] - positions[s[0]], axis=1))]
+        self.assertEqual(s[1], far)
+        self.assertEqual(len(pmsc.train(self.frames, max_keys=30, tolerance=0.05, sentinels=0).sentinel_points), 0)
         with self.assertRaisesRegex(pmsc.InputError, "expected 300 rows"):
             pmsc.train(self.frames, max_keys=30, tolerance=0.05, positions=positions[:299])
         with self.assertRaisesRegex(pmsc.InputError, r"positions must be an array \(N, 3\)"):
