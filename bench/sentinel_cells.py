@@ -26,22 +26,16 @@ arguments or a failed command.
 import argparse
 import json
 import os
-import subprocess
-import sys
 import tempfile
 
 import numpy as np
 
+from suite_common import fail, run
+
 try:
     import pmsc
 except ImportError:
-    print("sentinel_cells: cannot import pmsc (set PYTHONPATH=build/python)", file=sys.stderr)
-    sys.exit(2)
-
-
-def fail(message):
-    print("sentinel_cells: " + message, file=sys.stderr)
-    sys.exit(2)
+    fail("cannot import pmsc (set PYTHONPATH=build/python)")
 
 
 def cells_of(positions, sentinels):
@@ -80,9 +74,7 @@ def held_out_ratios(args, model, cell, sentinels, work):
         cmd = [os.path.join(args.bin, "pmsc"), "train", "--frames", kept, "--out", out,
                "--tolerance", repr(tolerance)]
         cmd += (["--positions", args.positions] if args.positions else []) + args.train.split()
-        done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        if done.returncode != 0:
-            fail("'" + " ".join(cmd) + "' exited " + str(done.returncode) + ": " + done.stdout.strip()[-300:])
+        run(cmd)
         fold = pmsc.Model.load(out)
         for f in range(a, b):
             e = point_errors(fold, np.asarray(frames[f], dtype=float))
@@ -138,7 +130,13 @@ def main():
     for r in args.replays:
         if ":" not in r:
             fail("a replay is TAKE.npy:REPORT.json, got '" + r + "'")
-    model = pmsc.Model.load(args.model)
+    try:
+        model = pmsc.Model.load(args.model)
+    except pmsc.Error as e:
+        fail(str(e))
+    for path in [args.frames] + ([args.positions] if args.positions else []) + [r.split(":", 1)[0] for r in args.replays]:
+        if not os.path.isfile(path):
+            fail("no file " + path)
     sentinels = np.asarray(model.sentinel_points)
     if len(sentinels) == 0 or not model.tolerance > 0:
         fail(args.model + " has no sentinels (train it with a tolerance)")

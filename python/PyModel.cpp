@@ -181,6 +181,13 @@ void bindModelFiles(ModelClass& c) {
 }
 
 /// pmsc.Model's sizes, thresholds and read-only views, and its arithmetic.
+/// A copy of point indices as an int64 array.
+py::array_t<std::int64_t> indexArray(const std::vector<Index>& points) {
+    py::array_t<std::int64_t> out(static_cast<py::ssize_t>(points.size()));
+    std::copy(points.begin(), points.end(), out.mutable_data());
+    return out;
+}
+
 void bindModelViews(ModelClass& c) {
     c.def_property_readonly(
          "points", [](const PyModel& s) { return s.get().points; }, "N")
@@ -197,22 +204,13 @@ void bindModelViews(ModelClass& c) {
         .def_property_readonly("tolerance", [](const PyModel& s) { return s.get().tolerance; })
         .def_property_readonly("energy_captured", [](const PyModel& s) { return s.get().energyCaptured(); })
         .def_property_readonly(
-            "key_points",
-            [](const PyModel& s) {
-                py::array_t<std::int64_t> k(s.get().keyCount());
-                std::copy(s.get().keyPoints.begin(), s.get().keyPoints.end(), k.mutable_data());
-                return k;
-            },
+            "key_points", [](const PyModel& s) { return indexArray(s.get().keyPoints); },
             "the K key point indices, in selection order (a copy)")
         .def_property_readonly(
             "sentinel_points",
             [](const PyModel& s) {
                 const Model& m = s.get();
-                const Index n = m.sentinels ? static_cast<Index>(m.sentinels->points.size()) : Index{0};
-                py::array_t<std::int64_t> out(n);
-                if (n > 0)
-                    std::copy(m.sentinels->points.begin(), m.sentinels->points.end(), out.mutable_data());
-                return out;
+                return indexArray(m.sentinels ? m.sentinels->points : std::vector<Index>{});
             },
             "the sentinels' point indices (computed beside every hit), in the order training chose them; "
             "empty without them (a copy)")
