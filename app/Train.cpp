@@ -174,7 +174,7 @@ FrameSet readShots(const std::vector<Shot>& shots) {
     if (shots.size() == 1) return readFrames(shots.front().path).frames;
     Index total = 0;
     for (const Shot& s : shots) total += s.info.frames;
-    FrameSet all(total, shots.front().info.points, shots.front().info.channels);
+    FrameSet all(total, shots.front().info.points, shots.front().info.channels, FrameSet::Uninitialised{});
     Index at = 0;
     for (const Shot& s : shots) {
         const FrameFile f = readFrames(s.path);

@@ -1,18 +1,33 @@
 #include "pmsc/FrameSet.h"
 
+#include <sys/mman.h>
+
+#include <algorithm>
 #include <stdexcept>
 #include <string>
 
 namespace pmsc {
 
+void* allocateAligned(std::size_t bytes, std::size_t alignment, bool huge) noexcept {
+    void* p = nullptr;
+    if (::posix_memalign(&p, alignment, bytes == 0 ? alignment : bytes) != 0) return nullptr;
+    if (huge) ::madvise(p, bytes, MADV_HUGEPAGE);
+    return p;
+}
+
 FrameSet::FrameSet(Index frameCount, Index pointCount, Index channelCount)
+    : FrameSet(frameCount, pointCount, channelCount, Uninitialised{}) {
+    std::fill(values.begin(), values.end(), 0.0);
+}
+
+FrameSet::FrameSet(Index frameCount, Index pointCount, Index channelCount, Uninitialised)
     : frames(frameCount), points(pointCount), channels(channelCount) {
     if (frameCount <= 0 || pointCount <= 0 || channelCount <= 0) {
         throw std::invalid_argument("FrameSet: sizes must be positive (frames=" + std::to_string(frameCount) +
                                     ", points=" + std::to_string(pointCount) +
                                     ", channels=" + std::to_string(channelCount) + ")");
     }
-    values.assign(static_cast<size_t>(frameCount * pointCount * channelCount), 0.0);
+    values.resize(static_cast<size_t>(frameCount * pointCount * channelCount));
 }
 
 }  // namespace pmsc

@@ -381,7 +381,7 @@ FrameFile readFrames(const std::string& path) {
     const NpyInfo info = parseInfo(path, file);
     FrameFile out;
     out.dtype = info.dtype;
-    out.frames = FrameSet(info.frames, info.points, info.channels);
+    out.frames = FrameSet(info.frames, info.points, info.channels, FrameSet::Uninitialised{});
     readValues(path, file, info, 0, out.frames.values.size(), out.frames.values.data());
     return out;
 }
@@ -394,7 +394,7 @@ FrameFile readFrameRange(const std::string& path, Index first, Index count) {
                          ") are not within the file's " + std::to_string(info.frames) + " frames");
     FrameFile out;
     out.dtype = info.dtype;
-    out.frames = FrameSet(count, info.points, info.channels);
+    out.frames = FrameSet(count, info.points, info.channels, FrameSet::Uninitialised{});
     const std::uint64_t perFrame = static_cast<std::uint64_t>(info.points * info.channels);
     readValues(path, file, info, static_cast<std::uint64_t>(first) * perFrame, out.frames.values.size(),
                out.frames.values.data());
@@ -406,7 +406,7 @@ FrameFile readPointTable(const std::string& path) {
     const NpyInfo info = parseInfo(path, file, true);
     FrameFile out;
     out.dtype = info.dtype;
-    out.frames = FrameSet(1, info.points, info.channels);
+    out.frames = FrameSet(1, info.points, info.channels, FrameSet::Uninitialised{});
     readValues(path, file, info, 0, out.frames.values.size(), out.frames.values.data());
     return out;
 }

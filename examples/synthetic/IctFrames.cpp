@@ -147,7 +147,7 @@ FrameSet poseIctFrames(const IctRig& rig, Index frames, unsigned seed,
         held[s] = 1;
         fixed[s] = weight;
     }
-    FrameSet out(frames, rig.points, 3);
+    FrameSet out(frames, rig.points, 3, FrameSet::Uninitialised{});  // every frame starts as the neutral
     std::mt19937_64 rng(0x1C7FACEull ^ (static_cast<std::uint64_t>(seed) * 0x9E3779B97F4A7C15ull));
     std::uniform_real_distribution<double> threshold(0.0, 0.45), gain(1.5, 2.5);
     // Left/right pairs share a curve plus a smaller private one, as faces mostly move symmetrically.
@@ -196,7 +196,7 @@ FrameSet poseIctSegments(const IctRig& rig, Index framesPerSegment, unsigned see
                          const std::vector<std::string>& without,
                          const std::vector<std::vector<std::pair<std::string, double>>>& holds) {
     if (holds.empty()) throw InputError("no segments to pose");
-    FrameSet out(framesPerSegment * static_cast<Index>(holds.size()), rig.points, 3);
+    FrameSet out(framesPerSegment * static_cast<Index>(holds.size()), rig.points, 3, FrameSet::Uninitialised{});
     for (std::size_t h = 0; h < holds.size(); ++h) {
         const FrameSet segment = poseIctFrames(rig, framesPerSegment, seed, without, holds[h]);
         std::copy(segment.values.begin(), segment.values.end(),
