@@ -53,7 +53,8 @@ FrameSet readFrameFiles(const std::vector<std::string>& paths) {
         frames += f.frames;
     }
     if (files.size() == 1) return std::move(files.front().frames);
-    FrameSet all(frames, files.front().frames.points, files.front().frames.channels, FrameSet::Uninitialised{});
+    FrameSet all(frames, files.front().frames.points, files.front().frames.channels,
+                 FrameSet::Uninitialised{});
     auto at = all.values.begin();
     for (const auto& f : files) at = std::copy(f.frames.values.begin(), f.frames.values.end(), at);
     return all;

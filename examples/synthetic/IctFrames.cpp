@@ -196,7 +196,8 @@ FrameSet poseIctSegments(const IctRig& rig, Index framesPerSegment, unsigned see
                          const std::vector<std::string>& without,
                          const std::vector<std::vector<std::pair<std::string, double>>>& holds) {
     if (holds.empty()) throw InputError("no segments to pose");
-    FrameSet out(framesPerSegment * static_cast<Index>(holds.size()), rig.points, 3, FrameSet::Uninitialised{});
+    FrameSet out(framesPerSegment * static_cast<Index>(holds.size()), rig.points, 3,
+                 FrameSet::Uninitialised{});
     for (std::size_t h = 0; h < holds.size(); ++h) {
         const FrameSet segment = poseIctFrames(rig, framesPerSegment, seed, without, holds[h]);
         std::copy(segment.values.begin(), segment.values.end(),
