@@ -68,9 +68,7 @@ def models_of(args):
 
 def run(cmd):
     """A command's output; fail() with its last lines when it exits non-zero."""
-    import time as _t; _t0=_t.time()
     done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    sys.stderr.write("TIME %.2f %s\n" % (_t.time()-_t0, " ".join(os.path.basename(c) if i==0 else c for i,c in enumerate(cmd[:3]))))
     if done.returncode != 0:
         fail("'" + " ".join(cmd) + "' exited " + str(done.returncode) + ": " + done.stdout.strip()[-400:])
     return done.stdout
