@@ -1,19 +1,10 @@
 #include "pmsc/FrameSet.h"
 
-#include <sys/mman.h>
-
 #include <algorithm>
 #include <stdexcept>
 #include <string>
 
 namespace pmsc {
-
-void* allocateAligned(std::size_t bytes, std::size_t alignment, bool huge) noexcept {
-    void* p = nullptr;
-    if (::posix_memalign(&p, alignment, bytes == 0 ? alignment : bytes) != 0) return nullptr;
-    if (huge) ::madvise(p, bytes, MADV_HUGEPAGE);
-    return p;
-}
 
 FrameSet::FrameSet(Index frameCount, Index pointCount, Index channelCount)
     : FrameSet(frameCount, pointCount, channelCount, Uninitialised{}) {

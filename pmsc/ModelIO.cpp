@@ -1,6 +1,7 @@
 #include "pmsc/ModelIO.h"
 
 #include "pmsc/AtomicFile.h"
+#include "pmsc/BulkAllocator.h"
 #include "pmsc/ByteIO.h"
 #include "pmsc/Errors.h"
 #include "pmsc/ModelSections.h"
@@ -388,7 +389,12 @@ Model readModel(const std::string& path) {
     if (S_ISDIR(st.st_mode)) bad(path, "is a folder, not a model file");
     // The buffer is as large as the file really is; nothing is allocated from a size field.
     const auto size = static_cast<std::size_t>(st.st_size);
-    const std::unique_ptr<char[]> buffer(new char[size]);  // no zero fill: read() writes it
+    // No zero fill (read() writes it), on huge pages when large (BulkAllocator): a model of hundreds
+    // of megabytes is read at every `pmsc run` task's start.
+    const bool huge = size >= BulkAllocator<char>::kHugePageBytes;
+    const std::unique_ptr<char, FreeDeleter> buffer(
+        static_cast<char*>(allocateAligned(size, huge ? BulkAllocator<char>::kHugePageBytes : 64, huge)));
+    if (!buffer) bad(path, "no memory for its " + std::to_string(size) + " bytes");
     std::size_t done = 0;
     while (done < size) {
         const ssize_t got = ::read(fd, buffer.get() + done, size - done);

@@ -31,16 +31,17 @@ using ConstRowMajorMap = Eigen::Map<const RowMajor>;
 constexpr Index kPanel = 16;
 
 template <typename Scalar>
-Eigen::Matrix<Scalar, Eigen::Dynamic, 1> panelsOf(const Eigen::MatrixXd& basis) {
+std::vector<Scalar, BulkAllocator<Scalar>> panelsOf(const Eigen::MatrixXd& basis) {
     const Index n = basis.rows(), m = basis.cols();
     const Index panels = (n + kPanel - 1) / kPanel;
-    Eigen::Matrix<Scalar, Eigen::Dynamic, 1> out =
-        Eigen::Matrix<Scalar, Eigen::Dynamic, 1>::Zero(panels * kPanel * m);
+    std::vector<Scalar, BulkAllocator<Scalar>> out(static_cast<std::size_t>(panels * kPanel * m));
     for (Index p = 0; p < panels; ++p) {
         const Index rows = std::min(kPanel, n - p * kPanel);
-        for (Index j = 0; j < m; ++j)
-            for (Index i = 0; i < rows; ++i)
-                out[(p * m + j) * kPanel + i] = static_cast<Scalar>(basis(p * kPanel + i, j));
+        for (Index j = 0; j < m; ++j) {
+            Scalar* column = out.data() + (p * m + j) * kPanel;
+            for (Index i = 0; i < rows; ++i) column[i] = static_cast<Scalar>(basis(p * kPanel + i, j));
+            std::fill(column + rows, column + kPanel, Scalar(0));  // the last panel's padding
+        }
     }
     return out;
 }

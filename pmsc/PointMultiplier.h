@@ -1,9 +1,11 @@
 // pmsc — Point Multiplication and Soft Caching (Meyer & Anderson, Pixar).
 #pragma once
 
+#include "pmsc/BulkAllocator.h"
 #include "pmsc/Model.h"
 
 #include <span>
+#include <vector>
 
 namespace pmsc {
 
@@ -83,8 +85,10 @@ private:
     Eigen::MatrixXd keyBasis_;          // (K*C) x M; K x M when the channels share the basis
     Eigen::VectorXd projectedKeyMean_;  // M (or M x C): P mean_K, so project() needs no temporary
     BasisPrecision precision_;          // which copy of the basis reconstruct() reads, if any
-    Eigen::VectorXd panels_;  // BasisPrecision::Double: the basis in panels of rows (PointMultiplier.cpp)
-    Eigen::VectorXf singlePanels_;  // BasisPrecision::Single: the basis (either layout) in float panels
+    // The basis in panels of rows (PointMultiplier.cpp): BasisPrecision::Double's, or Single's
+    // (either layout) in float. As large as the basis: BulkAllocator's pages.
+    std::vector<double, BulkAllocator<double>> panels_;
+    std::vector<float, BulkAllocator<float>> singlePanels_;
     Eigen::VectorXd looScale_;      // KeyErrorNorm::LeaveOneOut: 1 / (1 - leverage) per key row
 };
 
