@@ -89,7 +89,7 @@ private:
     // (either layout) in float. As large as the basis: BulkAllocator's pages.
     std::vector<double, BulkAllocator<double>> panels_;
     std::vector<float, BulkAllocator<float>> singlePanels_;
-    Eigen::VectorXd looScale_;      // KeyErrorNorm::LeaveOneOut: 1 / (1 - leverage) per key row
+    Eigen::VectorXd looScale_;  // KeyErrorNorm::LeaveOneOut: 1 / (1 - leverage) per key row
 };
 
 /// PM at `points`, which index the rows of `mean` (C values a point) and `basis` (column-major:
