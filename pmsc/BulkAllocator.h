@@ -5,7 +5,6 @@
 
 #include <cstddef>
 #include <cstdlib>
-#include <memory>
 #include <new>
 #include <utility>
 
@@ -55,11 +54,6 @@ struct BulkAllocator {
 
 private:
     static constexpr std::size_t kAlignment = EIGEN_MAX_ALIGN_BYTES > 16 ? EIGEN_MAX_ALIGN_BYTES : 16;
-};
-
-/// What frees allocateAligned's memory, for a std::unique_ptr.
-struct FreeDeleter {
-    void operator()(void* p) const noexcept { std::free(p); }
 };
 
 }  // namespace pmsc

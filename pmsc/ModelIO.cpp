@@ -12,12 +12,12 @@
 #include <cstdio>
 #include <cstring>
 #include <exception>
-#include <memory>
 #include <set>
 #include <stdexcept>
 #include <string>
 #include <system_error>
 #include <thread>
+#include <vector>
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -389,15 +389,12 @@ Model readModel(const std::string& path) {
     if (S_ISDIR(st.st_mode)) bad(path, "is a folder, not a model file");
     // The buffer is as large as the file really is; nothing is allocated from a size field.
     const auto size = static_cast<std::size_t>(st.st_size);
-    // No zero fill (read() writes it), on huge pages when large (BulkAllocator): a model of hundreds
-    // of megabytes is read at every `pmsc run` task's start.
-    const bool huge = size >= BulkAllocator<char>::kHugePageBytes;
-    const std::unique_ptr<char, FreeDeleter> buffer(
-        static_cast<char*>(allocateAligned(size, huge ? BulkAllocator<char>::kHugePageBytes : 64, huge)));
-    if (!buffer) bad(path, "no memory for its " + std::to_string(size) + " bytes");
+    // BulkAllocator: no zero fill (read() writes it), and huge pages when large, as a model of
+    // hundreds of megabytes is read at every `pmsc run` task's start.
+    std::vector<char, BulkAllocator<char>> buffer(size);
     std::size_t done = 0;
     while (done < size) {
-        const ssize_t got = ::read(fd, buffer.get() + done, size - done);
+        const ssize_t got = ::read(fd, buffer.data() + done, size - done);
         if (got < 0) {
             if (errno == EINTR) continue;
             bad(path, std::string("read failed: ") + std::strerror(errno));
@@ -405,7 +402,7 @@ Model readModel(const std::string& path) {
         if (got == 0) break;
         done += static_cast<std::size_t>(got);
     }
-    return decodeModel(std::string_view(buffer.get(), done), path);
+    return decodeModel(std::string_view(buffer.data(), done), path);
 }
 
 }  // namespace pmsc
