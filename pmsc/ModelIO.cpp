@@ -170,7 +170,8 @@ std::uint32_t checkVersion(std::string_view bytes, const std::string& name) {
     if (length >= sizeof kModelMagic && std::memcmp(bytes.data(), kModelMagic, sizeof kModelMagic) != 0)
         bad(name, "not a pmsc model file (bad magic; expected \"PMSCMODL\")");
     if (length < kModelHeaderBytes + 8) {
-        if (length < sizeof kModelMagic && std::memcmp(bytes.data(), kModelMagic, length) != 0)
+        // An empty file has no bytes to compare (and may have no buffer: memcmp on null is undefined).
+        if (length > 0 && length < sizeof kModelMagic && std::memcmp(bytes.data(), kModelMagic, length) != 0)
             bad(name, "not a pmsc model file (bad magic; expected \"PMSCMODL\")");
         bad(name, "truncated model file (" + std::to_string(length) + " bytes; the header alone needs " +
                       std::to_string(kModelHeaderBytes + 8) + ")");
