@@ -149,6 +149,39 @@ struct DensityVolume::Tracer::Impl {
     openvdb::tree::ValueAccessor<const openvdb::FloatTree, false> acc;  // unregistered: no mutex
     Intersector inter;  // shallow copy: shares the master's topology, own accessor
     double voxel;
+
+    /// Trilinear density at an index-space position: the value of openvdb::tools::BoxSampler's
+    /// sample() to the bit (its floor, its trilinearInterpolation on the same eight values), read
+    /// from one leaf's buffer when the 2 x 2 x 2 stencil lies inside a leaf (343 of its 512 voxels)
+    /// instead of eight accessor lookups. Why: the eight lookups were about a third of the
+    /// evaluator's time (`perf` of pmsc_volume_bench); the fallback keeps BoxSampler's own path
+    /// for stencils that straddle leaves or fall on tiles.
+    float sample(const openvdb::Vec3d& x) {
+        using openvdb::tools::BoxSampler;
+        using Leaf = openvdb::FloatTree::LeafNodeType;
+        const openvdb::Vec3i floor = openvdb::tools::local_util::floorVec3(x);
+        const openvdb::Vec3d uvw = x - floor;
+        const openvdb::Coord ijk(floor);
+        float data[2][2][2];
+        constexpr int kLast = static_cast<int>(Leaf::DIM) - 1;
+        if ((ijk.x() & kLast) != kLast && (ijk.y() & kLast) != kLast && (ijk.z() & kLast) != kLast) {
+            if (const Leaf* leaf = acc.probeConstLeaf(ijk)) {
+                constexpr openvdb::Index kX = 1u << (2 * Leaf::LOG2DIM), kY = 1u << Leaf::LOG2DIM;
+                const float* v = leaf->buffer().data() + Leaf::coordToOffset(ijk);
+                data[0][0][0] = v[0];
+                data[0][0][1] = v[1];
+                data[0][1][0] = v[kY];
+                data[0][1][1] = v[kY + 1];
+                data[1][0][0] = v[kX];
+                data[1][0][1] = v[kX + 1];
+                data[1][1][0] = v[kX + kY];
+                data[1][1][1] = v[kX + kY + 1];
+                return BoxSampler::trilinearInterpolation(data, uvw);
+            }
+        }
+        BoxSampler::getValues(data, acc, ijk);
+        return BoxSampler::trilinearInterpolation(data, uvw);
+    }
 };
 
 DensityVolume::Tracer::Tracer(const DensityVolume& volume) : impl_(std::make_unique<Impl>(*volume.impl_)) {}
@@ -172,8 +205,7 @@ double DensityVolume::Tracer::densityIntegral(Vec3 from, Vec3 to, double stepVox
         const int n = std::max(1, static_cast<int>(std::ceil((t1 - t0) / stepVoxels)));
         const double dt = (t1 - t0) / n;
         double s = 0;
-        for (int i = 0; i < n; ++i)
-            s += openvdb::tools::BoxSampler::sample(m.acc, a + dir * (t0 + (i + 0.5) * dt));
+        for (int i = 0; i < n; ++i) s += m.sample(a + dir * (t0 + (i + 0.5) * dt));
         sum += s * dt;
     }
     return sum * m.voxel;
@@ -181,7 +213,7 @@ double DensityVolume::Tracer::densityIntegral(Vec3 from, Vec3 to, double stepVox
 
 double DensityVolume::Tracer::density(Vec3 p) {
     auto& m = *impl_;
-    return openvdb::tools::BoxSampler::sample(m.acc, m.grid.worldToIndex(openvdb::Vec3d(p.x, p.y, p.z)));
+    return m.sample(m.grid.worldToIndex(openvdb::Vec3d(p.x, p.y, p.z)));
 }
 
 void DensityVolume::Tracer::spans(Vec3 origin, Vec3 dir, double tMax,

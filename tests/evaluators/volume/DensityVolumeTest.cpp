@@ -10,6 +10,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <random>
 
 namespace pmsc::volume {
 namespace {
@@ -100,6 +101,41 @@ TEST(DensityVolume, MarchIntegratesAConstantBoxExactlyAndSkipsEmptySpace) {
     EXPECT_EQ(tracer.densityIntegral({3, 0, 0}, {3, 5, 0}, 1.0), 0.0);
     EXPECT_NEAR(tracer.densityIntegral({-5, 0.2, 0.1}, {5, 0.2, 0.1}, 1.0), 2.0 * (2.0 + 0.05), 0.01);
     EXPECT_NEAR(tracer.density({0.3, 0.2, -0.1}), 2.0, 1e-6);
+    std::filesystem::remove_all(dir);
+}
+
+// The tracer reads a stencil inside one leaf from the leaf's buffer and any other through the
+// accessor; both must give BoxSampler's value to the bit (the evaluator's frames, and so the
+// models trained on them, do not depend on which path a sample took).
+TEST(DensityVolume, TrilinearDensityIsBoxSamplersToTheBit) {
+    const std::string dir = test::tempDir("noise");
+    const double voxel = 0.1;
+    test::writeNoiseDensity(dir + "/noise.vdb", voxel, 7);
+    const DensityVolume v = DensityVolume::read(dir + "/noise.vdb");
+    DensityVolume::Tracer tracer(v);
+    std::mt19937 rng(11);
+    // Random points over the random leaves, points within a hundredth of a voxel of the leaves'
+    // faces (index coordinates near -8, 0 and 8, negative ones too), and points across the
+    // border between the leaves and the two tiles (index 7 to 25 along x or y).
+    std::uniform_real_distribution<double> inside(-11.5, 11.5), acrossTiles(7.0, 25.0), jitter(-0.01, 0.01);
+    std::uniform_int_distribution<int> face(-1, 1);
+    std::vector<double> xyz;
+    for (int p = 0; p < 6000; ++p) {
+        double index[3] = {inside(rng), inside(rng), inside(rng)};
+        if (p % 3 == 1)
+            for (double& c : index) c = 8.0 * face(rng) - 0.5 + jitter(rng);
+        if (p % 3 == 2) index[p % 2] = acrossTiles(rng);
+        for (const double c : index) xyz.push_back(c * voxel);
+    }
+    const std::vector<double> expected = test::boxSamplerDensities(dir + "/noise.vdb", xyz);
+    ASSERT_EQ(expected.size(), xyz.size() / 3);
+    int nonZero = 0;
+    for (std::size_t p = 0; p < expected.size(); ++p) {
+        const double got = tracer.density({xyz[3 * p], xyz[3 * p + 1], xyz[3 * p + 2]});
+        ASSERT_EQ(got, expected[p]) << "at point " << p;
+        nonZero += got != 0;
+    }
+    EXPECT_GT(nonZero, 4000);  // the points sample the grid, not its background
     std::filesystem::remove_all(dir);
 }
 

@@ -3,12 +3,14 @@
 #include "tests/common/MissingData.h"
 
 #include <openvdb/openvdb.h>
+#include <openvdb/tools/Interpolation.h>
 
 #include <gtest/gtest.h>
 
 #include <unistd.h>
 #include <cstdlib>
 #include <filesystem>
+#include <random>
 
 namespace pmsc::volume::test {
 
@@ -51,6 +53,42 @@ void writeVectorOnly(const std::string& path) {
     grid->tree().setValue(openvdb::Coord(1, 2, 3), openvdb::Vec3s(1, 0, 0));
     grid->setName("velocity");
     openvdb::io::File(path).write({grid});
+}
+
+void writeNoiseDensity(const std::string& path, double voxel, unsigned seed) {
+    openvdb::initialize();
+    auto grid = openvdb::FloatGrid::create(0.0f);
+    grid->setTransform(openvdb::math::Transform::createLinearTransform(voxel));
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> value(0.0f, 2.0f);
+    auto acc = grid->getAccessor();
+    for (int i = -12; i < 12; ++i)
+        for (int j = -12; j < 12; ++j)
+            for (int k = -12; k < 12; ++k) {
+                const openvdb::Coord ijk(i, j, k);
+                if (rng() % 4 == 0)
+                    acc.setValueOff(ijk, value(rng));  // inactive, but its value is still sampled
+                else
+                    acc.setValueOn(ijk, value(rng));
+            }
+    grid->tree().addTile(1, openvdb::Coord(16, 0, 0), 0.75f, true);
+    grid->tree().addTile(1, openvdb::Coord(0, 16, 0), 1.25f, false);
+    grid->setName("density");
+    openvdb::io::File(path).write({grid});
+}
+
+std::vector<double> boxSamplerDensities(const std::string& path, const std::vector<double>& xyz) {
+    openvdb::initialize();
+    openvdb::io::File file(path);
+    file.open();
+    const auto grid = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid("density"));
+    file.close();
+    std::vector<double> out;
+    for (std::size_t p = 0; p + 2 < xyz.size(); p += 3) {
+        const openvdb::Vec3d index = grid->worldToIndex(openvdb::Vec3d(xyz[p], xyz[p + 1], xyz[p + 2]));
+        out.push_back(openvdb::tools::BoxSampler::sample(grid->tree(), index));
+    }
+    return out;
 }
 
 std::string testMesh() {
