@@ -165,16 +165,18 @@ struct DensityVolume::Tracer::Impl {
         constexpr int kLast = static_cast<int>(Leaf::DIM) - 1;
         if ((ijk.x() & kLast) != kLast && (ijk.y() & kLast) != kLast && (ijk.z() & kLast) != kLast) {
             if (const Leaf* leaf = acc.probeConstLeaf(ijk)) {
+                // LeafNode::getValue(offset): the buffer read that also answers 0 for a leaf whose
+                // buffer was never allocated, as the accessor does.
                 constexpr openvdb::Index kX = 1u << (2 * Leaf::LOG2DIM), kY = 1u << Leaf::LOG2DIM;
-                const float* v = leaf->buffer().data() + Leaf::coordToOffset(ijk);
-                data[0][0][0] = v[0];
-                data[0][0][1] = v[1];
-                data[0][1][0] = v[kY];
-                data[0][1][1] = v[kY + 1];
-                data[1][0][0] = v[kX];
-                data[1][0][1] = v[kX + 1];
-                data[1][1][0] = v[kX + kY];
-                data[1][1][1] = v[kX + kY + 1];
+                const openvdb::Index o = Leaf::coordToOffset(ijk);
+                data[0][0][0] = leaf->getValue(o);
+                data[0][0][1] = leaf->getValue(o + 1);
+                data[0][1][0] = leaf->getValue(o + kY);
+                data[0][1][1] = leaf->getValue(o + kY + 1);
+                data[1][0][0] = leaf->getValue(o + kX);
+                data[1][0][1] = leaf->getValue(o + kX + 1);
+                data[1][1][0] = leaf->getValue(o + kX + kY);
+                data[1][1][1] = leaf->getValue(o + kX + kY + 1);
                 return BoxSampler::trilinearInterpolation(data, uvw);
             }
         }

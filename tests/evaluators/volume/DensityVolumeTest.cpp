@@ -114,19 +114,23 @@ TEST(DensityVolume, TrilinearDensityIsBoxSamplersToTheBit) {
     const DensityVolume v = DensityVolume::read(dir + "/noise.vdb");
     DensityVolume::Tracer tracer(v);
     std::mt19937 rng(11);
-    // Random points over the random leaves, points within a hundredth of a voxel of the leaves'
-    // faces (index coordinates near -8, 0 and 8, negative ones too), and points across the
-    // border between the leaves and the two tiles (index 7 to 25 along x or y).
+    // Random points over the random leaves; points near the leaves' faces along every axis (index
+    // coordinates just inside a leaf, straddling two, and just past a face, at -8, 0 and 8, so
+    // negative ones too); points across the border between the leaves and the two tiles (index 7
+    // to 25 along x or y); and fixed points on the inactive tile's border.
     std::uniform_real_distribution<double> inside(-11.5, 11.5), acrossTiles(7.0, 25.0), jitter(-0.01, 0.01);
-    std::uniform_int_distribution<int> face(-1, 1);
+    std::uniform_int_distribution<int> face(-1, 1), side(0, 2);
+    const double nearFace[3] = {-1.01, -0.5, 0.01};
     std::vector<double> xyz;
     for (int p = 0; p < 6000; ++p) {
         double index[3] = {inside(rng), inside(rng), inside(rng)};
         if (p % 3 == 1)
-            for (double& c : index) c = 8.0 * face(rng) - 0.5 + jitter(rng);
+            for (double& c : index) c = 8.0 * face(rng) + nearFace[side(rng)] + jitter(rng);
         if (p % 3 == 2) index[p % 2] = acrossTiles(rng);
         for (const double c : index) xyz.push_back(c * voxel);
     }
+    for (const double c : {3.3, 15.5, 4.2, 3.3, 16.01, 4.2, 3.3, 23.5, 4.2, 7.999, 8.0, 0.0, 15.5, 3.3, 4.2})
+        xyz.push_back(c * voxel);
     const std::vector<double> expected = test::boxSamplerDensities(dir + "/noise.vdb", xyz);
     ASSERT_EQ(expected.size(), xyz.size() / 3);
     int nonZero = 0;

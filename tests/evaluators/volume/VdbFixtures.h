@@ -17,9 +17,10 @@ void writeFloatGrids(const std::string& path, const std::vector<std::string>& na
 void writeEmptyFloatGrid(const std::string& path, const std::string& name);
 /// A file with only a Vec3SGrid "velocity" (no float grid).
 void writeVectorOnly(const std::string& path);
-/// A FloatGrid "density" (voxel `voxel`) of pseudo-random values from `seed` over 3 x 3 x 3
-/// leaves around the origin (active and inactive voxels alike), with an active leaf-sized tile
-/// (which DensityVolume::read voxelizes) and an inactive one of other values beside them.
+/// A FloatGrid "density" (voxel `voxel`) of pseudo-random values from `seed` over index
+/// [-12, 12)^3 (parts of 4 x 4 x 4 leaves around the origin; active and inactive voxels alike),
+/// with an active leaf-sized tile (which DensityVolume::read voxelizes) and an inactive one of
+/// other values beside them.
 void writeNoiseDensity(const std::string& path, double voxel, unsigned seed);
 /// openvdb::tools::BoxSampler's trilinear value of the grid "density" in `path` at each world
 /// point (x, y, z in turn), read the way OpenVDB's own samplers read it.
