@@ -6,6 +6,7 @@
 #include "pmsc/Errors.h"
 #include "pmsc/ModelSections.h"
 
+#include <algorithm>
 #include <bit>
 #include <cerrno>
 #include <cmath>
@@ -167,15 +168,14 @@ namespace {
 /// The magic, the length a header needs, and a version this build reads; returns the version.
 std::uint32_t checkVersion(std::string_view bytes, const std::string& name) {
     const std::uint64_t length = bytes.size();
-    if (length >= sizeof kModelMagic && std::memcmp(bytes.data(), kModelMagic, sizeof kModelMagic) != 0)
+    // The bytes there are against as much of the magic (string_view's compare: an empty file, whose
+    // buffer may be null, matches the empty prefix and is reported as truncated).
+    const std::size_t prefix = std::min<std::size_t>(bytes.size(), sizeof kModelMagic);
+    if (bytes.substr(0, prefix) != std::string_view(kModelMagic, prefix))
         bad(name, "not a pmsc model file (bad magic; expected \"PMSCMODL\")");
-    if (length < kModelHeaderBytes + 8) {
-        // An empty file has no bytes to compare (and may have no buffer: memcmp on null is undefined).
-        if (length > 0 && length < sizeof kModelMagic && std::memcmp(bytes.data(), kModelMagic, length) != 0)
-            bad(name, "not a pmsc model file (bad magic; expected \"PMSCMODL\")");
+    if (length < kModelHeaderBytes + 8)
         bad(name, "truncated model file (" + std::to_string(length) + " bytes; the header alone needs " +
                       std::to_string(kModelHeaderBytes + 8) + ")");
-    }
     const auto version = get<std::uint32_t>(bytes, 8);
     if (version < kModelFormatVersionCore || version > kModelFormatVersion)
         bad(name, "unsupported model format version " + std::to_string(version) +
