@@ -56,8 +56,9 @@ namespace {
 /// the recording (the errors of the report) and writes it to the output file.
 class ReplaySink : public engine::FrameSink {
 public:
-    ReplaySink(const Model& model, const PointEvaluator& recorded, ReplayResult& result, NpyFrameWriter* out,
-               KeptFrames* keep, std::function<void(Index, const double*)> frameOut)
+    ReplaySink(const Model& model, const PointMultiplier& multiplier, const PointEvaluator& recorded,
+               ReplayResult& result, NpyFrameWriter* out, KeptFrames* keep,
+               std::function<void(Index, const double*)> frameOut)
         : model_(model),
           recorded_(recorded),
           result_(result),
@@ -65,7 +66,7 @@ public:
           keep_(keep),
           frameOut_(std::move(frameOut)),
           full_(static_cast<std::size_t>(model.points * model.channels)),
-          multiplier_(model),
+          multiplier_(multiplier),
           pm_(full_.size()),
           coords_(static_cast<std::size_t>(model.coordCount())) {}
 
@@ -112,7 +113,7 @@ private:
     KeptFrames* keep_;
     std::function<void(Index, const double*)> frameOut_;
     std::vector<double> full_;
-    PointMultiplier multiplier_;
+    const PointMultiplier& multiplier_;  // the engine's: one copy of the basis, not two
     std::vector<double> pm_, coords_;
 };
 
@@ -143,7 +144,7 @@ ReplayResult replay(const Model& model, const PointEvaluator& recorded, const Re
         };
     }
     engine::Engine engine(model, recorded, std::move(engineOptions));
-    ReplaySink sink(model, recorded, result, out, options.keep, options.frameOut);
+    ReplaySink sink(model, engine.pointMultiplier(), recorded, result, out, options.keep, options.frameOut);
     // pmsc::Cancelled (interrupt) and pmsc::EvaluatorError propagate unchanged.
     const engine::RunStats stats = engine.run({0, frames, 1}, sink);
     result.threads = stats.threads;

@@ -243,6 +243,8 @@ std::uint64_t Engine::frameBytes() const { return impl_->slotBytes; }
 const std::vector<Index>& Engine::outputPoints() const { return impl_->plan.outputPoints; }
 bool Engine::localFailThrough() const { return impl_->regions.has_value(); }
 
+const PointMultiplier& Engine::pointMultiplier() const { return impl_->pm; }
+
 RunStats Engine::run(FrameRange range, FrameSink& sink) { return impl_->run(range, sink); }
 
 void Engine::Impl::checkRange(FrameRange range) const {

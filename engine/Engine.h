@@ -7,7 +7,7 @@
 #include "pmsc/Errors.h"  // pmsc::Cancelled
 #include "pmsc/Model.h"
 #include "pmsc/PointEvaluator.h"
-#include "pmsc/PointMultiplier.h"  // BasisPrecision
+#include "pmsc/PointMultiplier.h"  // BasisPrecision, PointMultiplier
 
 #include <atomic>
 #include <cstdint>
@@ -168,6 +168,10 @@ public:
     /// Whether runs route frames region by region (a model with regions, and the options and the
     /// evaluator allow it).
     bool localFailThrough() const;
+    /// The point multiplier the engine projects and reconstructs with, its basis copy in
+    /// EngineOptions::basisPrecision: a sink that needs a frame's PM reuses it rather than holding
+    /// a second copy of the basis. Safe to call from FrameSink::write().
+    const PointMultiplier& pointMultiplier() const;
 
 private:
     struct Impl;
