@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 #include <tbb/info.h>
+#include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
 #include <cmath>
@@ -100,6 +101,36 @@ TEST(CornellEvaluator, ThreadCountDoesNotChangeAnyBit) {
     tbb::task_arena(1).execute([&] { ev.evaluateAll(77, one.data()); });
     tbb::task_arena(2).execute([&] { ev.evaluateAll(77, two.data()); });
     EXPECT_EQ(0, std::memcmp(one.data(), two.data(), one.size() * sizeof(double)));
+}
+
+// The engine evaluates a frame's keys and sentinels in pieces on every thread at once: threads that
+// start a frame together may each build its light paths, and frames past the 16-frame cache evict
+// others meanwhile; every piece must still be what one caller with nothing cached computes.
+TEST(CornellEvaluator, PiecesOfOneFrameOnManyThreadsEqualOneCallerBitForBit) {
+    const auto lights = LightRig{}.trainingLights();
+    const CornellEvaluator shared(smallWorld(), lights, 16);
+    const Index n = shared.pointCount();
+    constexpr Index kPieces = 8, kFrames = 24;
+    std::vector<double> together(static_cast<std::size_t>(3 * n * kFrames));
+    tbb::task_arena(4).execute([&] {
+        tbb::parallel_for(Index{0}, kFrames * kPieces, [&](Index task) {
+            const Index frame = 40 + task / kPieces, piece = task % kPieces;
+            std::vector<Index> points;
+            for (Index p = piece; p < n; p += kPieces) points.push_back(p);
+            std::vector<double> values(3 * points.size());
+            shared.evaluate(frame, points, values.data());
+            double* out = together.data() + 3 * n * (frame - 40);
+            for (std::size_t i = 0; i < points.size(); ++i)
+                std::memcpy(out + 3 * points[i], &values[3 * i], 3 * sizeof(double));
+        });
+    });
+    std::vector<double> one(static_cast<std::size_t>(3 * n));
+    for (Index f = 0; f < kFrames; ++f) {
+        const CornellEvaluator alone(smallWorld(), lights, 16);  // one frame, nothing cached before
+        alone.evaluateAll(40 + f, one.data());
+        EXPECT_EQ(0, std::memcmp(one.data(), together.data() + 3 * n * f, one.size() * sizeof(double)))
+            << "frame " << 40 + f;
+    }
 }
 
 TEST(CornellEvaluator, IrradianceIsFiniteNonNegativeAndLit) {
