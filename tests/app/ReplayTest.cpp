@@ -151,6 +151,16 @@ TEST(Replay, ModelWithRegionsReportsLocalFramesAndWholeFrameFlagRestoresTheOldRo
     EXPECT_LT(report["frames"][1]["soft_max_point_error"].get<double>(),
               1e-12);  // region 0 read, the rest exact
     EXPECT_GT(report["frames"][1]["pm_max_point_error"].get<double>(), 0.01);
+    // The local frame's PM column (the sink reconstructs it with the engine's point multiplier) is
+    // the whole frame's PM, to the bit, as replayFrame() computes it with a multiplier of its own.
+    {
+        const pmsc::PointMultiplier own(model);
+        pmsc::app::ReplayScratch scratch(model);
+        std::vector<double> out(120);
+        const pmsc::app::ReplayFrame direct = pmsc::app::replayFrame(
+            own, pmsc::SoftCachePolicy(model.epsMin, model.epsMax), rec, 1, scratch, out.data());
+        EXPECT_EQ(report["frames"][1]["pm_max_point_error"].get<double>(), direct.pmMaxPointError);
+    }
     EXPECT_EQ(report["summary"]["region_states"][0]["misses"], 1);
     options.localFailThrough = false;  // --whole-frame-fail-through
     report = pmsc::app::replayReport(model, pmsc::app::replay(model, rec, options));
