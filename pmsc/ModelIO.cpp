@@ -168,9 +168,10 @@ namespace {
 /// The magic, the length a header needs, and a version this build reads; returns the version.
 std::uint32_t checkVersion(std::string_view bytes, const std::string& name) {
     const std::uint64_t length = bytes.size();
-    // The bytes there are against as much of the magic (string_view's compare: an empty file, whose
-    // buffer may be null, matches the empty prefix and is reported as truncated).
-    const std::size_t prefix = std::min<std::size_t>(bytes.size(), sizeof kModelMagic);
+    // The file's first bytes against as many of the magic's: a short file whose bytes match is
+    // reported as truncated below, and an empty one (whose buffer may be null; string_view compares
+    // it without reading) matches the empty prefix.
+    const std::size_t prefix = std::min<std::size_t>(length, sizeof kModelMagic);
     if (bytes.substr(0, prefix) != std::string_view(kModelMagic, prefix))
         bad(name, "not a pmsc model file (bad magic; expected \"PMSCMODL\")");
     if (length < kModelHeaderBytes + 8)
