@@ -14,6 +14,7 @@
 #include "nodes/Reconstructor.h"
 #include "nodes/RunControl.h"
 #include "pmsc/Errors.h"
+#include "pmsc/HitCheck.h"
 #include "pmsc/PointMultiplier.h"
 #include "pmsc/RegionMultiplier.h"
 
@@ -134,6 +135,8 @@ struct Engine::Impl {
     const PointEvaluator& evaluator;
     EngineOptions options;
     PointEvaluator::FailThroughShape shape;
+    /// The sentinels the key node computes in the keys' call (sentinelsWithTheKeys), or empty.
+    std::vector<Index> keySentinels;
     PointMultiplier pm;
     SoftCachePolicy policy;
     Index chunkPoints;  ///< points per fail-through chunk (and per piece of a local frame)
@@ -154,13 +157,14 @@ struct Engine::Impl {
           evaluator(e),
           options(std::move(o)),
           shape(e.failThroughShape()),
+          keySentinels(sentinelsWithTheKeys() ? HitCheck::sentinelsOf(m) : std::vector<Index>{}),
           pm(checked(m, e, options), options.basisPrecision),
           policy(options.policy ? *options.policy : SoftCachePolicy(m.epsMin, m.epsMax)),
           chunkPoints(chunkPointsOf(
               options, shape, options.pointsWanted.empty() ? m.points : Index(options.pointsWanted.size()),
               threadCount(options))),
           plan(FramePlan::make(m, options.pointsWanted, chunkPoints,
-                               options.wholeFrameFailThrough || shape.wholeFrame)),
+                               options.wholeFrameFailThrough || shape.wholeFrame, keySentinels)),
           threads(threadCount(options)),
           maxInFlight(options.maxFramesInFlight > 0 ? options.maxFramesInFlight : 2 * Index(threads)),
           arena(threads) {
@@ -177,6 +181,21 @@ struct Engine::Impl {
     /// is cheap and a call has no set-up of its own, else 0 (one call each).
     Index keyPiecePoints() const {
         return shape.cheapSubsets && !shape.callSetUp ? options.keyPiecePoints : 0;
+    }
+
+    /// Decision: an evaluator whose calls share work between their points (a whole-frame rig, whose
+    /// subsets pose through a shared dependency closure and set up the pose per call; a child
+    /// process or renderer that pays a set-up per call) computes a hit's sentinels in the keys'
+    /// call. Why: every hit of a model with sentinels computes them, and one call of both costs
+    /// less than two (the face demo: 5.4-5.6x against 4.9-5.0x, alternated runs, docs/face.md). A frame that
+    /// does not hit uses them as it uses the keys: its fail-through's chunks copy them in (a
+    /// whole-frame evaluateAll() computes them again; a local frame checks with them). Not with
+    /// keyPiecePoints (the pieces already run at once) nor with estimateBeforeCheck (the client
+    /// wants the keys' estimate before the check). The values are the same either way: an
+    /// evaluator's point does not depend on the points asked with it.
+    bool sentinelsWithTheKeys() const {
+        return (shape.wholeFrame || shape.callSetUp) && keyPiecePoints() == 0 &&
+               !options.estimateBeforeCheck && model.sentinels.has_value();
     }
 
     /// Cuts maxInFlight to the frame buffers options.memoryLimit holds.
@@ -266,6 +285,7 @@ std::span<const std::unique_ptr<FrameSlot>> Engine::Impl::takeSlots(Index frames
         pool.push_back(std::make_unique<FrameSlot>(plan, model.keyCount(), model.coordCount(),
                                                    options.keepPointMultiplication));
         if (regions) pool.back()->enableRegions(*regions, model.points, model.channels);
+        if (!keySentinels.empty()) pool.back()->enableSentinels(Index(keySentinels.size()), model.channels);
     }
     return {pool.data(), size_t(slotCount)};
 }
@@ -351,7 +371,7 @@ struct Engine::Impl::Bodies {
 };
 
 Engine::Impl::Bodies::Bodies(Impl& impl, FrameSink& frames, nodes::RunControl& control)
-    : keys(impl.model, impl.evaluator, impl.keyPiecePoints()),
+    : keys(impl.model, impl.evaluator, impl.keyPiecePoints(), impl.keySentinels),
       project(impl.pm),
       monitor(impl.pm, impl.policy, impl.options.keepPointMultiplication,
               impl.regions ? &*impl.regions : nullptr, &impl.evaluator, impl.keyPiecePoints()),

@@ -2,6 +2,7 @@
 
 #include "nodes/PointPieces.h"
 
+#include <algorithm>
 #include <exception>
 #include <limits>
 #include <string>
@@ -71,7 +72,7 @@ bool ErrorMonitor::checkLocal(FrameSlot& slot, Index& full, Index& checked) cons
     if (points.empty()) return true;
     thread_local std::vector<double> values;
     values.resize(points.size() * size_t(pm_.model().channels));
-    if (!evaluateInto(slot, points, values.data(), "sentinels")) return false;
+    if (!checkValuesInto(slot, points, values.data(), "sentinels")) return false;
     const std::vector<Index> off = check_.offPoints(slot.coords.data(), points, values.data());
     if (off.empty()) return true;
     if (!regions_->failRegionsOf(off, slot.regionWeights)) {  // the frame fails through whole
@@ -91,7 +92,7 @@ Route ErrorMonitor::check(FrameSlot& slot) const {
         check_.points(slot.keyValues.data(), slot.coords.data(), slot.keyErrorParts);
     thread_local std::vector<double> values;
     values.resize(points.size() * size_t(pm_.model().channels));
-    if (!evaluateInto(slot, points, values.data(), "check points")) return Route::Done;
+    if (!checkValuesInto(slot, points, values.data(), "check points")) return Route::Done;
     if (check_.passes(slot.coords.data(), points, values.data())) {
         slot.pointsEvaluated = static_cast<Index>(points.size());
         return Route::Reconstruct;
@@ -106,6 +107,32 @@ Route ErrorMonitor::check(FrameSlot& slot) const {
 Route ErrorMonitor::whole(FrameSlot& slot) const {
     slot.pointsEvaluated = Index(slot.values.size()) / pm_.model().channels;
     return keepPm_ ? Route::Reconstruct : Route::FailThrough;
+}
+
+bool ErrorMonitor::checkValuesInto(FrameSlot& slot, std::span<const Index> points, double* out,
+                                   const char* what) const {
+    if (!slot.sentinelsComputed) return evaluateInto(slot, points, out, what);
+    const auto c = static_cast<size_t>(pm_.model().channels);
+    const std::span<const Index> sentinels = check_.sentinels();
+    thread_local std::vector<Index> others;
+    thread_local std::vector<size_t> othersAt;
+    others.clear();
+    othersAt.clear();
+    for (size_t i = 0; i < points.size(); ++i) {
+        const auto s = std::lower_bound(sentinels.begin(), sentinels.end(), points[i]);
+        if (s != sentinels.end() && *s == points[i]) {
+            std::copy_n(slot.sentinelValues.data() + size_t(s - sentinels.begin()) * c, c, out + i * c);
+        } else {
+            others.push_back(points[i]);
+            othersAt.push_back(i);
+        }
+    }
+    if (others.empty()) return true;
+    thread_local std::vector<double> values;
+    values.resize(others.size() * c);
+    if (!evaluateInto(slot, others, values.data(), what)) return false;
+    for (size_t j = 0; j < others.size(); ++j) std::copy_n(values.data() + j * c, c, out + othersAt[j] * c);
+    return true;
 }
 
 bool ErrorMonitor::evaluateInto(FrameSlot& slot, std::span<const Index> points, double* out,

@@ -63,6 +63,9 @@ public:
     /// frame (blended with weight 0).
     Route check(FrameSlot& slot) const;
 
+    /// The sentinels the check computes (HitCheck::sentinels(), ascending; empty without them).
+    std::span<const Index> sentinels() const { return check_.sentinels(); }
+
 private:
     /// A local frame: computes the sentinels it would hand back as PM alone (`checked` of them);
     /// the regions of those PM misses fail through too (`full` becomes the new count of points
@@ -70,6 +73,9 @@ private:
     bool checkLocal(FrameSlot& slot, Index& full, Index& checked) const;
     /// The frame's whole-frame route when it does not hit (regions did not take it locally).
     Route whole(FrameSlot& slot) const;
+    /// Check points' values into `out`: the sentinels among `points` from the slot when the key node
+    /// computed them (FrameSlot::sentinelsComputed), the others through evaluateInto().
+    bool checkValuesInto(FrameSlot& slot, std::span<const Index> points, double* out, const char* what) const;
     /// Evaluates `points` of the slot's frame into `out`; false (the frame failed) on an exception.
     bool evaluateInto(FrameSlot& slot, std::span<const Index> points, double* out, const char* what) const;
 

@@ -34,7 +34,8 @@ void FailThroughEvaluator::operator()(FrameSlot& slot, Index chunkIndex) const {
                     for (Index ch = 0; ch < c; ++ch) out[i * c + ch] = src[ch];
                 }
             }
-        } else if (!slot.keysFinite || chunk.keyOutput.empty()) {
+        } else if (!slot.keysFinite || chunk.keyOutput.empty() ||
+                   (plan_.keySentinels && !slot.sentinelsComputed)) {
             // No key values to reuse: evaluate the range straight into the output.
             evaluator_.evaluate(slot.frame, rangePoints, out);
         } else {
@@ -46,9 +47,12 @@ void FailThroughEvaluator::operator()(FrameSlot& slot, Index chunkIndex) const {
                 double* dst = slot.values.data() + chunk.evalOutput[i] * c;
                 for (Index ch = 0; ch < c; ++ch) dst[ch] = tmp[Index(i) * c + ch];
             }
+            const Index keys = Index(slot.keyValues.size()) / c;
             for (size_t j = 0; j < chunk.keyOutput.size(); ++j) {
                 double* dst = slot.values.data() + chunk.keyOutput[j] * c;
-                const double* src = slot.keyValues.data() + chunk.keyNumber[j] * c;
+                const Index number = chunk.keyNumber[j];
+                const double* src = number < keys ? slot.keyValues.data() + number * c
+                                                  : slot.sentinelValues.data() + (number - keys) * c;
                 for (Index ch = 0; ch < c; ++ch) dst[ch] = src[ch];
             }
         }

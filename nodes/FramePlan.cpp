@@ -9,7 +9,7 @@
 namespace pmsc::nodes {
 
 FramePlan FramePlan::make(const Model& model, std::span<const Index> wanted, Index chunkPoints,
-                          bool wholeFrame) {
+                          bool wholeFrame, std::span<const Index> keySentinels) {
     if (chunkPoints <= 0) {
         throw InputError("engine: chunk size must be positive, got " + std::to_string(chunkPoints));
     }
@@ -40,6 +40,12 @@ FramePlan FramePlan::make(const Model& model, std::span<const Index> wanted, Ind
 
     std::vector<Index> keyNumberOf(static_cast<size_t>(model.points), -1);
     for (Index k = 0; k < model.keyCount(); ++k) keyNumberOf[size_t(model.keyPoints[size_t(k)])] = k;
+    // Training never makes a key a sentinel; a point that were both would copy the key's value.
+    for (size_t i = 0; i < keySentinels.size(); ++i) {
+        Index& number = keyNumberOf[size_t(keySentinels[i])];
+        if (number < 0) number = model.keyCount() + Index(i);
+    }
+    plan.keySentinels = !keySentinels.empty();
 
     // Whole-frame fail-through: one branch whose evaluateAll() covers everything.
     const Index step = wholeFrame ? std::max<Index>(n, 1) : chunkPoints;

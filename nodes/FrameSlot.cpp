@@ -31,11 +31,13 @@ void FrameSlot::enableRegions(const RegionMultiplier& regions, Index points, Ind
     localFull.assign(size_t(points * c), 0.0);
 }
 
+void FrameSlot::enableSentinels(Index count, Index c) { sentinelValues.assign(size_t(count * c), 0.0); }
+
 std::size_t FrameSlot::bytes() const {
     const auto of = [](const auto& v) { return v.capacity() * sizeof(v[0]); };
     return sizeof(*this) + of(keyValues) + of(coords) + of(values) + of(scratch) + of(pmValues) +
            of(regionKeyValues) + of(regionCoords) + of(regionKeyErrors) + of(regionStates) +
-           of(regionWeights) + of(pointWeights) + of(localPoints) + of(localFull);
+           of(regionWeights) + of(pointWeights) + of(localPoints) + of(localFull) + of(sentinelValues);
 }
 
 Index FrameSlot::liveCount() { return gLiveSlots.load(std::memory_order_relaxed); }
@@ -44,6 +46,7 @@ void FrameSlot::reset(Index sequenceNumber, Index frameNumber) {
     sequence = sequenceNumber;
     frame = frameNumber;
     keysFinite = true;
+    sentinelsComputed = false;
     keyError = 0;
     decision = CacheDecision{};
     keyErrorParts = PredictedParts{};

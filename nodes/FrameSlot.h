@@ -53,6 +53,12 @@ struct FrameSlot {
     double keyError = 0;            ///< section 5's key-point error (NaN if keys not finite)
     PredictedParts keyErrorParts;   ///< its parts (the RMS and leave-one-out errors of the keys)
     CacheDecision decision;         ///< hit / blend / miss and the weight of the full result
+    /// The sentinels' values (HitCheck::sentinels() order, S*C), when the key node computed them in
+    /// the keys' call (KeyPointEvaluator); sized by enableSentinels(), empty otherwise.
+    std::vector<double> sentinelValues;
+    bool sentinelsComputed = false;  ///< sentinelValues belong to this frame
+    /// Sizes sentinelValues for `count` sentinels (once, before the slot's first run).
+    void enableSentinels(Index count, Index channels);
 
     std::vector<double> values;    ///< output: plan.outputCount() * C
     std::vector<double> scratch;   ///< fail-through / blend workspace (plan.scratchSize())

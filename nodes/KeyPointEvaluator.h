@@ -5,6 +5,9 @@
 #include "pmsc/Model.h"
 #include "pmsc/PointEvaluator.h"
 
+#include <span>
+#include <vector>
+
 namespace pmsc::nodes {
 
 /// Step 1 of the runtime (section 6): the expensive evaluator runs on the key
@@ -18,15 +21,23 @@ public:
 
     /// @param piecePoints > 0: the keys are evaluated in parallel pieces of this many points
     ///        (EngineOptions::keyPiecePoints); 0: in one call.
-    KeyPointEvaluator(const Model& model, const PointEvaluator& evaluator, Index piecePoints = 0)
-        : model_(model), evaluator_(evaluator), piecePoints_(piecePoints) {}
+    /// @param sentinels   non-empty: these points (HitCheck::sentinels(), ascending) are evaluated
+    ///        in the keys' call, into FrameSlot::sentinelValues, for an evaluator whose calls share
+    ///        work between their points (see Engine.cpp, sentinelsWithTheKeys).
+    KeyPointEvaluator(const Model& model, const PointEvaluator& evaluator, Index piecePoints = 0,
+                      std::span<const Index> sentinels = {});
 
     void operator()(FrameSlot& slot) const;
+
+    /// The sentinels this node computes with the keys (empty: none).
+    std::span<const Index> sentinels() const { return sentinels_; }
 
 private:
     const Model& model_;
     const PointEvaluator& evaluator_;
     Index piecePoints_;
+    std::vector<Index> sentinels_;
+    std::vector<Index> keysThenSentinels_;  ///< the one call's points: the keys, then the sentinels
 };
 
 }  // namespace pmsc::nodes

@@ -39,6 +39,14 @@ HitCheck::HitCheck(const Model& model, const PointMultiplier& pm) : model_(model
         !sentinels_.empty() || (predicted_ && (!regionKeys_.empty() || model.keyNeighbours.has_value()));
 }
 
+std::vector<Index> HitCheck::sentinelsOf(const Model& model) {
+    if (!model.sentinels) return {};
+    std::vector<Index> points = model.sentinels->points;
+    std::sort(points.begin(), points.end());
+    points.erase(std::unique(points.begin(), points.end()), points.end());
+    return points;
+}
+
 bool HitCheck::disagree(PredictedParts parts) const {
     return predicted_ && partsDisagree(parts, model_.partEps);
 }

@@ -62,6 +62,8 @@ public:
     std::vector<Index> points(const double* keyValues, const double* coords, PredictedParts parts) const;
     /// The sentinels, ascending (empty without them).
     std::span<const Index> sentinels() const { return sentinels_; }
+    /// What sentinels() is for a HitCheck of `model`, without building one.
+    static std::vector<Index> sentinelsOf(const Model& model);
     /// The sentinels a local frame hands back as PM alone (weight 0 of the full result in
     /// `pointWeights`, N values), ascending: the ones its check computes.
     std::vector<Index> unblendedSentinels(std::span<const double> pointWeights) const;

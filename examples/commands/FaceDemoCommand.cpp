@@ -69,12 +69,12 @@ void printFaceDemoSummary(const nlohmann::json& r, const std::string& out) {
     std::printf("  novel      %ld frames moving controls never trained: %.1f%% caught (blend or miss)\n",
                 r.at("novel_frames").get<long>(), 100 * num("novel_nonhit_rate"));
     std::printf(
-        "  speed      full pose %.1f ms/frame, PMSC %.2f ms/frame (keys %.2f, projection %.3f, "
-        "reconstruction %.2f): "
-        "speedup %.1fx\n",
+        "  speed      full pose %.1f ms/frame, PMSC %.2f ms/frame (keys and sentinels %.2f, projection "
+        "%.3f, check %.2f, reconstruction %.2f): speedup %.1fx\n",
         1e3 * num("full_seconds_per_frame"), 1e3 * num("pmsc_seconds_per_frame"),
-        1e3 * r.at("timing").at("key_posing").get<double>(),
+        1e3 * r.at("timing").at("key_and_sentinel_posing").get<double>(),
         1e3 * r.at("timing").at("projection").get<double>(),
+        1e3 * r.at("timing").at("hit_check").get<double>(),
         1e3 * r.at("timing").at("reconstruction").get<double>(), num("speedup"));
     if (r.contains("local_fail_through")) printFaceLocalFailThrough(r.at("local_fail_through"));
     std::printf(

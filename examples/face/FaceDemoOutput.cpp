@@ -211,6 +211,7 @@ void reportTiming(nlohmann::json& report, const PoseTimings& pt) {
          "on the same frames"},
         {"frames", timed},
         {"full_pose", fullSeconds},
+        {"key_and_sentinel_posing", pt.cpuPosing / static_cast<double>(timed)},
         {"key_posing", pt.cpuKeys / static_cast<double>(timed)},
         {"projection", pt.cpuProject / static_cast<double>(timed)},
         {"hit_check", pt.cpuCheck / static_cast<double>(timed)},

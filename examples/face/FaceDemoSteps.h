@@ -99,18 +99,20 @@ struct EngineTotals {
 
 // Seconds summed over the timed frames: thread CPU time and wall time.
 struct PoseTimings {
-    double cpuFull = 0, cpuKeys = 0, cpuProject = 0, cpuCheck = 0, cpuReconstruct = 0;
-    double wallFull = 0, wallKeys = 0, wallProject = 0, wallCheck = 0, wallReconstruct = 0;
-    double checkPoints = 0;  // points the hits' checks posed, summed over the frames
+    double cpuFull = 0, cpuPosing = 0, cpuProject = 0, cpuCheck = 0, cpuReconstruct = 0;
+    double wallFull = 0, wallPosing = 0, wallProject = 0, wallCheck = 0, wallReconstruct = 0;
+    double cpuKeys = 0;      // the keys alone, in a call of their own (a hit without the check)
+    double checkPoints = 0;  // points the hits' checks compared, summed over the frames
     Index timed = 0;         // frames
 
     double fullSeconds() const { return cpuFull / static_cast<double>(timed); }
-    /// A hit's cost: its keys, projection, check (pmsc::HitCheck) and reconstruction.
+    /// A hit's cost: its keys and sentinels (one call), projection, the rest of its check
+    /// (pmsc::HitCheck) and reconstruction.
     double pmscSeconds() const {
-        return (cpuKeys + cpuProject + cpuCheck + cpuReconstruct) / static_cast<double>(timed);
+        return (cpuPosing + cpuProject + cpuCheck + cpuReconstruct) / static_cast<double>(timed);
     }
     double pmscWallSeconds() const {
-        return (wallKeys + wallProject + wallCheck + wallReconstruct) / static_cast<double>(timed);
+        return (wallPosing + wallProject + wallCheck + wallReconstruct) / static_cast<double>(timed);
     }
 };
 

@@ -462,10 +462,12 @@ TEST_F(Fixture, KeysInParallelPiecesGiveTheSameFrames) {
 /// `setUp` declares that every call pays a set-up (FailThroughShape::callSetUp).
 class CallSizes : public PointEvaluator {
 public:
-    explicit CallSizes(const PointEvaluator& inner, bool setUp = false) : inner_(inner), setUp_(setUp) {}
+    explicit CallSizes(const PointEvaluator& inner, bool setUp = false, bool wholeFrame = false)
+        : inner_(inner), setUp_(setUp), wholeFrame_(wholeFrame) {}
     FailThroughShape failThroughShape() const override {
         FailThroughShape shape = inner_.failThroughShape();
         shape.callSetUp = shape.callSetUp || setUp_;
+        shape.wholeFrame = shape.wholeFrame || wholeFrame_;
         return shape;
     }
     std::string name() const override { return inner_.name(); }
@@ -497,6 +499,7 @@ public:
 private:
     const PointEvaluator& inner_;
     bool setUp_;
+    bool wholeFrame_;
     mutable std::mutex mutex_;
     mutable std::vector<std::pair<Index, Index>> calls_;
 };
@@ -594,6 +597,78 @@ TEST_F(Fixture, AHitsEstimateBeforeItsCheckComesBetweenTheKeysAndTheSentinelsAnd
             }
         }
     }
+}
+
+TEST_F(Fixture, AnEvaluatorWhoseCallsShareWorkComputesAHitsSentinelsInTheKeysCall) {
+    // A child process or a whole-frame rig: a hit asks once, for its keys and sentinels together,
+    // and every frame is delivered as by an evaluator asked for them in two calls.
+    for (const double tolerance : {1e300, 1e-12}) {  // every check passes; every check refuses
+        const Model checked = withSentinels(model, tolerance);
+        const auto sentinels = static_cast<Index>(checked.sentinels->points.size());
+        auto runWith = [&](const CallSizes& counting, std::vector<CacheState>& states, RunStats& stats) {
+            EngineOptions o = options(2);
+            o.policy = SoftCachePolicy(1e300, 1e300);  // every key error is a hit's
+            Engine engine(checked, counting, o);
+            FrameSetSink sink(6, checked.points, 3);
+            withWatchdog(60, "run", [&] { stats = engine.run({0, 6, 1}, sink); });
+            for (Index f = 0; f < 6; ++f) states.push_back(sink.info()[size_t(f)].state);
+            return std::vector<double>(sink.values().frame(0),
+                                       sink.values().frame(0) + 6 * checked.points * 3);
+        };
+        std::vector<CacheState> twoCalls, oneCall;
+        RunStats apart, together;
+        const CallSizes plain(evaluator);
+        const std::vector<double> expected = runWith(plain, twoCalls, apart);
+        for (const bool wholeFrame : {false, true}) {
+            const CallSizes sharing(evaluator, !wholeFrame, wholeFrame);
+            oneCall.clear();
+            EXPECT_EQ(runWith(sharing, oneCall, together), expected) << "tolerance " << tolerance;
+            EXPECT_EQ(oneCall, twoCalls);
+            EXPECT_EQ(together.hits, apart.hits);
+            EXPECT_EQ(together.blends, apart.blends);
+            EXPECT_EQ(together.blends > 0, tolerance < 1) << "at 1e-12 the check refuses hits";
+            std::map<Index, std::vector<Index>> perFrame;
+            for (const auto& [frame, size] : sharing.calls()) perFrame[frame].push_back(size);
+            ASSERT_EQ(perFrame.size(), 6u);
+            for (const auto& [frame, sizes] : perFrame) {
+                EXPECT_EQ(sizes.front(), checked.keyCount() + sentinels)
+                    << "frame " << frame << ": the keys and the sentinels in one call";
+                if (oneCall[size_t(frame)] == CacheState::Hit) {
+                    EXPECT_EQ(sizes.size(), 1u) << "frame " << frame << ": a hit asks once";
+                } else if (!wholeFrame) {
+                    EXPECT_EQ(std::accumulate(sizes.begin(), sizes.end(), Index(0)), checked.points)
+                        << "frame " << frame << ": every point once (the fail-through reuses both)";
+                }
+                EXPECT_EQ(std::count(sizes.begin(), sizes.end(), sentinels), 0)
+                    << "frame " << frame << ": the sentinels are not asked for again";
+            }
+        }
+    }
+    // With a client that shows a hit before its check, the keys come alone (the previous test).
+}
+
+TEST_F(Fixture, AFailureOfTheKeysAndSentinelsCallFailsTheFrameAtTheKeys) {
+    // The synthetic evaluator throws on frame 3 in any call but the model's own key list: here the
+    // keys' and sentinels' call, so the frame fails in the key node, and no frame after it is sent.
+    const Model checked = withSentinels(model, 1e300);
+    evaluator.throwInFullAt = 3;
+    const CallSizes sharing(evaluator, /*setUp*/ true);
+    EngineOptions o = options(1);
+    o.policy = SoftCachePolicy(1e300, 1e300);
+    Engine engine(checked, sharing, o);
+    FrameSetSink sink(6, checked.points, 3);
+    std::string message;
+    withWatchdog(60, "run", [&] {
+        try {
+            engine.run({0, 6, 1}, sink);
+        } catch (const EvaluatorError& e) {
+            message = e.what();
+        }
+    });
+    EXPECT_NE(message.find("frame 3: node 'keys'"), std::string::npos) << message;
+    EXPECT_NE(message.find("injected full failure"), std::string::npos) << message;
+    EXPECT_EQ(engine.lastStats().failed, 1);
+    EXPECT_EQ(engine.lastStats().hits, 3);
 }
 
 TEST_F(Fixture, AnEstimateBeforeTheCheckNeedsSomeoneToShowItTo) {
