@@ -2,12 +2,14 @@
 // all points with the same rig) as a ratio of two Google Benchmarks run in the same process:
 //
 //   BM_FaceFullPose  the rig posing all 26,719 points of a frame (FaceRig::evaluateAll)
-//   BM_FacePmsc      the rig posing the model's key points, the projection, the key error and the
-//                    reconstruction of all points (what a hit costs)
+//   BM_FacePmsc      the rig posing the model's key points and sentinels in one call (as the engine
+//                    asks a whole-frame rig), the projection, the key error and the reconstruction
+//                    of all points (what a hit costs)
 //   BM_FaceKeyPose, BM_FaceReconstruct: the two big parts of BM_FacePmsc (BM_FaceKeyPose's
 //                    counters: the dependency closure the keys pose, FaceRig::closureSize)
 //   BM_FaceSentinelPose: a hit's sentinels posed alone (with a model that has them), and the keys
-//                    and sentinels in one call against two (counter one_call_over_two)
+//                    and sentinels in one call against two (counter one_call_over_two: what the
+//                    engine's one call saves)
 //   BM_FaceKeyErrorPredictedVsRms: the key error of a frame in `pmsc train --tolerance`'s default
 //                    measure (the predicted point error: the key RMS and the leave-one-out error)
 //                    against the key RMS alone, timed alternately (counter predicted_over_rms)
@@ -19,6 +21,7 @@
 // the folder CMake was configured with.
 #include "TimeAlternately.h"
 #include "evaluators/face/FaceEvaluator.h"
+#include "pmsc/HitCheck.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/PointMultiplier.h"
 #include "pmsc/Training.h"
@@ -113,36 +116,31 @@ void BM_FaceReconstruct(benchmark::State& state) {
     }
 }
 
-/// The model's sentinels (pmsc::HitCheck), ascending; empty without them.
-std::vector<Index> sentinels(const Model& model) {
-    std::vector<Index> points;
-    if (model.sentinels) points = model.sentinels->points;
-    std::sort(points.begin(), points.end());
-    return points;
-}
+/// The model's sentinels, ascending (what a hit's check computes); empty without them.
+std::vector<Index> sentinels(const Model& model) { return HitCheck::sentinelsOf(model); }
 
 void BM_FacePmsc(benchmark::State& state) {
     const Setup& s = setup();
     const PointMultiplier pm(s.model);
     const std::vector<Index> check = sentinels(s.model);
-    std::vector<double> keys(static_cast<size_t>(3 * s.model.keyCount())),
-        coords(static_cast<size_t>(s.model.coordCount())), checked(3 * check.size());
+    std::vector<Index> posed = s.model.keyPoints;  // the keys, then the sentinels: one call
+    posed.insert(posed.end(), check.begin(), check.end());
+    std::vector<double> values(3 * posed.size()), coords(static_cast<size_t>(s.model.coordCount()));
     std::vector<double> out(static_cast<size_t>(3 * s.model.points));
     size_t i = 0;
     for (auto _ : state) {
         const Index frame = s.frames[i++ % s.frames.size()];
-        s.evaluator->evaluate(frame, s.model.keyPoints, keys.data());
-        pm.project(keys.data(), coords.data());
-        benchmark::DoNotOptimize(pm.keyError(keys.data(), coords.data()));
-        if (!check.empty()) s.evaluator->evaluate(frame, check, checked.data());  // a hit's sentinels
+        s.evaluator->evaluate(frame, posed, values.data());
+        pm.project(values.data(), coords.data());
+        benchmark::DoNotOptimize(pm.keyError(values.data(), coords.data()));
         pm.reconstruct(coords.data(), out.data());
         benchmark::DoNotOptimize(out.data());
     }
     state.counters["sentinels"] = static_cast<double>(check.size());
 }
 
-/// A hit's sentinels posed alone (the error monitor's second call), and the keys and sentinels in
-/// one call for comparison (counter one_call_over_two: what merging the calls would save).
+/// A hit's sentinels posed alone, and the keys and sentinels in one call against two calls
+/// (counter one_call_over_two: what the engine's one call saves for this whole-frame rig).
 void BM_FaceSentinelPose(benchmark::State& state) {
     const Setup& s = setup();
     const std::vector<Index> check = sentinels(s.model);

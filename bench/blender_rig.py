@@ -35,7 +35,7 @@ import shutil
 import sys
 import time
 
-from blender_relight import fail, numpy_and_blender, run, timings  # beside this script
+from blender_relight import fail, first_calls, numpy_and_blender, run, timings  # beside this script
 
 ASSIMP_BVH = "/usr/share/assimp/models/BVH"
 
@@ -107,7 +107,7 @@ def main():
         "train_summary": [l.strip() for l in out.splitlines()
                           if l.strip().startswith(("basis", "key points", "sentinels"))],
         "takes": {name: replay(np, pmsc, w, evaluator, name, f"0-{lengths[name] - 1}:{args.stride}", size,
-                               tolerance, len(inspect["key_indices"]))
+                               tolerance)
                   for name in names[1:]},
     }
     with open(w("report.json"), "w") as f:
@@ -125,7 +125,7 @@ def main():
     return 0
 
 
-def replay(np, pmsc, w, evaluator, take, span, size, tolerance, keys):
+def replay(np, pmsc, w, evaluator, take, span, size, tolerance):
     """Blender's full evaluation of the take's frames, then `pmsc run` over them: the figures."""
     began = time.perf_counter()
     run([pmsc, "export-frames", evaluator(take, w(take + ".full.log")), "--out", w(take + ".npy"), "--frames", span,
@@ -146,10 +146,11 @@ def replay(np, pmsc, w, evaluator, take, span, size, tolerance, keys):
         stats = json.load(f)
     point_error = np.linalg.norm(got - full, axis=2)
     full_calls = [(n, s) for _, n, s in timings(w(take + ".full.log"))]
-    run_calls = [(n, s) for _, n, s in timings(w(take + ".run.log"))]
+    logged = timings(w(take + ".run.log"))
+    run_calls = [(n, s) for _, n, s in logged]
     full_per_frame = sum(s for _, s in full_calls) / len(full_calls)
     pmsc_per_frame = sum(s for _, s in run_calls) / len(full)
-    key_calls = [s for n, s in run_calls if n == keys]
+    key_calls = [s for _, _, s in first_calls(logged)]  # the keys, and the sentinels with them
     return {
         "frames": len(full),
         "hit_rate": stats["hit_rate"], "hits": stats["hits"], "blends": stats["blends"], "misses": stats["misses"],
