@@ -112,23 +112,13 @@ Route ErrorMonitor::whole(FrameSlot& slot) const {
 bool ErrorMonitor::checkValuesInto(FrameSlot& slot, std::span<const Index> points, double* out,
                                    const char* what) const {
     if (!slot.sentinelsComputed) return evaluateInto(slot, points, out, what);
+    const std::vector<size_t> othersAt = check_.copySentinelValues(points, slot.sentinelValues.data(), out);
+    if (othersAt.empty()) return true;
     const auto c = static_cast<size_t>(pm_.model().channels);
-    const std::span<const Index> sentinels = check_.sentinels();
     thread_local std::vector<Index> others;
-    thread_local std::vector<size_t> othersAt;
-    others.clear();
-    othersAt.clear();
-    for (size_t i = 0; i < points.size(); ++i) {
-        const auto s = std::lower_bound(sentinels.begin(), sentinels.end(), points[i]);
-        if (s != sentinels.end() && *s == points[i]) {
-            std::copy_n(slot.sentinelValues.data() + size_t(s - sentinels.begin()) * c, c, out + i * c);
-        } else {
-            others.push_back(points[i]);
-            othersAt.push_back(i);
-        }
-    }
-    if (others.empty()) return true;
     thread_local std::vector<double> values;
+    others.clear();
+    for (const size_t i : othersAt) others.push_back(points[i]);
     values.resize(others.size() * c);
     if (!evaluateInto(slot, others, values.data(), what)) return false;
     for (size_t j = 0; j < others.size(); ++j) std::copy_n(values.data() + j * c, c, out + othersAt[j] * c);

@@ -63,9 +63,6 @@ public:
     /// frame (blended with weight 0).
     Route check(FrameSlot& slot) const;
 
-    /// The sentinels the check computes (HitCheck::sentinels(), ascending; empty without them).
-    std::span<const Index> sentinels() const { return check_.sentinels(); }
-
 private:
     /// A local frame: computes the sentinels it would hand back as PM alone (`checked` of them);
     /// the regions of those PM misses fail through too (`full` becomes the new count of points

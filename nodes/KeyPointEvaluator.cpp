@@ -9,19 +9,16 @@ namespace pmsc::nodes {
 
 KeyPointEvaluator::KeyPointEvaluator(const Model& model, const PointEvaluator& evaluator, Index piecePoints,
                                      std::span<const Index> sentinels)
-    : model_(model),
-      evaluator_(evaluator),
-      piecePoints_(piecePoints),
-      sentinels_(sentinels.begin(), sentinels.end()) {
-    if (sentinels_.empty()) return;
+    : model_(model), evaluator_(evaluator), piecePoints_(piecePoints) {
+    if (sentinels.empty()) return;
     keysThenSentinels_ = model.keyPoints;
-    keysThenSentinels_.insert(keysThenSentinels_.end(), sentinels_.begin(), sentinels_.end());
+    keysThenSentinels_.insert(keysThenSentinels_.end(), sentinels.begin(), sentinels.end());
 }
 
 void KeyPointEvaluator::operator()(FrameSlot& slot) const {
     const Index c = model_.channels;
     try {
-        if (sentinels_.empty()) {
+        if (keysThenSentinels_.empty()) {
             evaluateInPieces(evaluator_, slot.frame, model_.keyPoints, c, piecePoints_,
                              slot.keyValues.data());
         } else {

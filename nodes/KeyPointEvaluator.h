@@ -29,15 +29,12 @@ public:
 
     void operator()(FrameSlot& slot) const;
 
-    /// The sentinels this node computes with the keys (empty: none).
-    std::span<const Index> sentinels() const { return sentinels_; }
-
 private:
     const Model& model_;
     const PointEvaluator& evaluator_;
     Index piecePoints_;
-    std::vector<Index> sentinels_;
-    std::vector<Index> keysThenSentinels_;  ///< the one call's points: the keys, then the sentinels
+    /// The one call's points: the keys, then the sentinels (empty: the keys alone).
+    std::vector<Index> keysThenSentinels_;
 };
 
 }  // namespace pmsc::nodes

@@ -10,18 +10,13 @@ namespace pmsc {
 HitCheck::HitCheck(const Model& model, const PointMultiplier& pm) : model_(model), pm_(pm) {
     if (model.regions) regionKeys_ = model.regions->extraKeyPoints;
     std::sort(regionKeys_.begin(), regionKeys_.end());
+    sentinels_ = sentinelsOf(model);
+    sentinelAt_.assign(sentinels_.size(), -1);  // each one's first position in the model's list
     if (model.sentinels) {
         const std::vector<Index>& chosen = model.sentinels->points;
-        std::vector<std::pair<Index, Index>> byPoint;  // (point, its position in the model's list)
-        for (size_t i = 0; i < chosen.size(); ++i) byPoint.emplace_back(chosen[i], static_cast<Index>(i));
-        std::sort(byPoint.begin(), byPoint.end());
-        byPoint.erase(std::unique(byPoint.begin(), byPoint.end(),
-                                  [](const auto& a, const auto& b) { return a.first == b.first; }),
-                      byPoint.end());
-        for (const auto& [point, at] : byPoint) {
-            sentinels_.push_back(point);
-            sentinelAt_.push_back(at);
-        }
+        for (size_t i = chosen.size(); i-- > 0;)
+            sentinelAt_[size_t(std::lower_bound(sentinels_.begin(), sentinels_.end(), chosen[i]) -
+                               sentinels_.begin())] = static_cast<Index>(i);
     }
     if (!sentinels_.empty()) {
         const Index c = model.channels, width = model.sharedChannels ? 1 : c;
@@ -92,6 +87,21 @@ std::vector<Index> HitCheck::unblendedSentinels(std::span<const double> pointWei
         if (pointWeights[size_t(p)] == 0.0) out.push_back(p);
     }
     return out;
+}
+
+std::vector<size_t> HitCheck::copySentinelValues(std::span<const Index> points, const double* sentinelValues,
+                                                 double* out) const {
+    const auto c = static_cast<size_t>(model_.channels);
+    std::vector<size_t> others;
+    for (size_t i = 0; i < points.size(); ++i) {
+        const auto s = std::lower_bound(sentinels_.begin(), sentinels_.end(), points[i]);
+        if (s != sentinels_.end() && *s == points[i]) {
+            std::copy_n(sentinelValues + size_t(s - sentinels_.begin()) * c, c, out + i * c);
+        } else {
+            others.push_back(i);
+        }
+    }
+    return others;
 }
 
 bool HitCheck::passes(const double* coords, std::span<const Index> points, const double* values) const {

@@ -64,6 +64,12 @@ public:
     std::span<const Index> sentinels() const { return sentinels_; }
     /// What sentinels() is for a HitCheck of `model`, without building one.
     static std::vector<Index> sentinelsOf(const Model& model);
+    /// For check points computed with the sentinels beforehand (the engine's key node, for an
+    /// evaluator whose calls share work): copies into `out` (points.size()*C) the values of the
+    /// sentinels among `points` from `sentinelValues` (sentinels() order, S*C), and returns the
+    /// positions in `points` of the others, which are still to be computed.
+    std::vector<size_t> copySentinelValues(std::span<const Index> points, const double* sentinelValues,
+                                           double* out) const;
     /// The sentinels a local frame hands back as PM alone (weight 0 of the full result in
     /// `pointWeights`, N values), ascending: the ones its check computes.
     std::vector<Index> unblendedSentinels(std::span<const double> pointWeights) const;

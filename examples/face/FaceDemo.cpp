@@ -317,22 +317,14 @@ nlohmann::json measureLocalFailThrough(const DemoRun& run, const FaceScene& scen
     return local;
 }
 
-// A check's values at `points` (ascending): the sentinels' from `sentinelValues` (posed with the
-// keys, in `sentinels`' order), the others posed in one call, as nodes::ErrorMonitor does.
-void checkValuesOf(const FaceEvaluator& evaluator, Index frame, std::span<const Index> sentinels,
+// A check's values at `points`: the sentinels' from `sentinelValues` (posed with the keys), the
+// others posed in one call, as nodes::ErrorMonitor does.
+void checkValuesOf(const FaceEvaluator& evaluator, Index frame, const HitCheck& check,
                    const double* sentinelValues, std::span<const Index> points, double* out) {
+    const std::vector<size_t> othersAt = check.copySentinelValues(points, sentinelValues, out);
+    if (othersAt.empty()) return;
     std::vector<Index> others;
-    std::vector<size_t> othersAt;
-    for (size_t i = 0; i < points.size(); ++i) {
-        const auto s = std::lower_bound(sentinels.begin(), sentinels.end(), points[i]);
-        if (s != sentinels.end() && *s == points[i]) {
-            std::copy_n(sentinelValues + 3 * size_t(s - sentinels.begin()), 3, out + 3 * i);
-        } else {
-            others.push_back(points[i]);
-            othersAt.push_back(i);
-        }
-    }
-    if (others.empty()) return;
+    for (const size_t i : othersAt) others.push_back(points[i]);
     std::vector<double> posed(3 * others.size());
     evaluator.evaluate(frame, others, posed.data());
     for (size_t j = 0; j < others.size(); ++j) std::copy_n(posed.data() + 3 * j, 3, out + 3 * othersAt[j]);
@@ -386,8 +378,7 @@ PoseTimings timeFullPoseAgainstPmsc(const DemoRun& run, const FaceScene& scene, 
         if (check.needed({CacheState::Hit, 0.0}, parts)) {
             const std::vector<Index> points = check.points(values.data(), coords.data(), parts);
             checkValues.resize(points.size() * 3);
-            checkValuesOf(evaluator, frame, check.sentinels(), values.data() + k3, points,
-                          checkValues.data());
+            checkValuesOf(evaluator, frame, check, values.data() + k3, points, checkValues.data());
             volatile bool passes = check.passes(coords.data(), points, checkValues.data());
             (void)passes;
             pt.checkPoints += static_cast<double>(points.size());
