@@ -67,6 +67,10 @@ void printLearnSummary(const std::string& modelPath, const std::string& outPath,
         std::cout << "  parts       key RMS eps " << fmt("%.6g", model.partEps.rms) << " -> "
                   << fmt("%.6g", learned.partEps.rms) << ", leave-one-out eps "
                   << fmt("%.6g", model.partEps.loo) << " -> " << fmt("%.6g", learned.partEps.loo) << "\n";
+    if (learned.regions)
+        std::cout << "  regions     " << learned.regions->regionCount()
+                  << " kept, each with its keys, basis and thresholds learned again (" << report.regionKeys
+                  << " region keys)\n";
     for (const auto& w : report.warnings) std::cout << "  warning: " << w << "\n";
 }
 
@@ -125,10 +129,17 @@ int runLearn(const std::vector<std::string>& args) {
                   "key neighbours are chosen again from them for the new keys and the points the new "
                   "frames move",
                   request.positions);
+    bool noRegions = false;
+    parser.flag(
+        "--no-regions",
+        "a model with regions of local fail-through: drop them (every frame that does not hit then fails "
+        "through whole); by default they are kept, with their keys, bases and thresholds learned again",
+        noRegions);
     parser.flag("--quiet", "no progress display", quiet);
     if (!parser.parse(args)) return kExitOk;
     try {
         request.frames = splitPaths(framesText);
+        options.regions = !noRegions;
         options.rule = app::calibrationNamed(rule, app::Spelling::CommandLine);
         app::validate(request, app::Spelling::CommandLine);
     } catch (const std::invalid_argument& e) {  // UsageError, app::OptionError

@@ -6,6 +6,7 @@
 #include "pmsc/LearningState.h"
 #include "pmsc/QDeim.h"
 #include "pmsc/RegionChoice.h"
+#include "pmsc/RegionLearning.h"
 #include "pmsc/RowBlocks.h"
 #include "pmsc/Sentinels.h"
 #include "pmsc/Subspace.h"
@@ -182,11 +183,6 @@ void updateState(const Model& model, const Eigen::Map<const Eigen::MatrixXd>& fr
                  const LearnOptions& options, LearnReport& report, SubspaceUpdate& u) {
     u.before = subspaceOf(model);
     report.rankBefore = u.before.rank();
-    if (model.regions) {
-        report.warnings.push_back(
-            "the model's local fail-through regions are not updated by learn (the keys "
-            "change): the learned model has none; train again to get them");
-    }
     if (!model.learning) {
         report.warnings.push_back(
             "the model has no learning state (train with --learn-rank): the old frames "
@@ -358,10 +354,10 @@ void learnedSentinels(const Model& model, Model& out, const Eigen::Map<const Eig
 
 /// Step 3, cross-fitting: each slice of the new frames is scored by a model that never saw it
 /// (the old state updated with the other slices, or the old state alone for one slice; the new
-/// keys).
+/// keys). `regionFolds`, when given, gets each fold's subspace, for the regions' calibration.
 CalibrationStats crossFitNewFrames(const SubspaceUpdate& u, const Eigen::Map<const Eigen::MatrixXd>& fresh,
                                    Index channels, KeyErrorNorm norm, const std::vector<Index>& keys,
-                                   Index slices, const auto& progress) {
+                                   Index slices, std::vector<RegionFold>* regionFolds, const auto& progress) {
     const Index m = fresh.cols();
     CalibrationStats scores;
     // Decision: each fold is the old state updated with the other slices in the span of the full
@@ -389,6 +385,7 @@ CalibrationStats crossFitNewFrames(const SubspaceUpdate& u, const Eigen::Map<con
         scoreFrames(fresh.middleCols(first, last - first), fold.mean, foldBasis, foldProjector, channels,
                     keys, norm, scores);
         for (Index j = first; j < last; ++j) scores.frames.push_back(j);
+        if (regionFolds) regionFolds->push_back({foldBasis, fold.sigma.head(foldM), fold.mean, first, last});
         progress("calibration", static_cast<double>(slice + 1), static_cast<double>(slices));
     }
     scores.slices = slices;
@@ -461,11 +458,12 @@ void calibratePredicted(const Model& model, const CalibrationStats& scores, Cali
 void calibrateLearned(const Model& model, const SubspaceUpdate& u,
                       const Eigen::Map<const Eigen::MatrixXd>& fresh, const std::vector<Index>& keys,
                       const LearnOptions& options, CalibrationRule rule, double coverage,
-                      CalibrationRecord& record, Model& out, LearnReport& report, const auto& progress) {
+                      CalibrationRecord& record, Model& out, LearnReport& report,
+                      std::vector<RegionFold>* regionFolds, const auto& progress) {
     const Index m = fresh.cols();
     const Index slices = newFrameSlices(model, record, m, options);
     CalibrationStats scores =
-        crossFitNewFrames(u, fresh, model.channels, model.keyErrorNorm, keys, slices, progress);
+        crossFitNewFrames(u, fresh, model.channels, model.keyErrorNorm, keys, slices, regionFolds, progress);
     if (model.keyErrorNorm == KeyErrorNorm::Predicted) {
         calibratePredicted(model, scores, rule, coverage, record, out, report);
         return;
@@ -503,7 +501,8 @@ void calibrateLearned(const Model& model, const SubspaceUpdate& u,
 CalibrationRecord learnThresholds(const Model& model, const SubspaceUpdate& u,
                                   const Eigen::Map<const Eigen::MatrixXd>& fresh,
                                   const std::vector<Index>& keys, const LearnOptions& options, Model& out,
-                                  LearnReport& report, const auto& progress) {
+                                  LearnReport& report, std::vector<RegionFold>* regionFolds,
+                                  const auto& progress) {
     CalibrationStats fit;
     scoreFrames(fresh, out.mean, out.basis, out.projector, model.channels, keys, model.keyErrorNorm, fit);
     const std::vector<double>& eNew = fit.keyRms;  // read only by an uncalibrated model's rule
@@ -523,7 +522,8 @@ CalibrationRecord learnThresholds(const Model& model, const SubspaceUpdate& u,
     record.rule = rule;
     record.coverage = rule != CalibrationRule::MaxRatio ? coverage : 0.0;
     if (model.tolerance > 0) {
-        calibrateLearned(model, u, fresh, keys, options, rule, coverage, record, out, report, progress);
+        calibrateLearned(model, u, fresh, keys, options, rule, coverage, record, out, report, regionFolds,
+                         progress);
     } else {
         // Uncalibrated, as training: the largest key error seen on frames it learned from.
         out.epsMin = std::max(model.epsMin, *std::max_element(eNew.begin(), eNew.end()));
@@ -625,7 +625,17 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
     // --- 3. eps.
     progress("calibration", 0, 1);
     t = Clock::now();
-    CalibrationRecord record = learnThresholds(model, u, fresh, keys, options, out, report, progress);
+    std::vector<RegionFold> regionFolds;
+    const bool regions = model.regions && options.regions;
+    CalibrationRecord record = learnThresholds(model, u, fresh, keys, options, out, report,
+                                               regions ? &regionFolds : nullptr, progress);
+    // The regions: the old partition, each region's keys, basis and thresholds learned again
+    // (relearnRegions says how and why).
+    if (regions) {
+        out.regions = relearnRegions(*model.regions, model, out, u.state.u, u.state.sigma, fresh, regionFolds,
+                                     SvdOptions{});
+        report.regionKeys = static_cast<Index>(out.regions->extraKeyPoints.size());
+    }
     report.secondsCalibration = since(t);
     progress("calibration", 1, 1);
 

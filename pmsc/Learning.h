@@ -40,6 +40,10 @@ struct LearnOptions {
     /// learn keeps the old sentinels less those that became keys, and drops the key neighbours
     /// (LearnReport::warnings says so).
     Eigen::MatrixXd positions;
+    /// Models with regions: keep them, their keys, bases and thresholds learned again
+    /// (relearnRegions); false: the learned model has none (every frame that misses fails through
+    /// whole; --no-regions).
+    bool regions = true;
     ProgressFn progress;  ///< optional; returning false cancels (pmsc::Cancelled)
 };
 
@@ -57,6 +61,9 @@ struct LearnReport {
     CalibrationStats calibration;           ///< the new frames' cross-fitted scores and the thresholds
     double calibrationRatioOld = 0;         ///< the rule's ratio on the stored scores (0: none stored)
     double calibrationRatioNew = 0;         ///< the rule's ratio on the new frames' scores (0: too few)
+    /// Models with regions: the learned model's region keys (LocalRegions::extraKeyPoints), the
+    /// points its regions read that are not its keys (relearnRegions).
+    Index regionKeys = 0;
     std::vector<std::string> warnings;
     double secondsSubspace = 0, secondsKeys = 0, secondsCalibration = 0, seconds = 0;
 };
@@ -75,7 +82,9 @@ struct LearnReport {
 ///    cross-fitting (each of `slices` contiguous slices held out: the OLD state updated with the
 ///    other slices, computed in the span of the full update, updateInSpan; the new keys) and
 ///    r = the larger of the rule's ratio on those scores and on
-///    the stored training scores; eps_min = T / r, eps_max = 2 eps_min.
+///    the stored training scores; eps_min = T / r, eps_max = 2 eps_min;
+/// 5. a model with regions keeps them, each region's keys, basis and thresholds learned again
+///    from the state and the same folds (relearnRegions), unless LearnOptions::regions is false.
 /// What is exact and what is approximate compared with training from scratch on all frames is
 /// in docs/learning-and-calibration.md and IncrementalSvd.h.
 /// @throws InputError if the frames' N or C differ from the model's, there are none, or a value

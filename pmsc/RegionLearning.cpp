@@ -302,12 +302,12 @@ void setRegionThresholds(Region& g, const CalibrationStats& cal, double toleranc
     g.epsMax = 1.5 * g.epsMin;
 }
 
-/// Step 4: region `ri`'s local basis (the energy rule, capped by its share of key values), key
-/// projector and thresholds, learned from its rows `qr`; true if the cap made the basis smaller
-/// than the model's.
-bool fitRegion(Region& g, Index ri, const Eigen::MatrixXd& qr, const std::vector<Index>& keyLocal,
-               const Model& model, const RegionOptions& options, double tolerance, Index slices,
-               const SvdOptions& svd) {
+/// Step 4a: region `ri`'s local basis from its rows `qr` (the energy rule, capped by its share of
+/// key values) and its key projector; returns the basis over all of qr's rows (its points', then its
+/// outside keys'), zero for a region that never moved. `capped`: the cap made it smaller than M.
+Eigen::MatrixXd fitRegionBasis(Region& g, Index ri, const Eigen::MatrixXd& qr,
+                               const std::vector<Index>& keyLocal, const Model& model,
+                               const RegionOptions& options, const SvdOptions& svd, bool& capped) {
     const Index c = model.channels;
     const Index f = qr.cols();
     const Index kc = Index(g.keys.size()) * c;
@@ -321,31 +321,177 @@ bool fitRegion(Region& g, Index ri, const Eigen::MatrixXd& qr, const std::vector
                   ? basisSizeForEnergy(local_svd.sigma, energy > 0 ? energy : 1.0, options.energy)
                   : 0;
     m = std::clamp<Index>(m, 1, std::max<Index>(1, local_svd.sigma.size()));
-    if (local_svd.sigma.size() == 0) {
-        // A region that never moved in training: a zero basis vector reconstructs the mean.
-        g.basis = Eigen::MatrixXd::Zero(Index(g.points.size()) * c, 1);
-        g.keyBasis = Eigen::MatrixXd::Zero(kc, 1);
-    } else {
-        const Eigen::MatrixXd u = local_svd.u.leftCols(m);
-        g.basis = u.topRows(Index(g.points.size()) * c);
-        g.keyBasis = gatherKeyRows(u, c, keyLocal);
-    }
-    const bool capped = m == cap && cap < model.basisSize();
-    {
-        Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(g.keyBasis);
-        g.projector = cod.pseudoInverse();
-    }
+    // A region that never moved in training: a zero basis vector reconstructs the mean.
+    Eigen::MatrixXd u = local_svd.sigma.size() == 0 ? Eigen::MatrixXd::Zero(qr.rows(), 1)
+                                                    : Eigen::MatrixXd(local_svd.u.leftCols(m));
+    g.basis = u.topRows(Index(g.points.size()) * c);
+    g.keyBasis = gatherKeyRows(u, c, keyLocal);
+    capped = m == cap && cap < model.basisSize();
+    Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(g.keyBasis);
+    g.projector = cod.pseudoInverse();
+    return u;
+}
+
+/// Step 4: region `ri`'s local basis, key projector and thresholds, learned from its rows `qr`;
+/// true if the cap made the basis smaller than the model's.
+bool fitRegion(Region& g, Index ri, const Eigen::MatrixXd& qr, const std::vector<Index>& keyLocal,
+               const Model& model, const RegionOptions& options, double tolerance, Index slices,
+               const SvdOptions& svd) {
+    bool capped = false;
+    const Eigen::MatrixXd u = fitRegionBasis(g, ri, qr, keyLocal, model, options, svd, capped);
+    const bool moved = u.squaredNorm() > 0;
     CalibrationStats cal;
-    if (tolerance > 0 && local_svd.sigma.size() > 0) {
-        cal = calibrate(qr, c, keyLocal, m, tolerance, slices, o);
+    if (tolerance > 0 && moved) {
+        SvdOptions o = svd;
+        o.seed = svd.seed + 7919u * static_cast<unsigned>(ri + 1);
+        cal = calibrate(qr, model.channels, keyLocal, g.basisSize(), tolerance, slices, o);
         g.ratio = cal.ratio;
     } else {
-        Eigen::MatrixXd u = Eigen::MatrixXd::Zero(qr.rows(), 1);
-        if (local_svd.sigma.size() > 0) u = local_svd.u.leftCols(m);
-        cal = thresholdsFromTraining(qr, u, c, keyLocal, g.projector);
+        cal = thresholdsFromTraining(qr, u, model.channels, keyLocal, g.projector);
     }
     setRegionThresholds(g, cal, tolerance, options);
     return capped;
+}
+
+/// relearnRegions step 2: each region's key numbers in the learned model. A region reads the
+/// learned keys inside it, the old region keys (they were placed where it held too few keys), and
+/// the old keys outside it that are still read (learned keys, region keys); old keys that are no
+/// longer keys come back only while it holds fewer than training's ownKeys inside, then minKeys in
+/// all (RegionOptions' defaults), those inside first, each in the old order. So a region watches what
+/// training gave it to watch, and the dropped keys do not all turn into region keys that every checked hit
+/// computes. Points that are not learned keys become region keys, appended to out.extraKeyPoints in region
+/// order (deterministic).
+void relearnedRegionKeys(const LocalRegions& old, const Model& oldModel, const Model& learned,
+                         LocalRegions& out) {
+    const Index n = learned.points;
+    const Index k = learned.keyCount();
+    const Index oldK = oldModel.keyCount();
+    const RegionOptions defaults;
+    std::vector<Index> keyOf(size_t(n), -1), extraOf(size_t(n), -1);
+    std::vector<char> oldExtra(size_t(n), 0);
+    for (Index j = 0; j < k; ++j) keyOf[size_t(learned.keyPoints[size_t(j)])] = j;
+    for (const Index p : old.extraKeyPoints) oldExtra[size_t(p)] = 1;
+    const std::vector<Index> regionOf = old.regionOfPoints(n);
+    std::vector<std::vector<Index>> inside(old.regions.size());
+    for (const Index p : learned.keyPoints) inside[size_t(regionOf[size_t(p)])].push_back(p);
+    for (size_t r = 0; r < old.regions.size(); ++r) {
+        std::vector<Index> pts, droppedInside, droppedOutside;
+        Index own = 0;
+        // Each point once (training may give a region a region key at one of the model's keys).
+        auto add = [&](Index p, bool in) {
+            if (std::find(pts.begin(), pts.end(), p) != pts.end()) return;
+            pts.push_back(p);
+            own += in;
+        };
+        for (const Index p : inside[r]) add(p, true);
+        for (const Index key : old.regions[r].keys) {
+            const Index p = old.keyPoint(oldModel, key);
+            const bool in = regionOf[size_t(p)] == Index(r);
+            if (keyOf[size_t(p)] >= 0 || oldExtra[size_t(p)] || key >= oldK)
+                add(p, in);
+            else
+                (in ? droppedInside : droppedOutside).push_back(p);
+        }
+        size_t next = 0;
+        for (; next < droppedInside.size() && own < defaults.ownKeys; ++next) add(droppedInside[next], true);
+        droppedOutside.insert(droppedOutside.begin(), droppedInside.begin() + std::ptrdiff_t(next),
+                              droppedInside.end());
+        for (size_t i = 0; i < droppedOutside.size() && Index(pts.size()) < defaults.minKeys; ++i)
+            add(droppedOutside[i], false);
+        std::sort(pts.begin(), pts.end());
+        std::vector<Index>& keys = out.regions[r].keys;
+        for (const Index p : pts) {
+            if (keyOf[size_t(p)] >= 0) {
+                keys.push_back(keyOf[size_t(p)]);
+                continue;
+            }
+            if (extraOf[size_t(p)] < 0) {
+                extraOf[size_t(p)] = Index(out.extraKeyPoints.size());
+                out.extraKeyPoints.push_back(p);
+            }
+            keys.push_back(k + extraOf[size_t(p)]);
+        }
+        std::sort(keys.begin(), keys.end());
+    }
+}
+
+/// The region's rows of frames `frames` about `mean` (N*C): its points, then its outside keys.
+Eigen::MatrixXd centredRegionRows(const Eigen::Ref<const Eigen::MatrixXd>& frames,
+                                  const Eigen::VectorXd& mean, const Region& g, const Model& model,
+                                  const LocalRegions& out) {
+    std::vector<Index> keyLocal;
+    Eigen::MatrixXd rows = regionRows(frames, g, model, out, 1, keyLocal);
+    keyLocal.clear();
+    const Eigen::MatrixXd centre = regionRows(mean, g, model, out, 1, keyLocal);
+    rows.colwise() -= centre.col(0);
+    return rows;
+}
+
+/// relearnRegions step 4: region g's held-out scores under one fold of learn's new frames, appended
+/// to `s`: its basis of m vectors from the fold's surrogate rows, as the learned region's comes from
+/// every frame's; per held-out frame its key RMS (RegionMultiplier's measure) and the largest
+/// error at its own points.
+void scoreRegionFold(const Region& g, Index ri, const std::vector<Index>& keyLocal, const Model& learned,
+                     const LocalRegions& out, const RegionFold& fold,
+                     const Eigen::Ref<const Eigen::MatrixXd>& fresh, const SvdOptions& svd,
+                     CalibrationStats& s) {
+    const Index c = learned.channels;
+    std::vector<Index> local;
+    const Eigen::MatrixXd qf = regionRows(fold.basis, g, learned, out, 1, local) * fold.sigma.asDiagonal();
+    SvdOptions o = svd;
+    o.seed = svd.seed + 7919u * static_cast<unsigned>(ri + 1);
+    const TruncatedSvd t = truncatedSvd(qf, std::min<Index>(g.basisSize(), qf.cols()), o);
+    if (t.sigma.size() == 0) return;  // the region did not move in this fold's frames
+    const Eigen::MatrixXd u = t.u.leftCols(std::min<Index>(g.basisSize(), t.sigma.size()));
+    const Eigen::MatrixXd bk = gatherKeyRows(u, c, keyLocal);
+    const Eigen::MatrixXd projector =
+        Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd>(bk).pseudoInverse();
+    const Eigen::MatrixXd h =
+        centredRegionRows(fresh.middleCols(fold.first, fold.last - fold.first), fold.mean, g, learned, out);
+    const Eigen::MatrixXd hk = gatherKeyRows(h, c, keyLocal);
+    const Eigen::MatrixXd b = projector * hk;
+    const Index rows = Index(g.points.size()) * c;
+    const Eigen::MatrixXd keyResidual = hk - bk * b;
+    const Eigen::MatrixXd pointResidual = h.topRows(rows) - u.topRows(rows) * b;
+    for (Index j = 0; j < h.cols(); ++j) {
+        s.keyRms.push_back(std::sqrt(keyResidual.col(j).squaredNorm() / double(g.keys.size())));
+        double largest = 0;
+        for (Index p = 0; p < Index(g.points.size()); ++p)
+            largest = std::max(largest, pointResidual.block(p * c, j, c, 1).norm());
+        s.maxPointError.push_back(largest);
+    }
+}
+
+/// relearnRegions steps 3-4 for region ri: basis, projector and thresholds.
+void relearnRegion(Index ri, const Region& was, const Model& learned, LocalRegions& out,
+                   const Eigen::Ref<const Eigen::MatrixXd>& basis, const Eigen::VectorXd& sigma,
+                   const Eigen::Ref<const Eigen::MatrixXd>& fresh, const std::vector<RegionFold>& folds,
+                   const SvdOptions& svd) {
+    Region& g = out.regions[size_t(ri)];
+    std::vector<Index> keyLocal;
+    const Eigen::MatrixXd qr = regionRows(basis, g, learned, out, 1, keyLocal) * sigma.asDiagonal();
+    RegionOptions options;  // training's defaults: a model does not store the options it had
+    bool capped = false;
+    const Eigen::MatrixXd u = fitRegionBasis(g, ri, qr, keyLocal, learned, options, svd, capped);
+    const double t = learned.tolerance;
+    CalibrationStats cal;
+    if (t > 0) {
+        if (u.squaredNorm() > 0)
+            for (const RegionFold& fold : folds)
+                scoreRegionFold(g, ri, keyLocal, learned, out, fold, fresh, svd, cal);
+        if (!cal.keyRms.empty()) setThresholds(cal, t, CalibrationRule::MaxRatio, 0.9);
+        g.ratio = std::max(cal.ratio, was.ratio);
+        cal.ratio = g.ratio;
+        cal.epsMin = g.ratio > 0 ? t / g.ratio : was.epsMin;  // never moved: the old noise floor
+        // The old margin, recovered from its thresholds (setRegionThresholds: eps_min = T / (margin r)).
+        if (was.ratio > 0 && was.epsMin > 0)
+            options.ratioMargin = std::max(1.0, t / (was.ratio * was.epsMin));
+    } else {
+        cal = thresholdsFromTraining(centredRegionRows(fresh, learned.mean, g, learned, out), u,
+                                     learned.channels, keyLocal, g.projector);
+        cal.epsMin = std::max(cal.epsMin, was.epsMin);
+    }
+    setRegionThresholds(g, cal, t, options);
 }
 
 }  // namespace
@@ -412,6 +558,36 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
     // Step 5.
     featherEntries(pos, regionOf, out.featherWidth, out);
     out.validate(model);
+    return out;
+}
+
+LocalRegions relearnRegions(const LocalRegions& old, const Model& oldModel, const Model& learned,
+                            const Eigen::Ref<const Eigen::MatrixXd>& basis, const Eigen::VectorXd& sigma,
+                            const Eigen::Ref<const Eigen::MatrixXd>& fresh,
+                            const std::vector<RegionFold>& folds, const SvdOptions& svd) {
+    const Index rows = learned.points * learned.channels;
+    if (oldModel.points != learned.points || oldModel.channels != learned.channels || basis.rows() != rows ||
+        basis.cols() != sigma.size() || fresh.rows() != rows)
+        throw std::invalid_argument("relearnRegions: the models, the state and the frames differ in size");
+    old.validate(oldModel);
+    LocalRegions out;
+    out.maxLocalFraction = old.maxLocalFraction;
+    out.featherWidth = old.featherWidth;
+    out.featherStart = old.featherStart;
+    out.featherRegion = old.featherRegion;
+    out.featherFactor = old.featherFactor;
+    out.regions.resize(old.regions.size());
+    for (size_t r = 0; r < old.regions.size(); ++r) out.regions[r].points = old.regions[r].points;
+    relearnedRegionKeys(old, oldModel, learned, out);
+    const Index r = out.regionCount();
+    std::atomic<Index> next{0};
+    runOnEveryCore(
+        [&] {
+            for (Index ri = next++; ri < r; ri = next++)
+                relearnRegion(ri, old.regions[size_t(ri)], learned, out, basis, sigma, fresh, folds, svd);
+        },
+        r);
+    out.validate(learned);
     return out;
 }
 

@@ -107,4 +107,42 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
                           const RegionOptions& options, double tolerance, Index slices, const SvdOptions& svd,
                           std::vector<std::string>* notes = nullptr);
 
+/// One held-out slice of `pmsc learn`'s new frames and the subspace that never saw it, for
+/// relearnRegions' calibration: columns [first, last) of the new frames were scored by the state
+/// `basis` diag(sigma) about `mean`.
+struct RegionFold {
+    Eigen::MatrixXd basis;  ///< (N*C) x m, orthonormal: the fold's leading directions
+    Eigen::VectorXd sigma;  ///< m singular values
+    Eigen::VectorXd mean;   ///< N*C
+    Index first = 0, last = 0;
+};
+
+/// The regions of a learned model (`pmsc learn`), without the frames training learned them from.
+///
+/// Method:
+///  1. The partition, the feather and the largest local fraction are the old model's: positions do
+///     not change, and a region's points still share their motions where training saw them share.
+///  2. Each region's key points are its old ones (the model's keys it read and its region keys)
+///     plus any learned key inside it. A point that is a key of the learned model is read as that
+///     key; the others are region keys (LocalRegions::extraKeyPoints), read only for frames that do
+///     not hit whole, as training's region keys are. So no region loses a key it watched, and none
+///     needs the positions or options training placed them with.
+///  3. Each region's basis: the SVD of its rows of the surrogate `basis` diag(sigma) of every frame
+///     seen (the updated state, as learn's keys are selected on), with training's energy rule and
+///     cap (RegionOptions' defaults: a model does not store the options it was trained with).
+///  4. Thresholds, with a tolerance: each fold of `folds` gives its region basis the same way from
+///     its own state and scores its held-out new frames (region key RMS, largest point error of
+///     the region's points); the region's ratio is the larger of those frames' (MaxRatio) and the
+///     old region's, and its margin is the old one (T / (ratio eps_min)). As learn's frame-wide
+///     thresholds take the larger of the new frames' ratio and the stored one: a motion the new
+///     frames add must not loosen a region, and one they lack must not either.
+///     Without a tolerance: eps_min is the larger of the old one and the largest region key RMS of
+///     the new frames (`fresh`, about the learned mean) under the new basis, as training's are.
+/// @param fresh the new frames, (N*C) x m, raw
+/// @throws std::invalid_argument when old does not fit oldModel or the sizes disagree.
+LocalRegions relearnRegions(const LocalRegions& old, const Model& oldModel, const Model& learned,
+                            const Eigen::Ref<const Eigen::MatrixXd>& basis, const Eigen::VectorXd& sigma,
+                            const Eigen::Ref<const Eigen::MatrixXd>& fresh,
+                            const std::vector<RegionFold>& folds, const SvdOptions& svd);
+
 }  // namespace pmsc

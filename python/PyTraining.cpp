@@ -244,7 +244,8 @@ std::shared_ptr<PyModel> trainModel(py::handle frames, Index basis, double energ
 
 std::shared_ptr<PyModel> learnModel(const PyModel& model, py::handle frames, Index basis, double energy,
                                     Index rank, const std::string& calibration, const py::object& coverage,
-                                    Index slices, const py::object& positions, py::object progress) {
+                                    Index slices, const py::object& positions, bool regions,
+                                    py::object progress) {
     // The keyword arguments into app::LearnOptions, checked by the rules `pmsc learn` uses.
     constexpr app::Spelling kPython = app::Spelling::Python;
     app::LearnOptions request;
@@ -255,6 +256,7 @@ std::shared_ptr<PyModel> learnModel(const PyModel& model, py::handle frames, Ind
     o.rule = app::calibrationNamed(calibration, kPython);
     if (!coverage.is_none()) o.coverage = coverage.cast<double>();
     o.slices = slices;
+    o.regions = regions;
     app::validate(request, kPython);
     app::checkLearnable(model.get(), "model");
 
@@ -280,6 +282,7 @@ std::shared_ptr<PyModel> learnModel(const PyModel& model, py::handle frames, Ind
     r["basis_before"] = report.basisBefore;
     r["basis_after"] = report.basisAfter;
     r["keys_kept"] = report.keysKept;
+    r["region_keys"] = report.regionKeys;
     r["seconds"] = report.seconds;
     r["new_frames_max_point_error"] = report.newFramesMaxPointError;
     result->trainingReport = r;
@@ -308,11 +311,11 @@ void bindTraining(py::module_& m) {
     m.def(
         "learn", &learnModel, "model"_a, "frames"_a, py::kw_only(), "basis"_a = 0, "energy"_a = 0.0,
         "rank"_a = 0, "calibration"_a = "", "coverage"_a = py::none(), "slices"_a = 0,
-        "positions"_a = py::none(), "progress"_a = py::none(),
+        "positions"_a = py::none(), "regions"_a = true, "progress"_a = py::none(),
         "Updates a model with new frames as `pmsc learn` does (same options, same model bytes), without its "
         "training frames. frames: an array (F, N, C), a .npy path, or a list of them. Returns the learned "
         "model; its training_report says what the update did. positions: the positions the model was "
-        "trained with, as train's positions (--positions).");
+        "trained with, as train's positions (--positions). regions=False: as --no-regions.");
 }
 
 }  // namespace pmsc::python

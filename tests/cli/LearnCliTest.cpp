@@ -174,6 +174,31 @@ TEST_F(LearnCli, PositionsTheModelWasTrainedWithChooseItsSentinelsAgain) {
     EXPECT_FALSE(fs::exists(work.file("bad.pmsc")));
 }
 
+// A model with regions keeps them through learn, unless --no-regions drops them.
+TEST_F(LearnCli, AModelWithRegionsKeepsThemUnlessToldToDropThem) {
+    TempDir work;
+    RunResult r = runPmsc(
+        work, {"train", "--frames", dir_->file("train.npy"), "--out", work.file("r.pmsc"), "--max-keys", "24",
+               "--tolerance", "0.02", "--learn-rank", "30", "--regions", "3", "--quiet"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const pmsc::Model trained = pmsc::readModel(work.file("r.pmsc"));
+    ASSERT_TRUE(trained.regions.has_value());
+    r = runPmsc(work, {"learn", "--model", work.file("r.pmsc"), "--frames", dir_->file("test.npy"), "--out",
+                       work.file("kept.pmsc"), "--quiet"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.out.find("regions     " + std::to_string(trained.regions->regionCount()) + " kept"),
+              std::string::npos)
+        << r.out;
+    const pmsc::Model kept = pmsc::readModel(work.file("kept.pmsc"));
+    ASSERT_TRUE(kept.regions.has_value());
+    EXPECT_EQ(kept.regions->regionCount(), trained.regions->regionCount());
+    r = runPmsc(work, {"learn", "--model", work.file("r.pmsc"), "--frames", dir_->file("test.npy"), "--out",
+                       work.file("dropped.pmsc"), "--no-regions", "--quiet"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_EQ(r.out.find("regions "), std::string::npos) << r.out;
+    EXPECT_FALSE(pmsc::readModel(work.file("dropped.pmsc")).regions.has_value());
+}
+
 TEST_F(LearnCli, BadInputsFailWithOneLineAndLeaveFilesAlone) {
     TempDir work;
     // Kept frames of another shape: refused before any work, the old files untouched.

@@ -5,6 +5,7 @@
 #include "pmsc/Errors.h"
 #include "pmsc/ModelIO.h"
 #include "pmsc/PointMultiplier.h"
+#include "pmsc/RegionMultiplier.h"
 #include "pmsc/Training.h"
 
 #include <gtest/gtest.h>
@@ -347,4 +348,106 @@ TEST(Learning, ScoresOfFramesSpanningSeveralSlabsAreThoseOfTheWholeFrames) {
     ASSERT_GT(keyMax, old.epsMin);  // so the learned threshold is the new frames' own
     EXPECT_NEAR(learned.epsMin, keyMax, 1e-9 * keyMax);
     EXPECT_NEAR(report.newFramesMaxPointError, pointMax, 1e-9 * pointMax);
+}
+
+namespace {
+
+// The patches laid out on a line, 10 units apart, so that regions follow them.
+Eigen::MatrixXd patchPositions() {
+    Eigen::MatrixXd pos = Eigen::MatrixXd::Zero(kPatches * kPointsPerPatch, 3);
+    for (Index p = 0; p < pos.rows(); ++p)
+        pos(p, 0) = 10.0 * double(p / kPointsPerPatch) + 0.1 * double(p % kPointsPerPatch);
+    return pos;
+}
+
+}  // namespace
+
+// Learn keeps a model's regions: the partition and feather, every key a region read that is still
+// read, and thresholds calibrated on the new frames: a region that never moved in training (its
+// ratio from noise alone) moves in the new frames and gets its ratio from their held-out scores, and on
+// held-out frames every region it calls a hit is within T.
+TEST(Learning, AModelWithRegionsKeepsThemAndCalibratesWhatTheNewFramesMove) {
+    const pmsc::FrameSet day1 = patches(0, 120, 5, 2);     // patches 4 and 5 never move
+    const pmsc::FrameSet misses = patches(120, 80, 5, 0);  // everything moves
+    const pmsc::FrameSet heldOut = patches(260, 80, 5, 0);
+    pmsc::TrainingOptions o = options(12);
+    o.regions.count = 6;
+    o.regions.positions = patchPositions();
+    const pmsc::Model old = pmsc::train(day1, o);
+    ASSERT_TRUE(old.regions.has_value());
+    pmsc::LearnReport report;
+    const pmsc::Model learned = pmsc::learn(old, misses, {}, &report);
+    ASSERT_TRUE(learned.regions.has_value());
+    const pmsc::LocalRegions &was = *old.regions, &now = *learned.regions;
+    ASSERT_EQ(now.regionCount(), was.regionCount());
+    EXPECT_EQ(now.featherStart, was.featherStart);
+    EXPECT_EQ(now.featherRegion, was.featherRegion);
+    EXPECT_EQ(now.featherWidth, was.featherWidth);
+    EXPECT_EQ(report.regionKeys, Index(now.extraKeyPoints.size()));
+
+    const Index firstStill = 4 * kPointsPerPatch;
+    Index stillRegions = 0;
+    for (Index r = 0; r < now.regionCount(); ++r) {
+        const pmsc::Region &a = was.regions[size_t(r)], &b = now.regions[size_t(r)];
+        EXPECT_EQ(b.points, a.points);
+        std::vector<Index> read;
+        for (const Index key : b.keys) read.push_back(now.keyPoint(learned, key));
+        std::sort(read.begin(), read.end());
+        for (const Index key : a.keys) {
+            const Index p = was.keyPoint(old, key);
+            const bool stillRead = key >= old.keyCount() ||
+                                   std::count(learned.keyPoints.begin(), learned.keyPoints.end(), p) > 0;
+            if (stillRead) EXPECT_TRUE(std::binary_search(read.begin(), read.end(), p)) << "region " << r;
+        }
+        EXPECT_GE(b.ratio, a.ratio);
+        std::vector<Index> readBefore;  // distinct points: a region key may sit at a model key
+        for (const Index key : a.keys) readBefore.push_back(was.keyPoint(old, key));
+        std::sort(readBefore.begin(), readBefore.end());
+        readBefore.erase(std::unique(readBefore.begin(), readBefore.end()), readBefore.end());
+        EXPECT_GE(Index(read.size()), std::min<Index>(12, Index(readBefore.size()))) << "region " << r;
+        if (a.points.front() >= firstStill) {
+            ++stillRegions;
+            // Its motion is new: the new frames' held-out scores set its ratio, not training's noise.
+            EXPECT_GT(b.ratio, a.ratio) << "region " << r;
+        }
+    }
+    EXPECT_GE(stillRegions, 1);
+
+    // Held out: every region hit is within T, and the regions that were still hit some frames.
+    const pmsc::RegionMultiplier rm(learned);
+    std::vector<double> keys(size_t(learned.keyCount() * kChannels)),
+        regionKeys(now.extraKeyPoints.size() * kChannels), coords(size_t(rm.coordsSize())),
+        frame(size_t(heldOut.rows()));
+    Index stillHits = 0;
+    for (Index f = 0; f < heldOut.frames; ++f) {
+        const double* full = heldOut.frame(f);
+        for (Index k = 0; k < learned.keyCount(); ++k)
+            for (Index c = 0; c < kChannels; ++c)
+                keys[size_t(k * kChannels + c)] = full[learned.keyPoints[size_t(k)] * kChannels + c];
+        for (size_t e = 0; e < now.extraKeyPoints.size(); ++e)
+            for (Index c = 0; c < kChannels; ++c)
+                regionKeys[e * kChannels + size_t(c)] = full[now.extraKeyPoints[e] * kChannels + c];
+        for (Index r = 0; r < now.regionCount(); ++r) {
+            double* rc = coords.data() + rm.coordsOffset(r);
+            const double keyError = rm.project(r, keys.data(), regionKeys.data(), rc);
+            if (keyError > now.regions[size_t(r)].epsMin) continue;
+            rm.reconstruct(r, rc, frame.data());
+            double largest = 0;
+            for (const Index p : now.regions[size_t(r)].points) {
+                double d = 0;
+                for (Index c = 0; c < kChannels; ++c)
+                    d += std::pow(frame[size_t(p * kChannels + c)] - full[p * kChannels + c], 2);
+                largest = std::max(largest, std::sqrt(d));
+            }
+            EXPECT_LE(largest, learned.tolerance) << "frame " << f << ", region " << r;
+            stillHits += now.regions[size_t(r)].points.front() >= firstStill;
+        }
+    }
+    EXPECT_GT(stillHits, 0);
+
+    // The regions go through the model file.
+    const pmsc::Model read = pmsc::decodeModel(pmsc::encodeModel(learned), "learned");
+    ASSERT_TRUE(read.regions.has_value());
+    EXPECT_EQ(read.regions->extraKeyPoints, now.extraKeyPoints);
+    EXPECT_EQ(read.regions->regions.back().epsMin, now.regions.back().epsMin);
 }

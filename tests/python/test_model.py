@@ -214,6 +214,22 @@ class ModelTest(TempDirTest):
         with self.assertRaisesRegex(pmsc.InputError, "learn: positions"):
             pmsc.learn(model, second, positions=positions[:-1])
 
+    def test_learn_keeps_regions_unless_told_as_the_command_line(self):
+        # regions=False is learn's --no-regions; by default a model's regions are kept, byte for byte.
+        self.require_cli()
+        first, second = synthetic_frames(seed=4)[:40], synthetic_frames(seed=4, novel=20)[40:]
+        model = pmsc.train(first, max_keys=30, tolerance=0.05, seed=3, regions=3)
+        model.save(self.path("day1.pmsc"))
+        np.save(self.path("new.npy"), second)
+        for flag, name in (([], "kept.pmsc"), (["--no-regions"], "dropped.pmsc")):
+            run_cli("learn", "--model", self.path("day1.pmsc"), "--frames", self.path("new.npy"), "--out",
+                    self.path(name), "--quiet", *flag)
+        with open(self.path("kept.pmsc"), "rb") as f:
+            self.assertEqual(pmsc.learn(model, second).to_bytes(), f.read())
+        with open(self.path("dropped.pmsc"), "rb") as f:
+            self.assertEqual(pmsc.learn(model, second, regions=False).to_bytes(), f.read())
+        self.assertGreater(pmsc.learn(model, second).training_report["region_keys"], 0)
+
     def test_regions_by_default_as_the_command_line(self):
         # Local motion on a surface (each of 24 bumps moves a few percent of 2,025 points): `pmsc
         # train --tolerance` learns regions without being told; pmsc.train does the same, byte for byte.
