@@ -108,6 +108,9 @@ def main():
     p.add_argument("--samples", type=int, default=64)
     p.add_argument("--tolerance-share", type=float, default=0.1)
     p.add_argument("--train", default="", help="more `pmsc train` options, as one string (e.g. '--basis 32')")
+    p.add_argument("--no-positions", action="store_true",
+                   help="train without the points' positions (--positions points.npy, as docs/blender.md trains): "
+                        "the sentinels are then drawn in point order, and there are no regions or key neighbours")
     p.add_argument("--reuse", action="store_true",
                    help="keep the scene, points and training frames of --work when they are there (timing again)")
     p.add_argument("--check", action="store_true", help="exit 1 when the RMS error is over --check-rms")
@@ -157,8 +160,9 @@ def main():
          path_span, "--threads", "1", "--quiet"])
     train = np.load(w("train.npy"))
     tolerance = args.tolerance_share * float(np.sqrt((train ** 2).sum(axis=2)).max())
+    positions = [] if args.no_positions else ["--positions", w("points.npy")]
     out = run([pmsc, "train", "--frames", w("train.npy"), "--out", w("model.pmsc"), "--tolerance", "%.6g" % tolerance]
-              + args.train.split())
+              + positions + args.train.split())
     shutil.rmtree(w("run"), ignore_errors=True)
     began = time.perf_counter()
     run([pmsc, "run", "--model", w("model.pmsc"), "--evaluator", evaluator(args.samples, w("run.log")), "--frames",

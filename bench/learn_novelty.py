@@ -9,7 +9,9 @@ them free; the test take is 200 frames of seed SEED + 1, every control free. `pm
 `pmsc train` on both halves, each with its defaults; both models replayed on the test take. The
 table gives M, the p99.5 over frames of PM's largest point error and of the soft-cached error
 (learned / scratch), hits, frames over T, and the wall times of `pmsc learn` and of the scratch
-`pmsc train` (one run each). docs/results/learning.md has the figures.
+`pmsc train` (one run each). With --novel, a second table: takes whose halves leave controls Y still
+that the test take moves, through the learned model with its regions, learned with --no-regions, and
+retrained (points evaluated, local frames, frames over T). docs/results/learning.md has the figures.
 
     /usr/bin/python3 bench/learn_novelty.py --data ICT-FaceKit/FaceXModel --bin build/bin \\
         --work /tmp/learn-novelty
