@@ -352,6 +352,18 @@ void learnedSentinels(const Model& model, Model& out, const Eigen::Map<const Eig
     if (!chosen.points.empty()) out.sentinels = std::move(chosen);
 }
 
+/// The positions a model's regions were learned from, as learn knows them: the given ones, else the
+/// learned mean when training took them from its mean (3 channels, and its sentinels or key
+/// neighbours say no positions were given); empty when nothing says which.
+Eigen::MatrixXd regionPositions(const Model& model, const Model& out, const LearnOptions& options) {
+    if (options.positions.size() > 0) return options.positions;
+    const bool fromMean = model.sentinels       ? model.sentinels->source != SentinelSource::Given
+                          : model.keyNeighbours ? model.keyNeighbours->fromMean
+                                                : false;
+    if (model.channels != 3 || !fromMean) return {};
+    return Eigen::Map<const Eigen::MatrixXd>(out.mean.data(), 3, out.points).transpose();
+}
+
 /// Step 3, cross-fitting: each slice of the new frames is scored by a model that never saw it
 /// (the old state updated with the other slices, or the old state alone for one slice; the new
 /// keys). `regionFolds`, when given, gets each fold's subspace, for the regions' calibration.
@@ -633,7 +645,7 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
     // (relearnRegions says how and why).
     if (regions) {
         out.regions = relearnRegions(*model.regions, model, out, u.state.u, u.state.sigma, fresh, regionFolds,
-                                     SvdOptions{});
+                                     SvdOptions{}, regionPositions(model, out, options));
         report.regionKeys = static_cast<Index>(out.regions->extraKeyPoints.size());
     }
     report.secondsCalibration = since(t);

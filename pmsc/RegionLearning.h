@@ -122,11 +122,14 @@ struct RegionFold {
 /// Method:
 ///  1. The partition, the feather and the largest local fraction are the old model's: positions do
 ///     not change, and a region's points still share their motions where training saw them share.
-///  2. Each region's key points are its old ones (the model's keys it read and its region keys)
-///     plus any learned key inside it. A point that is a key of the learned model is read as that
-///     key; the others are region keys (LocalRegions::extraKeyPoints), read only for frames that do
-///     not hit whole, as training's region keys are. So no region loses a key it watched, and none
-///     needs the positions or options training placed them with.
+///  2. Each region's key points: the learned keys inside it, its old region keys, the old keys
+///     outside it that the learned model still reads, and, with the positions the regions were
+///     learned from (`positions`, N x 3; empty: unknown), the learned keys within keyRadius of it,
+///     as training chooses them (RegionOptions' defaults). Old keys the learned model dropped come
+///     back only while the region holds fewer than ownKeys inside, then minKeys in all
+///     (relearnedRegionKeys has the measured reason). A point that is a key of the learned model is
+///     read as that key; the others are region keys (LocalRegions::extraKeyPoints), read only for
+///     frames that do not hit whole and for checked hits, as training's region keys are.
 ///  3. Each region's basis: the SVD of its rows of the surrogate `basis` diag(sigma) of every frame
 ///     seen (the updated state, as learn's keys are selected on), with training's energy rule and
 ///     cap (RegionOptions' defaults: a model does not store the options it was trained with).
@@ -143,6 +146,7 @@ struct RegionFold {
 LocalRegions relearnRegions(const LocalRegions& old, const Model& oldModel, const Model& learned,
                             const Eigen::Ref<const Eigen::MatrixXd>& basis, const Eigen::VectorXd& sigma,
                             const Eigen::Ref<const Eigen::MatrixXd>& fresh,
-                            const std::vector<RegionFold>& folds, const SvdOptions& svd);
+                            const std::vector<RegionFold>& folds, const SvdOptions& svd,
+                            const Eigen::MatrixXd& positions = {});
 
 }  // namespace pmsc

@@ -376,7 +376,9 @@ TEST(Learning, AModelWithRegionsKeepsThemAndCalibratesWhatTheNewFramesMove) {
     const pmsc::Model old = pmsc::train(day1, o);
     ASSERT_TRUE(old.regions.has_value());
     pmsc::LearnReport report;
-    const pmsc::Model learned = pmsc::learn(old, misses, {}, &report);
+    pmsc::LearnOptions lo;
+    lo.positions = patchPositions();  // as train had them: the learned keys near a region join it
+    const pmsc::Model learned = pmsc::learn(old, misses, lo, &report);
     ASSERT_TRUE(learned.regions.has_value());
     const pmsc::LocalRegions &was = *old.regions, &now = *learned.regions;
     ASSERT_EQ(now.regionCount(), was.regionCount());
@@ -412,6 +414,25 @@ TEST(Learning, AModelWithRegionsKeepsThemAndCalibratesWhatTheNewFramesMove) {
         }
     }
     EXPECT_GE(stillRegions, 1);
+    // Every learned key within the key radius of a region (4.5% of the positions' diagonal) is one of its
+    // keys.
+    const Eigen::MatrixXd pos = patchPositions();
+    const double reach =
+        pmsc::RegionOptions{}.keyRadius * (pos.colwise().maxCoeff() - pos.colwise().minCoeff()).norm();
+    Index nearKeys = 0;
+    for (Index r = 0; r < now.regionCount(); ++r) {
+        const pmsc::Region& g = now.regions[size_t(r)];
+        for (Index j = 0; j < learned.keyCount(); ++j) {
+            double nearest = 1e300;
+            for (const Index p : g.points)
+                nearest = std::min(nearest, (pos.row(learned.keyPoints[size_t(j)]) - pos.row(p)).norm());
+            if (nearest > reach || nearest == 0) continue;
+            ++nearKeys;
+            EXPECT_TRUE(std::binary_search(g.keys.begin(), g.keys.end(), j))
+                << "region " << r << ", key " << j;
+        }
+    }
+    EXPECT_GT(nearKeys, 0);
 
     // Held out: every region hit is within T, and the regions that were still hit some frames.
     const pmsc::RegionMultiplier rm(learned);
