@@ -645,7 +645,7 @@ Model learn(const Model& model, const FrameSet& newFrames, const LearnOptions& o
     // (relearnRegions says how and why).
     if (regions) {
         out.regions = relearnRegions(*model.regions, model, out, u.state.u, u.state.sigma, fresh, regionFolds,
-                                     SvdOptions{}, regionPositions(model, out, options));
+                                     SvdOptions{}, regionPositions(model, out, options), &report.warnings);
         report.regionKeys = static_cast<Index>(out.regions->extraKeyPoints.size());
     }
     report.secondsCalibration = since(t);

@@ -2,6 +2,7 @@
 
 #include "pmsc/Calibration.h"
 #include "pmsc/Parallel.h"
+#include "pmsc/Subspace.h"
 #include "pmsc/Varimax.h"
 
 #include <Eigen/QR>
@@ -22,6 +23,12 @@ namespace {
 
 [[noreturn]] void badRegionOption(const std::string& what) {
     throw std::invalid_argument("train: regions: " + what);
+}
+
+/// The note training and learn give when the cap made some regions' bases smaller than M.
+std::string cappedBasesNote(Index capped, Index regions) {
+    return "regions: " + std::to_string(capped) + " of " + std::to_string(regions) +
+           " regions' local bases were capped by their share of key values";
 }
 
 /// Step 1: each point's loading pattern on the Varimax-rotated leading factors (N x J).
@@ -469,17 +476,17 @@ void scoreRegionFold(const Region& g, Index ri, const std::vector<Index>& keyLoc
     const Index rows = Index(g.points.size()) * c;
     const Eigen::MatrixXd keyResidual = hk - bk * b;
     const Eigen::MatrixXd pointResidual = h.topRows(rows) - u.topRows(rows) * b;
+    // The region's key error as the soft cache computes it at run time (the RMS over its keys).
+    const Eigen::VectorXd largest = maxPointNormPerColumn(pointResidual, c);
     for (Index j = 0; j < h.cols(); ++j) {
-        s.keyRms.push_back(std::sqrt(keyResidual.col(j).squaredNorm() / double(g.keys.size())));
-        double largest = 0;
-        for (Index p = 0; p < Index(g.points.size()); ++p)
-            largest = std::max(largest, pointResidual.block(p * c, j, c, 1).norm());
-        s.maxPointError.push_back(largest);
+        s.keyRms.push_back(keyErrorOfResidual(keyResidual.col(j), c, KeyErrorNorm::Rms));
+        s.maxPointError.push_back(largest[j]);
     }
 }
 
-/// relearnRegions steps 3-4 for region ri: basis, projector and thresholds.
-void relearnRegion(Index ri, const Region& was, const Model& learned, LocalRegions& out,
+/// relearnRegions steps 3-4 for region ri: basis, projector and thresholds. Returns whether the
+/// cap made its basis smaller than M.
+bool relearnRegion(Index ri, const Region& was, const Model& learned, LocalRegions& out,
                    const Eigen::Ref<const Eigen::MatrixXd>& basis, const Eigen::VectorXd& sigma,
                    const Eigen::Ref<const Eigen::MatrixXd>& fresh, const std::vector<RegionFold>& folds,
                    const SvdOptions& svd) {
@@ -508,6 +515,7 @@ void relearnRegion(Index ri, const Region& was, const Model& learned, LocalRegio
         cal.epsMin = std::max(cal.epsMin, was.epsMin);
     }
     setRegionThresholds(g, cal, t, options);
+    return capped;
 }
 
 }  // namespace
@@ -567,9 +575,7 @@ LocalRegions learnRegions(const Eigen::Ref<const Eigen::MatrixXd>& q, const Mode
         }
     };
     runOnEveryCore(learnSome, r);
-    if (notes && smallBases > 0)
-        notes->push_back("regions: " + std::to_string(smallBases) + " of " + std::to_string(r) +
-                         " regions' local bases were capped by their share of key values");
+    if (notes && smallBases > 0) notes->push_back(cappedBasesNote(smallBases, r));
 
     // Step 5.
     featherEntries(pos, regionOf, out.featherWidth, out);
@@ -581,7 +587,7 @@ LocalRegions relearnRegions(const LocalRegions& old, const Model& oldModel, cons
                             const Eigen::Ref<const Eigen::MatrixXd>& basis, const Eigen::VectorXd& sigma,
                             const Eigen::Ref<const Eigen::MatrixXd>& fresh,
                             const std::vector<RegionFold>& folds, const SvdOptions& svd,
-                            const Eigen::MatrixXd& positions) {
+                            const Eigen::MatrixXd& positions, std::vector<std::string>* notes) {
     const Index rows = learned.points * learned.channels;
     if (oldModel.points != learned.points || oldModel.channels != learned.channels || basis.rows() != rows ||
         basis.cols() != sigma.size() || fresh.rows() != rows ||
@@ -598,13 +604,15 @@ LocalRegions relearnRegions(const LocalRegions& old, const Model& oldModel, cons
     for (size_t r = 0; r < old.regions.size(); ++r) out.regions[r].points = old.regions[r].points;
     relearnedRegionKeys(old, oldModel, learned, positions, out);
     const Index r = out.regionCount();
-    std::atomic<Index> next{0};
+    std::atomic<Index> next{0}, smallBases{0};
     runOnEveryCore(
         [&] {
             for (Index ri = next++; ri < r; ri = next++)
-                relearnRegion(ri, old.regions[size_t(ri)], learned, out, basis, sigma, fresh, folds, svd);
+                if (relearnRegion(ri, old.regions[size_t(ri)], learned, out, basis, sigma, fresh, folds, svd))
+                    ++smallBases;
         },
         r);
+    if (notes && smallBases > 0) notes->push_back(cappedBasesNote(smallBases, r));
     out.validate(learned);
     return out;
 }

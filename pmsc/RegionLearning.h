@@ -142,11 +142,13 @@ struct RegionFold {
 ///     Without a tolerance: eps_min is the larger of the old one and the largest region key RMS of
 ///     the new frames (`fresh`, about the learned mean) under the new basis, as training's are.
 /// @param fresh the new frames, (N*C) x m, raw
+/// @param notes when given, gets a line when the cap made some regions' bases smaller than M (as
+///     training says it).
 /// @throws std::invalid_argument when old does not fit oldModel or the sizes disagree.
 LocalRegions relearnRegions(const LocalRegions& old, const Model& oldModel, const Model& learned,
                             const Eigen::Ref<const Eigen::MatrixXd>& basis, const Eigen::VectorXd& sigma,
                             const Eigen::Ref<const Eigen::MatrixXd>& fresh,
                             const std::vector<RegionFold>& folds, const SvdOptions& svd,
-                            const Eigen::MatrixXd& positions = {});
+                            const Eigen::MatrixXd& positions = {}, std::vector<std::string>* notes = nullptr);
 
 }  // namespace pmsc

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Each way pmsc's Blender child fails gives one line naming what went wrong, exit code 3 from
-`pmsc export-frames`, and no output file; animate_light.py's, show_values.py's and
+`pmsc export-frames`, and no output file (and the values it must give: controls, seeds, passes); animate_light.py's, show_values.py's and
 bvh_character.py's bad requests exit 2 with one line and write nothing (docs/blender.md, "Failures").
 
 Exit codes: 0 every case as expected, 1 a case was not, 77 no Blender and CI not set (a skip; under
@@ -165,6 +165,22 @@ def main():
             bad += 1
     except (EOFError, RuntimeError) as error:
         print("blender_failures: seeds: %s" % error, file=sys.stderr)
+        bad += 1
+    # The passes: the indirect light alone is light (not zeros), and direct + indirect is both passes'
+    # bake at the same seed.
+    try:
+        passes = {}
+        for light in ("direct", "indirect", "direct,indirect"):
+            passes[light] = ask(serve(w("box.blend"), "--light", light)[len("exec:"):], [(2, None)])[0]
+        direct, indirect, both = passes["direct"], passes["indirect"], passes["direct,indirect"]
+        apart = float(np.abs(direct + indirect - both).max() / both.max())
+        print("passes       indirect mean %.4g (both %.4g); direct + indirect against both: largest relative "
+              "difference %g" % (indirect.mean(), both.mean(), apart))
+        if not indirect.mean() > 0.05 * both.mean() or indirect.min() < 0 or apart > 1e-6:
+            print("blender_failures: passes: --light indirect is not both passes less the direct one", file=sys.stderr)
+            bad += 1
+    except (EOFError, RuntimeError) as error:
+        print("blender_failures: passes: %s" % error, file=sys.stderr)
         bad += 1
     # animate_light.py (a light keyed on a .blend): bad requests end Blender with exit 2, one line
     # on stderr, and no .blend written.

@@ -350,6 +350,33 @@ TEST(Learning, ScoresOfFramesSpanningSeveralSlabsAreThoseOfTheWholeFrames) {
     EXPECT_NEAR(report.newFramesMaxPointError, pointMax, 1e-9 * pointMax);
 }
 
+// Learn says when its region bases were capped by their share of key values, as training does:
+// a region of white noise wants every direction and gets 0.4 of its key values.
+TEST(Learning, SaysAsTrainingDoesWhenRegionBasesAreCapped) {
+    auto noise = [](Index frames, unsigned seed) {
+        pmsc::FrameSet set(frames, kPatches * kPointsPerPatch, kChannels);
+        set.matrix() = pmsc::test::gaussian(set.rows(), frames, seed);
+        return set;
+    };
+    pmsc::TrainingOptions o = options(40);
+    o.basis = 40;
+    o.maxKeys = 60;
+    o.regions.count = 6;
+    pmsc::TrainingReport trained;
+    const pmsc::Model old = pmsc::train(noise(120, 3), o, &trained);
+    ASSERT_TRUE(old.regions.has_value());
+    const auto capped = [](const std::vector<std::string>& notes) {
+        return std::count_if(notes.begin(), notes.end(), [](const std::string& n) {
+            return n.find("local bases were capped by their share of key values") != std::string::npos;
+        });
+    };
+    ASSERT_EQ(capped(trained.warnings), 1);
+    pmsc::LearnReport report;
+    const pmsc::Model learned = pmsc::learn(old, noise(60, 4), pmsc::LearnOptions{}, &report);
+    ASSERT_TRUE(learned.regions.has_value());
+    EXPECT_EQ(capped(report.warnings), 1);
+}
+
 namespace {
 
 // The patches laid out on a line, 10 units apart, so that regions follow them.
