@@ -4,7 +4,7 @@ never saw, against Cycles computing every point.
 
     /usr/bin/python3 bench/blender_relight.py --bin build/bin --share share/blender --work /tmp/bc \\
         [--blend SCENE.blend] [--points 10000] [--grid 12] [--path 30] [--samples 64] [--tolerance-share 0.1]
-        [--train OPTIONS] [--check]
+        [--light direct,indirect|indirect] [--train OPTIONS] [--check]
 
 Steps (each a command a lighting TD would type; docs/blender.md):
   1. the scene: without --blend, `blender -b --python cornell_box.py` builds the measured Cornell
@@ -107,6 +107,9 @@ def main():
     p.add_argument("--path", type=int, default=30)
     p.add_argument("--samples", type=int, default=64)
     p.add_argument("--tolerance-share", type=float, default=0.1)
+    p.add_argument("--light", default="direct,indirect",
+                   help="the passes Cycles bakes (pmsc-blender's --light): direct,indirect (default) or indirect, "
+                        "the light the paper's section 8 caches while the renderer traces the direct light itself")
     p.add_argument("--train", default="", help="more `pmsc train` options, as one string (e.g. '--basis 32')")
     p.add_argument("--no-positions", action="store_true",
                    help="train without the points' positions (--positions points.npy, as docs/blender.md trains): "
@@ -142,8 +145,8 @@ def main():
     train_span, path_span = "0-%d" % (args.grid * args.grid - 1), "%d-%d" % (args.grid * args.grid, frames - 1)
 
     def evaluator(samples, log, seed=0):
-        return ("exec:PMSC_BLENDER_TIMING=%s %s %s serve --points %s --frames 1-%d --samples %d --seed %d"
-                % (log, launcher, scene, w("points.npy"), frames, samples, seed))
+        return ("exec:PMSC_BLENDER_TIMING=%s %s %s serve --points %s --frames 1-%d --samples %d --seed %d --light %s"
+                % (log, launcher, scene, w("points.npy"), frames, samples, seed, args.light))
 
     for name in ("full", "seed", "run", "fixed") if reuse else ("train", "full", "seed", "run", "fixed"):
         if os.path.exists(w(name + ".log")):
@@ -197,7 +200,7 @@ def main():
     report = {
         "scene": os.path.abspath(args.blend) if args.blend else "cornell box",
         "points": args.points, "keys": keys, "training_frames": args.grid * args.grid, "path_frames": args.path,
-        "samples": args.samples, "tolerance": tolerance,
+        "samples": args.samples, "light": args.light, "tolerance": tolerance,
         "hit_rate": stats["hit_rate"], "hits": stats["hits"], "blends": stats["blends"], "misses": stats["misses"],
         "rms_rel_error": rms,
         "noise_rms_rel": noise_rms,
