@@ -4,7 +4,7 @@ never saw, against Cycles computing every point.
 
     /usr/bin/python3 bench/blender_relight.py --bin build/bin --share share/blender --work /tmp/bc \\
         [--blend SCENE.blend] [--points 10000] [--grid 12] [--path 30] [--samples 64] [--tolerance-share 0.1]
-        [--light direct,indirect|indirect] [--train OPTIONS] [--check]
+        [--light direct,indirect|indirect] [--export-threads 1] [--train OPTIONS] [--check]
 
 Steps (each a command a lighting TD would type; docs/blender.md):
   1. the scene: without --blend, `blender -b --python cornell_box.py` builds the measured Cornell
@@ -110,6 +110,9 @@ def main():
     p.add_argument("--light", default="direct,indirect",
                    help="the passes Cycles bakes (pmsc-blender's --light): direct,indirect (default) or indirect, "
                         "the light the paper's section 8 caches while the renderer traces the direct light itself")
+    p.add_argument("--export-threads", type=int, default=1,
+                   help="Blenders baking the frames nothing times (the training frames, the path at another seed); "
+                        "the path's full frames and pmsc run stay on one thread")
     p.add_argument("--train", default="", help="more `pmsc train` options, as one string (e.g. '--basis 32')")
     p.add_argument("--no-positions", action="store_true",
                    help="train without the points' positions (--positions points.npy, as docs/blender.md trains): "
@@ -120,8 +123,9 @@ def main():
     p.add_argument("--check-rms", type=float, default=0.05, help="the largest RMS error --check accepts")
     args = p.parse_args()
     np, blender = numpy_and_blender()
-    if args.points < 100 or args.grid < 2 or args.path < 1 or args.samples < 1 or not args.tolerance_share > 0:
-        fail("--points >= 100, --grid >= 2, --path >= 1, --samples >= 1 and --tolerance-share > 0")
+    if (args.points < 100 or args.grid < 2 or args.path < 1 or args.samples < 1 or not args.tolerance_share > 0
+            or args.export_threads < 1):
+        fail("--points >= 100, --grid >= 2, --path >= 1, --samples >= 1, --tolerance-share > 0 and --export-threads >= 1")
     os.makedirs(args.work, exist_ok=True)
     w = lambda name: os.path.join(args.work, name)
     pmsc = os.path.join(args.bin, "pmsc")
@@ -153,14 +157,14 @@ def main():
             os.remove(w(name + ".log"))
     if not reuse:
         run([pmsc, "export-frames", evaluator(args.samples, w("train.log")), "--out", w("train.npy"), "--frames",
-             train_span, "--threads", "1", "--quiet"])
+             train_span, "--threads", str(args.export_threads), "--quiet"])
     began = time.perf_counter()
     run([pmsc, "export-frames", evaluator(args.samples, w("full.log")), "--out", w("full.npy"), "--frames",
          path_span, "--threads", "1", "--quiet"])
     full_wall = time.perf_counter() - began
     # The noise of Cycles' full result: the path frames again with another seed.
     run([pmsc, "export-frames", evaluator(args.samples, w("seed.log"), 1), "--out", w("full-seed1.npy"), "--frames",
-         path_span, "--threads", "1", "--quiet"])
+         path_span, "--threads", str(args.export_threads), "--quiet"])
     train = np.load(w("train.npy"))
     tolerance = args.tolerance_share * float(np.sqrt((train ** 2).sum(axis=2)).max())
     positions = [] if args.no_positions else ["--positions", w("points.npy")]
