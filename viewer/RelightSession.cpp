@@ -172,9 +172,10 @@ struct RelightSession::Impl : engine::FrameSink {
         // Every branch of a fail-through is a range the page can show as it arrives.
         o.localFailThrough = false;
         // One frame at a time, every core on it: the keys and a hit's check points in pieces (volume:
-        // 250 keys in 8, 1,024 sentinels in 32). The check keeps every core too: computed in one
-        // call, which leaves a core to a page on the same machine while it draws the hit's image,
-        // it gave no faster first image on 2 cores (docs/results/viewer.md) and a later checked one.
+        // 250 keys in 8, 1,024 sentinels in 32). The check keeps every core too. Computing it in
+        // one call would leave a core to a page on the same machine while it draws the hit's
+        // image, but on 2 cores that gave no faster first image and a later checked one
+        // (docs/results/viewer.md).
         o.keyPiecePoints = 32;
         // The page shows half floats: a float basis halves the memory a hit's reconstruction
         // reads (volume: 81 MB of doubles) and changes no half by more than its last bit.
