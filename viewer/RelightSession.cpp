@@ -78,6 +78,7 @@ struct Request {
     Controls controls;
     bool full = false;  ///< answer with the full calculation (the page's "full" view)
     Clock::time_point received;
+    double receivedUnixMs = 0;  ///< the same moment by the system clock, ms since 1970 (UTC)
 };
 
 std::uint32_t sequenceOf(const nlohmann::json& msg) {
@@ -207,9 +208,11 @@ struct RelightSession::Impl : engine::FrameSink {
     }
 
     nlohmann::json header(const char* target, const char* phase, const std::string& state) const {
-        return {{"type", "update"},        {"seq", current.seq},    {"target", target},
-                {"phase", phase},          {"state", state},        {"eps_min", model.epsMin},
-                {"eps_max", model.epsMax}, {"light", currentLight}, {"points_total", points}};
+        return {{"type", "update"},        {"seq", current.seq},
+                {"target", target},        {"phase", phase},
+                {"state", state},          {"eps_min", model.epsMin},
+                {"eps_max", model.epsMax}, {"light", currentLight},
+                {"points_total", points},  {"received_unix_ms", current.receivedUnixMs}};
     }
 
     /// Writes values into `target`, and emits them. Caller holds emitMutex.
@@ -387,6 +390,9 @@ struct RelightSession::Impl : engine::FrameSink {
         const std::string type = msg["type"];
         Request r;
         r.received = Clock::now();
+        r.receivedUnixMs =
+            std::chrono::duration<double, std::milli>(std::chrono::system_clock::now().time_since_epoch())
+                .count();
         if (type == "set") {
             r.seq = sequenceOf(msg);
             r.controls = scene.resolve(controlsOf(msg));

@@ -130,9 +130,23 @@ TEST_F(RelightSessionTest, AHitSendsItsReconstructionOnceAndBeforeItsCheck) {
         const Model model = checked ? withSentinels(plain, 1e300) : plain;  // every check passes
         Page page(v.scene->pointCount());
         RelightSession session(model, *v.scene, 2, page.emitter());
+        const auto unixMs = [] {
+            return std::chrono::duration<double, std::milli>(
+                       std::chrono::system_clock::now().time_since_epoch())
+                .count();
+        };
+        const double before = unixMs();
         session.receive(setMessage(1, 100, 30));
         const nlohmann::json last = page.waitFinal(1);
+        const double after = unixMs();
         EXPECT_EQ(last["state"], "hit");
+        // Every update says when the server read its request, by the system clock (the page's
+        // latency split into the way out and the way back).
+        for (const auto& u : page.of(1)) {
+            ASSERT_TRUE(u.text.contains("received_unix_ms")) << u.text.dump();
+            EXPECT_GE(u.text["received_unix_ms"].get<double>(), before);
+            EXPECT_LE(u.text["received_unix_ms"].get<double>(), after);
+        }
         EXPECT_TRUE(last["converged"].get<bool>());
         EXPECT_TRUE(last["timing_ms"].contains("keys"));
         const auto updates = page.of(1);

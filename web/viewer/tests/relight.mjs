@@ -3,7 +3,7 @@
 //
 //   node tests/relight.mjs --model D/model.pmsc --scene volume:D/density.vdb [--bin build/bin/pmsc]
 //        [--moves 100 | --short] [--out DIR] [--size 480x360] [--tolerance 0] [--url URL]
-//        [--gpu-compositing]
+//        [--gpu-compositing] [--trace FILE]
 //
 // Starts the server itself (--port 0, the address it prints), drives the page through
 // window.pmscView, prints a JSON summary and exits 1 if any check failed (2: could not run).
@@ -32,6 +32,7 @@ function parseArgs(argv) {
     chromium: process.env.CHROMIUM || '/usr/bin/chromium',
     timeout: 60000,
     gpuCompositing: false,
+    trace: null,
   };
   for (let i = 2; i < argv.length; ++i) {
     const arg = argv[i];
@@ -50,6 +51,7 @@ function parseArgs(argv) {
     else if (arg === '--url') options.url = value();
     else if (arg === '--chromium') options.chromium = value();
     else if (arg === '--gpu-compositing') options.gpuCompositing = true;
+    else if (arg === '--trace') options.trace = path.resolve(value());
     else if (arg === '--help' || arg === '-h') {
       console.log(fs.readFileSync(fileURLToPath(import.meta.url), 'utf8').split('\n').slice(1, 11).join('\n'));
       process.exit(0);
@@ -157,6 +159,10 @@ async function main() {
   const browser = await puppeteer.launch({
     executablePath: options.chromium,
     headless: true,
+    // No DevTools Network domain: with it on, Chromium copies every response body and base64-encodes
+    // every binary WebSocket frame for the inspector, on the page's main thread (about 30 ms for a
+    // whole volume cache on a 2-core machine), a cost a user's browser does not pay.
+    networkEnabled: false,
     // Chromium's own set-up on a machine without a GPU (SystemInfo.getInfo: gpu_compositing
     // "disabled_software"): WebGL 2 in SwiftShader, the page composited in software.
     // --gpu-compositing forces compositing through SwiftShader as well (--use-angle=swiftshader
@@ -181,12 +187,30 @@ async function main() {
 
     // 1. The scripted drag.
     const moves = [];
-    const hashes = [await page.evaluate(() => window.pmscView.canvasHash())];
-    const hashEvery = Math.max(1, Math.floor(options.moves / 10));
-    for (const [m, controls] of dragPath(scene.controls, options.moves).entries()) {
+    const drag = dragPath(scene.controls, options.moves);
+    // --trace: Chromium's trace of the middle 20 moves (chrome://tracing or Perfetto reads it).
+    const traceFrom = Math.max(0, Math.floor(options.moves / 2) - 10);
+    for (const [m, controls] of drag.entries()) {
+      if (options.trace && m === traceFrom)
+        await page.tracing.start({path: options.trace, categories: ['devtools.timeline', 'toplevel', 'v8',
+          'blink', 'cc', 'gpu', 'viz', 'netlog', 'loading', 'disabled-by-default-devtools.timeline',
+          'blink.user_timing', 'mojom', 'ipc']});
       const r = await page.evaluate(c => window.pmscView.set(c), controls);
       moves.push(r);
-      if ((m + 1) % hashEvery === 0) hashes.push(await page.evaluate(() => window.pmscView.canvasHash()));
+      if (options.trace && m === traceFrom + 19) await page.tracing.stop();
+    }
+    const dragSeqs = new Set(moves.map(r => r.seq));
+    const recorded = (await page.evaluate(() => window.pmscView.stats.moves)).filter(m => dragSeqs.has(m.seq));
+    // The images along the drag, afterwards: each hash draws the whole canvas at full size and reads
+    // it back, work a drag never does, which would slow the move after it by 50-100 ms on a 2-core
+    // machine. The same controls again give the same cache.
+    const hashEvery = Math.max(1, Math.floor(options.moves / 10));
+    const samples = [Object.fromEntries(scene.controls.map(c => [c.name, c.value]))];
+    for (let m = hashEvery - 1; m < drag.length; m += hashEvery) samples.push(drag[m]);
+    const hashes = [];
+    for (const controls of samples) {
+      await page.evaluate(c => window.pmscView.set(c), controls);
+      hashes.push(await page.evaluate(() => window.pmscView.canvasHash()));
     }
     await page.screenshot({path: path.join(options.out, 'hit.png')});
     result.screenshots.hit = path.join(options.out, 'hit.png');
@@ -207,7 +231,7 @@ async function main() {
       convergedByState: Object.fromEntries(Object.entries(convergedByState).map(([s, v]) => [s, summary(v)])),
     };
     // The first image's latency split: the server's own time, the page's (update arrived to drawn).
-    const recorded = await page.evaluate(k => window.pmscView.stats.moves.slice(-k), options.moves);
+    fs.writeFileSync(path.join(options.out, 'moves.json'), JSON.stringify(recorded));  // move by move
     result.latency.serverMs = summary(recorded.map(m => m.serverMs).filter(Number.isFinite));
     result.latency.pageMs = summary(recorded.map(m => m.pageMs));
     // The whole path of the hits' first images, part by part (main.js pathParts): each part's
