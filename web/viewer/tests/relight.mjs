@@ -159,9 +159,9 @@ async function main() {
   const browser = await puppeteer.launch({
     executablePath: options.chromium,
     headless: true,
-    // No DevTools Network domain: with it on, Chromium copies every response body and base64-encodes
-    // every binary WebSocket frame for the inspector, on the page's main thread (about 30 ms for a
-    // whole volume cache on a 2-core machine), a cost a user's browser does not pay.
+    // No DevTools Network domain: with it on, Chromium copies every response body and WebSocket
+    // message for the inspector, on the page's main thread (about 30 ms for a whole volume cache on a
+    // 2-core machine), a cost a user's browser does not pay.
     networkEnabled: false,
     // Chromium's own set-up on a machine without a GPU (SystemInfo.getInfo: gpu_compositing
     // "disabled_software"): WebGL 2 in SwiftShader, the page composited in software.
@@ -185,6 +185,8 @@ async function main() {
     const scene = await page.evaluate(() => window.pmscView.scene);
     result.scene = {kind: scene.kind, points: scene.points, dims: scene.grid.dims, model: scene.model};
 
+    const defaults = Object.fromEntries(scene.controls.map(c => [c.name, c.value]));
+
     // 1. The scripted drag.
     const moves = [];
     const drag = dragPath(scene.controls, options.moves);
@@ -205,7 +207,7 @@ async function main() {
     // it back, work a drag never does, which would slow the move after it by 50-100 ms on a 2-core
     // machine. The same controls again give the same cache.
     const hashEvery = Math.max(1, Math.floor(options.moves / 10));
-    const samples = [Object.fromEntries(scene.controls.map(c => [c.name, c.value]))];
+    const samples = [defaults];
     for (let m = hashEvery - 1; m < drag.length; m += hashEvery) samples.push(drag[m]);
     const hashes = [];
     for (const controls of samples) {
@@ -265,7 +267,6 @@ async function main() {
     };
 
     // 2. A miss: the first far setting the server answers with state "miss".
-    const defaults = Object.fromEntries(scene.controls.map(c => [c.name, c.value]));
     // A model that misses nowhere in the controls' range gets its first blend instead (reported).
     let miss = null;
     let blend = null;
